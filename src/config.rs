@@ -1,0 +1,156 @@
+//! FLR configuration: guides, block size, window, regulariser, upsampling.
+//!
+//! All distances are in full-resolution pixels. Defaults are the tuned ones
+//! (see README, "Defaults").
+
+use crate::error::Error;
+use crate::guides::GuideSet;
+
+/// The window over which each local regression is fitted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Blur {
+    /// Gaussian of standard deviation `sigma`, truncated at `radius`
+    /// (`None`: 3σ). Applied to the block grid with σ/B and ⌈radius/B⌉ cells.
+    Gaussian { sigma: f32, radius: Option<f32> },
+    /// Box of half-width `radius` (the guided filter's window), O(1) per cell.
+    Box { radius: f32 },
+}
+
+/// How the per-cell normal equations are regularised.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Regularization {
+    /// The normalized-correlation regularized inverse (appendix eqs. 12–23):
+    /// `eps_mul` is ε (multiplicative, eq. 18), `eps_add` is ϵ (additive,
+    /// eqs. 18 and 22). Guides are standardised per frame first, so the result
+    /// does not depend on the world origin or the units of any guide.
+    Normalized { eps_mul: f64, eps_add: f64 },
+    /// Textbook Tikhonov (eq. 11): `(XᵀWX + ε I)⁻¹ XᵀWY` on the guides exactly
+    /// as given, weights normalised to sum 1.
+    Tikhonov { eps: f64 },
+}
+
+/// Which kernel implementation runs (for testing SIMD against scalar).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Kernel {
+    /// SIMD where the block size allows it, scalar elsewhere.
+    #[default]
+    Simd,
+    /// Portable scalar code everywhere (the oracle for the SIMD paths).
+    Scalar,
+}
+
+/// Everything that defines an FLR run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FlrConfig {
+    /// Guides the frames will carry.
+    pub guides: GuideSet,
+    /// Block size B ∈ {1, 2, 4, 8, 16}: one affine model per B×B pixels.
+    pub block: usize,
+    /// The regression window.
+    pub blur: Blur,
+    /// The regulariser.
+    pub regularization: Regularization,
+    /// Joint denoise + upsample: the noisy input is at 1/`upsample`
+    /// resolution (1, 2 or 4; `block` must be ≥ `upsample`).
+    pub upsample: usize,
+    /// Clamp negative output to 0 (light is never negative).
+    pub clamp_negative: bool,
+    /// Kernel implementation.
+    pub kernel: Kernel,
+}
+
+/// Default Gaussian σ in full-resolution pixels.
+pub const DEFAULT_SIGMA: f32 = 12.0;
+/// Default ε (multiplicative regulariser).
+pub const DEFAULT_EPS_MUL: f64 = 1e-4;
+/// Default ϵ (additive regulariser).
+pub const DEFAULT_EPS_ADD: f64 = 1e-4;
+
+impl Default for FlrConfig {
+    fn default() -> Self {
+        FlrConfig {
+            guides: GuideSet::NORMAL_DEPTH_AO,
+            block: 8,
+            blur: Blur::Gaussian { sigma: DEFAULT_SIGMA, radius: None },
+            regularization: Regularization::Normalized { eps_mul: DEFAULT_EPS_MUL, eps_add: DEFAULT_EPS_ADD },
+            upsample: 1,
+            clamp_negative: true,
+            kernel: Kernel::Simd,
+        }
+    }
+}
+
+/// Largest blur radius on the cell grid, in cells.
+pub const MAX_RADIUS_CELLS: usize = 64;
+
+impl FlrConfig {
+    /// The default configuration with another guide set.
+    pub fn with_guides(guides: GuideSet) -> Self {
+        FlrConfig { guides, ..Self::default() }
+    }
+
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), Error> {
+        self.guides.validate()?;
+        if !matches!(self.block, 1 | 2 | 4 | 8 | 16) {
+            return Err(Error::InvalidConfig("block (must be 1, 2, 4, 8 or 16)"));
+        }
+        if !matches!(self.upsample, 1 | 2 | 4) {
+            return Err(Error::InvalidConfig("upsample (must be 1, 2 or 4)"));
+        }
+        if self.block < self.upsample {
+            return Err(Error::InvalidConfig("block must be at least upsample"));
+        }
+        let ok = |v: f32| v.is_finite() && v > 0.0;
+        match self.blur {
+            Blur::Gaussian { sigma, radius } => {
+                if !ok(sigma) || sigma > 4096.0 {
+                    return Err(Error::InvalidConfig("sigma (must be finite and > 0)"));
+                }
+                if let Some(r) = radius {
+                    if !(r.is_finite() && r >= 0.0) {
+                        return Err(Error::InvalidConfig("radius (must be finite and >= 0)"));
+                    }
+                }
+            }
+            Blur::Box { radius } => {
+                if !(radius.is_finite() && radius >= 0.0) {
+                    return Err(Error::InvalidConfig("radius (must be finite and >= 0)"));
+                }
+            }
+        }
+        let reg_ok = |v: f64| v.is_finite() && v >= 0.0 && v < 1.0;
+        match self.regularization {
+            Regularization::Normalized { eps_mul, eps_add } => {
+                if !reg_ok(eps_mul) || !reg_ok(eps_add) || eps_add == 0.0 && eps_mul == 0.0 {
+                    return Err(Error::InvalidConfig(
+                        "regularization (eps in [0, 1), not both 0)",
+                    ));
+                }
+            }
+            Regularization::Tikhonov { eps } => {
+                if !(eps.is_finite() && eps > 0.0) {
+                    return Err(Error::InvalidConfig("regularization (tikhonov eps must be > 0)"));
+                }
+            }
+        }
+        if self.radius_cells() > MAX_RADIUS_CELLS {
+            return Err(Error::InvalidConfig("radius too large for the block size (at most 64 blocks)"));
+        }
+        Ok(())
+    }
+
+    /// Window half-width on the cell grid: ⌈radius / B⌉.
+    pub fn radius_cells(&self) -> usize {
+        let r = match self.blur {
+            Blur::Gaussian { sigma, radius } => radius.unwrap_or(3.0 * sigma),
+            Blur::Box { radius } => radius,
+        };
+        let cells = libm::ceilf(r / self.block as f32 - 1e-4);
+        if cells.is_finite() && cells >= 0.0 {
+            cells as usize
+        } else {
+            usize::MAX
+        }
+    }
+}

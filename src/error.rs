@@ -1,0 +1,96 @@
+//! Typed errors. Every size, stride, length and configuration is checked up
+//! front; nothing in the library panics on bad input.
+
+use core::fmt;
+
+/// Which argument an [`Error`] is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Arg {
+    /// The noisy input image.
+    Noisy,
+    /// A guide image (normal, depth, position, AO or a user channel).
+    Guide,
+    /// A low-resolution guide (joint denoise + upsample).
+    GuideLow,
+    /// The output image.
+    Output,
+    /// The scratch buffer.
+    Scratch,
+    /// The configuration.
+    Config,
+    /// A tile, band or stage index.
+    Tile,
+}
+
+/// Everything that can go wrong. Small and `Copy`, carries the data needed
+/// to say what was wrong.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Error {
+    /// Width or height is zero, or too large to address.
+    InvalidSize { arg: Arg, width: usize, height: usize },
+    /// An image does not have the size the denoiser was created for.
+    SizeMismatch { arg: Arg, expected: (usize, usize), got: (usize, usize) },
+    /// Offset/strides address an element past the end of the buffer
+    /// (`needed` elements, `len` given).
+    BufferTooSmall { arg: Arg, needed: usize, len: usize },
+    /// A stride is unusable (zero where it must not be, or overflows).
+    InvalidStride { arg: Arg },
+    /// Wrong number of channels for this image (e.g. a 2-channel normal).
+    ChannelCount { arg: Arg, expected: usize, got: usize },
+    /// The frame lacks a guide the configuration asks for, or has one it does not.
+    GuideMismatch,
+    /// More guide channels than [`crate::MAX_GUIDES`].
+    TooManyGuides { got: usize },
+    /// A configuration value is out of range; the string names the field.
+    InvalidConfig(&'static str),
+    /// The scratch buffer is smaller than `scratch_len()`.
+    ScratchTooSmall { needed: usize, got: usize },
+    /// Tile/band index out of range, or a band slice of the wrong length.
+    InvalidTile { index: usize, count: usize },
+    /// This operation is not possible with these arguments (the string says why).
+    Unsupported(&'static str),
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Error::InvalidSize { arg, width, height } => {
+                write!(f, "{arg:?}: invalid size {width}x{height}")
+            }
+            Error::SizeMismatch { arg, expected, got } => write!(
+                f,
+                "{arg:?}: size {}x{} does not match the expected {}x{}",
+                got.0, got.1, expected.0, expected.1
+            ),
+            Error::BufferTooSmall { arg, needed, len } => write!(
+                f,
+                "{arg:?}: buffer of {len} elements is too small for its layout ({needed} needed)"
+            ),
+            Error::InvalidStride { arg } => write!(f, "{arg:?}: invalid stride"),
+            Error::ChannelCount { arg, expected, got } => {
+                write!(f, "{arg:?}: expected {expected} channels, got {got}")
+            }
+            Error::GuideMismatch => {
+                write!(f, "the frame's guides do not match the configured guide set")
+            }
+            Error::TooManyGuides { got } => write!(
+                f,
+                "{got} guide channels; at most {} are supported",
+                crate::MAX_GUIDES
+            ),
+            Error::InvalidConfig(field) => write!(f, "invalid configuration: {field}"),
+            Error::ScratchTooSmall { needed, got } => {
+                write!(f, "scratch buffer too small: {got} given, {needed} needed")
+            }
+            Error::InvalidTile { index, count } => {
+                write!(f, "tile {index} out of range or mis-sized (tile count {count})")
+            }
+            Error::Unsupported(why) => write!(f, "unsupported: {why}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+extern crate std;
+#[cfg(feature = "std")]
+impl std::error::Error for Error {}

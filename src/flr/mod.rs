@@ -1,0 +1,524 @@
+//! The FLR frame driver: plan, scratch layout, and the six stages, each split
+//! into independent tiles (bands of cell rows) so a caller can run them on
+//! threads or an engine's job system. [`Flr::denoise`] runs every tile of
+//! every stage in order; running the tiles yourself gives bit-identical output.
+//!
+//! Stages and what each tile reads → writes:
+//!
+//! | stage | reads | writes |
+//! |---|---|---|
+//! | [`Flr::prepare`] (once) | a few guide samples | `Stats` reference |
+//! | [`Flr::moments_tile`] | frame rows of the band | `cells` band |
+//! | [`Flr::finish_stats`] (once) | all `cells` | `Stats` mean/scale |
+//! | [`Flr::blur_rows_tile`] | `cells` band | `tmp` band |
+//! | [`Flr::blur_cols_tile`] | all `tmp` | `cells` band |
+//! | [`Flr::solve_tile`] | `cells` band | `models` band |
+//! | [`Flr::apply_tile`] | all `models`, frame rows | output rows |
+
+use crate::config::{Blur, FlrConfig, Kernel};
+use crate::error::{Arg, Error};
+use crate::guides::{Frame, MAX_GUIDES};
+use crate::image::{ImageView, ImageViewMut};
+use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
+use crate::kernels::blur::{blur_cols_band, blur_row, Taps};
+use crate::kernels::moments::{moments_band, BandPlanes};
+use crate::kernels::solve::{solve_cell, SolveParams};
+use crate::kernels::{dispatch_q, model_len, CellLayout};
+
+/// Cell rows per tile. Small enough for parallelism at 720p, large enough to
+/// amortise the vertical box-window initialisation.
+pub const TILE_CELL_ROWS: usize = 4;
+
+/// What happened during a run (summed over tiles).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Report {
+    /// Input pixels with a NaN/Inf noisy value (excluded from the fit).
+    pub nonfinite_noisy: u64,
+    /// Input pixels with a NaN/Inf guide value (excluded from the fit).
+    pub nonfinite_guides: u64,
+    /// Output pixels whose own guides were not finite: given the local mean.
+    pub fallback_pixels: u64,
+    /// Blocks without any valid pixel.
+    pub empty_blocks: u64,
+    /// Cells whose window held no valid pixel (output 0 there).
+    pub empty_cells: u64,
+    /// Guide coefficients dropped by the Cholesky pivot floor (rank deficiency).
+    pub dropped_pivots: u64,
+}
+
+impl core::ops::AddAssign for Report {
+    fn add_assign(&mut self, o: Report) {
+        self.nonfinite_noisy += o.nonfinite_noisy;
+        self.nonfinite_guides += o.nonfinite_guides;
+        self.fallback_pixels += o.fallback_pixels;
+        self.empty_blocks += o.empty_blocks;
+        self.empty_cells += o.empty_cells;
+        self.dropped_pivots += o.dropped_pivots;
+    }
+}
+
+/// Per-frame constants: the reference each guide is measured from (a sample
+/// of the frame, so that large offsets cancel exactly) and the frame mean and
+/// standard deviation used to standardise guides in the normalized solve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stats {
+    pub reference: [f32; MAX_GUIDES],
+    pub mean: [f64; MAX_GUIDES],
+    pub scale: [f64; MAX_GUIDES],
+}
+
+impl Default for Stats {
+    fn default() -> Self {
+        Stats { reference: [0.0; MAX_GUIDES], mean: [0.0; MAX_GUIDES], scale: [1.0; MAX_GUIDES] }
+    }
+}
+
+/// A frame checked against the plan: one single-channel view per guide channel.
+#[derive(Clone, Copy, Debug)]
+pub struct CheckedFrame<'a> {
+    noisy: ImageView<'a>,
+    /// Guides the moments are built from (input resolution).
+    fit: [Option<ImageView<'a>>; MAX_GUIDES],
+    /// Guides the model is applied to (output resolution).
+    map: [Option<ImageView<'a>>; MAX_GUIDES],
+}
+
+/// The scratch buffer split into its regions.
+#[derive(Debug)]
+pub struct Parts<'s> {
+    /// Moment grid, `cells_x * cells_y * k` f64.
+    pub cells: &'s mut [f64],
+    /// Second moment grid for the separable blur.
+    pub tmp: &'s mut [f64],
+    /// Model grid, `cells_x * cells_y * model_len` f32.
+    pub models: &'s mut [f32],
+    /// One private buffer of `worker_len()` f32 per worker.
+    pub workers: &'s mut [f32],
+}
+
+/// Fast Local Regression for one frame size and configuration.
+#[derive(Clone, Copy, Debug)]
+pub struct Flr {
+    cfg: FlrConfig,
+    width: usize,
+    height: usize,
+    in_w: usize,
+    in_h: usize,
+    /// Block size at input resolution (B / upsample).
+    bin: usize,
+    cells_x: usize,
+    cells_y: usize,
+    q: usize,
+    lay: CellLayout,
+    ml: usize,
+    taps: Taps,
+}
+
+impl Flr {
+    /// Plans a denoiser for `width`×`height` output frames.
+    pub fn new(cfg: FlrConfig, width: usize, height: usize) -> Result<Self, Error> {
+        cfg.validate()?;
+        if width == 0 || height == 0 || width > crate::image::MAX_DIM || height > crate::image::MAX_DIM {
+            return Err(Error::InvalidSize { arg: Arg::Output, width, height });
+        }
+        let q = cfg.guides.channels();
+        if q > MAX_GUIDES {
+            return Err(Error::TooManyGuides { got: q });
+        }
+        let b = cfg.block;
+        let r = cfg.radius_cells();
+        let taps = match cfg.blur {
+            Blur::Gaussian { sigma, .. } => Taps::gaussian(sigma as f64 / b as f64, r),
+            Blur::Box { .. } => Taps::boxed(r),
+        };
+        Ok(Flr {
+            cfg,
+            width,
+            height,
+            in_w: width.div_ceil(cfg.upsample),
+            in_h: height.div_ceil(cfg.upsample),
+            bin: b / cfg.upsample,
+            cells_x: width.div_ceil(b),
+            cells_y: height.div_ceil(b),
+            q,
+            lay: CellLayout::new(q),
+            ml: model_len(q),
+            taps,
+        })
+    }
+
+    pub fn config(&self) -> &FlrConfig {
+        &self.cfg
+    }
+    /// Output size.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+    /// Size of the noisy input (output size / upsample, rounded up).
+    pub fn input_size(&self) -> (usize, usize) {
+        (self.in_w, self.in_h)
+    }
+    /// Model grid size.
+    pub fn cells(&self) -> (usize, usize) {
+        (self.cells_x, self.cells_y)
+    }
+    /// Guide channel count Q.
+    pub fn guide_channels(&self) -> usize {
+        self.q
+    }
+    /// Number of tiles of every tiled stage.
+    pub fn tile_count(&self) -> usize {
+        self.cells_y.div_ceil(TILE_CELL_ROWS)
+    }
+    /// Cell rows `[start, end)` of tile `t`.
+    fn tile_rows(&self, t: usize) -> Result<(usize, usize), Error> {
+        if t >= self.tile_count() {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        Ok((t * TILE_CELL_ROWS, ((t + 1) * TILE_CELL_ROWS).min(self.cells_y)))
+    }
+    /// Output pixel rows `[start, end)` of tile `t`.
+    pub fn tile_pixel_rows(&self, t: usize) -> Result<(usize, usize), Error> {
+        let (a, b) = self.tile_rows(t)?;
+        Ok((a * self.cfg.block, (b * self.cfg.block).min(self.height)))
+    }
+    /// f64 values in `cells` (and `tmp`) for tile `t`.
+    pub fn cells_tile_len(&self, t: usize) -> Result<usize, Error> {
+        let (a, b) = self.tile_rows(t)?;
+        Ok((b - a) * self.cells_x * self.lay.k)
+    }
+    /// f32 values in `models` for tile `t`.
+    pub fn models_tile_len(&self, t: usize) -> Result<usize, Error> {
+        let (a, b) = self.tile_rows(t)?;
+        Ok((b - a) * self.cells_x * self.ml)
+    }
+    fn grid_len(&self) -> usize {
+        self.cells_x * self.cells_y * self.lay.k
+    }
+    fn models_len(&self) -> usize {
+        self.cells_x * self.cells_y * self.ml
+    }
+    /// f32 values of one worker's private buffer.
+    pub fn worker_len(&self) -> usize {
+        let pw = self.cells_x * self.bin;
+        let moments = BandPlanes::len(self.q, self.bin, pw);
+        let apply = (self.q + 1) * self.width + self.cells_x * self.ml + 3 * self.width;
+        moments.max(apply)
+    }
+    /// Scratch length in f64 elements for `workers` concurrent workers.
+    pub fn scratch_len_for(&self, workers: usize) -> usize {
+        2 * self.grid_len() + self.models_len().div_ceil(2) + (workers.max(1) * self.worker_len()).div_ceil(2)
+    }
+    /// Scratch length in f64 elements for [`Flr::denoise`] (one worker).
+    pub fn scratch_len(&self) -> usize {
+        self.scratch_len_for(1)
+    }
+
+    /// Splits `scratch` (at least `scratch_len_for(workers)` long) into its regions.
+    pub fn split_scratch<'s>(&self, scratch: &'s mut [f64], workers: usize) -> Result<Parts<'s>, Error> {
+        let needed = self.scratch_len_for(workers);
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let (cells, rest) = scratch.split_at_mut(self.grid_len());
+        let (tmp, rest) = rest.split_at_mut(self.grid_len());
+        let (models, rest) = rest.split_at_mut(self.models_len().div_ceil(2));
+        let models = &mut bytemuck::cast_slice_mut::<f64, f32>(models)[..self.models_len()];
+        let wl = workers.max(1) * self.worker_len();
+        let workers = &mut bytemuck::cast_slice_mut::<f64, f32>(rest)[..wl];
+        Ok(Parts { cells, tmp, models, workers })
+    }
+
+    /// Checks a frame against the plan (sizes, channels, guide set).
+    pub fn check_frame<'a>(&self, frame: &Frame<'a>) -> Result<CheckedFrame<'a>, Error> {
+        let n = &frame.noisy;
+        if (n.width(), n.height()) != (self.in_w, self.in_h) {
+            return Err(Error::SizeMismatch { arg: Arg::Noisy, expected: (self.in_w, self.in_h), got: (n.width(), n.height()) });
+        }
+        if n.channel_count() < 3 {
+            return Err(Error::ChannelCount { arg: Arg::Noisy, expected: 3, got: n.channel_count() });
+        }
+        let set = &self.cfg.guides;
+        let map = frame.guides.channel_views(set, self.width, self.height, Arg::Guide)?;
+        let fit = match (self.cfg.upsample, &frame.guides_low) {
+            (1, None) => map,
+            (1, Some(_)) => return Err(Error::Unsupported("guides_low given but upsample is 1")),
+            (_, Some(low)) => low.channel_views(set, self.in_w, self.in_h, Arg::GuideLow)?,
+            (_, None) if self.q == 0 => map,
+            (_, None) => return Err(Error::Unsupported("upsampling needs guides_low at the noisy resolution")),
+        };
+        Ok(CheckedFrame { noisy: frame.noisy, fit, map })
+    }
+
+    /// Stage 0: picks the per-guide reference (the first finite value among
+    /// 16 fixed sample positions), so moments are accumulated near zero.
+    pub fn prepare(&self, frame: &CheckedFrame<'_>) -> Stats {
+        let mut st = Stats::default();
+        for (q, r) in st.reference.iter_mut().enumerate().take(self.q) {
+            let Some(v) = frame.fit[q] else { continue };
+            'search: for sy in 0..4 {
+                for sx in 0..4 {
+                    let x = (2 * sx + 1) * self.in_w / 8;
+                    let y = (2 * sy + 1) * self.in_h / 8;
+                    if let Some(g) = v.get(x, y, 0) {
+                        if g.is_finite() {
+                            *r = g;
+                            break 'search;
+                        }
+                    }
+                }
+            }
+        }
+        st
+    }
+
+    fn kernel_simd(&self) -> bool {
+        self.cfg.kernel == Kernel::Simd
+    }
+
+    /// Stage 1: moments of tile `t` into `cells_tile` (`cells_tile_len(t)`).
+    pub fn moments_tile(
+        &self,
+        frame: &CheckedFrame<'_>,
+        stats: &Stats,
+        t: usize,
+        cells_tile: &mut [f64],
+        worker: &mut [f32],
+    ) -> Result<Report, Error> {
+        let (r0, r1) = self.tile_rows(t)?;
+        if cells_tile.len() != self.cells_tile_len(t)? || worker.len() < self.worker_len() {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        let pw = self.cells_x * self.bin;
+        let plane = self.bin * pw;
+        let buf = &mut worker[..BandPlanes::len(self.q, self.bin, pw)];
+        let row_len = self.cells_x * self.lay.k;
+        let mut rep = Report::default();
+        for (j, cells_row) in (r0..r1).zip(cells_tile.chunks_exact_mut(row_len)) {
+            buf.fill(0.0);
+            for r in 0..self.bin {
+                let y = j * self.bin + r;
+                if y >= self.in_h {
+                    break;
+                }
+                let o = r * pw;
+                for c in 0..3 {
+                    let dst = &mut buf[(1 + c) * plane + o..(1 + c) * plane + o + self.in_w];
+                    frame.noisy.read_row(y, c, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+                }
+                for q in 0..self.q {
+                    let v = frame.fit[q].ok_or(Error::GuideMismatch)?;
+                    let dst = &mut buf[(4 + q) * plane + o..(4 + q) * plane + o + self.in_w];
+                    v.read_row(y, 0, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+                    let m = stats.reference[q];
+                    for d in dst.iter_mut() {
+                        *d -= m;
+                    }
+                }
+                for x in 0..self.in_w {
+                    let i = o + x;
+                    let ok_n = (1..4).all(|p| buf[p * plane + i].is_finite());
+                    let ok_g = (4..4 + self.q).all(|p| buf[p * plane + i].is_finite());
+                    if ok_n && ok_g {
+                        buf[i] = 1.0;
+                    } else {
+                        rep.nonfinite_noisy += !ok_n as u64;
+                        rep.nonfinite_guides += !ok_g as u64;
+                        for p in 1..4 + self.q {
+                            buf[p * plane + i] = 0.0;
+                        }
+                    }
+                }
+            }
+            let band = BandPlanes { data: buf, rows: self.bin, width: pw };
+            let simd = self.kernel_simd();
+            let empty = dispatch_q!(self.q, moments_band(band, self.bin, simd, cells_row));
+            rep.empty_blocks += empty as u64;
+        }
+        Ok(rep)
+    }
+
+    /// Stage 2: frame mean and standard deviation of each guide, from all cells.
+    pub fn finish_stats(&self, cells: &[f64], stats: &mut Stats) -> Result<(), Error> {
+        if cells.len() != self.grid_len() {
+            return Err(Error::InvalidTile { index: 0, count: 1 });
+        }
+        let l = &self.lay;
+        let mut n = 0f64;
+        let mut s = [0f64; MAX_GUIDES];
+        let mut ss = [0f64; MAX_GUIDES];
+        for cell in cells.chunks_exact(l.k) {
+            n += cell[0];
+            let mut p = l.ss;
+            for a in 0..self.q {
+                s[a] += cell[l.s + a];
+                ss[a] += cell[p];
+                p += self.q - a;
+            }
+        }
+        for a in 0..self.q {
+            let (mean, var) = if n > 0.0 { (s[a] / n, ss[a] / n - (s[a] / n) * (s[a] / n)) } else { (0.0, 0.0) };
+            // A guide cannot vary by less than f32 resolution of its magnitude.
+            let floor = 1e-6 * (stats.reference[a] as f64 + mean).abs();
+            let sd = libm::sqrt(var.max(0.0)).max(floor);
+            stats.mean[a] = if mean.is_finite() { mean } else { 0.0 };
+            stats.scale[a] = if sd.is_finite() && sd > 0.0 { sd } else { 1.0 };
+        }
+        Ok(())
+    }
+
+    /// Stage 3: horizontal blur of tile `t`: `cells` band → `tmp_tile`.
+    pub fn blur_rows_tile(&self, t: usize, cells: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
+        let (r0, _) = self.tile_rows(t)?;
+        if cells.len() != self.grid_len() || tmp_tile.len() != self.cells_tile_len(t)? {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        let row_len = self.cells_x * self.lay.k;
+        for (b, dst) in tmp_tile.chunks_exact_mut(row_len).enumerate() {
+            let j = r0 + b;
+            blur_row(&self.taps, self.lay.k, &cells[j * row_len..(j + 1) * row_len], dst);
+        }
+        Ok(())
+    }
+
+    /// Stage 4: vertical blur of tile `t`: all of `tmp` → `cells_tile`.
+    pub fn blur_cols_tile(&self, t: usize, tmp: &[f64], cells_tile: &mut [f64]) -> Result<(), Error> {
+        let (r0, _) = self.tile_rows(t)?;
+        if tmp.len() != self.grid_len() || cells_tile.len() != self.cells_tile_len(t)? {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        blur_cols_band(&self.taps, self.cells_x * self.lay.k, self.cells_y, r0, tmp, cells_tile);
+        Ok(())
+    }
+
+    fn solve_params(&self, stats: &Stats) -> SolveParams {
+        let mut reference = [0f64; MAX_GUIDES];
+        for (r, s) in reference.iter_mut().zip(&stats.reference) {
+            *r = *s as f64;
+        }
+        let total = (self.bin * self.bin) as f64 * self.taps.sum() * self.taps.sum();
+        SolveParams {
+            reference,
+            mean: stats.mean,
+            scale: stats.scale,
+            regularization: self.cfg.regularization,
+            weight_norm: 1.0 / total,
+            min_weight: 1e-12 * total,
+        }
+    }
+
+    /// Stage 5: solve every cell of tile `t`: `cells` band → `models_tile`.
+    pub fn solve_tile(&self, stats: &Stats, t: usize, cells_tile: &[f64], models_tile: &mut [f32]) -> Result<Report, Error> {
+        if cells_tile.len() != self.cells_tile_len(t)? || models_tile.len() != self.models_tile_len(t)? {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        let p = self.solve_params(stats);
+        let mut rep = Report::default();
+        for (cell, model) in cells_tile.chunks_exact(self.lay.k).zip(models_tile.chunks_exact_mut(self.ml)) {
+            let o = dispatch_q!(self.q, solve_cell(cell, &p, model));
+            rep.empty_cells += o.empty as u64;
+            rep.dropped_pivots += o.dropped as u64;
+        }
+        Ok(rep)
+    }
+
+    /// Stage 6: apply the models to the output rows of tile `t`. `out_band`
+    /// holds exactly those rows (`tile_pixel_rows(t)`), numbered from 0.
+    pub fn apply_tile(
+        &self,
+        frame: &CheckedFrame<'_>,
+        stats: &Stats,
+        t: usize,
+        models: &[f32],
+        worker: &mut [f32],
+        out_band: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        let (y0, y1) = self.tile_pixel_rows(t)?;
+        if models.len() != self.models_len() || worker.len() < self.worker_len() {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        if out_band.width() != self.width || out_band.height() != y1 - y0 || out_band.channel_count() < 3 {
+            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, y1 - y0), got: (out_band.width(), out_band.height()) });
+        }
+        let w = self.width;
+        let (gbuf, rest) = worker.split_at_mut((self.q + 1) * w);
+        let (row_models, rest) = rest.split_at_mut(self.cells_x * self.ml);
+        let outbuf = &mut rest[..3 * w];
+        let mut rep = Report::default();
+        let simd = self.kernel_simd();
+        for y in y0..y1 {
+            let (gplanes, valid) = gbuf.split_at_mut(self.q * w);
+            valid.fill(1.0);
+            for q in 0..self.q {
+                let v = frame.map[q].ok_or(Error::GuideMismatch)?;
+                let dst = &mut gplanes[q * w..(q + 1) * w];
+                v.read_row(y, 0, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+                let m = stats.reference[q];
+                for (d, ok) in dst.iter_mut().zip(valid.iter_mut()) {
+                    *d -= m;
+                    if !d.is_finite() {
+                        *ok = 0.0;
+                    }
+                }
+            }
+            for x in 0..w {
+                if valid[x] == 0.0 {
+                    rep.fallback_pixels += 1;
+                    for q in 0..self.q {
+                        gplanes[q * w + x] = 0.0;
+                    }
+                }
+            }
+            lerp_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y, row_models);
+            let guides = RowGuides { data: gbuf, width: w };
+            let clamp = self.cfg.clamp_negative;
+            dispatch_q!(self.q, apply_row(row_models, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
+            for c in 0..3 {
+                out_band.write_row(y - y0, c, 0, &outbuf[c * w..(c + 1) * w]).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+            }
+        }
+        Ok(rep)
+    }
+
+    /// Denoises one frame on the calling thread. `scratch` must hold at least
+    /// [`Flr::scratch_len`] values; `out` is the output-size, ≥ 3-channel image.
+    /// Allocates nothing.
+    pub fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        if out.width() != self.width || out.height() != self.height || out.channel_count() < 3 {
+            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, self.height), got: (out.width(), out.height()) });
+        }
+        let parts = self.split_scratch(scratch, 1)?;
+        let mut stats = self.prepare(&f);
+        let mut rep = Report::default();
+        let tiles = self.tile_count();
+        let mut off = 0;
+        for t in 0..tiles {
+            let n = self.cells_tile_len(t)?;
+            rep += self.moments_tile(&f, &stats, t, &mut parts.cells[off..off + n], parts.workers)?;
+            off += n;
+        }
+        self.finish_stats(parts.cells, &mut stats)?;
+        let mut off = 0;
+        for t in 0..tiles {
+            let n = self.cells_tile_len(t)?;
+            self.blur_rows_tile(t, parts.cells, &mut parts.tmp[off..off + n])?;
+            off += n;
+        }
+        let (mut off, mut moff) = (0, 0);
+        for t in 0..tiles {
+            let n = self.cells_tile_len(t)?;
+            let m = self.models_tile_len(t)?;
+            self.blur_cols_tile(t, parts.tmp, &mut parts.cells[off..off + n])?;
+            rep += self.solve_tile(&stats, t, &parts.cells[off..off + n], &mut parts.models[moff..moff + m])?;
+            off += n;
+            moff += m;
+        }
+        for t in 0..tiles {
+            let (y0, y1) = self.tile_pixel_rows(t)?;
+            let mut band = out.rows(y0, y1 - y0)?;
+            rep += self.apply_tile(&f, &stats, t, parts.models, parts.workers, &mut band)?;
+        }
+        Ok(rep)
+    }
+}

@@ -1,0 +1,330 @@
+//! Borrowed, validated image views (OIDN-style layouts).
+//!
+//! Element `(x, y, c)` of a view lives at
+//! `offset + y * row_stride + x * pixel_stride + c * channel_stride`
+//! in the underlying slice (all in *elements*, not bytes). Interleaved RGB is
+//! `Layout::interleaved(width, 3)`; a planar buffer has `pixel_stride = 1`,
+//! `row_stride = width` and `channel_stride = width * height`. Every view is
+//! checked once, at construction: after that, reads and writes are in bounds.
+
+use crate::error::{Arg, Error};
+use half::f16;
+
+/// Where each element of an image lives in its slice (element units).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layout {
+    /// Index of element (0, 0, 0).
+    pub offset: usize,
+    /// Distance between horizontally adjacent pixels.
+    pub pixel_stride: usize,
+    /// Distance between vertically adjacent pixels.
+    pub row_stride: usize,
+    /// Distance between the channels of one pixel.
+    pub channel_stride: usize,
+}
+
+impl Layout {
+    /// Tightly packed, channels interleaved (RGBRGB...).
+    pub const fn interleaved(width: usize, channels: usize) -> Self {
+        Layout { offset: 0, pixel_stride: channels, row_stride: width * channels, channel_stride: 1 }
+    }
+    /// One plane per channel (RRR...GGG...BBB...).
+    pub const fn planar(width: usize, height: usize) -> Self {
+        Layout { offset: 0, pixel_stride: 1, row_stride: width, channel_stride: width * height }
+    }
+    /// One past the largest element index used, or `None` on overflow.
+    fn end(&self, width: usize, height: usize, channels: usize) -> Option<usize> {
+        let last = self
+            .offset
+            .checked_add((height - 1).checked_mul(self.row_stride)?)?
+            .checked_add((width - 1).checked_mul(self.pixel_stride)?)?
+            .checked_add((channels - 1).checked_mul(self.channel_stride)?)?;
+        last.checked_add(1)
+    }
+}
+
+/// Read-only samples: f32 or f16.
+#[derive(Clone, Copy, Debug)]
+pub enum Samples<'a> {
+    F32(&'a [f32]),
+    F16(&'a [f16]),
+}
+
+impl Samples<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Samples::F32(s) => s.len(),
+            Samples::F16(s) => s.len(),
+        }
+    }
+}
+
+/// Largest width or height accepted (keeps every index computation far from overflow).
+pub const MAX_DIM: usize = 1 << 16;
+
+fn check(
+    arg: Arg,
+    len: usize,
+    width: usize,
+    height: usize,
+    channels: usize,
+    layout: &Layout,
+) -> Result<(), Error> {
+    if width == 0 || height == 0 || width > MAX_DIM || height > MAX_DIM {
+        return Err(Error::InvalidSize { arg, width, height });
+    }
+    if channels == 0 {
+        return Err(Error::ChannelCount { arg, expected: 1, got: 0 });
+    }
+    let needed = layout.end(width, height, channels).ok_or(Error::InvalidStride { arg })?;
+    if needed > len {
+        return Err(Error::BufferTooSmall { arg, needed, len });
+    }
+    Ok(())
+}
+
+/// A read-only, validated view of `channels` channels of a `width`×`height` image.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageView<'a> {
+    samples: Samples<'a>,
+    width: usize,
+    height: usize,
+    channels: usize,
+    layout: Layout,
+}
+
+impl<'a> ImageView<'a> {
+    /// Validates the layout against the slice. `Samples::F32(&data)` or `Samples::F16(&data)`.
+    pub fn new(
+        samples: Samples<'a>,
+        width: usize,
+        height: usize,
+        channels: usize,
+        layout: Layout,
+    ) -> Result<Self, Error> {
+        check(Arg::Noisy, samples.len(), width, height, channels, &layout)?;
+        Ok(ImageView { samples, width, height, channels, layout })
+    }
+    /// Shorthand for an f32 view.
+    pub fn f32(
+        data: &'a [f32],
+        width: usize,
+        height: usize,
+        channels: usize,
+        layout: Layout,
+    ) -> Result<Self, Error> {
+        Self::new(Samples::F32(data), width, height, channels, layout)
+    }
+    /// Shorthand for an f16 view.
+    pub fn f16(
+        data: &'a [f16],
+        width: usize,
+        height: usize,
+        channels: usize,
+        layout: Layout,
+    ) -> Result<Self, Error> {
+        Self::new(Samples::F16(data), width, height, channels, layout)
+    }
+    /// Shorthand for a tightly packed, interleaved f32 image.
+    pub fn interleaved(data: &'a [f32], width: usize, height: usize, channels: usize) -> Result<Self, Error> {
+        Self::f32(data, width, height, channels, Layout::interleaved(width, channels))
+    }
+    /// The view of channels `first..first + count` of this view.
+    pub fn channels(&self, first: usize, count: usize) -> Result<Self, Error> {
+        if count == 0 || first.checked_add(count).is_none_or(|e| e > self.channels) {
+            return Err(Error::ChannelCount { arg: Arg::Guide, expected: self.channels, got: first + count });
+        }
+        let mut layout = self.layout;
+        layout.offset += first * layout.channel_stride;
+        Ok(ImageView { channels: count, layout, ..*self })
+    }
+    pub fn width(&self) -> usize {
+        self.width
+    }
+    pub fn height(&self) -> usize {
+        self.height
+    }
+    pub fn channel_count(&self) -> usize {
+        self.channels
+    }
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+    pub fn samples(&self) -> Samples<'a> {
+        self.samples
+    }
+
+    /// Reads channel `c` of row `y` for pixels `x0..x0 + dst.len()` into `dst`,
+    /// converting to f32. Returns `None` (and reads nothing) if out of range.
+    #[inline]
+    pub fn read_row(&self, y: usize, c: usize, x0: usize, dst: &mut [f32]) -> Option<()> {
+        if y >= self.height || c >= self.channels || x0.checked_add(dst.len())? > self.width {
+            return None;
+        }
+        let l = &self.layout;
+        let start = l.offset + y * l.row_stride + c * l.channel_stride + x0 * l.pixel_stride;
+        let ps = l.pixel_stride;
+        match self.samples {
+            Samples::F32(s) => {
+                if ps == 1 {
+                    dst.copy_from_slice(&s[start..start + dst.len()]);
+                } else {
+                    for (i, d) in dst.iter_mut().enumerate() {
+                        // SAFETY: validated at construction: every (x, y, c) inside the
+                        // image maps below `len`, and x0 + i < width, y < height, c < channels.
+                        *d = unsafe { *s.get_unchecked(start + i * ps) };
+                    }
+                }
+            }
+            Samples::F16(s) => {
+                for (i, d) in dst.iter_mut().enumerate() {
+                    // SAFETY: as above.
+                    *d = unsafe { s.get_unchecked(start + i * ps) }.to_f32();
+                }
+            }
+        }
+        Some(())
+    }
+
+    /// One element, bounds-checked (slow path, for tests and tools).
+    pub fn get(&self, x: usize, y: usize, c: usize) -> Option<f32> {
+        let mut v = [0.0f32];
+        self.read_row(y, c, x, &mut v)?;
+        Some(v[0])
+    }
+}
+
+/// Mutable samples of an output image.
+#[derive(Debug)]
+pub enum SamplesMut<'a> {
+    F32(&'a mut [f32]),
+    F16(&'a mut [f16]),
+}
+
+impl SamplesMut<'_> {
+    fn len(&self) -> usize {
+        match self {
+            SamplesMut::F32(s) => s.len(),
+            SamplesMut::F16(s) => s.len(),
+        }
+    }
+}
+
+/// A mutable, validated view of an output image.
+#[derive(Debug)]
+pub struct ImageViewMut<'a> {
+    samples: SamplesMut<'a>,
+    width: usize,
+    height: usize,
+    channels: usize,
+    layout: Layout,
+}
+
+impl<'a> ImageViewMut<'a> {
+    /// Validates the layout against the slice. Strides must be non-zero.
+    pub fn new(
+        samples: SamplesMut<'a>,
+        width: usize,
+        height: usize,
+        channels: usize,
+        layout: Layout,
+    ) -> Result<Self, Error> {
+        check(Arg::Output, samples.len(), width, height, channels, &layout)?;
+        if layout.pixel_stride == 0 || (height > 1 && layout.row_stride == 0) || (channels > 1 && layout.channel_stride == 0) {
+            return Err(Error::InvalidStride { arg: Arg::Output });
+        }
+        Ok(ImageViewMut { samples, width, height, channels, layout })
+    }
+    /// Shorthand for a tightly packed, interleaved f32 image.
+    pub fn interleaved(data: &'a mut [f32], width: usize, height: usize, channels: usize) -> Result<Self, Error> {
+        Self::new(SamplesMut::F32(data), width, height, channels, Layout::interleaved(width, channels))
+    }
+    pub fn width(&self) -> usize {
+        self.width
+    }
+    pub fn height(&self) -> usize {
+        self.height
+    }
+    pub fn channel_count(&self) -> usize {
+        self.channels
+    }
+
+    /// Writes `src` to channel `c` of row `y`, pixels `x0..x0 + src.len()`.
+    #[inline]
+    pub fn write_row(&mut self, y: usize, c: usize, x0: usize, src: &[f32]) -> Option<()> {
+        if y >= self.height || c >= self.channels || x0.checked_add(src.len())? > self.width {
+            return None;
+        }
+        let l = &self.layout;
+        let start = l.offset + y * l.row_stride + c * l.channel_stride + x0 * l.pixel_stride;
+        let ps = l.pixel_stride;
+        match &mut self.samples {
+            SamplesMut::F32(s) => {
+                for (i, v) in src.iter().enumerate() {
+                    // SAFETY: validated at construction (see `ImageView::read_row`).
+                    unsafe { *s.get_unchecked_mut(start + i * ps) = *v };
+                }
+            }
+            SamplesMut::F16(s) => {
+                for (i, v) in src.iter().enumerate() {
+                    // SAFETY: as above.
+                    unsafe { *s.get_unchecked_mut(start + i * ps) = f16::from_f32(*v) };
+                }
+            }
+        }
+        Some(())
+    }
+
+    /// A view of rows `y0..y0 + n` (reborrowed; rows numbered from 0).
+    pub fn rows(&mut self, y0: usize, n: usize) -> Result<ImageViewMut<'_>, Error> {
+        if n == 0 || y0.checked_add(n).is_none_or(|e| e > self.height) {
+            return Err(Error::InvalidTile { index: y0, count: self.height });
+        }
+        let mut layout = self.layout;
+        layout.offset += y0 * layout.row_stride;
+        let samples = match &mut self.samples {
+            SamplesMut::F32(s) => SamplesMut::F32(s),
+            SamplesMut::F16(s) => SamplesMut::F16(s),
+        };
+        Ok(ImageViewMut { samples, width: self.width, height: n, channels: self.channels, layout })
+    }
+
+    /// Whether each row's elements lie in `[offset + y*row_stride, offset + (y+1)*row_stride)`,
+    /// so that row bands are disjoint sub-slices and can be written in parallel.
+    pub fn rows_are_separable(&self) -> bool {
+        let l = &self.layout;
+        let extent = (self.width - 1) * l.pixel_stride + (self.channels - 1) * l.channel_stride + 1;
+        self.height == 1 || extent <= l.row_stride
+    }
+
+    /// Splits off rows `0..rows` into their own view; `self` keeps the rest.
+    /// Requires [`Self::rows_are_separable`]. Row numbering of both views starts at 0.
+    pub fn split_rows(self, rows: usize) -> Result<(Self, Option<Self>), Error> {
+        if rows == 0 || rows > self.height {
+            return Err(Error::InvalidTile { index: rows, count: self.height });
+        }
+        if rows == self.height {
+            return Ok((self, None));
+        }
+        if !self.rows_are_separable() {
+            return Err(Error::Unsupported("output rows overlap in memory; cannot split into bands"));
+        }
+        let at = self.layout.offset + rows * self.layout.row_stride;
+        let (w, h, c, l) = (self.width, self.height, self.channels, self.layout);
+        let top_layout = l;
+        let bottom_layout = Layout { offset: 0, ..l };
+        let (top, bottom) = match self.samples {
+            SamplesMut::F32(s) => {
+                let (a, b) = s.split_at_mut(at);
+                (SamplesMut::F32(a), SamplesMut::F32(b))
+            }
+            SamplesMut::F16(s) => {
+                let (a, b) = s.split_at_mut(at);
+                (SamplesMut::F16(a), SamplesMut::F16(b))
+            }
+        };
+        let top = ImageViewMut::new(top, w, rows, c, top_layout)?;
+        let bottom = ImageViewMut::new(bottom, w, h - rows, c, bottom_layout)?;
+        Ok((top, Some(bottom)))
+    }
+}

@@ -1,0 +1,181 @@
+//! Kernel 4: bilinear interpolation of the per-cell affine models between
+//! cell centres and application to the full-resolution guides (paper §3.2).
+//!
+//! Cell `i` covers pixels `i·B .. i·B + B`; its centre is at `i·B + B/2 − ½`.
+//! Rows are done in two steps: [`lerp_rows`] interpolates the model grid
+//! vertically to the output row, [`apply_row`] interpolates horizontally and
+//! evaluates `ŷ = c0 + Σ c_q d_q` (eq. 23 in raw coordinates). With B a
+//! multiple of 8 each span between two centres is whole `f32x8` groups with
+//! fixed lane weights.
+
+use crate::guides::MAX_GUIDES;
+use wide::f32x8;
+
+/// Interpolation position of pixel `x` (or row `y`): left cell and weight.
+#[inline]
+pub fn cell_pos(x: usize, block: usize, cells: usize) -> (usize, f32) {
+    let c = (x as f32 + 0.5) / block as f32 - 0.5;
+    if c <= 0.0 {
+        return (0, 0.0);
+    }
+    let i = c as usize;
+    if i + 1 >= cells {
+        return (cells - 1, 0.0);
+    }
+    (i, c - i as f32)
+}
+
+/// Vertically interpolated model row for output row `y` into `out` (`cells_x * ml`).
+pub fn lerp_rows(models: &[f32], cells_x: usize, cells_y: usize, ml: usize, block: usize, y: usize, out: &mut [f32]) {
+    let (j, fy) = cell_pos(y, block, cells_y);
+    let row = cells_x * ml;
+    let a = &models[j * row..(j + 1) * row];
+    if fy == 0.0 {
+        out.copy_from_slice(a);
+        return;
+    }
+    let b = &models[(j + 1) * row..(j + 2) * row];
+    for ((o, a), b) in out.iter_mut().zip(a).zip(b) {
+        *o = a + (b - a) * fy;
+    }
+}
+
+/// Guide planes of one output row: `Q` planes of `d = g − m`, then a validity
+/// plane (1 = all guides finite, 0 = not; `d` is 0 there).
+#[derive(Clone, Copy, Debug)]
+pub struct RowGuides<'a> {
+    pub data: &'a [f32],
+    pub width: usize,
+}
+
+/// Evaluates one output row into `out` (3 planes of `width`).
+pub fn apply_row<const Q: usize>(
+    row_models: &[f32],
+    cells_x: usize,
+    block: usize,
+    guides: RowGuides<'_>,
+    clamp: bool,
+    simd: bool,
+    out: &mut [f32],
+) {
+    let w = guides.width;
+    let ml = super::model_len(Q);
+    let plane = |p: usize| &guides.data[p * w..(p + 1) * w];
+    let mut d: [&[f32]; MAX_GUIDES] = [&[]; MAX_GUIDES];
+    for (q, dq) in d.iter_mut().enumerate().take(Q) {
+        *dq = plane(q);
+    }
+    let valid = plane(Q);
+    let (o0, rest) = out.split_at_mut(w);
+    let (o1, o2) = rest.split_at_mut(w);
+    let mut outs = [o0, o1, &mut o2[..w]];
+
+    let mut x = 0;
+    if simd && block % 8 == 0 && cells_x > 1 {
+        // Left edge: pixels before the first centre use cell 0 alone (scalar below).
+        let half = block / 2;
+        while x < half.min(w) {
+            scalar_px::<Q>(row_models, cells_x, block, ml, &d, valid, clamp, x, &mut outs);
+            x += 1;
+        }
+        let inv_b = 1.0 / block as f32;
+        for i in 0..cells_x - 1 {
+            let start = i * block + half;
+            let a = &row_models[i * ml..(i + 1) * ml];
+            let b = &row_models[(i + 1) * ml..(i + 2) * ml];
+            for g in 0..block / 8 {
+                let x0 = start + 8 * g;
+                if x0 + 8 > w {
+                    break;
+                }
+                let fx = f32x8::from([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]) + f32x8::splat((8 * g) as f32);
+                let fx = fx * f32x8::splat(inv_b);
+                simd_group::<Q>(a, b, fx, &d, valid, clamp, x0, &mut outs);
+                x = x0 + 8;
+            }
+            if x < start + block {
+                break;
+            }
+        }
+    }
+    while x < w {
+        scalar_px::<Q>(row_models, cells_x, block, ml, &d, valid, clamp, x, &mut outs);
+        x += 1;
+    }
+}
+
+#[inline(always)]
+fn finish(y: f32, muy: f32, valid: bool, clamp: bool) -> f32 {
+    let y = if valid && y.is_finite() { y } else { muy };
+    if clamp {
+        y.max(0.0)
+    } else {
+        y
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn scalar_px<const Q: usize>(
+    row_models: &[f32],
+    cells_x: usize,
+    block: usize,
+    ml: usize,
+    d: &[&[f32]; MAX_GUIDES],
+    valid: &[f32],
+    clamp: bool,
+    x: usize,
+    outs: &mut [&mut [f32]; 3],
+) {
+    let (i, fx) = cell_pos(x, block, cells_x);
+    let a = &row_models[i * ml..(i + 1) * ml];
+    let b = if fx == 0.0 { a } else { &row_models[(i + 1) * ml..(i + 2) * ml] };
+    let lerp = |j: usize| a[j] + (b[j] - a[j]) * fx;
+    for c in 0..3 {
+        let mut y = lerp(c);
+        for q in 0..Q {
+            y += lerp(3 + 3 * q + c) * d[q][x];
+        }
+        let muy = lerp(3 + 3 * Q + c);
+        outs[c][x] = finish(y, muy, valid[x] != 0.0, clamp);
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn simd_group<const Q: usize>(
+    a: &[f32],
+    b: &[f32],
+    fx: f32x8,
+    d: &[&[f32]; MAX_GUIDES],
+    valid: &[f32],
+    clamp: bool,
+    x0: usize,
+    outs: &mut [&mut [f32]; 3],
+) {
+    let load = |s: &[f32]| -> f32x8 {
+        let v: [f32; 8] = s[x0..x0 + 8].try_into().unwrap_or([0.0; 8]);
+        f32x8::from(v)
+    };
+    let lerp = |j: usize| f32x8::splat(b[j] - a[j]).mul_add(fx, f32x8::splat(a[j]));
+    let mut dv = [f32x8::ZERO; MAX_GUIDES];
+    for q in 0..Q {
+        dv[q] = load(d[q]);
+    }
+    let ok = load(valid).simd_ge(f32x8::splat(0.5));
+    for c in 0..3 {
+        let mut y = lerp(c);
+        for q in 0..Q {
+            y = lerp(3 + 3 * q + c).mul_add(dv[q], y);
+        }
+        let muy = lerp(3 + 3 * Q + c);
+        // finite: |y| <= MAX (false for NaN and ±Inf)
+        let finite = y.abs().simd_le(f32x8::splat(f32::MAX));
+        let mut r = (ok & finite).select(y, muy);
+        if clamp {
+            r = r.fast_max(f32x8::ZERO);
+        }
+        let arr: [f32; 8] = r.into();
+        outs[c][x0..x0 + 8].copy_from_slice(&arr);
+    }
+}

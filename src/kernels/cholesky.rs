@@ -1,0 +1,71 @@
+//! Dense Cholesky LLᵀ for small SPD systems in f64, in place, with a pivot
+//! floor: a pivot that is not clearly positive (relative to the matrix's
+//! diagonal) drops its variable (row/column zeroed, coefficient 0) instead
+//! of dividing by ~0.
+
+/// Factors the `n×n` row-major matrix `a` (leading dimension `ld`) in place
+/// (lower triangle = L). Entries of dropped pivots are set so that the solve
+/// returns 0 for that variable. Returns a bit mask of dropped pivots.
+pub fn factor(a: &mut [f64], n: usize, ld: usize, rel_floor: f64) -> u32 {
+    let mut dropped = 0u32;
+    let mut maxdiag = 0f64;
+    for i in 0..n {
+        maxdiag = maxdiag.max(a[i * ld + i].abs());
+    }
+    let floor = (maxdiag * rel_floor).max(f64::MIN_POSITIVE);
+    for j in 0..n {
+        let mut d = a[j * ld + j];
+        for p in 0..j {
+            d -= a[j * ld + p] * a[j * ld + p];
+        }
+        if !(d > floor) || !d.is_finite() {
+            dropped |= 1 << j;
+            a[j * ld + j] = 0.0;
+            for i in j + 1..n {
+                a[i * ld + j] = 0.0;
+            }
+            continue;
+        }
+        let l = libm::sqrt(d);
+        a[j * ld + j] = l;
+        for i in j + 1..n {
+            let mut s = a[i * ld + j];
+            for p in 0..j {
+                s -= a[i * ld + p] * a[j * ld + p];
+            }
+            a[i * ld + j] = s / l;
+        }
+    }
+    dropped
+}
+
+/// Solves `L Lᵀ x = b` for `nrhs` right-hand sides stored row-major in `b`
+/// (`n × nrhs`), in place. Dropped variables (zero pivot) get 0.
+pub fn solve(l: &[f64], n: usize, ld: usize, b: &mut [f64], nrhs: usize) {
+    for c in 0..nrhs {
+        for i in 0..n {
+            let d = l[i * ld + i];
+            if d == 0.0 {
+                b[i * nrhs + c] = 0.0;
+                continue;
+            }
+            let mut s = b[i * nrhs + c];
+            for p in 0..i {
+                s -= l[i * ld + p] * b[p * nrhs + c];
+            }
+            b[i * nrhs + c] = s / d;
+        }
+        for i in (0..n).rev() {
+            let d = l[i * ld + i];
+            if d == 0.0 {
+                b[i * nrhs + c] = 0.0;
+                continue;
+            }
+            let mut s = b[i * nrhs + c];
+            for p in i + 1..n {
+                s -= l[p * ld + i] * b[p * nrhs + c];
+            }
+            b[i * nrhs + c] = s / d;
+        }
+    }
+}

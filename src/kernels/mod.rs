@@ -1,0 +1,71 @@
+//! The FLR kernels, each callable on its own on one band of cells.
+//!
+//! Cell layout (f64, `k = moment_count(Q)` values per cell), eq. 12:
+//! `[n, s_0..s_Q, S (upper triangle, row-major), t_0..t_3, P (Q×3, guide-major)]`
+//! with `n = Σw`, `s = Σw g`, `S = Σw g gᵀ`, `t = Σw y`, `P = Σw g yᵀ`; guides
+//! relative to the frame reference `m` (see `flr::Stats`).
+
+pub mod apply;
+pub mod blur;
+pub mod cholesky;
+pub mod moments;
+pub mod solve;
+
+/// Number of upper-triangle entries of a Q×Q matrix.
+pub const fn packed_len(q: usize) -> usize {
+    q * (q + 1) / 2
+}
+
+/// Moments per cell for `q` guides: n, s, S, t, P.
+pub const fn moment_count(q: usize) -> usize {
+    1 + q + packed_len(q) + 3 + 3 * q
+}
+
+/// Model floats per cell: intercept (3), coefficients (Q×3), local mean of y (3).
+pub const fn model_len(q: usize) -> usize {
+    3 + 3 * q + 3
+}
+
+/// Offsets of each moment group inside a cell.
+#[derive(Clone, Copy, Debug)]
+pub struct CellLayout {
+    pub q: usize,
+    pub s: usize,
+    pub ss: usize,
+    pub t: usize,
+    pub p: usize,
+    pub k: usize,
+}
+
+impl CellLayout {
+    pub const fn new(q: usize) -> Self {
+        let s = 1;
+        let ss = s + q;
+        let t = ss + packed_len(q);
+        let p = t + 3;
+        CellLayout { q, s, ss, t, p, k: p + 3 * q }
+    }
+}
+
+/// Calls `$f::<Q>(args)` for the runtime guide count `$q` (0..=12).
+macro_rules! dispatch_q {
+    ($q:expr, $f:ident ( $($a:expr),* $(,)? )) => {
+        match $q {
+            0 => $f::<0>($($a),*),
+            1 => $f::<1>($($a),*),
+            2 => $f::<2>($($a),*),
+            3 => $f::<3>($($a),*),
+            4 => $f::<4>($($a),*),
+            5 => $f::<5>($($a),*),
+            6 => $f::<6>($($a),*),
+            7 => $f::<7>($($a),*),
+            8 => $f::<8>($($a),*),
+            9 => $f::<9>($($a),*),
+            10 => $f::<10>($($a),*),
+            11 => $f::<11>($($a),*),
+            12 => $f::<12>($($a),*),
+            _ => return Err($crate::Error::TooManyGuides { got: $q }),
+        }
+    };
+}
+pub(crate) use dispatch_q;

@@ -1,0 +1,215 @@
+//! Kernel 1: per-pixel moments summed over B×B blocks (paper §3.2, eq. 12).
+//!
+//! Input is one band of `B` rows already gathered into planes (see
+//! [`BandPlanes`]). Each block is accumulated *relative to its first valid
+//! pixel* in f32 (so large guide offsets do not cancel), then shifted to the
+//! frame reference in f64 and stored. With B a multiple of 8 one block row
+//! maps onto `f32x8` lanes.
+
+use super::CellLayout;
+use crate::guides::MAX_GUIDES;
+use wide::f32x8;
+
+/// Largest moment count (Q = 12).
+const MAX_K: usize = super::moment_count(MAX_GUIDES);
+
+/// A band of `rows` input rows, `width` (padded to whole blocks) pixels each,
+/// as planes: weight (1 = valid, 0 = excluded), y0, y1, y2, then one plane per
+/// guide holding `g − m` (zero where excluded).
+#[derive(Clone, Copy, Debug)]
+pub struct BandPlanes<'a> {
+    pub data: &'a [f32],
+    pub rows: usize,
+    pub width: usize,
+}
+
+impl BandPlanes<'_> {
+    /// Floats needed for `q` guides.
+    pub const fn len(q: usize, rows: usize, width: usize) -> usize {
+        (4 + q) * rows * width
+    }
+    #[inline]
+    fn plane(&self, p: usize) -> &[f32] {
+        let n = self.rows * self.width;
+        &self.data[p * n..(p + 1) * n]
+    }
+}
+
+/// Accumulates the moments of every block of the band into `cells`
+/// (`cells.len() == (width / block) * k`). Returns the number of empty cells.
+pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bool, cells: &mut [f64]) -> usize {
+    let lay = CellLayout::new(Q);
+    let k = lay.k;
+    let w = band.plane(0);
+    let y = [band.plane(1), band.plane(2), band.plane(3)];
+    let mut g: [&[f32]; MAX_GUIDES] = [&[]; MAX_GUIDES];
+    for (i, gi) in g.iter_mut().enumerate().take(Q) {
+        *gi = band.plane(4 + i);
+    }
+    let mut acc = [0f32; MAX_K];
+    let mut accv = [f32x8::ZERO; MAX_K];
+    let mut empty = 0;
+    for (cx, cell) in cells.chunks_exact_mut(k).enumerate() {
+        let x0 = cx * block;
+        // Block reference: the first valid pixel (exact sample; a constant guide stays exactly constant).
+        let mut r = [0f32; MAX_GUIDES];
+        let mut found = false;
+        'find: for row in 0..band.rows {
+            for x in x0..x0 + block {
+                let i = row * band.width + x;
+                if w[i] != 0.0 {
+                    for q in 0..Q {
+                        r[q] = g[q][i];
+                    }
+                    found = true;
+                    break 'find;
+                }
+            }
+        }
+        if !found {
+            cell.fill(0.0);
+            empty += 1;
+            continue;
+        }
+        acc[..k].fill(0.0);
+        if simd && block % 8 == 0 {
+            accv[..k].fill(f32x8::ZERO);
+            block_simd::<Q>(&band, x0, block, &w, &y, &g, &r, &lay, &mut accv);
+            for (a, v) in acc[..k].iter_mut().zip(&accv[..k]) {
+                *a = v.reduce_add();
+            }
+        } else {
+            block_scalar::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc);
+        }
+        store_shifted::<Q>(&acc, &r, &lay, cell);
+    }
+    empty
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn block_scalar<const Q: usize>(
+    band: &BandPlanes<'_>,
+    x0: usize,
+    block: usize,
+    w: &[f32],
+    y: &[&[f32]; 3],
+    g: &[&[f32]; MAX_GUIDES],
+    r: &[f32; MAX_GUIDES],
+    lay: &CellLayout,
+    acc: &mut [f32; MAX_K],
+) {
+    for row in 0..band.rows {
+        let base = row * band.width;
+        for i in base + x0..base + x0 + block {
+            let wi = w[i];
+            let mut e = [0f32; MAX_GUIDES];
+            for q in 0..Q {
+                e[q] = (g[q][i] - r[q]) * wi;
+            }
+            let yy = [y[0][i], y[1][i], y[2][i]];
+            acc[0] += wi;
+            let mut p = lay.ss;
+            for a in 0..Q {
+                acc[lay.s + a] += e[a];
+                for b in a..Q {
+                    acc[p] += e[a] * e[b];
+                    p += 1;
+                }
+            }
+            for c in 0..3 {
+                acc[lay.t + c] += yy[c];
+            }
+            for a in 0..Q {
+                for c in 0..3 {
+                    acc[lay.p + 3 * a + c] += e[a] * yy[c];
+                }
+            }
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn block_simd<const Q: usize>(
+    band: &BandPlanes<'_>,
+    x0: usize,
+    block: usize,
+    w: &[f32],
+    y: &[&[f32]; 3],
+    g: &[&[f32]; MAX_GUIDES],
+    r: &[f32; MAX_GUIDES],
+    lay: &CellLayout,
+    acc: &mut [f32x8; MAX_K],
+) {
+    let load = |s: &[f32], i: usize| -> f32x8 {
+        let a: [f32; 8] = s[i..i + 8].try_into().unwrap_or([0.0; 8]);
+        f32x8::from(a)
+    };
+    let mut rv = [f32x8::ZERO; MAX_GUIDES];
+    for q in 0..Q {
+        rv[q] = f32x8::splat(r[q]);
+    }
+    for row in 0..band.rows {
+        let base = row * band.width;
+        let mut i = base + x0;
+        while i < base + x0 + block {
+            let wi = load(w, i);
+            let mut e = [f32x8::ZERO; MAX_GUIDES];
+            for q in 0..Q {
+                e[q] = (load(g[q], i) - rv[q]) * wi;
+            }
+            let yy = [load(y[0], i), load(y[1], i), load(y[2], i)];
+            acc[0] += wi;
+            let mut p = lay.ss;
+            for a in 0..Q {
+                acc[lay.s + a] += e[a];
+                for b in a..Q {
+                    acc[p] = e[a].mul_add(e[b], acc[p]);
+                    p += 1;
+                }
+            }
+            for c in 0..3 {
+                acc[lay.t + c] += yy[c];
+            }
+            for a in 0..Q {
+                for c in 0..3 {
+                    let j = lay.p + 3 * a + c;
+                    acc[j] = e[a].mul_add(yy[c], acc[j]);
+                }
+            }
+            i += 8;
+        }
+    }
+}
+
+/// Moments about the block reference `r` → moments about the frame reference (f64).
+#[inline(always)]
+fn store_shifted<const Q: usize>(acc: &[f32; MAX_K], r: &[f32; MAX_GUIDES], lay: &CellLayout, cell: &mut [f64]) {
+    let n = acc[0] as f64;
+    let mut rr = [0f64; MAX_GUIDES];
+    let mut s = [0f64; MAX_GUIDES];
+    for q in 0..Q {
+        rr[q] = r[q] as f64;
+        s[q] = acc[lay.s + q] as f64;
+    }
+    let t = [acc[lay.t] as f64, acc[lay.t + 1] as f64, acc[lay.t + 2] as f64];
+    cell[0] = n;
+    let mut p = lay.ss;
+    for a in 0..Q {
+        cell[lay.s + a] = s[a] + n * rr[a];
+        for b in a..Q {
+            cell[p] = acc[p] as f64 + rr[a] * s[b] + s[a] * rr[b] + n * rr[a] * rr[b];
+            p += 1;
+        }
+    }
+    for c in 0..3 {
+        cell[lay.t + c] = t[c];
+    }
+    for a in 0..Q {
+        for c in 0..3 {
+            let j = lay.p + 3 * a + c;
+            cell[j] = acc[j] as f64 + rr[a] * t[c];
+        }
+    }
+}

@@ -1,0 +1,171 @@
+//! Kernel 3: the per-cell solve. Blurred moments → affine model.
+//!
+//! * Normalized (default): the normalized-correlation regularized inverse,
+//!   appendix eqs. 12–23, on per-frame standardised guides.
+//! * Tikhonov: eq. 11 on the guides exactly as given.
+//!
+//! Model layout (f32, [`super::model_len`]): intercept `c0[3]`, coefficients
+//! `c[q][3]` applied to `d = g − m` (guide minus frame reference), and the
+//! local mean `μ_y[3]` (used where a pixel's guides are not finite).
+
+use super::{cholesky, CellLayout};
+use crate::config::Regularization;
+use crate::guides::MAX_GUIDES;
+
+const N1: usize = MAX_GUIDES + 1;
+
+/// Per-frame constants of the solve.
+#[derive(Clone, Copy, Debug)]
+pub struct SolveParams {
+    /// Frame reference `m` (absolute guide values; moments are relative to it).
+    pub reference: [f64; MAX_GUIDES],
+    /// Frame mean of each guide, relative to `m`.
+    pub mean: [f64; MAX_GUIDES],
+    /// Frame standard deviation of each guide (≥ a tiny floor, 1 for constants).
+    pub scale: [f64; MAX_GUIDES],
+    pub regularization: Regularization,
+    /// 1 / (total window weight): turns sums into weighted averages (Tikhonov).
+    pub weight_norm: f64,
+    /// A cell whose window weight is at most this is empty (no valid pixel).
+    pub min_weight: f64,
+}
+
+/// Outcome of one cell's solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CellOutcome {
+    pub empty: bool,
+    /// Variables dropped by the pivot floor.
+    pub dropped: u32,
+}
+
+/// Solves one cell. `cell` has `CellLayout::new(Q).k` values, `model` has `model_len(Q)`.
+pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f32]) -> CellOutcome {
+    let lay = CellLayout::new(Q);
+    let n = cell[0];
+    if !(n > p.min_weight) || !n.is_finite() {
+        model.fill(0.0);
+        return CellOutcome { empty: true, dropped: 0 };
+    }
+    let inv_n = 1.0 / n;
+    let muy = [cell[lay.t] * inv_n, cell[lay.t + 1] * inv_n, cell[lay.t + 2] * inv_n];
+    let mut c0 = muy;
+    let mut coef = [[0f64; 3]; MAX_GUIDES];
+    let dropped = match p.regularization {
+        Regularization::Normalized { eps_mul, eps_add } => {
+            let mut mu = [0f64; MAX_GUIDES];
+            let mut muz = [0f64; MAX_GUIDES];
+            for a in 0..Q {
+                mu[a] = cell[lay.s + a] * inv_n;
+                muz[a] = (mu[a] - p.mean[a]) / p.scale[a];
+            }
+            // Ŵ (eq. 18) on standardised guides; W = S/n − μμᵀ in f64.
+            let mut wh = [0f64; N1 * N1];
+            let mut idx = lay.ss;
+            for a in 0..Q {
+                for b in a..Q {
+                    let w = (cell[idx] * inv_n - mu[a] * mu[b]) / (p.scale[a] * p.scale[b]);
+                    let mut v = w + eps_mul * muz[a] * muz[b];
+                    if a == b {
+                        v += eps_mul * muz[a] * muz[a] + eps_add;
+                    }
+                    wh[a * N1 + b] = v;
+                    wh[b * N1 + a] = v;
+                    idx += 1;
+                }
+            }
+            // σ̂ (eq. 19), Ĉ + ϵI (eqs. 20, 22), B̂ (eq. 21).
+            let mut sig = [0f64; MAX_GUIDES];
+            for a in 0..Q {
+                sig[a] = libm::sqrt(wh[a * N1 + a].max(1e-300));
+            }
+            let mut bh = [0f64; MAX_GUIDES * 3];
+            for a in 0..Q {
+                for b in 0..Q {
+                    wh[a * N1 + b] /= sig[a] * sig[b];
+                }
+                wh[a * N1 + a] += eps_add;
+                for c in 0..3 {
+                    let cxy = cell[lay.p + 3 * a + c] * inv_n - mu[a] * muy[c];
+                    bh[a * 3 + c] = cxy / (p.scale[a] * sig[a]);
+                }
+            }
+            let dropped = cholesky::factor(&mut wh, Q, N1, 1e-12);
+            cholesky::solve(&wh, Q, N1, &mut bh, 3);
+            // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
+            for a in 0..Q {
+                for c in 0..3 {
+                    let beta = bh[a * 3 + c] / (sig[a] * p.scale[a]);
+                    coef[a][c] = beta;
+                    c0[c] -= beta * mu[a];
+                }
+            }
+            dropped
+        }
+        Regularization::Tikhonov { eps } => {
+            let wn = p.weight_norm;
+            let m = &p.reference;
+            let mut xx = [0f64; N1 * N1];
+            let mut xy = [0f64; N1 * 3];
+            xx[0] = n * wn + eps;
+            let mut idx = lay.ss;
+            for a in 0..Q {
+                let s_a = cell[lay.s + a];
+                let s_raw = s_a + n * m[a];
+                xx[a + 1] = s_raw * wn;
+                xx[(a + 1) * N1] = s_raw * wn;
+                for b in a..Q {
+                    let s_b = cell[lay.s + b];
+                    let raw = cell[idx] + m[a] * s_b + s_a * m[b] + n * m[a] * m[b];
+                    let mut v = raw * wn;
+                    if a == b {
+                        v += eps;
+                    }
+                    xx[(a + 1) * N1 + b + 1] = v;
+                    xx[(b + 1) * N1 + a + 1] = v;
+                    idx += 1;
+                }
+            }
+            for c in 0..3 {
+                let t = cell[lay.t + c];
+                xy[c] = t * wn;
+                for a in 0..Q {
+                    xy[(a + 1) * 3 + c] = (cell[lay.p + 3 * a + c] + m[a] * t) * wn;
+                }
+            }
+            let dropped = cholesky::factor(&mut xx, Q + 1, N1, 1e-15);
+            cholesky::solve(&xx, Q + 1, N1, &mut xy, 3);
+            for c in 0..3 {
+                c0[c] = xy[c];
+                for a in 0..Q {
+                    let v = xy[(a + 1) * 3 + c];
+                    coef[a][c] = v;
+                    c0[c] += v * m[a];
+                }
+            }
+            dropped
+        }
+    };
+    write_model::<Q>(&c0, &coef, &muy, model);
+    CellOutcome { empty: false, dropped: dropped.count_ones() }
+}
+
+fn write_model<const Q: usize>(c0: &[f64; 3], coef: &[[f64; 3]; MAX_GUIDES], muy: &[f64; 3], model: &mut [f32]) {
+    let finite = |v: f64| v.is_finite() && v.abs() < f32::MAX as f64;
+    let ok = c0.iter().chain(coef[..Q].iter().flatten()).chain(muy).all(|&v| finite(v));
+    let muy_f = if muy.iter().all(|&v| finite(v)) { [muy[0] as f32, muy[1] as f32, muy[2] as f32] } else { [0.0; 3] };
+    if !ok {
+        // Degenerate beyond repair: fall back to the local mean.
+        model.fill(0.0);
+        model[..3].copy_from_slice(&muy_f);
+    } else {
+        for c in 0..3 {
+            model[c] = c0[c] as f32;
+        }
+        for a in 0..Q {
+            for c in 0..3 {
+                model[3 + 3 * a + c] = coef[a][c] as f32;
+            }
+        }
+    }
+    model[3 + 3 * Q..3 + 3 * Q + 3].copy_from_slice(&muy_f);
+}

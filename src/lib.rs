@@ -1,0 +1,69 @@
+//! # lrdenoise
+//!
+//! Real-time regression denoisers for path-traced diffuse global illumination:
+//! `no_std`, allocation-free, tile-based SIMD kernels.
+//!
+//! The core method is **FLR** (Fast Local Regression, Salmi, Csefalvay & Imber):
+//! per-pixel weighted least squares of the noisy demodulated indirect light
+//! against noise-free guides (normals, depth, positions, AO), computed from
+//! moments summed over B×B blocks, blurred, solved per block with the
+//! normalized-correlation regularized inverse, and bilinearly applied.
+//!
+//! ```
+//! use lrdenoise::{Flr, FlrConfig, Frame, Guides, GuideSet, ImageView, ImageViewMut};
+//! let (w, h) = (64, 48);
+//! let noisy = vec![0.5f32; w * h * 3];
+//! let normal = vec![0.0f32; w * h * 3];
+//! let depth = vec![1.0f32; w * h];
+//! let cfg = FlrConfig::with_guides(GuideSet::NORMAL_DEPTH);
+//! let flr = Flr::new(cfg, w, h)?;
+//! let mut scratch = vec![0f64; flr.scratch_len()];   // once; reuse every frame
+//! let mut out = vec![0f32; w * h * 3];
+//! let guides = Guides {
+//!     normal: Some(ImageView::interleaved(&normal, w, h, 3)?),
+//!     depth: Some(ImageView::interleaved(&depth, w, h, 1)?),
+//!     ..Default::default()
+//! };
+//! let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3)?, guides);
+//! let report = flr.denoise(&frame, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3)?)?;
+//! assert_eq!(report.nonfinite_noisy, 0);
+//! assert!((out[0] - 0.5).abs() < 1e-4);
+//! # Ok::<(), lrdenoise::Error>(())
+//! ```
+#![no_std]
+#![forbid(unsafe_op_in_unsafe_fn)]
+#![warn(missing_debug_implementations)]
+
+pub mod config;
+pub mod error;
+#[cfg(feature = "flr")]
+pub mod flr;
+pub mod guides;
+pub mod image;
+pub mod kernels;
+
+pub use config::{Blur, FlrConfig, Kernel, Regularization};
+pub use error::{Arg, Error};
+#[cfg(feature = "flr")]
+pub use flr::{CheckedFrame, Flr, Parts, Report, Stats};
+pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
+pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
+
+/// The SIMD instruction set `wide` was compiled for (chosen at compile time by
+/// `-C target-feature`/`target-cpu`).
+pub const SIMD_LEVEL: &str = if cfg!(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma")) {
+    "avx2+fma"
+} else if cfg!(all(target_arch = "x86_64", target_feature = "avx")) {
+    "avx"
+} else if cfg!(all(target_arch = "x86_64", target_feature = "sse4.1")) {
+    "sse4.1"
+} else if cfg!(target_arch = "x86_64") {
+    "sse2"
+} else if cfg!(all(target_arch = "aarch64", target_feature = "neon")) {
+    "neon"
+} else {
+    "scalar"
+};
+
+/// Crate version.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
