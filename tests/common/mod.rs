@@ -1,0 +1,362 @@
+//! Test support: synthetic frames and the slow, obvious f64 reference.
+#![allow(dead_code)]
+
+use lrdenoise::{
+    Blur, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Regularization, Report,
+};
+
+/// xorshift64*: deterministic, dependency-free.
+pub struct Rng(pub u64);
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545F4914F6CDD1D)
+    }
+    /// Uniform in [0, 1).
+    pub fn f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// An owned frame with every guide (interleaved f32 buffers).
+#[derive(Clone)]
+pub struct Owned {
+    pub w: usize,
+    pub h: usize,
+    pub noisy: Vec<f32>,
+    pub clean: Vec<f32>,
+    pub normal: Vec<f32>,
+    pub depth: Vec<f32>,
+    pub position: Vec<f32>,
+    pub ao: Vec<f32>,
+    pub user: Vec<Vec<f32>>,
+}
+
+impl Owned {
+    /// A scene-like frame: a few planar regions with different normals, a
+    /// depth ramp, AO darkening near region edges, light an affine function of
+    /// the guides per region plus noise of relative amplitude `noise`.
+    pub fn synthetic(w: usize, h: usize, seed: u64, noise: f32) -> Owned {
+        let mut rng = Rng(seed.wrapping_mul(2654435761).wrapping_add(12345) | 1);
+        let n = w * h;
+        let mut o = Owned {
+            w,
+            h,
+            noisy: vec![0.0; 3 * n],
+            clean: vec![0.0; 3 * n],
+            normal: vec![0.0; 3 * n],
+            depth: vec![0.0; n],
+            position: vec![0.0; 3 * n],
+            ao: vec![0.0; n],
+            user: vec![],
+        };
+        let split_x = (w as f32 * (0.3 + 0.4 * rng.f32())) as usize;
+        let split_y = (h as f32 * (0.3 + 0.4 * rng.f32())) as usize;
+        let coef: Vec<f32> = (0..24).map(|_| rng.f32()).collect();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let region = (x >= split_x) as usize + 2 * (y >= split_y) as usize;
+                let nrm = match region {
+                    0 => [0.0, 1.0, 0.0],
+                    1 => [0.7071, 0.0, 0.7071],
+                    2 => [-0.6, 0.0, 0.8],
+                    _ => [0.0, 0.0, 1.0],
+                };
+                let fx = x as f32 / w.max(1) as f32;
+                let fy = y as f32 / h.max(1) as f32;
+                let depth = 2.0 + 3.0 * fy + region as f32 * 0.5 + 0.3 * fx;
+                let ao = (1.0 - 0.6 * (-(((x as f32 - split_x as f32).abs()) / 3.0)).exp()).clamp(0.0, 1.0);
+                o.normal[3 * i..3 * i + 3].copy_from_slice(&nrm);
+                o.depth[i] = depth;
+                o.ao[i] = ao;
+                o.position[3 * i..3 * i + 3].copy_from_slice(&[fx * 4.0, depth, fy * 4.0]);
+                for c in 0..3 {
+                    let k = &coef[region * 6..region * 6 + 6];
+                    let v = (0.2 + k[c] * 0.5) * ao + 0.1 * k[3 + c] * depth * 0.3 + 0.05 * nrm[c].abs();
+                    o.clean[3 * i + c] = v;
+                    let u = rng.f32();
+                    // heavy-tailed multiplicative noise (like 1 spp)
+                    let m = if u < 0.5 { 2.0 * u } else { 1.0 + noise * 4.0 * (u - 0.5) * (u - 0.5) * 8.0 };
+                    o.noisy[3 * i + c] = v * (1.0 - noise + noise * m);
+                }
+            }
+        }
+        o
+    }
+
+    pub fn guides(&self, set: GuideSet) -> Guides<'_> {
+        let (w, h) = (self.w, self.h);
+        let mut g = Guides::default();
+        if set.normal {
+            g.normal = Some(ImageView::interleaved(&self.normal, w, h, 3).unwrap());
+        }
+        if set.depth {
+            g.depth = Some(ImageView::interleaved(&self.depth, w, h, 1).unwrap());
+        }
+        if set.position {
+            g.position = Some(ImageView::interleaved(&self.position, w, h, 3).unwrap());
+        }
+        if set.ao {
+            g.ao = Some(ImageView::interleaved(&self.ao, w, h, 1).unwrap());
+        }
+        for u in 0..set.user as usize {
+            g.user[u] = Some(ImageView::interleaved(&self.user[u], w, h, 1).unwrap());
+        }
+        g
+    }
+
+    pub fn frame(&self, set: GuideSet) -> Frame<'_> {
+        Frame::new(ImageView::interleaved(&self.noisy, self.w, self.h, 3).unwrap(), self.guides(set))
+    }
+
+    /// Guide channels in kernel order (normal, depth, position, ao, user), per pixel.
+    pub fn channels(&self, set: GuideSet) -> Vec<Vec<f64>> {
+        let n = self.w * self.h;
+        let mut out = vec![];
+        if set.normal {
+            for c in 0..3 {
+                out.push((0..n).map(|i| self.normal[3 * i + c] as f64).collect());
+            }
+        }
+        if set.depth {
+            out.push(self.depth.iter().map(|&v| v as f64).collect());
+        }
+        if set.position {
+            for c in 0..3 {
+                out.push((0..n).map(|i| self.position[3 * i + c] as f64).collect());
+            }
+        }
+        if set.ao {
+            out.push(self.ao.iter().map(|&v| v as f64).collect());
+        }
+        for u in 0..set.user as usize {
+            out.push(self.user[u].iter().map(|&v| v as f64).collect());
+        }
+        out
+    }
+}
+
+/// Runs `denoise` with a fresh scratch buffer; returns (output, report).
+pub fn run(cfg: FlrConfig, f: &Owned) -> (Vec<f32>, Report) {
+    run_frame(cfg, f.w, f.h, &f.frame(cfg.guides))
+}
+
+pub fn run_frame(cfg: FlrConfig, w: usize, h: usize, frame: &Frame<'_>) -> (Vec<f32>, Report) {
+    let flr = Flr::new(cfg, w, h).unwrap();
+    let mut scratch = vec![0f64; flr.scratch_len()];
+    let mut out = vec![f32::NAN; w * h * 3];
+    let rep = flr
+        .denoise(frame, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap())
+        .unwrap();
+    (out, rep)
+}
+
+/// Solves the dense system `a x = b` (n×n, nrhs columns) by Gaussian
+/// elimination with partial pivoting (a different algorithm from the library's
+/// Cholesky on purpose). Singular pivots give 0.
+fn gauss(mut a: Vec<f64>, n: usize, mut b: Vec<f64>, nrhs: usize) -> Vec<f64> {
+    for col in 0..n {
+        let piv = (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs())).unwrap();
+        for k in 0..n {
+            a.swap(col * n + k, piv * n + k);
+        }
+        for k in 0..nrhs {
+            b.swap(col * nrhs + k, piv * nrhs + k);
+        }
+        let p = a[col * n + col];
+        if p.abs() < 1e-300 {
+            continue;
+        }
+        for r in col + 1..n {
+            let f = a[r * n + col] / p;
+            for k in col..n {
+                a[r * n + k] -= f * a[col * n + k];
+            }
+            for k in 0..nrhs {
+                b[r * nrhs + k] -= f * b[col * nrhs + k];
+            }
+        }
+    }
+    let mut x = vec![0.0; n * nrhs];
+    for k in 0..nrhs {
+        for r in (0..n).rev() {
+            let p = a[r * n + r];
+            if p.abs() < 1e-300 {
+                continue;
+            }
+            let mut s = b[r * nrhs + k];
+            for c in r + 1..n {
+                s -= a[r * n + c] * x[c * nrhs + k];
+            }
+            x[r * nrhs + k] = s / p;
+        }
+    }
+    x
+}
+
+/// The f64 reference: per-pixel windowed weighted least squares at full
+/// resolution (no blocks), Gaussian or box window, the same regulariser
+/// equations written out plainly. `guides[q][pixel]`, `y` interleaved RGB.
+/// Pixels with a non-finite value are excluded. Output interleaved RGB, no clamping.
+pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
+    let q = guides.len();
+    let (kern, r) = match cfg.blur {
+        Blur::Gaussian { sigma, radius } => {
+            let r = radius.unwrap_or(3.0 * sigma).ceil() as isize;
+            let s = sigma as f64;
+            let k: Vec<f64> = (-r..=r).map(|d| (-(d * d) as f64 / (2.0 * s * s)).exp()).collect();
+            let sum: f64 = k.iter().sum();
+            (k.iter().map(|v| v / sum).collect::<Vec<_>>(), r)
+        }
+        Blur::Box { radius } => {
+            let r = radius.ceil() as isize;
+            (vec![1.0 / (2 * r + 1) as f64; (2 * r + 1) as usize], r)
+        }
+    };
+    let valid: Vec<bool> = (0..w * h)
+        .map(|i| (0..3).all(|c| y[3 * i + c].is_finite()) && (0..q).all(|a| guides[a][i].is_finite()))
+        .collect();
+    // Frame statistics over valid pixels (two-pass).
+    let nv = valid.iter().filter(|v| **v).count().max(1) as f64;
+    let mut fmean = vec![0.0; q];
+    let mut fscale = vec![1.0; q];
+    for a in 0..q {
+        let m: f64 = (0..w * h).filter(|&i| valid[i]).map(|i| guides[a][i]).sum::<f64>() / nv;
+        let v: f64 = (0..w * h).filter(|&i| valid[i]).map(|i| (guides[a][i] - m).powi(2)).sum::<f64>() / nv;
+        fmean[a] = m;
+        let sd = v.sqrt().max(1e-6 * m.abs());
+        fscale[a] = if sd > 0.0 { sd } else { 1.0 };
+    }
+    let mut out = vec![0.0; 3 * w * h];
+    for py in 0..h as isize {
+        for px in 0..w as isize {
+            // weights and moments
+            let mut n = 0.0;
+            let mut sx = vec![0.0; q];
+            let mut sy = [0.0; 3];
+            let mut idx = vec![];
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (x, yy) = (px + dx, py + dy);
+                    if x < 0 || yy < 0 || x >= w as isize || yy >= h as isize {
+                        continue;
+                    }
+                    let i = (yy as usize) * w + x as usize;
+                    if !valid[i] {
+                        continue;
+                    }
+                    let wt = kern[(dx + r) as usize] * kern[(dy + r) as usize];
+                    idx.push((i, wt));
+                    n += wt;
+                    for a in 0..q {
+                        sx[a] += wt * guides[a][i];
+                    }
+                    for c in 0..3 {
+                        sy[c] += wt * y[3 * i + c] as f64;
+                    }
+                }
+            }
+            let k = (py as usize) * w + px as usize;
+            if n <= 0.0 {
+                continue;
+            }
+            match cfg.regularization {
+                Regularization::Normalized { eps_mul, eps_add } => {
+                    let mu: Vec<f64> = sx.iter().map(|s| s / n).collect();
+                    let muy: Vec<f64> = sy.iter().map(|s| s / n).collect();
+                    // centred covariance (two-pass), standardised by the frame scale
+                    let mut wm = vec![0.0; q * q];
+                    let mut cxy = vec![0.0; q * 3];
+                    for &(i, wt) in &idx {
+                        for a in 0..q {
+                            let ea = (guides[a][i] - mu[a]) / fscale[a];
+                            for b in 0..q {
+                                wm[a * q + b] += wt * ea * (guides[b][i] - mu[b]) / fscale[b];
+                            }
+                            for c in 0..3 {
+                                cxy[a * 3 + c] += wt * ea * (y[3 * i + c] as f64 - muy[c]);
+                            }
+                        }
+                    }
+                    let muz: Vec<f64> = (0..q).map(|a| (mu[a] - fmean[a]) / fscale[a]).collect();
+                    // eq. 18
+                    for a in 0..q {
+                        for b in 0..q {
+                            wm[a * q + b] = wm[a * q + b] / n + eps_mul * muz[a] * muz[b];
+                        }
+                        wm[a * q + a] += eps_mul * muz[a] * muz[a] + eps_add;
+                    }
+                    let sig: Vec<f64> = (0..q).map(|a| wm[a * q + a].max(1e-300).sqrt()).collect();
+                    let mut c = vec![0.0; q * q];
+                    let mut bh = vec![0.0; q * 3];
+                    for a in 0..q {
+                        for b in 0..q {
+                            c[a * q + b] = wm[a * q + b] / (sig[a] * sig[b]) + if a == b { eps_add } else { 0.0 };
+                        }
+                        for ch in 0..3 {
+                            bh[a * 3 + ch] = cxy[a * 3 + ch] / n / sig[a];
+                        }
+                    }
+                    let ah = gauss(c, q, bh, 3);
+                    for ch in 0..3 {
+                        let mut v = muy[ch];
+                        for a in 0..q {
+                            let z = (guides[a][k] - mu[a]) / fscale[a];
+                            v += z / sig[a] * ah[a * 3 + ch];
+                        }
+                        out[3 * k + ch] = v;
+                    }
+                }
+                Regularization::Tikhonov { eps } => {
+                    let d = q + 1;
+                    let mut xx = vec![0.0; d * d];
+                    let mut xy = vec![0.0; d * 3];
+                    for &(i, wt) in &idx {
+                        let mut x = vec![1.0];
+                        x.extend((0..q).map(|a| guides[a][i]));
+                        for a in 0..d {
+                            for b in 0..d {
+                                xx[a * d + b] += wt * x[a] * x[b];
+                            }
+                            for c in 0..3 {
+                                xy[a * 3 + c] += wt * x[a] * y[3 * i + c] as f64;
+                            }
+                        }
+                    }
+                    for a in 0..d {
+                        xx[a * d + a] += eps;
+                    }
+                    let coef = gauss(xx, d, xy, 3);
+                    for c in 0..3 {
+                        let mut v = coef[c];
+                        for a in 0..q {
+                            v += coef[(a + 1) * 3 + c] * guides[a][k];
+                        }
+                        out[3 * k + c] = v;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Largest absolute difference, and the mean absolute difference.
+pub fn diff(a: &[f32], b: &[f64]) -> (f64, f64) {
+    let mut max: f64 = 0.0;
+    let mut sum = 0.0;
+    for (x, y) in a.iter().zip(b) {
+        let d = (*x as f64 - y).abs();
+        max = max.max(d);
+        sum += d;
+    }
+    (max, sum / a.len() as f64)
+}
+
+/// The paper's defaults with `block` and clamping off (the reference does not clamp).
+pub fn cfg(set: GuideSet, block: usize) -> FlrConfig {
+    FlrConfig { guides: set, block, clamp_negative: false, ..FlrConfig::default() }
+}

@@ -1,0 +1,234 @@
+//! The fast path against the slow f64 reference, SIMD against scalar, tiled
+//! against whole frame, and awkward sizes.
+
+mod common;
+use common::*;
+use lrdenoise::*;
+
+const SETS: [GuideSet; 4] = [
+    GuideSet::NONE,
+    GuideSet::NORMAL_DEPTH,
+    GuideSet::NORMAL_DEPTH_AO,
+    GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 },
+];
+
+#[test]
+fn block1_matches_reference_normalized() {
+    for (s, set) in SETS.iter().enumerate() {
+        let f = Owned::synthetic(29, 23, s as u64, 0.5);
+        let mut c = cfg(*set, 1);
+        c.blur = Blur::Gaussian { sigma: 3.0, radius: None };
+        let (out, rep) = run(c, &f);
+        let want = reference(&c, f.w, f.h, &f.channels(*set), &f.noisy);
+        let (max, mean) = diff(&out, &want);
+        assert!(max < 2e-4 && mean < 2e-5, "set {set:?}: max {max} mean {mean}");
+        assert_eq!(rep.nonfinite_noisy, 0);
+    }
+}
+
+#[test]
+fn block1_matches_reference_tikhonov_and_box() {
+    let f = Owned::synthetic(31, 19, 3, 0.5);
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    for blur in [Blur::Gaussian { sigma: 2.5, radius: Some(5.0) }, Blur::Box { radius: 3.0 }] {
+        for reg in [Regularization::Tikhonov { eps: 1e-3 }, Regularization::Normalized { eps_mul: 1e-4, eps_add: 1e-4 }] {
+            let c = FlrConfig { blur, regularization: reg, ..cfg(set, 1) };
+            let (out, _) = run(c, &f);
+            let want = reference(&c, f.w, f.h, &f.channels(set), &f.noisy);
+            let (max, mean) = diff(&out, &want);
+            assert!(max < 5e-4 && mean < 5e-5, "{blur:?} {reg:?}: max {max} mean {mean}");
+        }
+    }
+}
+
+/// The paper's Fig. 3 configuration (B = 1, σ 10, radius 20, Tikhonov 1e-6,
+/// features [1, normal, depth, ao]) is the reference exactly, away from borders
+/// (and at them too: both drop out-of-image taps).
+#[test]
+fn fig3_configuration() {
+    let f = Owned::synthetic(48, 44, 5, 0.5);
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let c = FlrConfig {
+        blur: Blur::Gaussian { sigma: 10.0, radius: Some(20.0) },
+        regularization: Regularization::Tikhonov { eps: 1e-6 },
+        ..cfg(set, 1)
+    };
+    let (out, _) = run(c, &f);
+    let want = reference(&c, f.w, f.h, &f.channels(set), &f.noisy);
+    let (max, _) = diff(&out, &want);
+    assert!(max < 2e-3, "max {max}");
+}
+
+/// With larger blocks the model is interpolated between block centres, so the
+/// result only approximates the per-pixel reference: the error must stay small
+/// next to the noise it removes.
+#[test]
+fn blocks_approximate_reference() {
+    let f = Owned::synthetic(96, 80, 9, 0.5);
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let mut c1 = cfg(set, 1);
+    c1.blur = Blur::Gaussian { sigma: 12.0, radius: None };
+    let want = reference(&c1, f.w, f.h, &f.channels(set), &f.noisy);
+    let noise: f64 = f.noisy.iter().zip(&f.clean).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / f.noisy.len() as f64;
+    for b in [2, 4, 8, 16] {
+        let c = FlrConfig { block: b, ..c1 };
+        let (out, _) = run(c, &f);
+        let (_, mean) = diff(&out, &want);
+        assert!(mean < 0.25 * noise, "block {b}: mean diff {mean} vs noise {noise}");
+    }
+}
+
+/// Light that is exactly affine in the guides is reproduced exactly (up to the
+/// regularisation bias) by every block size, kernel and upsampling factor.
+#[test]
+fn affine_signal_is_reproduced() {
+    let mut f = Owned::synthetic(53, 37, 11, 0.0);
+    for i in 0..f.w * f.h {
+        for c in 0..3 {
+            f.noisy[3 * i + c] = 0.3 + 0.1 * c as f32 + 0.05 * f.normal[3 * i] - 0.02 * f.depth[i] + 0.2 * f.ao[i];
+        }
+    }
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    for b in [1, 2, 4, 8, 16] {
+        for kernel in [Kernel::Simd, Kernel::Scalar] {
+            let c = FlrConfig { kernel, regularization: Regularization::Normalized { eps_mul: 1e-7, eps_add: 1e-7 }, ..cfg(set, b) };
+            let (out, _) = run(c, &f);
+            let err = out.iter().zip(&f.noisy).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+            assert!(err < 2e-3, "block {b} {kernel:?}: {err}");
+        }
+    }
+}
+
+#[test]
+fn simd_matches_scalar() {
+    for (s, set) in SETS.iter().enumerate() {
+        for (w, h) in [(64, 40), (257, 19), (100, 33)] {
+            let f = Owned::synthetic(w, h, 20 + s as u64, 0.7);
+            for b in [8, 16] {
+                let (a, _) = run(FlrConfig { kernel: Kernel::Simd, ..cfg(*set, b) }, &f);
+                let (c, _) = run(FlrConfig { kernel: Kernel::Scalar, ..cfg(*set, b) }, &f);
+                let max = a.iter().zip(&c).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max);
+                // Block moments are summed in f32, lane-wise (SIMD) or pixel by pixel
+                // (scalar): different rounding over up to 256 pixels, amplified by the
+                // solve's conditioning, plus FMA vs mul+add. Measured ≤ 2.5e-4.
+                assert!(max < 1e-3, "{set:?} {w}x{h} B{b}: rel {max}");
+            }
+        }
+    }
+}
+
+/// Runs the stages by hand, tiles in reverse order, two worker buffers used
+/// alternately, output split into row bands: must equal `denoise` bit for bit.
+#[test]
+fn tiled_equals_whole_frame() {
+    for (w, h, b) in [(75, 61, 8), (257, 40, 4), (33, 70, 16), (20, 9, 1)] {
+        for set in SETS {
+            let f = Owned::synthetic(w, h, 7, 0.6);
+            let c = cfg(set, b);
+            let (whole, rep_whole) = run(c, &f);
+            let flr = Flr::new(c, w, h).unwrap();
+            let mut scratch = vec![0f64; flr.scratch_len_for(2)];
+            let p = flr.split_scratch(&mut scratch, 2).unwrap();
+            let frame = flr.check_frame(&f.frame(set)).unwrap();
+            let (w0, w1) = p.workers.split_at_mut(flr.worker_len());
+            let mut workers = [w0, w1];
+            let mut stats = flr.prepare(&frame);
+            let nt = flr.tile_count();
+            let offs: Vec<usize> = (0..=nt).map(|t| (0..t).map(|i| flr.cells_tile_len(i).unwrap()).sum()).collect();
+            let moffs: Vec<usize> = (0..=nt).map(|t| (0..t).map(|i| flr.models_tile_len(i).unwrap()).sum()).collect();
+            let mut rep = Report::default();
+            for t in (0..nt).rev() {
+                rep += flr.moments_tile(&frame, &stats, t, &mut p.cells[offs[t]..offs[t + 1]], workers[t % 2]).unwrap();
+            }
+            flr.finish_stats(p.cells, &mut stats).unwrap();
+            for t in (0..nt).rev() {
+                flr.blur_rows_tile(t, p.cells, &mut p.tmp[offs[t]..offs[t + 1]]).unwrap();
+            }
+            for t in (0..nt).rev() {
+                flr.blur_cols_tile(t, p.tmp, &mut p.cells[offs[t]..offs[t + 1]]).unwrap();
+            }
+            for t in (0..nt).rev() {
+                rep += flr.solve_tile(&stats, t, &p.cells[offs[t]..offs[t + 1]], &mut p.models[moffs[t]..moffs[t + 1]]).unwrap();
+            }
+            let mut out = vec![0f32; w * h * 3];
+            let mut rest = Some(ImageViewMut::interleaved(&mut out, w, h, 3).unwrap());
+            let mut bands = vec![];
+            for t in 0..nt {
+                let (y0, y1) = flr.tile_pixel_rows(t).unwrap();
+                let (band, r) = rest.take().unwrap().split_rows(y1 - y0).unwrap();
+                bands.push((t, y0, band));
+                rest = r;
+            }
+            for (t, _, band) in bands.iter_mut().rev() {
+                rep += flr.apply_tile(&frame, &stats, *t, p.models, workers[*t % 2], band).unwrap();
+            }
+            drop(bands);
+            assert_eq!(rep, rep_whole);
+            assert!(out.iter().zip(&whole).all(|(a, b)| a.to_bits() == b.to_bits()), "{w}x{h} B{b} {set:?}");
+        }
+    }
+}
+
+#[test]
+fn awkward_sizes() {
+    let sizes = [(1, 1), (7, 3), (3, 7), (255, 5), (256, 5), (257, 5), (17, 1), (1, 17), (9, 9)];
+    for (w, h) in sizes {
+        for b in [1, 2, 4, 8, 16] {
+            for set in SETS {
+                let f = Owned::synthetic(w, h, 1, 0.5);
+                for kernel in [Kernel::Simd, Kernel::Scalar] {
+                    let (out, _) = run(FlrConfig { kernel, ..cfg(set, b) }, &f);
+                    assert!(out.iter().all(|v| v.is_finite()), "{w}x{h} B{b} {set:?}");
+                }
+                if w * h <= 64 {
+                    // small frames: compare the B = 1 path with the reference too
+                    let c = FlrConfig { blur: Blur::Gaussian { sigma: 2.0, radius: None }, ..cfg(set, 1) };
+                    let (out, _) = run(c, &f);
+                    let want = reference(&c, w, h, &f.channels(set), &f.noisy);
+                    assert!(diff(&out, &want).0 < 5e-4, "{w}x{h} {set:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn interleaved_planar_and_f16_agree() {
+    let f = Owned::synthetic(40, 24, 4, 0.5);
+    let set = GuideSet::NORMAL_DEPTH;
+    let c = cfg(set, 8);
+    let (a, _) = run(c, &f);
+    let (w, h) = (f.w, f.h);
+    // planar noisy and normal, depth as the 2nd channel of an RGBA-like buffer
+    let mut noisy_p = vec![0f32; 3 * w * h];
+    let mut normal_p = vec![0f32; 3 * w * h];
+    let mut depth4 = vec![0f32; 4 * w * h];
+    for i in 0..w * h {
+        for ch in 0..3 {
+            noisy_p[ch * w * h + i] = f.noisy[3 * i + ch];
+            normal_p[ch * w * h + i] = f.normal[3 * i + ch];
+        }
+        depth4[4 * i + 1] = f.depth[i];
+    }
+    let pl = Layout::planar(w, h);
+    let guides = Guides {
+        normal: Some(ImageView::f32(&normal_p, w, h, 3, pl).unwrap()),
+        depth: Some(ImageView::f32(&depth4, w, h, 1, Layout { offset: 1, ..Layout::interleaved(w, 4) }).unwrap()),
+        ..Default::default()
+    };
+    let frame = Frame::new(ImageView::f32(&noisy_p, w, h, 3, pl).unwrap(), guides);
+    let (b, _) = run_frame(c, w, h, &frame);
+    assert_eq!(a, b);
+    // f16 inputs: same up to f16 rounding of the inputs
+    let h16 = |v: &[f32]| v.iter().map(|x| half::f16::from_f32(*x)).collect::<Vec<_>>();
+    let (n16, nr16, d16) = (h16(&f.noisy), h16(&f.normal), h16(&f.depth));
+    let guides = Guides {
+        normal: Some(ImageView::f16(&nr16, w, h, 3, Layout::interleaved(w, 3)).unwrap()),
+        depth: Some(ImageView::f16(&d16, w, h, 1, Layout::interleaved(w, 1)).unwrap()),
+        ..Default::default()
+    };
+    let frame = Frame::new(ImageView::f16(&n16, w, h, 3, Layout::interleaved(w, 3)).unwrap(), guides);
+    let (c16, _) = run_frame(c, w, h, &frame);
+    let max = a.iter().zip(&c16).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+    assert!(max < 2e-2, "f16 {max}");
+}

@@ -1,0 +1,53 @@
+//! A counting global allocator proves that denoising a frame allocates nothing.
+
+mod common;
+use common::*;
+use lrdenoise::*;
+use std::alloc::{GlobalAlloc, Layout as AllocLayout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged; only counts calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: AllocLayout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as our caller's.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: AllocLayout) {
+        // SAFETY: `p` came from `System.alloc` with layout `l`.
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: AllocLayout, n: usize) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as our caller's.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn denoise_allocates_nothing() {
+    let f = Owned::synthetic(131, 77, 1, 0.5);
+    for (set, block, reg) in [
+        (GuideSet::NORMAL_DEPTH_AO, 8, Regularization::Normalized { eps_mul: 1e-4, eps_add: 1e-4 }),
+        (GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 }, 4, Regularization::Tikhonov { eps: 1e-4 }),
+        (GuideSet::NONE, 16, Regularization::Normalized { eps_mul: 1e-4, eps_add: 1e-4 }),
+    ] {
+        let c = FlrConfig { regularization: reg, block, ..FlrConfig::with_guides(set) };
+        let flr = Flr::new(c, f.w, f.h).unwrap();
+        let mut scratch = vec![0f64; flr.scratch_len()];
+        let mut out = vec![0f32; f.w * f.h * 3];
+        let frame = f.frame(set);
+        let before = ALLOCS.load(Ordering::SeqCst);
+        for _ in 0..3 {
+            let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
+            flr.denoise(&frame, &mut scratch, &mut ov).unwrap();
+        }
+        assert_eq!(ALLOCS.load(Ordering::SeqCst) - before, 0, "{set:?}");
+    }
+}

@@ -1,0 +1,311 @@
+#!/usr/bin/env python3
+"""Render frames and sequences in the layout of shared/DATA.md with Mitsuba 3.
+
+Scenes are built procedurally from Mitsuba's shapes; each scene family has a
+seed, so the same command always gives the same frames. The train/test split is
+by scene family and seed (see SPLIT): FLR defaults are tuned on `train`, figures
+are reported on `test`, and `data/` (the bundled samples) comes from `test`.
+
+    pip install mitsuba numpy OpenEXR ; apt-get install libllvm19
+    python3 tools/render.py --out frames --split test --size 256x256 --ref-spp 2048
+    python3 tools/render.py --out data --sample      # the committed sample set
+
+Layers: noisy (1 spp), noisy4, reference, albedo, normal, depth, position, ao
+(plus motion for sequences), half floats except position and depth (float).
+Noisy/reference are *demodulated diffuse indirect* light: at the primary hit a
+cosine-weighted direction is sampled and Mitsuba's `path` integrator
+(hide_emitters, max_depth 3) is evaluated along it; with the cosine pdf and a
+Lambertian BRDF, albedo * mean(L) is the outgoing indirect radiance.
+"""
+import argparse, math, os, sys
+
+os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
+import numpy as np
+import mitsuba as mi
+import drjit as dr
+
+try:
+    mi.set_variant("llvm_ad_rgb")
+except Exception:  # no LLVM: 10x slower but works
+    mi.set_variant("scalar_rgb")
+
+# family -> seeds; disjoint between splits.
+SPLIT = {
+    "train": [("box", 1), ("clutter", 1), ("colonnade", 1), ("box", 2), ("clutter", 2), ("room", 1)],
+    "test": [("room", 7), ("poles", 7), ("farclutter", 7), ("colonnade", 7), ("box", 7)],
+}
+
+
+def diffuse(rgb):
+    return {"type": "diffuse", "reflectance": {"type": "rgb", "value": [float(c) for c in rgb]}}
+
+
+def xform(translate=(0, 0, 0), scale=(1, 1, 1), rotate=None):
+    t = mi.ScalarTransform4f().translate(list(map(float, translate)))
+    if rotate is not None:
+        t = t @ mi.ScalarTransform4f().rotate(rotate[0], rotate[1])
+    return t @ mi.ScalarTransform4f().scale(list(map(float, scale)))
+
+
+def cube(c, s, rgb, rot=None):
+    return {"type": "cube", "to_world": xform(c, s, rot), "bsdf": diffuse(rgb)}
+
+
+def rect(c, s, rgb, rot=None, emit=None):
+    d = {"type": "rectangle", "to_world": xform(c, s, rot), "bsdf": diffuse(rgb)}
+    if emit is not None:
+        d["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": emit}}
+    return d
+
+
+def sphere(c, r, rgb):
+    return {"type": "sphere", "center": list(map(float, c)), "radius": float(r), "bsdf": diffuse(rgb)}
+
+
+def cylinder(p0, p1, r, rgb):
+    return {"type": "cylinder", "p0": list(map(float, p0)), "p1": list(map(float, p1)), "radius": float(r), "bsdf": diffuse(rgb)}
+
+
+def color(rng, lo=0.2, hi=0.85):
+    return rng.uniform(lo, hi, 3)
+
+
+def scene_dict(family, seed):
+    """Returns (shapes dict, camera (origin, target, fov), ao distance, offset, scale)."""
+    rng = np.random.default_rng(seed * 1000 + hash(family) % 997)
+    S = {}
+    off, sc = np.zeros(3), 1.0
+    if family in ("room", "box"):
+        W = 4.0
+        wall = color(rng, 0.5, 0.8)
+        S["floor"] = rect((0, 0, 0), (W, W, 1), color(rng, 0.3, 0.7), (( 1, 0, 0), -90))
+        S["ceil"] = rect((0, 2 * W, 0), (W, W, 1), wall, ((1, 0, 0), 90))
+        S["back"] = rect((0, W, -W), (W, W, 1), wall)
+        S["left"] = rect((-W, W, 0), (W, W, 1), (0.7, 0.2, 0.15) if family == "box" else wall, ((0, 1, 0), 90))
+        if family == "box":
+            S["right"] = rect((W, W, 0), (W, W, 1), (0.15, 0.6, 0.2), ((0, 1, 0), -90))
+            S["light"] = rect((0, 2 * W - 0.01, 0), (1.0, 1.0, 1), (0, 0, 0), ((1, 0, 0), 90), emit=[12.0, 11.0, 9.0])
+        else:
+            # right wall with a window: four panels around an opening; sun through it.
+            for k, (cy, cz, sy, sz) in enumerate([(0.6, 0, 0.6, W), (2 * W - 1.2, 0, 1.2, W), (W, -2.5, W, 1.5), (W, 2.5, W, 1.5)]):
+                S[f"rw{k}"] = rect((W, cy, cz), (sz, sy, 1), wall, ((0, 1, 0), -90))
+            S["sun"] = {"type": "directional", "direction": [-1.0, -0.55, rng.uniform(-0.3, 0.3)], "irradiance": {"type": "rgb", "value": [9.0, 8.0, 6.5]}}
+            S["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [0.05, 0.07, 0.1]}}
+        for i in range(int(rng.integers(3, 6))):
+            c = (rng.uniform(-2.8, 2.8), 0, rng.uniform(-3, 1.5))
+            s = rng.uniform(0.3, 0.9, 3)
+            if rng.random() < 0.5:
+                S[f"c{i}"] = cube((c[0], s[1], c[2]), s, color(rng), ((0, 1, 0), rng.uniform(0, 90)))
+            else:
+                r = s[0]
+                S[f"s{i}"] = sphere((c[0], r, c[2]), r, color(rng))
+        cam = ((rng.uniform(-1, 1), W * 0.9, 2 * W - 0.5), (0, W * 0.6, -W), 65)
+        ao = 1.5
+    elif family in ("clutter", "farclutter"):
+        S["floor"] = rect((0, 0, 0), (12, 12, 1), color(rng, 0.4, 0.7), ((1, 0, 0), -90))
+        S["back"] = rect((0, 4, -6), (12, 4, 1), color(rng, 0.4, 0.8))
+        S["light"] = rect((1, 6, 0), (2.0, 2.0, 1), (0, 0, 0), ((1, 0, 0), 90), emit=[14.0, 13.0, 12.0])
+        S["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [0.25, 0.3, 0.4]}}
+        for i in range(28):
+            c = (rng.uniform(-4, 4), 0, rng.uniform(-5, 2))
+            s = rng.uniform(0.15, 0.7, 3)
+            k = rng.random()
+            if k < 0.4:
+                S[f"c{i}"] = cube((c[0], s[1], c[2]), s, color(rng), ((0, 1, 0), rng.uniform(0, 90)))
+            elif k < 0.75:
+                S[f"s{i}"] = sphere((c[0], s[0], c[2]), s[0], color(rng))
+            else:
+                S[f"y{i}"] = cylinder((c[0], 0, c[2]), (c[0], 2 * s[1] + 0.3, c[2]), 0.5 * s[0], color(rng))
+        cam = ((0, 3.0, 6.0), (0, 0.5, -1.5), 60)
+        ao = 1.0
+        if family == "farclutter":
+            off, sc = np.array([1.0e4, -3.0e3, 2.5e4]), 100.0  # far from the origin, centimetres
+    elif family == "colonnade":
+        S["floor"] = rect((0, 0, 0), (20, 20, 1), color(rng, 0.5, 0.7), ((1, 0, 0), -90))
+        S["back"] = rect((0, 5, -4), (20, 5, 1), color(rng, 0.5, 0.8))
+        S["roof"] = cube((0, 4.2, -1.5), (12, 0.2, 2.2), color(rng, 0.5, 0.8))
+        for i in range(-6, 7):
+            S[f"col{i}"] = cylinder((1.6 * i, 0, 0), (1.6 * i, 4.0, 0), 0.3, (0.75, 0.72, 0.68))
+        S["sun"] = {"type": "directional", "direction": [rng.uniform(-0.8, 0.8), -0.6, -1.0], "irradiance": {"type": "rgb", "value": [8.0, 7.2, 6.0]}}
+        S["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [0.2, 0.28, 0.45]}}
+        cam = ((rng.uniform(-3, 3), 1.7, 7.0), (0, 1.6, -3), 70)
+        ao = 1.5
+    elif family == "poles":
+        S["floor"] = rect((0, 0, 0), (8, 8, 1), (0.6, 0.6, 0.6), ((1, 0, 0), -90))
+        S["wall"] = rect((0, 3, -2), (8, 3, 1), (0.8, 0.75, 0.7))
+        S["lamp"] = rect((0, 5.0, 1.5), (1.5, 1.5, 1), (0, 0, 0), ((1, 0, 0), 90), emit=[15.0, 14.0, 12.0])
+        for i in range(9):
+            x = -3 + 0.75 * i
+            S[f"p{i}"] = cylinder((x, 0, -0.5 + 0.3 * (i % 3)), (x, 3.5, -0.5 + 0.3 * (i % 3)), 0.02 + 0.01 * (i % 4), color(rng))
+        S["sphere"] = sphere((1.5, 0.6, 0.2), 0.6, color(rng))
+        S["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [0.1, 0.1, 0.12]}}
+        cam = ((0, 1.8, 5.0), (0, 1.5, -2), 55)
+        ao = 1.0
+    else:
+        raise SystemExit(f"unknown scene family {family}")
+    return S, cam, ao, off, sc
+
+
+def place(S, cam, off, sc):
+    """Applies a world offset/scale (far-from-origin scenes) to shapes and camera."""
+    if sc == 1.0 and not off.any():
+        return S, cam
+    T = mi.ScalarTransform4f().translate(off.tolist()) @ mi.ScalarTransform4f().scale(sc)
+    out = {}
+    for k, v in S.items():
+        v = dict(v)
+        if "to_world" in v:
+            v["to_world"] = T @ v["to_world"]
+        elif v["type"] == "sphere":
+            v["center"] = (np.array(v["center"]) * sc + off).tolist(); v["radius"] *= sc
+        elif v["type"] == "cylinder":
+            v["p0"] = (np.array(v["p0"]) * sc + off).tolist(); v["p1"] = (np.array(v["p1"]) * sc + off).tolist(); v["radius"] *= sc
+        out[k] = v
+    o, t, fov = cam
+    return out, ((np.array(o) * sc + off).tolist(), (np.array(t) * sc + off).tolist(), fov)
+
+
+def sensor_dict(cam, w, h):
+    o, t, fov = cam
+    return {"type": "perspective", "fov": float(fov), "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, o)), target=list(map(float, t)), up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}}}
+
+
+def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0):
+    integ = mi.load_dict({"type": "path", "max_depth": 3, "hide_emitters": True})
+    n = w * h
+    idx = dr.arange(mi.UInt32, n)
+    px = mi.Float(idx % w) + 0.5
+    py = mi.Float(idx // w) + 0.5
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / w, py / h), mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    valid = si.is_valid()
+    out = {}
+    albedo = dr.select(valid, si.bsdf().eval_diffuse_reflectance(si), 0.0)
+    nrm = dr.select(valid, si.sh_frame.n, 0.0)
+    out["albedo"] = np.array(albedo).reshape(3, -1).T if np.array(albedo).shape[0] == 3 else np.array(albedo)
+    out["normal"] = np.array(nrm)
+    out["position"] = np.array(dr.select(valid, si.p, 0.0))
+    out["depth"] = np.array(dr.select(valid, si.t, 0.0))
+
+    def arr3(v):
+        a = np.array(v)
+        return a.T if a.shape[0] == 3 and a.ndim == 2 else a
+
+    for k in ("albedo", "normal", "position"):
+        out[k] = arr3(out[k]).reshape(h, w, 3)
+    out["depth"] = out["depth"].reshape(h, w)
+
+    def indirect(spp, sd):
+        acc = np.zeros((n, 3))
+        chunk = max(1, min(spp, (1 << 22) // n))
+        done = 0
+        sampler = mi.load_dict({"type": "independent"})
+        while done < spp:
+            c = min(chunk, spp - done)
+            sampler.seed(sd * 7919 + done, n * c)
+            rep = dr.arange(mi.UInt32, n * c) // c
+            si_r = dr.gather(type(si), si, rep)
+            v_r = dr.gather(mi.Bool, valid, rep)
+            d_local = mi.warp.square_to_cosine_hemisphere(sampler.next_2d())
+            d = si_r.sh_frame.to_world(d_local)
+            r2 = si_r.spawn_ray(d)
+            L, ok, _ = integ.sample(scene, sampler, r2, None, v_r)
+            L = dr.select(v_r & ok, L, 0.0)
+            La = arr3(L).reshape(n, c, 3)
+            acc += La.sum(axis=1)
+            done += c
+        return (acc / spp).reshape(h, w, 3)
+
+    for name, spp in spps.items():
+        out[name] = indirect(spp, seed + hash(name) % 1000)
+    out["reference"] = indirect(ref_spp, seed + 99991)
+
+    # ambient occlusion: fraction of cosine rays unoccluded within ao_dist
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(seed + 31337, n * ao_rays)
+    rep = dr.arange(mi.UInt32, n * ao_rays) // ao_rays
+    si_r = dr.gather(type(si), si, rep)
+    v_r = dr.gather(mi.Bool, valid, rep)
+    d = si_r.sh_frame.to_world(mi.warp.square_to_cosine_hemisphere(sampler.next_2d()))
+    r2 = si_r.spawn_ray(d)
+    r2.maxt = ao_dist
+    hit = scene.ray_test(r2, v_r)
+    open_ = np.array(dr.select(v_r & ~hit, 1.0, 0.0)).reshape(n, ao_rays).mean(axis=1)
+    out["ao"] = np.where(np.array(valid), open_, 0.0).reshape(h, w)
+
+    if prev_sensor is not None:
+        ds, _ = prev_sensor.sample_direction(si, mi.Point2f(0.5, 0.5), valid)
+        uv = arr3(ds.uv).reshape(h, w, 2)
+        cur = np.stack(np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), axis=-1)
+        mo = np.where(np.array(valid).reshape(h, w, 1), uv - cur, 0.0)
+        out["motion"] = mo
+    return out
+
+
+def write_exr(path, layers):
+    import OpenEXR
+    chans = {}
+    names = {"albedo": "RGB", "noisy": "RGB", "reference": "RGB", "normal": "XYZ", "position": "XYZ", "motion": "XY", "depth": "Z", "ao": "Y"}
+    for layer, a in layers.items():
+        comps = names.get(layer, "RGB")
+        full = layer in ("position", "depth")  # large values: keep float
+        dt = np.float32 if full else np.float16
+        if a.ndim == 2:
+            a = a[..., None]
+        for i, c in enumerate(comps):
+            chans[f"{layer}.{c}"] = np.ascontiguousarray(a[..., i].astype(dt))
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(hdr, chans) as f:
+        f.write(path)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--split", choices=list(SPLIT), default="test")
+    ap.add_argument("--scenes", help="comma list family:seed (overrides --split)")
+    ap.add_argument("--size", default="256x256")
+    ap.add_argument("--ref-spp", type=int, default=2048)
+    ap.add_argument("--seq", type=int, default=0, help="also render a sequence of N frames per scene (camera pans)")
+    ap.add_argument("--sample", action="store_true", help="render the committed data/ sample set")
+    a = ap.parse_args()
+    w, h = map(int, a.size.lower().split("x"))
+    scenes = SPLIT[a.split]
+    if a.scenes:
+        scenes = [(s.split(":")[0], int(s.split(":")[1])) for s in a.scenes.split(",")]
+    seq_scenes = []
+    if a.sample:
+        scenes = [("room", 7), ("poles", 7), ("farclutter", 7), ("colonnade", 7)]
+        seq_scenes = [("box", 7)]
+        a.seq = 6
+    os.makedirs(a.out, exist_ok=True)
+    spps = {"noisy": 1, "noisy4": 4}
+    for fam, seed in scenes:
+        S, cam, ao, off, sc = scene_dict(fam, seed)
+        S, cam = place(S, cam, off, sc)
+        scene = mi.load_dict({"type": "scene", **S})
+        sensor = mi.load_dict(sensor_dict(cam, w, h))
+        lay = render_frame(scene, sensor, None, w, h, spps, a.ref_spp, ao * sc, seed=seed)
+        path = os.path.join(a.out, f"{fam}_{seed}.exr")
+        write_exr(path, lay)
+        print("wrote", path, flush=True)
+    for fam, seed in seq_scenes or ([(f, s) for f, s in scenes] if a.seq else []):
+        S, cam, ao, off, sc = scene_dict(fam, seed)
+        S, cam0 = place(S, cam, off, sc)
+        scene = mi.load_dict({"type": "scene", **S})
+        d = os.path.join(a.out, f"seq_{fam}_{seed}")
+        os.makedirs(d, exist_ok=True)
+        prev = None
+        for i in range(a.seq):
+            o, t, fov = cam0
+            o = (np.array(o) + np.array([0.08 * i * sc, 0.0, 0.0])).tolist()
+            sensor = mi.load_dict(sensor_dict((o, t, fov), w, h))
+            lay = render_frame(scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i)
+            write_exr(os.path.join(d, f"frame_{i:04d}.exr"), lay)
+            print("wrote", d, i, flush=True)
+            prev = sensor
+
+
+if __name__ == "__main__":
+    main()
