@@ -1,0 +1,244 @@
+//! Evaluation: run variants (method + flags + input layer) on frames with a
+//! reference, score them with the quality protocol, time them.
+
+use crate::exrio::ExrFrame;
+use crate::methods::{label, FlrArgs, Method};
+use crate::metrics::{score, Scores};
+use crate::runner::Inputs;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// One row of a table: a method with its flags on one input layer.
+#[derive(Clone, Debug)]
+pub struct Variant {
+    /// "noisy" (the input itself) or "flr".
+    pub method: String,
+    pub args: FlrArgs,
+    pub input_layer: String,
+}
+
+impl Variant {
+    pub fn noisy(layer: &str) -> Self {
+        Variant { method: "noisy".into(), args: FlrArgs::default(), input_layer: layer.into() }
+    }
+    pub fn flr(args: FlrArgs) -> Self {
+        Variant { method: "flr".into(), args, input_layer: "noisy".into() }
+    }
+    pub fn on(mut self, layer: &str) -> Self {
+        self.input_layer = layer.into();
+        self
+    }
+}
+
+/// One (variant, frame) result; the JSON schema `lrd eval --json` writes and
+/// `lrd report --peers` reads.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Record {
+    pub method: String,
+    pub config: String,
+    pub frame: String,
+    pub psnr: f64,
+    pub ssim: f64,
+    pub flip: f64,
+    pub rmse: f64,
+    /// Median denoise time in milliseconds (no I/O).
+    pub ms: f64,
+    #[serde(default)]
+    pub threads: usize,
+    #[serde(default)]
+    pub width: usize,
+    #[serde(default)]
+    pub height: usize,
+    /// Flags that reproduce this row with `lrd denoise`.
+    #[serde(default)]
+    pub flags: String,
+}
+
+/// Outputs kept for image strips: (config label, tone-mapped RGB, FLIP map).
+pub struct FrameImages {
+    pub frame: String,
+    pub w: usize,
+    pub h: usize,
+    pub reference_tm: Vec<f32>,
+    pub rows: Vec<(String, Vec<f32>, Vec<f32>)>,
+}
+
+/// Expands directories to the `.exr` files directly inside them, sorted.
+pub fn list_frames(args: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
+    let mut out = vec![];
+    for a in args {
+        if a.is_dir() {
+            let mut v: Vec<PathBuf> = std::fs::read_dir(a)
+                .map_err(|e| format!("{}: {e}", a.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("exr")))
+                .collect();
+            v.sort();
+            out.extend(v);
+        } else if a.exists() {
+            out.push(a.clone());
+        } else {
+            return Err(format!("{}: no such file or directory", a.display()));
+        }
+    }
+    if out.is_empty() {
+        return Err("no .exr frames found in the given paths".into());
+    }
+    Ok(out)
+}
+
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+pub fn progress(len: u64, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len);
+    pb.set_style(ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} ({elapsed})").unwrap_or(ProgressStyle::default_bar()).progress_chars("=> "));
+    pb.set_message(what.to_string());
+    pb
+}
+
+/// Times `runs` calls after one warm-up; returns the median in ms.
+pub fn time_method(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize) -> Result<(f64, Vec<f64>), String> {
+    m.run(inputs, out)?;
+    let mut t = Vec::with_capacity(runs);
+    for _ in 0..runs.max(1) {
+        let s = Instant::now();
+        m.run(inputs, out)?;
+        t.push(s.elapsed().as_secs_f64() * 1e3);
+    }
+    let all = t.clone();
+    Ok((median(&mut t), all))
+}
+
+pub struct EvalOptions {
+    pub runs: usize,
+    pub threads: usize,
+    pub keep_images: bool,
+}
+
+fn frame_name(p: &Path) -> String {
+    p.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()
+}
+
+/// Runs every variant on every frame that has a reference.
+pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> Result<(Vec<Record>, Vec<FrameImages>), String> {
+    let pb = progress((frames.len() * variants.len()) as u64, "evaluating");
+    let mut records = vec![];
+    let mut images = vec![];
+    for path in frames {
+        let exr = ExrFrame::read(path)?;
+        if !exr.has("reference") {
+            pb.println(format!("{}: no 'reference' layer, skipped", path.display()));
+            pb.inc(variants.len() as u64);
+            continue;
+        }
+        let base = Inputs::from_exr(&exr, path, "noisy")?;
+        let reference = base.reference.clone().unwrap_or_default();
+        let albedo = base.albedo.clone().ok_or_else(|| format!("{}: missing layer 'albedo' (needed to score)", path.display()))?;
+        let (w, h) = (base.w, base.h);
+        let name = frame_name(path);
+        let mut fi = FrameImages { frame: name.clone(), w, h, reference_tm: vec![], rows: vec![] };
+        if opt.keep_images {
+            let r: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
+            fi.reference_tm = crate::metrics::tonemap(&r, crate::metrics::mean_luminance(&r));
+        }
+        for v in variants {
+            pb.inc(1);
+            if !exr.has(&v.input_layer) {
+                pb.println(format!("{}: no '{}' layer, variant skipped", path.display(), v.input_layer));
+                continue;
+            }
+            let inputs = if v.input_layer == "noisy" { base.clone() } else { Inputs { noisy: exr.layer(&v.input_layer, 3, path)?.interleaved(3), ..base.clone() } };
+            let (mut m, cfg_label, flags) = match v.method.as_str() {
+                "noisy" => (Method::Noisy, v.input_layer.clone(), String::new()),
+                _ => {
+                    let cfg = match v.args.config(&inputs) {
+                        Ok(c) => c,
+                        Err(e) => {
+                            pb.println(format!("{}: {e}; variant skipped", path.display()));
+                            continue;
+                        }
+                    };
+                    let mut l = label(&cfg);
+                    let mut f = crate::methods::flag_line(&cfg);
+                    if v.input_layer != "noisy" {
+                        l += &format!(" [{}]", v.input_layer);
+                        f += &format!(" --input-layer {}", v.input_layer);
+                    }
+                    (Method::flr(cfg, &inputs, opt.threads)?, l, f)
+                }
+            };
+            let mut out = vec![0f32; w * h * 3];
+            let (ms, _) = if v.method == "noisy" { m.run(&inputs, &mut out).map(|_| (0.0, vec![]))? } else { time_method(&mut m, &inputs, &mut out, opt.runs)? };
+            let (s, fmap): (Scores, Vec<f32>) = score(&out, &reference, &albedo, w, h);
+            if opt.keep_images {
+                let i: Vec<f32> = out.iter().zip(&albedo).map(|(a, b)| a * b).collect();
+                let r: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
+                fi.rows.push((cfg_label.clone(), crate::metrics::tonemap(&i, crate::metrics::mean_luminance(&r)), fmap));
+            }
+            records.push(Record {
+                method: v.method.clone(),
+                config: cfg_label,
+                frame: name.clone(),
+                psnr: s.psnr,
+                ssim: s.ssim,
+                flip: s.flip,
+                rmse: s.rmse,
+                ms,
+                threads: if v.method == "noisy" { 0 } else { opt.threads },
+                width: w,
+                height: h,
+                flags,
+            });
+        }
+        if opt.keep_images {
+            images.push(fi);
+        }
+    }
+    pb.finish_and_clear();
+    Ok((records, images))
+}
+
+/// Mean over frames per config, in first-seen order.
+pub fn means(records: &[Record]) -> Vec<Record> {
+    let mut order: Vec<String> = vec![];
+    for r in records {
+        if !order.contains(&r.config) {
+            order.push(r.config.clone());
+        }
+    }
+    order
+        .iter()
+        .map(|c| {
+            let rs: Vec<&Record> = records.iter().filter(|r| &r.config == c).collect();
+            let n = rs.len() as f64;
+            let avg = |f: &dyn Fn(&Record) -> f64| rs.iter().map(|r| f(r)).sum::<f64>() / n;
+            Record {
+                method: rs[0].method.clone(),
+                config: c.clone(),
+                frame: format!("mean of {}", rs.len()),
+                psnr: avg(&|r| r.psnr),
+                ssim: avg(&|r| r.ssim),
+                flip: avg(&|r| r.flip),
+                rmse: avg(&|r| r.rmse),
+                ms: avg(&|r| r.ms),
+                threads: rs[0].threads,
+                width: rs[0].width,
+                height: rs[0].height,
+                flags: rs[0].flags.clone(),
+            }
+        })
+        .collect()
+}

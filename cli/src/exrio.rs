@@ -1,0 +1,135 @@
+//! Reading and writing frames in the layout of `shared/DATA.md`: one
+//! multi-layer EXR, channels named `layer.component`, half or float.
+
+use exr::prelude::{read, AnyChannel, AnyChannels, Encoding, FlatSamples, Image, LayerAttributes, ReadChannels, ReadLayers, WritableImage};
+use std::result::Result;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One layer: its component names (e.g. R, G, B) and a plane per component.
+#[derive(Clone, Debug)]
+pub struct Layer {
+    pub comps: Vec<String>,
+    pub planes: Vec<Vec<f32>>,
+}
+
+impl Layer {
+    /// Interleaved copy of the first `n` components (missing ones are 0).
+    pub fn interleaved(&self, n: usize) -> Vec<f32> {
+        let len = self.planes[0].len();
+        let mut out = vec![0f32; len * n];
+        for (c, p) in self.planes.iter().take(n).enumerate() {
+            for (i, v) in p.iter().enumerate() {
+                out[i * n + c] = *v;
+            }
+        }
+        out
+    }
+}
+
+/// A frame: size and named layers.
+#[derive(Clone, Debug)]
+pub struct ExrFrame {
+    pub width: usize,
+    pub height: usize,
+    pub layers: BTreeMap<String, Layer>,
+}
+
+const ORDER: [&str; 8] = ["R", "G", "B", "X", "Y", "Z", "A", "W"];
+
+fn comp_rank(c: &str) -> usize {
+    ORDER.iter().position(|o| o.eq_ignore_ascii_case(c)).unwrap_or(ORDER.len())
+}
+
+impl ExrFrame {
+    /// Reads every channel of the first (largest) image part.
+    pub fn read(path: &Path) -> Result<Self, String> {
+        let name = path.display();
+        if !path.exists() {
+            return Err(format!("{name}: no such file"));
+        }
+        let img = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .all_layers()
+            .all_attributes()
+            .from_file(path)
+            .map_err(|e| format!("{name}: not a readable OpenEXR file ({e})"))?;
+        let mut layers: BTreeMap<String, Layer> = BTreeMap::new();
+        let (mut width, mut height) = (0, 0);
+        for (li, part) in img.layer_data.iter().enumerate() {
+            let size = part.size;
+            if li == 0 {
+                width = size.0;
+                height = size.1;
+            } else if (size.0, size.1) != (width, height) {
+                return Err(format!("{name}: image parts have different sizes"));
+            }
+            let prefix = part.attributes.layer_name.as_ref().map(|t| t.to_string());
+            for ch in &part.channel_data.list {
+                let full = ch.name.to_string();
+                let full = match &prefix {
+                    Some(p) if !full.contains('.') => format!("{p}.{full}"),
+                    _ => full,
+                };
+                let (layer, comp) = match full.rsplit_once('.') {
+                    Some((l, c)) => (l.to_string(), c.to_string()),
+                    None => (String::new(), full.clone()), // un-layered RGB: the "" layer
+                };
+                let plane: Vec<f32> = ch.sample_data.values_as_f32().collect();
+                let e = layers.entry(layer).or_insert(Layer { comps: vec![], planes: vec![] });
+                e.comps.push(comp);
+                e.planes.push(plane);
+            }
+        }
+        for l in layers.values_mut() {
+            let mut idx: Vec<usize> = (0..l.comps.len()).collect();
+            idx.sort_by_key(|&i| (comp_rank(&l.comps[i]), l.comps[i].clone()));
+            l.comps = idx.iter().map(|&i| l.comps[i].clone()).collect();
+            l.planes = idx.iter().map(|&i| std::mem::take(&mut l.planes[i])).collect();
+        }
+        if width == 0 || height == 0 {
+            return Err(format!("{name}: empty image"));
+        }
+        Ok(ExrFrame { width, height, layers })
+    }
+
+    /// The layer, checked to have at least `comps` components.
+    pub fn layer(&self, name: &str, comps: usize, file: &Path) -> Result<&Layer, String> {
+        let l = self.layers.get(name).ok_or_else(|| {
+            let have: Vec<&str> = self.layers.keys().map(|s| s.as_str()).collect();
+            format!("{}: missing layer '{name}' (has: {})", file.display(), have.join(", "))
+        })?;
+        if l.planes.len() < comps {
+            return Err(format!("{}: layer '{name}' has {} channels, needs {comps}", file.display(), l.planes.len()));
+        }
+        Ok(l)
+    }
+
+    pub fn has(&self, name: &str) -> bool {
+        self.layers.contains_key(name)
+    }
+
+    /// Writes the given layers (half floats, except `position`/`depth`/`denoised`
+    /// which stay f32), ZIP compressed.
+    pub fn write(path: &Path, width: usize, height: usize, layers: &[(&str, &Layer)]) -> Result<(), String> {
+        let mut chans: Vec<AnyChannel<FlatSamples>> = vec![];
+        for (lname, l) in layers {
+            let full = matches!(*lname, "position" | "depth" | "denoised" | "motion");
+            for (c, p) in l.comps.iter().zip(&l.planes) {
+                let name = if lname.is_empty() { c.clone() } else { format!("{lname}.{c}") };
+                let samples = if full {
+                    FlatSamples::F32(p.clone())
+                } else {
+                    FlatSamples::F16(p.iter().map(|v| half::f16::from_f32(*v)).collect())
+                };
+                chans.push(AnyChannel::new(name.as_str(), samples));
+            }
+        }
+        let channels = AnyChannels::sort(chans.into());
+        let layer = exr::image::Layer::new((width, height), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, channels);
+        let img = Image::from_layer(layer);
+        img.write().to_file(path).map_err(|e| format!("{}: cannot write ({e})", path.display()))
+    }
+}

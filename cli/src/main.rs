@@ -1,0 +1,485 @@
+//! `lrd`: denoise frames, evaluate and compare methods, report error against
+//! run time, advise what a scene can drop, benchmark. See the README.
+
+mod evaluate;
+mod exrio;
+mod methods;
+mod metrics;
+mod report;
+mod runner;
+
+use clap::{Parser, Subcommand};
+use evaluate::{evaluate, list_frames, means, time_method, EvalOptions, Record, Variant};
+use exrio::{ExrFrame, Layer};
+use methods::{check_method, flag_line, label, FlrArgs, Method};
+use runner::Inputs;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(name = "lrd", version, about = "Real-time regression denoisers for path-traced diffuse GI (lrdenoise)")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Denoise one frame: writes OUT.exr with a `denoised` layer (plus the input layers)
+    Denoise {
+        frame: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        #[arg(long, default_value = "flr")]
+        method: String,
+        #[command(flatten)]
+        flr: FlrArgs,
+        /// The noisy layer to denoise (e.g. noisy4)
+        #[arg(long, default_value = "noisy")]
+        input_layer: String,
+        /// Also write a tone-mapped PNG preview of albedo * denoised
+        #[arg(long)]
+        png: Option<PathBuf>,
+        /// Write only the `denoised` layer
+        #[arg(long)]
+        only_output: bool,
+        /// Threads (default: all cores)
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Denoise a sequence directory (frame_NNNN.exr) into OUTDIR, same file names
+    DenoiseSeq {
+        dir: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        #[arg(long, default_value = "flr")]
+        method: String,
+        #[command(flatten)]
+        flr: FlrArgs,
+        #[arg(long, default_value = "noisy")]
+        input_layer: String,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Score methods on frames with a reference: PSNR, SSIM, FLIP, rMSE and median time
+    Eval {
+        #[arg(required = true)]
+        frames: Vec<PathBuf>,
+        #[arg(long, default_value = "flr")]
+        methods: String,
+        #[command(flatten)]
+        flr: FlrArgs,
+        /// Write one JSON record per (method, frame)
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Timed runs per measurement (after one warm-up; at least 5)
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Evaluate every method and configuration; write DIR/report.md, plot.svg/png and image strips
+    Report {
+        #[arg(required = true)]
+        frames: Vec<PathBuf>,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// JSON files of records produced elsewhere (same schema as `eval --json`), merged into tables and plot
+        #[arg(long)]
+        peers: Vec<PathBuf>,
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Measure which guides and settings earn their cost on this scene; print the flags to use
+    Advise {
+        frame: PathBuf,
+        /// Cheapest configuration within D dB of the best (default 0.25)
+        #[arg(long, conflicts_with = "budget_ms")]
+        max_loss_db: Option<f64>,
+        /// Best configuration within T ms
+        #[arg(long)]
+        budget_ms: Option<f64>,
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Time the denoiser alone on a synthetic frame (or FRAME resampled to WxH)
+    Bench {
+        #[arg(long, default_value = "flr")]
+        method: String,
+        #[arg(long, default_value = "1920x1080")]
+        size: String,
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+        #[arg(long, default_value_t = 30)]
+        runs: usize,
+        #[command(flatten)]
+        flr: FlrArgs,
+        frame: Option<PathBuf>,
+    },
+    /// Denoise the bundled sample frames with every method and write the report to ./lrd-demo/
+    Demo {
+        #[arg(short, long, default_value = "lrd-demo")]
+        output: PathBuf,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+}
+
+fn threads_or_all(t: Option<usize>) -> usize {
+    t.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1)
+}
+
+fn layer_of(comps: &[&str], inter: &[f32]) -> Layer {
+    let n = comps.len();
+    Layer { comps: comps.iter().map(|s| s.to_string()).collect(), planes: (0..n).map(|c| inter.iter().skip(c).step_by(n).copied().collect()).collect() }
+}
+
+fn write_png(path: &Path, rgb: &[f32], w: usize, h: usize) -> Result<(), String> {
+    let bytes: Vec<u8> = rgb.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+    image::RgbImage::from_raw(w as u32, h as u32, bytes)
+        .ok_or("png: bad size")?
+        .save(path)
+        .map_err(|e| format!("{}: {e}", path.display()))
+}
+
+struct DenoiseJob<'a> {
+    method: &'a str,
+    flr: &'a FlrArgs,
+    input_layer: &'a str,
+    threads: usize,
+}
+
+/// Reads, denoises and writes one frame; returns (config label, ms, width, height).
+fn denoise_file(job: &DenoiseJob, input: &Path, output: &Path, png: Option<&Path>, only_output: bool) -> Result<(String, f64, usize, usize), String> {
+    check_method(job.method)?;
+    let exr = ExrFrame::read(input)?;
+    let inputs = Inputs::from_exr(&exr, input, job.input_layer)?;
+    let cfg = job.flr.config(&inputs).map_err(|e| format!("{}: {e}", input.display()))?;
+    let mut m = Method::flr(cfg, &inputs, job.threads)?;
+    let mut out = vec![0f32; inputs.w * inputs.h * 3];
+    let t = Instant::now();
+    m.run(&inputs, &mut out)?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let den = layer_of(&["R", "G", "B"], &out);
+    let mut layers: Vec<(&str, &Layer)> = vec![("denoised", &den)];
+    if !only_output {
+        for (k, l) in &exr.layers {
+            if k != "denoised" {
+                layers.push((k.as_str(), l));
+            }
+        }
+    }
+    ExrFrame::write(output, inputs.w, inputs.h, &layers)?;
+    if let Some(p) = png {
+        let albedo = inputs.albedo.clone().unwrap_or_else(|| vec![1.0; out.len()]);
+        let i: Vec<f32> = out.iter().zip(&albedo).map(|(a, b)| a * b).collect();
+        let l = match &inputs.reference {
+            Some(r) => metrics::mean_luminance(&r.iter().zip(&albedo).map(|(a, b)| a * b).collect::<Vec<_>>()),
+            None => metrics::mean_luminance(&i),
+        };
+        write_png(p, &metrics::tonemap(&i, l), inputs.w, inputs.h)?;
+    }
+    Ok((label(&cfg), ms, inputs.w, inputs.h))
+}
+
+fn print_table(records: &[Record]) {
+    println!("{}", report::table(records, true));
+    let m = means(records);
+    println!("{}", report::table(&m, false));
+}
+
+/// The configurations `lrd report` compares: the default, then one setting changed at a time.
+fn report_variants() -> Vec<Variant> {
+    let g = |s: &str| FlrArgs { guides: Some(s.into()), ..Default::default() };
+    vec![
+        Variant::noisy("noisy"),
+        Variant::noisy("noisy4"),
+        Variant::flr(FlrArgs::default()),
+        Variant::flr(g("none")),
+        Variant::flr(g("normal")),
+        Variant::flr(g("normal,depth")),
+        Variant::flr(g("normal,depth,position,ao")),
+        Variant::flr(FlrArgs { block: Some(4), ..Default::default() }),
+        Variant::flr(FlrArgs { block: Some(16), ..Default::default() }),
+        Variant::flr(FlrArgs { sigma: Some(6.0), ..Default::default() }),
+        Variant::flr(FlrArgs { sigma: Some(24.0), ..Default::default() }),
+        Variant::flr(FlrArgs { box_radius: Some(16.0), ..Default::default() }),
+        Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
+        Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
+        Variant::flr(FlrArgs::default()).on("noisy4"),
+    ]
+}
+
+fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, threads: usize) -> Result<(), String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: true };
+    let (mut records, images) = evaluate(frames, &report_variants(), &opt)?;
+    if records.is_empty() {
+        return Err("no frame with a 'reference' layer: nothing to report".into());
+    }
+    for p in peers {
+        let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
+        let peer: Vec<Record> = serde_json::from_str(&text).map_err(|e| format!("{}: not a JSON list of records ({e})", p.display()))?;
+        records.extend(peer);
+    }
+    let mean = means(&records);
+    let refs: Vec<&Record> = mean.iter().collect();
+    report::plot(out, &refs)?;
+    let strips = report::strips(out, &images)?;
+    let cpu = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())).unwrap_or_else(|| "unknown CPU".into());
+    let (w, h) = (records[0].width, records[0].height);
+    let mut md = String::new();
+    md += "# lrdenoise report\n\n";
+    md += &format!(
+        "{} frame(s), {w}x{h} (first frame); {threads} thread(s); {cpu}; SIMD level `{}`; time = median of {} runs after a warm-up, denoiser only (no I/O). \
+         Metrics follow shared/DATA.md (albedo-modulated, tone-mapped PSNR/SSIM/LDR-FLIP, linear rMSE). Peer rows (if any) were measured by their own tools.\n\n",
+        images.len(),
+        lrdenoise::SIMD_LEVEL,
+        opt.runs
+    );
+    md += "## Mean over frames\n\n";
+    md += &report::table(&mean, false);
+    md += "\n![error versus run time](plot.png)\n\n";
+    md += "## Per frame\n\n";
+    md += &report::table(&records, true);
+    md += "\n## Image strips\n\nTop: noisy | each configuration | reference; bottom: FLIP error maps.\n\n";
+    for s in &strips {
+        md += &format!("![{s}]({s})\n\n");
+    }
+    std::fs::write(out.join("report.md"), md).map_err(|e| format!("{}: {e}", out.display()))?;
+    let json = serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?;
+    std::fs::write(out.join("records.json"), json).map_err(|e| e.to_string())?;
+    println!("{}", report::table(&mean, false));
+    println!("wrote {}/report.md, plot.svg, plot.png, records.json and {} strip(s)", out.display(), strips.len());
+    Ok(())
+}
+
+fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize, threads: usize) -> Result<(), String> {
+    let exr = ExrFrame::read(frame)?;
+    let inputs = Inputs::from_exr(&exr, frame, "noisy")?;
+    if inputs.reference.is_none() {
+        return Err(format!("{}: advise measures quality and needs a 'reference' layer", frame.display()));
+    }
+    // Every subset of the available guides x block sizes x window sizes.
+    let avail: Vec<&str> = [("normal", inputs.normal.is_some()), ("depth", inputs.depth.is_some()), ("position", inputs.position.is_some()), ("ao", inputs.ao.is_some())]
+        .iter()
+        .filter(|(_, a)| *a)
+        .map(|(n, _)| *n)
+        .collect();
+    let mut variants = vec![Variant::noisy("noisy")];
+    for mask in 0..(1usize << avail.len()) {
+        let g: Vec<&str> = avail.iter().enumerate().filter(|(i, _)| mask >> i & 1 == 1).map(|(_, n)| *n).collect();
+        let gs = if g.is_empty() { "none".to_string() } else { g.join(",") };
+        for block in [4, 8, 16] {
+            for sigma in [6.0, 12.0, 24.0] {
+                variants.push(Variant::flr(FlrArgs { guides: Some(gs.clone()), block: Some(block), sigma: Some(sigma), ..Default::default() }));
+            }
+        }
+    }
+    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: false };
+    let (records, _) = evaluate(&[frame.to_path_buf()], &variants, &opt)?;
+    let noisy = records.iter().find(|r| r.method == "noisy").map(|r| r.psnr).unwrap_or(f64::NAN);
+    let flr: Vec<&Record> = records.iter().filter(|r| r.method == "flr").collect();
+    let best = flr.iter().max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or("no configuration could run")?;
+    let pick = match budget {
+        Some(t) => flr.iter().filter(|r| r.ms <= t).max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or_else(|| format!("no configuration runs within {t} ms (fastest: {:.3} ms)", flr.iter().map(|r| r.ms).fold(f64::MAX, f64::min)))?,
+        None => {
+            let d = max_loss.unwrap_or(0.25);
+            flr.iter().filter(|r| r.psnr >= best.psnr - d).min_by(|a, b| a.ms.total_cmp(&b.ms)).unwrap_or(best)
+        }
+    };
+    // What each guide is worth: best PSNR with it minus best without it.
+    println!("{}: {} configurations measured, {threads} thread(s), noisy input {noisy:.2} dB", frame.display(), flr.len());
+    for gname in &avail {
+        let with = flr.iter().filter(|r| r.flags.contains(gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
+        let without = flr.iter().filter(|r| !r.flags.contains(gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
+        let verdict = if with - without > 0.1 { "keep" } else { "can drop" };
+        println!("  guide {gname:<8}: best with {with:.2} dB, without {without:.2} dB ({:+.2} dB) -> {verdict}", with - without);
+    }
+    println!("  best     : {:.2} dB in {:.3} ms  ({})", best.psnr, best.ms, best.config);
+    println!("  chosen   : {:.2} dB in {:.3} ms  ({})", pick.psnr, pick.ms, pick.config);
+    println!("{}", pick.flags);
+    Ok(())
+}
+
+fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, frame: Option<&Path>) -> Result<(), String> {
+    check_method(method)?;
+    let (w, h) = size
+        .split_once('x')
+        .and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?)))
+        .filter(|(a, b)| *a > 0 && *b > 0)
+        .ok_or_else(|| format!("--size: '{size}' is not WIDTHxHEIGHT"))?;
+    let inputs = match frame {
+        Some(p) => {
+            let exr = ExrFrame::read(p)?;
+            resample(&Inputs::from_exr(&exr, p, "noisy")?, w, h)
+        }
+        None => synthetic(w, h),
+    };
+    let cfg = flr.config(&inputs)?;
+    let mut m = Method::flr(cfg, &inputs, threads)?;
+    let mut out = vec![0f32; w * h * 3];
+    let (med, all) = time_method(&mut m, &inputs, &mut out, runs.max(5))?;
+    let min = all.iter().copied().fold(f64::MAX, f64::min);
+    let max = all.iter().copied().fold(0.0, f64::max);
+    println!(
+        "{method} {w}x{h} [{}] threads {threads} simd {}: median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
+        label(&cfg),
+        lrdenoise::SIMD_LEVEL,
+        all.len(),
+        (w * h) as f64 / med / 1e3
+    );
+    Ok(())
+}
+
+/// Nearest-neighbour resample of every layer to w×h.
+fn resample(i: &Inputs, w: usize, h: usize) -> Inputs {
+    let map = |v: &Vec<f32>, c: usize| -> Vec<f32> {
+        let mut o = Vec::with_capacity(w * h * c);
+        for y in 0..h {
+            let sy = y * i.h / h;
+            for x in 0..w {
+                let sx = x * i.w / w;
+                o.extend_from_slice(&v[(sy * i.w + sx) * c..(sy * i.w + sx + 1) * c]);
+            }
+        }
+        o
+    };
+    Inputs {
+        w,
+        h,
+        noisy: map(&i.noisy, 3),
+        normal: i.normal.as_ref().map(|v| map(v, 3)),
+        depth: i.depth.as_ref().map(|v| map(v, 1)),
+        position: i.position.as_ref().map(|v| map(v, 3)),
+        ao: i.ao.as_ref().map(|v| map(v, 1)),
+        albedo: None,
+        reference: None,
+    }
+}
+
+/// A synthetic frame with every guide (for benchmarks: content does not change the work).
+fn synthetic(w: usize, h: usize) -> Inputs {
+    let mut s = 0x9E3779B97F4A7C15u64;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let n = w * h;
+    let mut normal = vec![0f32; 3 * n];
+    let mut depth = vec![0f32; n];
+    let mut position = vec![0f32; 3 * n];
+    let mut ao = vec![0f32; n];
+    let mut noisy = vec![0f32; 3 * n];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let r = ((x / 97) + (y / 61)) % 3;
+            let nr = [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]][r];
+            normal[3 * i..3 * i + 3].copy_from_slice(&nr);
+            depth[i] = 2.0 + y as f32 * 0.01 + r as f32;
+            position[3 * i..3 * i + 3].copy_from_slice(&[x as f32 * 0.01, depth[i], y as f32 * 0.01]);
+            ao[i] = 0.5 + 0.5 * ((x as f32) * 0.05).sin().abs();
+            for c in 0..3 {
+                noisy[3 * i + c] = (0.2 + 0.1 * c as f32) * ao[i] * 2.0 * rnd();
+            }
+        }
+    }
+    Inputs { w, h, noisy, normal: Some(normal), depth: Some(depth), position: Some(position), ao: Some(ao), albedo: None, reference: None }
+}
+
+/// The bundled sample frames: `data/` next to the workspace, or ./data.
+fn data_dir() -> Result<PathBuf, String> {
+    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("data");
+    for d in [built, PathBuf::from("data")] {
+        if d.is_dir() {
+            return Ok(d);
+        }
+    }
+    Err("cannot find the bundled data/ directory (run from the repository root)".into())
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.cmd {
+        Cmd::Denoise { frame, output, method, flr, input_layer, png, only_output, threads } => {
+            let t = threads_or_all(threads);
+            let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
+            let (cfg, ms, w, h) = denoise_file(&job, &frame, &output, png.as_deref(), only_output)?;
+            println!("{method} [{cfg}] {w}x{h} threads {t}: {ms:.2} ms -> {}", output.display());
+        }
+        Cmd::DenoiseSeq { dir, output, method, flr, input_layer, threads } => {
+            let t = threads_or_all(threads);
+            let frames = list_frames(std::slice::from_ref(&dir))?;
+            std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
+            let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
+            let pb = evaluate::progress(frames.len() as u64, "denoising");
+            let mut total = 0.0;
+            for f in &frames {
+                let name = f.file_name().ok_or("bad frame name")?;
+                let (_, ms, _, _) = denoise_file(&job, f, &output.join(name), None, false)?;
+                total += ms;
+                pb.inc(1);
+            }
+            pb.finish_and_clear();
+            println!("{method}: {} frames, mean {:.2} ms per frame, threads {t} -> {}", frames.len(), total / frames.len() as f64, output.display());
+        }
+        Cmd::Eval { frames, methods, flr, json, runs, threads } => {
+            let mut variants = vec![Variant::noisy("noisy")];
+            for m in methods.split(',').map(str::trim) {
+                check_method(m)?;
+                variants.push(Variant::flr(flr.clone()));
+            }
+            let t = threads_or_all(threads);
+            let (records, _) = evaluate(&list_frames(&frames)?, &variants, &EvalOptions { runs: runs.max(5), threads: t, keep_images: false })?;
+            if records.is_empty() {
+                return Err("no frame with a 'reference' layer: nothing to evaluate".into());
+            }
+            print_table(&records);
+            if let Some(j) = json {
+                std::fs::write(&j, serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?).map_err(|e| format!("{}: {e}", j.display()))?;
+            }
+        }
+        Cmd::Report { frames, output, peers, runs, threads } => write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads))?,
+        Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads } => advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads))?,
+        Cmd::Bench { method, size, threads, runs, flr, frame } => bench(&method, &size, threads, runs, &flr, frame.as_deref())?,
+        Cmd::Demo { output, threads } => {
+            let d = data_dir()?;
+            let mut frames = list_frames(std::slice::from_ref(&d))?;
+            // plus the last frame of each bundled sequence
+            if let Ok(rd) = std::fs::read_dir(&d) {
+                let mut seqs: Vec<PathBuf> = rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
+                seqs.sort();
+                for s in seqs {
+                    if let Ok(mut f) = list_frames(&[s]) {
+                        frames.extend(f.pop());
+                    }
+                }
+            }
+            write_report(&frames, &output, &[], 7, threads_or_all(threads))?;
+            let _ = flag_line;
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    std::panic::set_hook(Box::new(|info| {
+        let msg = info.payload().downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| info.payload().downcast_ref::<String>().cloned()).unwrap_or_default();
+        eprintln!("lrd: internal error: {msg} (at {})", info.location().map(|l| l.to_string()).unwrap_or_default());
+    }));
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("lrd: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,185 @@
+//! Methods and their flags. The FLR flags mean exactly what issue #2 says:
+//! `--guides normal,depth,ao` (default: those of normal, depth, ao present),
+//! `--block B`, `--sigma S`, `--radius R` (full-resolution pixels; default 3σ),
+//! `--regularization normalized:EPS_MUL,EPS_ADD | tikhonov:EPS`, `--upsample 2|4`.
+
+use crate::runner::{FlrRunner, Inputs};
+use clap::Args;
+use lrdenoise::{Blur, FlrConfig, GuideSet, Regularization};
+
+#[derive(Args, Clone, Debug, Default)]
+pub struct FlrArgs {
+    /// Guides to use, comma separated from normal,depth,position,ao (default: normal,depth,ao present in the frame); "none" for none
+    #[arg(long)]
+    pub guides: Option<String>,
+    /// Block size B: one affine model per BxB pixels (1, 2, 4, 8, 16)
+    #[arg(long)]
+    pub block: Option<usize>,
+    /// Gaussian window sigma in full-resolution pixels
+    #[arg(long)]
+    pub sigma: Option<f32>,
+    /// Window truncation radius in full-resolution pixels (default 3*sigma)
+    #[arg(long)]
+    pub radius: Option<f32>,
+    /// Use a box window of this radius instead of the Gaussian (the guided filter's window)
+    #[arg(long = "box")]
+    pub box_radius: Option<f32>,
+    /// normalized:EPS_MUL,EPS_ADD (default) or tikhonov:EPS
+    #[arg(long)]
+    pub regularization: Option<String>,
+    /// Joint denoise + upsample: trace at 1/2 or 1/4 resolution (emulated by taking every 2nd/4th pixel of the noisy layer)
+    #[arg(long)]
+    pub upsample: Option<usize>,
+}
+
+pub fn parse_guides(s: &str) -> Result<GuideSet, String> {
+    let mut g = GuideSet::NONE;
+    if s.trim() == "none" {
+        return Ok(g);
+    }
+    for p in s.split(',').map(str::trim) {
+        match p {
+            "normal" => g.normal = true,
+            "depth" => g.depth = true,
+            "position" => g.position = true,
+            "ao" => g.ao = true,
+            _ => return Err(format!("--guides: unknown guide '{p}' (use normal, depth, position, ao or none)")),
+        }
+    }
+    Ok(g)
+}
+
+pub fn guides_string(g: &GuideSet) -> String {
+    let mut v = vec![];
+    if g.normal {
+        v.push("normal");
+    }
+    if g.depth {
+        v.push("depth");
+    }
+    if g.position {
+        v.push("position");
+    }
+    if g.ao {
+        v.push("ao");
+    }
+    if v.is_empty() {
+        "none".into()
+    } else {
+        v.join(",")
+    }
+}
+
+pub fn parse_regularization(s: &str) -> Result<Regularization, String> {
+    let bad = || format!("--regularization: '{s}' is not normalized:EPS_MUL,EPS_ADD or tikhonov:EPS");
+    let (kind, vals) = s.split_once(':').ok_or_else(bad)?;
+    let nums: Vec<f64> = vals.split(',').map(|v| v.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| bad())?;
+    match (kind, nums.as_slice()) {
+        ("normalized", [a, b]) => Ok(Regularization::Normalized { eps_mul: *a, eps_add: *b }),
+        ("tikhonov", [e]) => Ok(Regularization::Tikhonov { eps: *e }),
+        _ => Err(bad()),
+    }
+}
+
+impl FlrArgs {
+    /// The configuration for a frame (default guides depend on what it has).
+    pub fn config(&self, inputs: &Inputs) -> Result<FlrConfig, String> {
+        let guides = match &self.guides {
+            Some(s) => parse_guides(s)?,
+            None => inputs.default_guides(),
+        };
+        if let Some(m) = inputs.missing(&guides) {
+            return Err(format!("--guides asks for '{m}' but the frame has no '{m}' layer"));
+        }
+        let mut c = FlrConfig::with_guides(guides);
+        if let Some(b) = self.block {
+            c.block = b;
+        }
+        let sigma = self.sigma.unwrap_or(lrdenoise::config::DEFAULT_SIGMA);
+        c.blur = match self.box_radius {
+            Some(r) => Blur::Box { radius: r },
+            None => Blur::Gaussian { sigma, radius: self.radius },
+        };
+        if let Some(r) = &self.regularization {
+            c.regularization = parse_regularization(r)?;
+        }
+        if let Some(u) = self.upsample {
+            c.upsample = u;
+        }
+        c.validate().map_err(|e| format!("flr flags: {e}"))?;
+        Ok(c)
+    }
+}
+
+/// A flag line that reproduces `c` on the command line.
+pub fn flag_line(c: &FlrConfig) -> String {
+    let mut s = format!("--method flr --guides {} --block {}", guides_string(&c.guides), c.block);
+    match c.blur {
+        Blur::Gaussian { sigma, radius } => {
+            s += &format!(" --sigma {sigma}");
+            if let Some(r) = radius {
+                s += &format!(" --radius {r}");
+            }
+        }
+        Blur::Box { radius } => s += &format!(" --box {radius}"),
+    }
+    match c.regularization {
+        Regularization::Normalized { eps_mul, eps_add } => s += &format!(" --regularization normalized:{eps_mul:e},{eps_add:e}"),
+        Regularization::Tikhonov { eps } => s += &format!(" --regularization tikhonov:{eps:e}"),
+    }
+    if c.upsample > 1 {
+        s += &format!(" --upsample {}", c.upsample);
+    }
+    s
+}
+
+/// A short label for tables and plots.
+pub fn label(c: &FlrConfig) -> String {
+    let g: String = guides_string(&c.guides).split(',').map(|p| if p == "none" { "-".to_string() } else { p[..1].to_uppercase() }).collect();
+    let blur = match c.blur {
+        Blur::Gaussian { sigma, .. } => format!("s{sigma}"),
+        Blur::Box { radius } => format!("box{radius}"),
+    };
+    let reg = match c.regularization {
+        Regularization::Tikhonov { .. } => " tik",
+        _ => "",
+    };
+    let up = if c.upsample > 1 { format!(" up{}", c.upsample) } else { String::new() };
+    format!("flr {g} b{} {blur}{reg}{up}", c.block)
+}
+
+/// A runnable method on one frame size.
+pub enum Method {
+    /// The noisy input itself (the baseline row).
+    Noisy,
+    Flr { runner: Box<FlrRunner>, low: Option<Inputs> },
+}
+
+impl Method {
+    pub fn flr(cfg: FlrConfig, inputs: &Inputs, threads: usize) -> Result<Self, String> {
+        let low = (cfg.upsample > 1).then(|| inputs.subsample(cfg.upsample));
+        Ok(Method::Flr { runner: Box::new(FlrRunner::new(cfg, inputs.w, inputs.h, threads)?), low })
+    }
+
+    /// One denoise call (what is timed).
+    pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<(), String> {
+        match self {
+            Method::Noisy => {
+                out.copy_from_slice(&inputs.noisy);
+                Ok(())
+            }
+            Method::Flr { runner, low } => runner.run(inputs, low.as_ref(), out).map(|_| ()),
+        }
+    }
+}
+
+/// Known method names for `--methods` / `--method`.
+pub const METHODS: &[&str] = &["flr"];
+
+pub fn check_method(m: &str) -> Result<(), String> {
+    if METHODS.contains(&m) {
+        Ok(())
+    } else {
+        Err(format!("--method: unknown method '{m}' (available: {})", METHODS.join(", ")))
+    }
+}

@@ -1,0 +1,248 @@
+//! Frame inputs for the denoisers, and running FLR with its tiles spread over
+//! threads (each stage's tiles split into one contiguous group per thread).
+
+use crate::exrio::ExrFrame;
+use lrdenoise::{Error, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Report};
+use std::path::Path;
+
+/// The layers of one frame, interleaved f32, at full resolution.
+#[derive(Clone, Debug)]
+pub struct Inputs {
+    pub w: usize,
+    pub h: usize,
+    pub noisy: Vec<f32>,
+    pub normal: Option<Vec<f32>>,
+    pub depth: Option<Vec<f32>>,
+    pub position: Option<Vec<f32>>,
+    pub ao: Option<Vec<f32>>,
+    pub albedo: Option<Vec<f32>>,
+    pub reference: Option<Vec<f32>>,
+}
+
+impl Inputs {
+    /// Reads the noisy layer `noisy_layer` and whatever guides the frame has.
+    pub fn from_exr(f: &ExrFrame, path: &Path, noisy_layer: &str) -> Result<Self, String> {
+        let get = |name: &str, n: usize| -> Result<Option<Vec<f32>>, String> {
+            if f.has(name) {
+                Ok(Some(f.layer(name, n, path)?.interleaved(n)))
+            } else {
+                Ok(None)
+            }
+        };
+        Ok(Inputs {
+            w: f.width,
+            h: f.height,
+            noisy: f.layer(noisy_layer, 3, path)?.interleaved(3),
+            normal: get("normal", 3)?,
+            depth: get("depth", 1)?,
+            position: get("position", 3)?,
+            ao: get("ao", 1)?,
+            albedo: get("albedo", 3)?,
+            reference: get("reference", 3)?,
+        })
+    }
+
+    /// The guides present among normal, depth and AO (the default set).
+    pub fn default_guides(&self) -> GuideSet {
+        GuideSet { normal: self.normal.is_some(), depth: self.depth.is_some(), position: false, ao: self.ao.is_some(), user: 0 }
+    }
+
+    /// Names the first guide in `set` that this frame lacks.
+    pub fn missing(&self, set: &GuideSet) -> Option<&'static str> {
+        [(set.normal, self.normal.is_none(), "normal"), (set.depth, self.depth.is_none(), "depth"), (set.position, self.position.is_none(), "position"), (set.ao, self.ao.is_none(), "ao")]
+            .into_iter()
+            .find(|(want, lack, _)| *want && *lack)
+            .map(|(_, _, n)| n)
+    }
+
+    /// Every `u`-th pixel (the centre-most of each u×u block): what a renderer
+    /// tracing at 1/u resolution with the same sample count would produce.
+    pub fn subsample(&self, u: usize) -> Inputs {
+        let (lw, lh) = (self.w.div_ceil(u), self.h.div_ceil(u));
+        let pick = |v: &Vec<f32>, c: usize| -> Vec<f32> {
+            let mut o = Vec::with_capacity(lw * lh * c);
+            for y in 0..lh {
+                let sy = (y * u + u / 2).min(self.h - 1);
+                for x in 0..lw {
+                    let sx = (x * u + u / 2).min(self.w - 1);
+                    o.extend_from_slice(&v[(sy * self.w + sx) * c..(sy * self.w + sx + 1) * c]);
+                }
+            }
+            o
+        };
+        Inputs {
+            w: lw,
+            h: lh,
+            noisy: pick(&self.noisy, 3),
+            normal: self.normal.as_ref().map(|v| pick(v, 3)),
+            depth: self.depth.as_ref().map(|v| pick(v, 1)),
+            position: self.position.as_ref().map(|v| pick(v, 3)),
+            ao: self.ao.as_ref().map(|v| pick(v, 1)),
+            albedo: None,
+            reference: None,
+        }
+    }
+
+    pub fn guides(&self, set: &GuideSet) -> Result<Guides<'_>, Error> {
+        let (w, h) = (self.w, self.h);
+        fn view(v: &Option<Vec<f32>>, want: bool, w: usize, h: usize, c: usize) -> Result<Option<ImageView<'_>>, Error> {
+            match (want, v) {
+                (true, Some(v)) => Ok(Some(ImageView::interleaved(v, w, h, c)?)),
+                (true, None) => Err(Error::GuideMismatch),
+                _ => Ok(None),
+            }
+        }
+        let view = |v, want, c| view(v, want, w, h, c);
+        Ok(Guides {
+            normal: view(&self.normal, set.normal, 3)?,
+            depth: view(&self.depth, set.depth, 1)?,
+            position: view(&self.position, set.position, 3)?,
+            ao: view(&self.ao, set.ao, 1)?,
+            ..Default::default()
+        })
+    }
+}
+
+/// An FLR denoiser for one size: plan, scratch, thread pool, and (for
+/// upsampling) the low-resolution inputs, prepared outside the timed call.
+pub struct FlrRunner {
+    pub flr: Flr,
+    scratch: Vec<f64>,
+    threads: usize,
+    pool: Option<rayon::ThreadPool>,
+}
+
+impl FlrRunner {
+    pub fn new(cfg: FlrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+        let flr = Flr::new(cfg, w, h).map_err(|e| format!("flr: {e}"))?;
+        let threads = threads.max(1);
+        let scratch = vec![0f64; flr.scratch_len_for(threads)];
+        let pool = if threads > 1 {
+            Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?)
+        } else {
+            None
+        };
+        Ok(FlrRunner { flr, scratch, threads, pool })
+    }
+
+    /// Denoises `full` (and `low` = its subsampled version when upsampling) into `out`.
+    pub fn run(&mut self, full: &Inputs, low: Option<&Inputs>, out: &mut [f32]) -> Result<Report, String> {
+        let cfg = *self.flr.config();
+        let set = cfg.guides;
+        let (noisy_src, guides_low) = match low {
+            Some(l) => (l, Some(l.guides(&set).map_err(|e| e.to_string())?)),
+            None => (full, None),
+        };
+        let noisy = ImageView::interleaved(&noisy_src.noisy, noisy_src.w, noisy_src.h, 3).map_err(|e| e.to_string())?;
+        let frame = Frame { noisy, guides: full.guides(&set).map_err(|e| e.to_string())?, guides_low };
+        let mut ov = ImageViewMut::interleaved(out, full.w, full.h, 3).map_err(|e| e.to_string())?;
+        let r = match &self.pool {
+            None => self.flr.denoise(&frame, &mut self.scratch, &mut ov),
+            Some(pool) => denoise_parallel(&self.flr, &frame, &mut self.scratch, self.threads, pool, ov),
+        };
+        r.map_err(|e| format!("flr: {e}"))
+    }
+}
+
+/// Splits `v` into consecutive pieces of the given lengths.
+fn split_lens<'a, T>(mut v: &'a mut [T], lens: &[usize]) -> Vec<&'a mut [T]> {
+    let mut out = Vec::with_capacity(lens.len());
+    for &n in lens {
+        let (a, b) = v.split_at_mut(n);
+        out.push(a);
+        v = b;
+    }
+    out
+}
+
+/// Runs `f` on every item, items split into `workers.len()` contiguous groups,
+/// one task per group with its own worker. Reports are summed.
+fn par_groups<T: Send, W: Send>(
+    pool: &rayon::ThreadPool,
+    items: Vec<T>,
+    workers: &mut [W],
+    f: &(dyn Fn(T, &mut W) -> Result<Report, Error> + Sync),
+) -> Result<Report, Error> {
+    let g = workers.len();
+    let per = items.len().div_ceil(g).max(1);
+    let mut groups: Vec<Vec<T>> = (0..g).map(|_| Vec::new()).collect();
+    for (i, it) in items.into_iter().enumerate() {
+        groups[i / per].push(it);
+    }
+    let mut results: Vec<Result<Report, Error>> = (0..g).map(|_| Ok(Report::default())).collect();
+    pool.scope(|s| {
+        for ((group, w), res) in groups.into_iter().zip(workers.iter_mut()).zip(results.iter_mut()) {
+            s.spawn(move |_| {
+                let mut acc = Report::default();
+                for it in group {
+                    match f(it, w) {
+                        Ok(r) => acc += r,
+                        Err(e) => {
+                            *res = Err(e);
+                            return;
+                        }
+                    }
+                }
+                *res = Ok(acc);
+            });
+        }
+    });
+    let mut total = Report::default();
+    for r in results {
+        total += r?;
+    }
+    Ok(total)
+}
+
+/// The same stages as `Flr::denoise`, tiles in parallel: bit-identical output.
+pub fn denoise_parallel(
+    flr: &Flr,
+    frame: &Frame<'_>,
+    scratch: &mut [f64],
+    threads: usize,
+    pool: &rayon::ThreadPool,
+    out: ImageViewMut<'_>,
+) -> Result<Report, Error> {
+    let f = flr.check_frame(frame)?;
+    let p = flr.split_scratch(scratch, threads)?;
+    let mut stats = flr.prepare(&f);
+    let nt = flr.tile_count();
+    let cl: Vec<usize> = (0..nt).map(|t| flr.cells_tile_len(t)).collect::<Result<_, _>>()?;
+    let ml: Vec<usize> = (0..nt).map(|t| flr.models_tile_len(t)).collect::<Result<_, _>>()?;
+    let mut workers: Vec<&mut [f32]> = p.workers.chunks_exact_mut(flr.worker_len()).collect();
+    let mut units: Vec<()> = vec![(); threads];
+    let mut rep = Report::default();
+
+    let st = stats;
+    let items: Vec<_> = split_lens(p.cells, &cl).into_iter().enumerate().collect();
+    rep += par_groups(pool, items, &mut workers, &|(t, c), w| flr.moments_tile(&f, &st, t, c, w))?;
+    flr.finish_stats(p.cells, &mut stats)?;
+    let st = stats;
+    {
+        let cells: &[f64] = p.cells;
+        let items: Vec<_> = split_lens(p.tmp, &cl).into_iter().enumerate().collect();
+        par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile(t, cells, d).map(|_| Report::default()))?;
+    }
+    {
+        let tmp: &[f64] = p.tmp;
+        let cells = split_lens(p.cells, &cl);
+        let models = split_lens(p.models, &ml);
+        let items: Vec<_> = cells.into_iter().zip(models).enumerate().collect();
+        rep += par_groups(pool, items, &mut units, &|(t, (c, m)), _| {
+            flr.blur_cols_tile(t, tmp, c)?;
+            flr.solve_tile(&st, t, c, m)
+        })?;
+    }
+    let models: &[f32] = p.models;
+    let mut bands = Vec::with_capacity(nt);
+    let mut rest = Some(out);
+    for t in 0..nt {
+        let (y0, y1) = flr.tile_pixel_rows(t)?;
+        let r = rest.take().ok_or(Error::InvalidTile { index: t, count: nt })?;
+        let (band, r) = r.split_rows(y1 - y0)?;
+        bands.push((t, band));
+        rest = r;
+    }
+    rep += par_groups(pool, bands, &mut workers, &|(t, mut band), w| flr.apply_tile(&f, &st, t, models, w, &mut band))?;
+    Ok(rep)
+}
