@@ -57,6 +57,14 @@ impl core::ops::AddAssign for Report {
     }
 }
 
+/// `mask[i] = 0` where `v[i]` is NaN or ±Inf (branch-free, vectorisable).
+#[inline]
+fn mask_finite(v: &[f32], mask: &mut [f32]) {
+    for (m, x) in mask.iter_mut().zip(v) {
+        *m = if x.abs() <= f32::MAX { *m } else { 0.0 };
+    }
+}
+
 /// Per-frame constants: the reference each guide is measured from (a sample
 /// of the frame, so that large offsets cancel exactly) and the frame mean and
 /// standard deviation used to standardise guides in the normalized solve.
@@ -294,38 +302,52 @@ impl Flr {
         let buf = &mut worker[..BandPlanes::len(self.q, self.bin, pw)];
         let row_len = self.cells_x * self.lay.k;
         let mut rep = Report::default();
+        let np = 4 + self.q;
         for (j, cells_row) in (r0..r1).zip(cells_tile.chunks_exact_mut(row_len)) {
-            buf.fill(0.0);
             for r in 0..self.bin {
                 let y = j * self.bin + r;
-                if y >= self.in_h {
-                    break;
-                }
                 let o = r * pw;
+                if y >= self.in_h {
+                    // below the image: an empty row (weight 0, values 0)
+                    for p in 0..np {
+                        buf[p * plane + o..p * plane + o + pw].fill(0.0);
+                    }
+                    continue;
+                }
+                for p in 0..np {
+                    // padding to whole blocks
+                    buf[p * plane + o + self.in_w..p * plane + o + pw].fill(0.0);
+                }
+                let (wplane, rest) = buf.split_at_mut(plane);
+                let wrow = &mut wplane[o..o + self.in_w];
+                wrow.fill(1.0);
                 for c in 0..3 {
-                    let dst = &mut buf[(1 + c) * plane + o..(1 + c) * plane + o + self.in_w];
+                    let dst = &mut rest[c * plane + o..c * plane + o + self.in_w];
                     frame.noisy.read_row(y, c, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+                    mask_finite(dst, wrow);
                 }
                 for q in 0..self.q {
                     let v = frame.fit[q].ok_or(Error::GuideMismatch)?;
-                    let dst = &mut buf[(4 + q) * plane + o..(4 + q) * plane + o + self.in_w];
+                    let dst = &mut rest[(3 + q) * plane + o..(3 + q) * plane + o + self.in_w];
                     v.read_row(y, 0, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
                     let m = stats.reference[q];
                     for d in dst.iter_mut() {
                         *d -= m;
                     }
+                    mask_finite(dst, wrow);
                 }
-                for x in 0..self.in_w {
-                    let i = o + x;
-                    let ok_n = (1..4).all(|p| buf[p * plane + i].is_finite());
-                    let ok_g = (4..4 + self.q).all(|p| buf[p * plane + i].is_finite());
-                    if ok_n && ok_g {
-                        buf[i] = 1.0;
-                    } else {
-                        rep.nonfinite_noisy += !ok_n as u64;
-                        rep.nonfinite_guides += !ok_g as u64;
-                        for p in 1..4 + self.q {
-                            buf[p * plane + i] = 0.0;
+                let valid: f32 = wrow.iter().sum();
+                if (valid as usize) < self.in_w {
+                    // rare: count what was not finite and zero those pixels everywhere
+                    for x in 0..self.in_w {
+                        if wrow[x] != 0.0 {
+                            continue;
+                        }
+                        let bad = |p: usize| !rest[p * plane + o + x].is_finite();
+                        rep.nonfinite_noisy += (0..3).any(bad) as u64;
+                        rep.nonfinite_guides += (3..3 + self.q).any(bad) as u64;
+                        for p in 0..3 + self.q {
+                            rest[p * plane + o + x] = 0.0;
                         }
                     }
                 }
@@ -454,18 +476,19 @@ impl Flr {
                 let dst = &mut gplanes[q * w..(q + 1) * w];
                 v.read_row(y, 0, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
                 let m = stats.reference[q];
-                for (d, ok) in dst.iter_mut().zip(valid.iter_mut()) {
+                for d in dst.iter_mut() {
                     *d -= m;
-                    if !d.is_finite() {
-                        *ok = 0.0;
-                    }
                 }
+                mask_finite(dst, valid);
             }
-            for x in 0..w {
-                if valid[x] == 0.0 {
-                    rep.fallback_pixels += 1;
-                    for q in 0..self.q {
-                        gplanes[q * w + x] = 0.0;
+            let nvalid: f32 = valid.iter().sum();
+            if (nvalid as usize) < w {
+                for x in 0..w {
+                    if valid[x] == 0.0 {
+                        rep.fallback_pixels += 1;
+                        for q in 0..self.q {
+                            gplanes[q * w + x] = 0.0;
+                        }
                     }
                 }
             }

@@ -154,8 +154,10 @@ fn simd_group<const Q: usize>(
     outs: &mut [&mut [f32]; 3],
 ) {
     let load = |s: &[f32]| -> f32x8 {
-        let v: [f32; 8] = s[x0..x0 + 8].try_into().unwrap_or([0.0; 8]);
-        f32x8::from(v)
+        debug_assert!(x0 + 8 <= s.len());
+        // SAFETY: `apply_row` only calls this for groups with `x0 + 8 <= width`, and
+        // every plane (`d[q]`, `valid`) is exactly `width` long.
+        unsafe { core::ptr::read_unaligned(s.as_ptr().add(x0) as *const f32x8) }
     };
     let lerp = |j: usize| f32x8::splat(b[j] - a[j]).mul_add(fx, f32x8::splat(a[j]));
     let mut dv = [f32x8::ZERO; MAX_GUIDES];

@@ -69,3 +69,64 @@ pub fn solve(l: &[f64], n: usize, ld: usize, b: &mut [f64], nrhs: usize) {
         }
     }
 }
+
+/// [`factor`] for a compile-time size: fully unrollable, no zeroed scratch.
+#[inline(always)]
+pub fn factor_n<const N: usize>(a: &mut [[f64; N]; N], rel_floor: f64) -> u32 {
+    let mut dropped = 0u32;
+    let mut maxdiag = 0f64;
+    for (i, row) in a.iter().enumerate() {
+        maxdiag = maxdiag.max(row[i].abs());
+    }
+    let floor = (maxdiag * rel_floor).max(f64::MIN_POSITIVE);
+    for j in 0..N {
+        let mut d = a[j][j];
+        for p in 0..j {
+            d -= a[j][p] * a[j][p];
+        }
+        if !(d > floor) || !d.is_finite() {
+            dropped |= 1 << j;
+            a[j][j] = 0.0;
+            for row in a.iter_mut().skip(j + 1) {
+                row[j] = 0.0;
+            }
+            continue;
+        }
+        let l = libm::sqrt(d);
+        let inv = 1.0 / l;
+        a[j][j] = l;
+        for i in j + 1..N {
+            let mut s = a[i][j];
+            for p in 0..j {
+                s -= a[i][p] * a[j][p];
+            }
+            a[i][j] = s * inv;
+        }
+    }
+    dropped
+}
+
+/// [`solve`] for a compile-time size and 3 right-hand sides.
+#[inline(always)]
+pub fn solve_n<const N: usize>(l: &[[f64; N]; N], b: &mut [[f64; 3]; N]) {
+    for i in 0..N {
+        let d = l[i][i];
+        for c in 0..3 {
+            let mut s = b[i][c];
+            for p in 0..i {
+                s -= l[i][p] * b[p][c];
+            }
+            b[i][c] = if d == 0.0 { 0.0 } else { s / d };
+        }
+    }
+    for i in (0..N).rev() {
+        let d = l[i][i];
+        for c in 0..3 {
+            let mut s = b[i][c];
+            for p in i + 1..N {
+                s -= l[p][i] * b[p][c];
+            }
+            b[i][c] = if d == 0.0 { 0.0 } else { s / d };
+        }
+    }
+}

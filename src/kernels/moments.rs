@@ -40,6 +40,11 @@ impl BandPlanes<'_> {
 pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bool, cells: &mut [f64]) -> usize {
     let lay = CellLayout::new(Q);
     let k = lay.k;
+    // The SIMD path reads planes unchecked: establish its preconditions here.
+    if band.data.len() < BandPlanes::len(Q, band.rows, band.width) || cells.len() / k.max(1) * block > band.width || block == 0 {
+        cells.fill(0.0);
+        return cells.len() / k.max(1);
+    }
     let w = band.plane(0);
     let y = [band.plane(1), band.plane(2), band.plane(3)];
     let mut g: [&[f32]; MAX_GUIDES] = [&[]; MAX_GUIDES];
@@ -142,10 +147,13 @@ fn block_simd<const Q: usize>(
     lay: &CellLayout,
     acc: &mut [f32x8; MAX_K],
 ) {
-    let load = |s: &[f32], i: usize| -> f32x8 {
-        let a: [f32; 8] = s[i..i + 8].try_into().unwrap_or([0.0; 8]);
-        f32x8::from(a)
-    };
+    #[inline(always)]
+    fn load(s: &[f32], i: usize) -> f32x8 {
+        debug_assert!(i + 8 <= s.len());
+        // SAFETY: callers pass `i + 8 <= s.len()`: `moments_band` checked that every
+        // plane holds `rows * width` values and `x0 + block <= width` with block % 8 == 0.
+        unsafe { core::ptr::read_unaligned(s.as_ptr().add(i) as *const f32x8) }
+    }
     let mut rv = [f32x8::ZERO; MAX_GUIDES];
     for q in 0..Q {
         rv[q] = f32x8::splat(r[q]);

@@ -52,14 +52,14 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
     let mut coef = [[0f64; 3]; MAX_GUIDES];
     let dropped = match p.regularization {
         Regularization::Normalized { eps_mul, eps_add } => {
-            let mut mu = [0f64; MAX_GUIDES];
-            let mut muz = [0f64; MAX_GUIDES];
+            let mut mu = [0f64; Q];
+            let mut muz = [0f64; Q];
             for a in 0..Q {
                 mu[a] = cell[lay.s + a] * inv_n;
                 muz[a] = (mu[a] - p.mean[a]) / p.scale[a];
             }
             // Ŵ (eq. 18) on standardised guides; W = S/n − μμᵀ in f64.
-            let mut wh = [0f64; N1 * N1];
+            let mut wh = [[0f64; Q]; Q];
             let mut idx = lay.ss;
             for a in 0..Q {
                 for b in a..Q {
@@ -68,33 +68,33 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
                     if a == b {
                         v += eps_mul * muz[a] * muz[a] + eps_add;
                     }
-                    wh[a * N1 + b] = v;
-                    wh[b * N1 + a] = v;
+                    wh[a][b] = v;
+                    wh[b][a] = v;
                     idx += 1;
                 }
             }
             // σ̂ (eq. 19), Ĉ + ϵI (eqs. 20, 22), B̂ (eq. 21).
-            let mut sig = [0f64; MAX_GUIDES];
+            let mut isig = [0f64; Q];
             for a in 0..Q {
-                sig[a] = libm::sqrt(wh[a * N1 + a].max(1e-300));
+                isig[a] = 1.0 / libm::sqrt(wh[a][a].max(1e-300));
             }
-            let mut bh = [0f64; MAX_GUIDES * 3];
+            let mut bh = [[0f64; 3]; Q];
             for a in 0..Q {
                 for b in 0..Q {
-                    wh[a * N1 + b] /= sig[a] * sig[b];
+                    wh[a][b] *= isig[a] * isig[b];
                 }
-                wh[a * N1 + a] += eps_add;
+                wh[a][a] += eps_add;
                 for c in 0..3 {
                     let cxy = cell[lay.p + 3 * a + c] * inv_n - mu[a] * muy[c];
-                    bh[a * 3 + c] = cxy / (p.scale[a] * sig[a]);
+                    bh[a][c] = cxy * isig[a] / p.scale[a];
                 }
             }
-            let dropped = cholesky::factor(&mut wh, Q, N1, 1e-12);
-            cholesky::solve(&wh, Q, N1, &mut bh, 3);
+            let dropped = cholesky::factor_n(&mut wh, 1e-12);
+            cholesky::solve_n(&wh, &mut bh);
             // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
             for a in 0..Q {
                 for c in 0..3 {
-                    let beta = bh[a * 3 + c] / (sig[a] * p.scale[a]);
+                    let beta = bh[a][c] * isig[a] / p.scale[a];
                     coef[a][c] = beta;
                     c0[c] -= beta * mu[a];
                 }

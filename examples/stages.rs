@@ -1,0 +1,75 @@
+//! Times each FLR stage on a synthetic 1920×1080 frame (one thread).
+//! `cargo run --release --example stages [WIDTH HEIGHT]`
+use lrdenoise::*;
+use std::time::Instant;
+
+fn main() {
+    let a: Vec<usize> = std::env::args().skip(1).filter_map(|s| s.parse().ok()).collect();
+    let (w, h) = (a.first().copied().unwrap_or(1920), a.get(1).copied().unwrap_or(1080));
+    let n = w * h;
+    let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 1000) as f32 / 1000.0).collect();
+    let normal: Vec<f32> = (0..3 * n).map(|i| ((i / 3 / 97) % 3) as f32 * 0.5).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 1.0 + (i / w) as f32 * 0.01).collect();
+    let ao: Vec<f32> = (0..n).map(|i| ((i % w) as f32 * 0.05).sin().abs()).collect();
+    let cfg = FlrConfig::default();
+    let flr = Flr::new(cfg, w, h).unwrap();
+    let guides = Guides {
+        normal: Some(ImageView::interleaved(&normal, w, h, 3).unwrap()),
+        depth: Some(ImageView::interleaved(&depth, w, h, 1).unwrap()),
+        ao: Some(ImageView::interleaved(&ao, w, h, 1).unwrap()),
+        ..Default::default()
+    };
+    let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3).unwrap(), guides);
+    let mut scratch = vec![0f64; flr.scratch_len()];
+    let mut out = vec![0f32; 3 * n];
+    let mut t = [0f64; 6];
+    for it in 0..6 {
+        let f = flr.check_frame(&frame).unwrap();
+        let p = flr.split_scratch(&mut scratch, 1).unwrap();
+        let nt = flr.tile_count();
+        let lens: Vec<usize> = (0..nt).map(|t| flr.cells_tile_len(t).unwrap()).collect();
+        let mlens: Vec<usize> = (0..nt).map(|t| flr.models_tile_len(t).unwrap()).collect();
+        let s = Instant::now();
+        let mut stats = flr.prepare(&f);
+        let mut o = 0;
+        for k in 0..nt {
+            flr.moments_tile(&f, &stats, k, &mut p.cells[o..o + lens[k]], p.workers).unwrap();
+            o += lens[k];
+        }
+        let t0 = s.elapsed().as_secs_f64();
+        flr.finish_stats(p.cells, &mut stats).unwrap();
+        let t1 = s.elapsed().as_secs_f64();
+        let mut o = 0;
+        for k in 0..nt {
+            flr.blur_rows_tile(k, p.cells, &mut p.tmp[o..o + lens[k]]).unwrap();
+            o += lens[k];
+        }
+        let t2 = s.elapsed().as_secs_f64();
+        let mut o = 0;
+        for k in 0..nt {
+            flr.blur_cols_tile(k, p.tmp, &mut p.cells[o..o + lens[k]]).unwrap();
+            o += lens[k];
+        }
+        let t3 = s.elapsed().as_secs_f64();
+        let (mut o, mut mo) = (0, 0);
+        for k in 0..nt {
+            flr.solve_tile(&stats, k, &p.cells[o..o + lens[k]], &mut p.models[mo..mo + mlens[k]]).unwrap();
+            o += lens[k];
+            mo += mlens[k];
+        }
+        let t4 = s.elapsed().as_secs_f64();
+        let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+        for k in 0..nt {
+            let (y0, y1) = flr.tile_pixel_rows(k).unwrap();
+            let mut band = ov.rows(y0, y1 - y0).unwrap();
+            flr.apply_tile(&f, &stats, k, p.models, p.workers, &mut band).unwrap();
+        }
+        let t5 = s.elapsed().as_secs_f64();
+        if it > 0 {
+            for (acc, v) in t.iter_mut().zip([t0, t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4]) {
+                *acc += v * 1e3 / 5.0;
+            }
+        }
+    }
+    println!("{w}x{h} simd {}: moments {:.2} stats {:.2} blur_rows {:.2} blur_cols {:.2} solve {:.2} apply {:.2} ms; total {:.2}", SIMD_LEVEL, t[0], t[1], t[2], t[3], t[4], t[5], t.iter().sum::<f64>());
+}
