@@ -1,5 +1,6 @@
 //! Times each FLR stage on a synthetic 1920×1080 frame (one thread).
 //! `cargo run --release --example stages [WIDTH HEIGHT]`
+#![allow(clippy::needless_range_loop)]
 use lrdenoise::*;
 use std::time::Instant;
 
@@ -71,5 +72,15 @@ fn main() {
             }
         }
     }
-    println!("{w}x{h} simd {}: moments {:.2} stats {:.2} blur_rows {:.2} blur_cols {:.2} solve {:.2} apply {:.2} ms; total {:.2}", SIMD_LEVEL, t[0], t[1], t[2], t[3], t[4], t[5], t.iter().sum::<f64>());
+    println!(
+        "{w}x{h} simd {}: moments {:.2} stats {:.2} blur_rows {:.2} blur_cols {:.2} solve {:.2} apply {:.2} ms; total {:.2}",
+        SIMD_LEVEL,
+        t[0],
+        t[1],
+        t[2],
+        t[3],
+        t[4],
+        t[5],
+        t.iter().sum::<f64>()
+    );
 }

@@ -119,13 +119,11 @@ impl FlrConfig {
                 }
             }
         }
-        let reg_ok = |v: f64| v.is_finite() && v >= 0.0 && v < 1.0;
+        let reg_ok = |v: f64| (0.0..1.0).contains(&v);
         match self.regularization {
             Regularization::Normalized { eps_mul, eps_add } => {
                 if !reg_ok(eps_mul) || !reg_ok(eps_add) || eps_add == 0.0 && eps_mul == 0.0 {
-                    return Err(Error::InvalidConfig(
-                        "regularization (eps in [0, 1), not both 0)",
-                    ));
+                    return Err(Error::InvalidConfig("regularization (eps in [0, 1), not both 0)"));
                 }
             }
             Regularization::Tikhonov { eps } => {

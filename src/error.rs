@@ -57,15 +57,12 @@ impl fmt::Display for Error {
             Error::InvalidSize { arg, width, height } => {
                 write!(f, "{arg:?}: invalid size {width}x{height}")
             }
-            Error::SizeMismatch { arg, expected, got } => write!(
-                f,
-                "{arg:?}: size {}x{} does not match the expected {}x{}",
-                got.0, got.1, expected.0, expected.1
-            ),
-            Error::BufferTooSmall { arg, needed, len } => write!(
-                f,
-                "{arg:?}: buffer of {len} elements is too small for its layout ({needed} needed)"
-            ),
+            Error::SizeMismatch { arg, expected, got } => {
+                write!(f, "{arg:?}: size {}x{} does not match the expected {}x{}", got.0, got.1, expected.0, expected.1)
+            }
+            Error::BufferTooSmall { arg, needed, len } => {
+                write!(f, "{arg:?}: buffer of {len} elements is too small for its layout ({needed} needed)")
+            }
             Error::InvalidStride { arg } => write!(f, "{arg:?}: invalid stride"),
             Error::ChannelCount { arg, expected, got } => {
                 write!(f, "{arg:?}: expected {expected} channels, got {got}")
@@ -73,11 +70,7 @@ impl fmt::Display for Error {
             Error::GuideMismatch => {
                 write!(f, "the frame's guides do not match the configured guide set")
             }
-            Error::TooManyGuides { got } => write!(
-                f,
-                "{got} guide channels; at most {} are supported",
-                crate::MAX_GUIDES
-            ),
+            Error::TooManyGuides { got } => write!(f, "{got} guide channels; at most {} are supported", crate::MAX_GUIDES),
             Error::InvalidConfig(field) => write!(f, "invalid configuration: {field}"),
             Error::ScratchTooSmall { needed, got } => {
                 write!(f, "scratch buffer too small: {got} given, {needed} needed")

@@ -87,8 +87,7 @@ impl<'a> Guides<'a> {
         }
         let mut out = [None; MAX_GUIDES];
         let mut q = 0;
-        let layers: [(Option<ImageView<'a>>, usize); 4] =
-            [(self.normal, 3), (self.depth, 1), (self.position, 3), (self.ao, 1)];
+        let layers: [(Option<ImageView<'a>>, usize); 4] = [(self.normal, 3), (self.depth, 1), (self.position, 3), (self.ao, 1)];
         let users = self.user.iter().take(set.user as usize).map(|u| (*u, 1));
         for (view, ch) in layers.into_iter().chain(users) {
             let Some(v) = view else { continue };

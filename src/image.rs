@@ -62,14 +62,7 @@ impl Samples<'_> {
 /// Largest width or height accepted (keeps every index computation far from overflow).
 pub const MAX_DIM: usize = 1 << 16;
 
-fn check(
-    arg: Arg,
-    len: usize,
-    width: usize,
-    height: usize,
-    channels: usize,
-    layout: &Layout,
-) -> Result<(), Error> {
+fn check(arg: Arg, len: usize, width: usize, height: usize, channels: usize, layout: &Layout) -> Result<(), Error> {
     if width == 0 || height == 0 || width > MAX_DIM || height > MAX_DIM {
         return Err(Error::InvalidSize { arg, width, height });
     }
@@ -95,34 +88,16 @@ pub struct ImageView<'a> {
 
 impl<'a> ImageView<'a> {
     /// Validates the layout against the slice. `Samples::F32(&data)` or `Samples::F16(&data)`.
-    pub fn new(
-        samples: Samples<'a>,
-        width: usize,
-        height: usize,
-        channels: usize,
-        layout: Layout,
-    ) -> Result<Self, Error> {
+    pub fn new(samples: Samples<'a>, width: usize, height: usize, channels: usize, layout: Layout) -> Result<Self, Error> {
         check(Arg::Noisy, samples.len(), width, height, channels, &layout)?;
         Ok(ImageView { samples, width, height, channels, layout })
     }
     /// Shorthand for an f32 view.
-    pub fn f32(
-        data: &'a [f32],
-        width: usize,
-        height: usize,
-        channels: usize,
-        layout: Layout,
-    ) -> Result<Self, Error> {
+    pub fn f32(data: &'a [f32], width: usize, height: usize, channels: usize, layout: Layout) -> Result<Self, Error> {
         Self::new(Samples::F32(data), width, height, channels, layout)
     }
     /// Shorthand for an f16 view.
-    pub fn f16(
-        data: &'a [f16],
-        width: usize,
-        height: usize,
-        channels: usize,
-        layout: Layout,
-    ) -> Result<Self, Error> {
+    pub fn f16(data: &'a [f16], width: usize, height: usize, channels: usize, layout: Layout) -> Result<Self, Error> {
         Self::new(Samples::F16(data), width, height, channels, layout)
     }
     /// Shorthand for a tightly packed, interleaved f32 image.
@@ -222,13 +197,7 @@ pub struct ImageViewMut<'a> {
 
 impl<'a> ImageViewMut<'a> {
     /// Validates the layout against the slice. Strides must be non-zero.
-    pub fn new(
-        samples: SamplesMut<'a>,
-        width: usize,
-        height: usize,
-        channels: usize,
-        layout: Layout,
-    ) -> Result<Self, Error> {
+    pub fn new(samples: SamplesMut<'a>, width: usize, height: usize, channels: usize, layout: Layout) -> Result<Self, Error> {
         check(Arg::Output, samples.len(), width, height, channels, &layout)?;
         if layout.pixel_stride == 0 || (height > 1 && layout.row_stride == 0) || (channels > 1 && layout.channel_stride == 0) {
             return Err(Error::InvalidStride { arg: Arg::Output });

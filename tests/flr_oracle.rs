@@ -131,7 +131,7 @@ fn tiled_equals_whole_frame() {
             let p = flr.split_scratch(&mut scratch, 2).unwrap();
             let frame = flr.check_frame(&f.frame(set)).unwrap();
             let (w0, w1) = p.workers.split_at_mut(flr.worker_len());
-            let mut workers = [w0, w1];
+            let workers = [w0, w1];
             let mut stats = flr.prepare(&frame);
             let nt = flr.tile_count();
             let offs: Vec<usize> = (0..=nt).map(|t| (0..t).map(|i| flr.cells_tile_len(i).unwrap()).sum()).collect();

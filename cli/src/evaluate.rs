@@ -104,7 +104,11 @@ pub fn median(v: &mut [f64]) -> f64 {
 
 pub fn progress(len: u64, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(len);
-    pb.set_style(ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} ({elapsed})").unwrap_or(ProgressStyle::default_bar()).progress_chars("=> "));
+    pb.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} ({elapsed})")
+            .unwrap_or(ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
     pb.set_message(what.to_string());
     pb
 }
@@ -160,7 +164,11 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 pb.println(format!("{}: no '{}' layer, variant skipped", path.display(), v.input_layer));
                 continue;
             }
-            let inputs = if v.input_layer == "noisy" { base.clone() } else { Inputs { noisy: exr.layer(&v.input_layer, 3, path)?.interleaved(3), ..base.clone() } };
+            let inputs = if v.input_layer == "noisy" {
+                base.clone()
+            } else {
+                Inputs { noisy: exr.layer(&v.input_layer, 3, path)?.interleaved(3), ..base.clone() }
+            };
             let (mut m, cfg_label, flags) = match v.method.as_str() {
                 "noisy" => (Method::Noisy, v.input_layer.clone(), String::new()),
                 _ => {
@@ -181,7 +189,11 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 }
             };
             let mut out = vec![0f32; w * h * 3];
-            let (ms, _) = if v.method == "noisy" { m.run(&inputs, &mut out).map(|_| (0.0, vec![]))? } else { time_method(&mut m, &inputs, &mut out, opt.runs)? };
+            let (ms, _) = if v.method == "noisy" {
+                m.run(&inputs, &mut out).map(|_| (0.0, vec![]))?
+            } else {
+                time_method(&mut m, &inputs, &mut out, opt.runs)?
+            };
             let (s, fmap): (Scores, Vec<f32>) = score(&out, &reference, &albedo, w, h);
             if opt.keep_images {
                 let i: Vec<f32> = out.iter().zip(&albedo).map(|(a, b)| a * b).collect();

@@ -2,9 +2,9 @@
 //! multi-layer EXR, channels named `layer.component`, half or float.
 
 use exr::prelude::{read, AnyChannel, AnyChannels, Encoding, FlatSamples, Image, LayerAttributes, ReadChannels, ReadLayers, WritableImage};
-use std::result::Result;
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::result::Result;
 
 /// One layer: its component names (e.g. R, G, B) and a plane per component.
 #[derive(Clone, Debug)]
@@ -119,11 +119,8 @@ impl ExrFrame {
             let full = matches!(*lname, "position" | "depth" | "denoised" | "motion");
             for (c, p) in l.comps.iter().zip(&l.planes) {
                 let name = if lname.is_empty() { c.clone() } else { format!("{lname}.{c}") };
-                let samples = if full {
-                    FlatSamples::F32(p.clone())
-                } else {
-                    FlatSamples::F16(p.iter().map(|v| half::f16::from_f32(*v)).collect())
-                };
+                let samples =
+                    if full { FlatSamples::F32(p.clone()) } else { FlatSamples::F16(p.iter().map(|v| half::f16::from_f32(*v)).collect()) };
                 chans.push(AnyChannel::new(name.as_str(), samples));
             }
         }

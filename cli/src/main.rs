@@ -136,15 +136,15 @@ fn threads_or_all(t: Option<usize>) -> usize {
 
 fn layer_of(comps: &[&str], inter: &[f32]) -> Layer {
     let n = comps.len();
-    Layer { comps: comps.iter().map(|s| s.to_string()).collect(), planes: (0..n).map(|c| inter.iter().skip(c).step_by(n).copied().collect()).collect() }
+    Layer {
+        comps: comps.iter().map(|s| s.to_string()).collect(),
+        planes: (0..n).map(|c| inter.iter().skip(c).step_by(n).copied().collect()).collect(),
+    }
 }
 
 fn write_png(path: &Path, rgb: &[f32], w: usize, h: usize) -> Result<(), String> {
     let bytes: Vec<u8> = rgb.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-    image::RgbImage::from_raw(w as u32, h as u32, bytes)
-        .ok_or("png: bad size")?
-        .save(path)
-        .map_err(|e| format!("{}: {e}", path.display()))
+    image::RgbImage::from_raw(w as u32, h as u32, bytes).ok_or("png: bad size")?.save(path).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 struct DenoiseJob<'a> {
@@ -155,7 +155,13 @@ struct DenoiseJob<'a> {
 }
 
 /// Reads, denoises and writes one frame; returns (config label, ms, width, height).
-fn denoise_file(job: &DenoiseJob, input: &Path, output: &Path, png: Option<&Path>, only_output: bool) -> Result<(String, f64, usize, usize), String> {
+fn denoise_file(
+    job: &DenoiseJob,
+    input: &Path,
+    output: &Path,
+    png: Option<&Path>,
+    only_output: bool,
+) -> Result<(String, f64, usize, usize), String> {
     check_method(job.method)?;
     let exr = ExrFrame::read(input)?;
     let inputs = Inputs::from_exr(&exr, input, job.input_layer)?;
@@ -231,7 +237,10 @@ fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, 
     let refs: Vec<&Record> = mean.iter().collect();
     report::plot(out, &refs)?;
     let strips = report::strips(out, &images)?;
-    let cpu = std::fs::read_to_string("/proc/cpuinfo").ok().and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())).unwrap_or_else(|| "unknown CPU".into());
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .unwrap_or_else(|| "unknown CPU".into());
     let (w, h) = (records[0].width, records[0].height);
     let mut md = String::new();
     md += "# lrdenoise report\n\n";
@@ -266,18 +275,28 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         return Err(format!("{}: advise measures quality and needs a 'reference' layer", frame.display()));
     }
     // Every subset of the available guides x block sizes x window sizes.
-    let avail: Vec<&str> = [("normal", inputs.normal.is_some()), ("depth", inputs.depth.is_some()), ("position", inputs.position.is_some()), ("ao", inputs.ao.is_some())]
-        .iter()
-        .filter(|(_, a)| *a)
-        .map(|(n, _)| *n)
-        .collect();
+    let avail: Vec<&str> = [
+        ("normal", inputs.normal.is_some()),
+        ("depth", inputs.depth.is_some()),
+        ("position", inputs.position.is_some()),
+        ("ao", inputs.ao.is_some()),
+    ]
+    .iter()
+    .filter(|(_, a)| *a)
+    .map(|(n, _)| *n)
+    .collect();
     let mut variants = vec![Variant::noisy("noisy")];
     for mask in 0..(1usize << avail.len()) {
         let g: Vec<&str> = avail.iter().enumerate().filter(|(i, _)| mask >> i & 1 == 1).map(|(_, n)| *n).collect();
         let gs = if g.is_empty() { "none".to_string() } else { g.join(",") };
         for block in [4, 8, 16] {
             for sigma in [6.0, 12.0, 24.0] {
-                variants.push(Variant::flr(FlrArgs { guides: Some(gs.clone()), block: Some(block), sigma: Some(sigma), ..Default::default() }));
+                variants.push(Variant::flr(FlrArgs {
+                    guides: Some(gs.clone()),
+                    block: Some(block),
+                    sigma: Some(sigma),
+                    ..Default::default()
+                }));
             }
         }
     }
@@ -287,7 +306,9 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
     let flr: Vec<&Record> = records.iter().filter(|r| r.method == "flr").collect();
     let best = flr.iter().max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or("no configuration could run")?;
     let pick = match budget {
-        Some(t) => flr.iter().filter(|r| r.ms <= t).max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or_else(|| format!("no configuration runs within {t} ms (fastest: {:.3} ms)", flr.iter().map(|r| r.ms).fold(f64::MAX, f64::min)))?,
+        Some(t) => flr.iter().filter(|r| r.ms <= t).max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or_else(|| {
+            format!("no configuration runs within {t} ms (fastest: {:.3} ms)", flr.iter().map(|r| r.ms).fold(f64::MAX, f64::min))
+        })?,
         None => {
             let d = max_loss.unwrap_or(0.25);
             flr.iter().filter(|r| r.psnr >= best.psnr - d).min_by(|a, b| a.ms.total_cmp(&b.ms)).unwrap_or(best)
@@ -428,7 +449,12 @@ fn run(cli: Cli) -> Result<(), String> {
                 pb.inc(1);
             }
             pb.finish_and_clear();
-            println!("{method}: {} frames, mean {:.2} ms per frame, threads {t} -> {}", frames.len(), total / frames.len() as f64, output.display());
+            println!(
+                "{method}: {} frames, mean {:.2} ms per frame, threads {t} -> {}",
+                frames.len(),
+                total / frames.len() as f64,
+                output.display()
+            );
         }
         Cmd::Eval { frames, methods, flr, json, runs, threads } => {
             let mut variants = vec![Variant::noisy("noisy")];
@@ -437,17 +463,23 @@ fn run(cli: Cli) -> Result<(), String> {
                 variants.push(Variant::flr(flr.clone()));
             }
             let t = threads_or_all(threads);
-            let (records, _) = evaluate(&list_frames(&frames)?, &variants, &EvalOptions { runs: runs.max(5), threads: t, keep_images: false })?;
+            let (records, _) =
+                evaluate(&list_frames(&frames)?, &variants, &EvalOptions { runs: runs.max(5), threads: t, keep_images: false })?;
             if records.is_empty() {
                 return Err("no frame with a 'reference' layer: nothing to evaluate".into());
             }
             print_table(&records);
             if let Some(j) = json {
-                std::fs::write(&j, serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?).map_err(|e| format!("{}: {e}", j.display()))?;
+                std::fs::write(&j, serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?)
+                    .map_err(|e| format!("{}: {e}", j.display()))?;
             }
         }
-        Cmd::Report { frames, output, peers, runs, threads } => write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads))?,
-        Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads } => advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads))?,
+        Cmd::Report { frames, output, peers, runs, threads } => {
+            write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads))?
+        }
+        Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads } => {
+            advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads))?
+        }
         Cmd::Bench { method, size, threads, runs, flr, frame } => bench(&method, &size, threads, runs, &flr, frame.as_deref())?,
         Cmd::Demo { output, threads } => {
             let d = data_dir()?;
@@ -471,7 +503,12 @@ fn run(cli: Cli) -> Result<(), String> {
 
 fn main() -> ExitCode {
     std::panic::set_hook(Box::new(|info| {
-        let msg = info.payload().downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| info.payload().downcast_ref::<String>().cloned()).unwrap_or_default();
+        let msg = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_default();
         eprintln!("lrd: internal error: {msg} (at {})", info.location().map(|l| l.to_string()).unwrap_or_default());
     }));
     let cli = Cli::parse();

@@ -135,7 +135,8 @@ pub fn flag_line(c: &FlrConfig) -> String {
 
 /// A short label for tables and plots.
 pub fn label(c: &FlrConfig) -> String {
-    let g: String = guides_string(&c.guides).split(',').map(|p| if p == "none" { "-".to_string() } else { p[..1].to_uppercase() }).collect();
+    let g: String =
+        guides_string(&c.guides).split(',').map(|p| if p == "none" { "-".to_string() } else { p[..1].to_uppercase() }).collect();
     let blur = match c.blur {
         Blur::Gaussian { sigma, .. } => format!("s{sigma}"),
         Blur::Box { radius } => format!("box{radius}"),
@@ -152,7 +153,10 @@ pub fn label(c: &FlrConfig) -> String {
 pub enum Method {
     /// The noisy input itself (the baseline row).
     Noisy,
-    Flr { runner: Box<FlrRunner>, low: Option<Inputs> },
+    Flr {
+        runner: Box<FlrRunner>,
+        low: Option<Inputs>,
+    },
 }
 
 impl Method {

@@ -128,10 +128,14 @@ pub fn flip_map(test_tm: &[f32], ref_tm: &[f32], w: usize, h: usize) -> Vec<f32>
 }
 
 pub fn rmse(i: &[f32], r: &[f32]) -> f64 {
-    i.iter().zip(r).map(|(a, b)| {
-        let (a, b) = (*a as f64, *b as f64);
-        (a - b).powi(2) / (b * b + 0.01)
-    }).sum::<f64>() / i.len() as f64
+    i.iter()
+        .zip(r)
+        .map(|(a, b)| {
+            let (a, b) = (*a as f64, *b as f64);
+            (a - b).powi(2) / (b * b + 0.01)
+        })
+        .sum::<f64>()
+        / i.len() as f64
 }
 
 /// All four scores of a demodulated estimate against the demodulated reference.

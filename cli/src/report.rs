@@ -15,7 +15,11 @@ pub fn register_font() {
 /// Indices of the Pareto-optimal rows: no other row is both faster and better.
 pub fn pareto(rows: &[&Record], better: impl Fn(&Record, &Record) -> bool) -> Vec<usize> {
     (0..rows.len())
-        .filter(|&i| !(0..rows.len()).any(|j| j != i && rows[j].ms <= rows[i].ms && better(rows[j], rows[i]) && (rows[j].ms < rows[i].ms || better(rows[j], rows[i]))))
+        .filter(|&i| {
+            !(0..rows.len()).any(|j| {
+                j != i && rows[j].ms <= rows[i].ms && better(rows[j], rows[i]) && (rows[j].ms < rows[i].ms || better(rows[j], rows[i]))
+            })
+        })
         .collect()
 }
 
@@ -31,7 +35,8 @@ pub fn table(rows: &[Record], with_frame: bool) -> String {
         if with_frame {
             let _ = writeln!(s, "| {} | {} | {:.2} | {:.4} | {:.4} | {:.4} | {} |", r.frame, r.config, r.psnr, r.ssim, r.flip, r.rmse, ms);
         } else {
-            let _ = writeln!(s, "| {} | {:.2} | {:.4} | {:.4} | {:.4} | {} | `{}` |", r.config, r.psnr, r.ssim, r.flip, r.rmse, ms, r.flags);
+            let _ =
+                writeln!(s, "| {} | {:.2} | {:.4} | {:.4} | {:.4} | {} | `{}` |", r.config, r.psnr, r.ssim, r.flip, r.rmse, ms, r.flags);
         }
     }
     s
@@ -62,16 +67,30 @@ where
             .y_label_area_size(52)
             .build_cartesian_2d((tmin..tmax).log_scale(), (lo - pad)..(hi + pad))
             .map_err(|e| e.to_string())?;
-        chart.configure_mesh().x_desc("ms per frame (log)").y_desc(name).label_style(("sans-serif", 12)).draw().map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("ms per frame (log)")
+            .y_desc(name)
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(|e| e.to_string())?;
         if let Some(n) = noisy {
             let y = metric(n);
-            chart.draw_series(LineSeries::new([(tmin, y), (tmax, y)], RED.mix(0.5))).map_err(|e| e.to_string())?.label("noisy input").legend(|(x, y)| PathElement::new([(x, y), (x + 14, y)], RED));
+            chart
+                .draw_series(LineSeries::new([(tmin, y), (tmax, y)], RED.mix(0.5)))
+                .map_err(|e| e.to_string())?
+                .label("noisy input")
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 14, y)], RED));
         }
         let better = |a: &Record, b: &Record| if k == 0 { a.psnr > b.psnr } else { a.flip < b.flip };
         let front = pareto(&timed, better);
         let mut pts: Vec<(f64, f64)> = front.iter().map(|&i| (timed[i].ms, metric(timed[i]))).collect();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        chart.draw_series(LineSeries::new(pts.clone(), BLUE.stroke_width(2))).map_err(|e| e.to_string())?.label("Pareto front").legend(|(x, y)| PathElement::new([(x, y), (x + 14, y)], BLUE));
+        chart
+            .draw_series(LineSeries::new(pts.clone(), BLUE.stroke_width(2)))
+            .map_err(|e| e.to_string())?
+            .label("Pareto front")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 14, y)], BLUE));
         for (i, r) in timed.iter().enumerate() {
             let on = front.contains(&i);
             let color = if r.method == "flr" { BLACK } else { GREEN };
@@ -84,7 +103,13 @@ where
                     .map_err(|e| e.to_string())?;
             }
         }
-        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).label_font(("sans-serif", 12)).draw().map_err(|e| e.to_string())?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 12))
+            .draw()
+            .map_err(|e| e.to_string())?;
     }
     root.present().map_err(|e| e.to_string())
 }

@@ -49,10 +49,15 @@ impl Inputs {
 
     /// Names the first guide in `set` that this frame lacks.
     pub fn missing(&self, set: &GuideSet) -> Option<&'static str> {
-        [(set.normal, self.normal.is_none(), "normal"), (set.depth, self.depth.is_none(), "depth"), (set.position, self.position.is_none(), "position"), (set.ao, self.ao.is_none(), "ao")]
-            .into_iter()
-            .find(|(want, lack, _)| *want && *lack)
-            .map(|(_, _, n)| n)
+        [
+            (set.normal, self.normal.is_none(), "normal"),
+            (set.depth, self.depth.is_none(), "depth"),
+            (set.position, self.position.is_none(), "position"),
+            (set.ao, self.ao.is_none(), "ao"),
+        ]
+        .into_iter()
+        .find(|(want, lack, _)| *want && *lack)
+        .map(|(_, _, n)| n)
     }
 
     /// Every `u`-th pixel (the centre-most of each u×u block): what a renderer
@@ -117,11 +122,8 @@ impl FlrRunner {
         let flr = Flr::new(cfg, w, h).map_err(|e| format!("flr: {e}"))?;
         let threads = threads.max(1);
         let scratch = vec![0f64; flr.scratch_len_for(threads)];
-        let pool = if threads > 1 {
-            Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?)
-        } else {
-            None
-        };
+        let pool =
+            if threads > 1 { Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?) } else { None };
         Ok(FlrRunner { flr, scratch, threads, pool })
     }
 

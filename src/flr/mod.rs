@@ -460,7 +460,11 @@ impl Flr {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
         }
         if out_band.width() != self.width || out_band.height() != y1 - y0 || out_band.channel_count() < 3 {
-            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, y1 - y0), got: (out_band.width(), out_band.height()) });
+            return Err(Error::SizeMismatch {
+                arg: Arg::Output,
+                expected: (self.width, y1 - y0),
+                got: (out_band.width(), out_band.height()),
+            });
         }
         let w = self.width;
         let (gbuf, rest) = worker.split_at_mut((self.q + 1) * w);

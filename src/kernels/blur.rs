@@ -112,7 +112,7 @@ pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, 
             if j + r < cells_y as isize {
                 axpy(out, 1.0, row(j + r));
             }
-            if j - r - 1 >= 0 {
+            if j - r > 0 {
                 axpy(out, -1.0, row(j - r - 1));
             }
             prev = out;

@@ -4,6 +4,10 @@
 //! `[n, s_0..s_Q, S (upper triangle, row-major), t_0..t_3, P (Q×3, guide-major)]`
 //! with `n = Σw`, `s = Σw g`, `S = Σw g gᵀ`, `t = Σw y`, `P = Σw g yᵀ`; guides
 //! relative to the frame reference `m` (see `flr::Stats`).
+//!
+//! Index loops are kept where they mirror the equations (`needless_range_loop`),
+//! and `!(x > floor)` is used on purpose: it is also true for NaN.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod apply;
 pub mod blur;

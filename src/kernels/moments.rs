@@ -79,7 +79,7 @@ pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bo
         acc[..k].fill(0.0);
         if simd && block % 8 == 0 {
             accv[..k].fill(f32x8::ZERO);
-            block_simd::<Q>(&band, x0, block, &w, &y, &g, &r, &lay, &mut accv);
+            block_simd::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut accv);
             for (a, v) in acc[..k].iter_mut().zip(&accv[..k]) {
                 *a = v.reduce_add();
             }

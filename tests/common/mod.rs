@@ -1,9 +1,7 @@
 //! Test support: synthetic frames and the slow, obvious f64 reference.
 #![allow(dead_code)]
 
-use lrdenoise::{
-    Blur, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Regularization, Report,
-};
+use lrdenoise::{Blur, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Regularization, Report};
 
 /// xorshift64*: deterministic, dependency-free.
 pub struct Rng(pub u64);
@@ -61,7 +59,7 @@ impl Owned {
                 let region = (x >= split_x) as usize + 2 * (y >= split_y) as usize;
                 let nrm = match region {
                     0 => [0.0, 1.0, 0.0],
-                    1 => [0.7071, 0.0, 0.7071],
+                    1 => [std::f32::consts::FRAC_1_SQRT_2, 0.0, std::f32::consts::FRAC_1_SQRT_2],
                     2 => [-0.6, 0.0, 0.8],
                     _ => [0.0, 0.0, 1.0],
                 };
@@ -148,9 +146,7 @@ pub fn run_frame(cfg: FlrConfig, w: usize, h: usize, frame: &Frame<'_>) -> (Vec<
     let flr = Flr::new(cfg, w, h).unwrap();
     let mut scratch = vec![0f64; flr.scratch_len()];
     let mut out = vec![f32::NAN; w * h * 3];
-    let rep = flr
-        .denoise(frame, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap())
-        .unwrap();
+    let rep = flr.denoise(frame, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
     (out, rep)
 }
 
@@ -216,9 +212,8 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
             (vec![1.0 / (2 * r + 1) as f64; (2 * r + 1) as usize], r)
         }
     };
-    let valid: Vec<bool> = (0..w * h)
-        .map(|i| (0..3).all(|c| y[3 * i + c].is_finite()) && (0..q).all(|a| guides[a][i].is_finite()))
-        .collect();
+    let valid: Vec<bool> =
+        (0..w * h).map(|i| (0..3).all(|c| y[3 * i + c].is_finite()) && (0..q).all(|a| guides[a][i].is_finite())).collect();
     // Frame statistics over valid pixels (two-pass).
     let nv = valid.iter().filter(|v| **v).count().max(1) as f64;
     let mut fmean = vec![0.0; q];
