@@ -187,3 +187,32 @@ pub fn check_method(m: &str) -> Result<(), String> {
         Err(format!("--method: unknown method '{m}' (available: {})", METHODS.join(", ")))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn inputs() -> Inputs {
+        Inputs { w: 2, h: 1, noisy: vec![0.0; 6], normal: Some(vec![0.0; 6]), depth: None, position: None, ao: Some(vec![1.0; 2]), albedo: None, reference: None }
+    }
+
+    #[test]
+    fn missing_guide_is_named() {
+        let a = FlrArgs { guides: Some("normal,depth".into()), ..Default::default() };
+        let e = a.config(&inputs()).unwrap_err();
+        assert!(e.contains("'depth'") && e.contains("--guides"), "{e}");
+        // default guides: those of normal, depth, ao present
+        let c = FlrArgs::default().config(&inputs()).unwrap();
+        assert_eq!(c.guides, GuideSet { normal: true, ao: true, ..GuideSet::NONE });
+    }
+
+    #[test]
+    fn flags_round_trip() {
+        let a = FlrArgs { guides: Some("normal,ao".into()), block: Some(16), sigma: Some(7.5), regularization: Some("tikhonov:1e-5".into()), upsample: Some(2), ..Default::default() };
+        let c = a.config(&inputs()).unwrap();
+        let line = flag_line(&c);
+        assert_eq!(line, "--method flr --guides normal,ao --block 16 --sigma 7.5 --regularization tikhonov:1e-5 --upsample 2");
+        assert!(parse_regularization("normalized:1e-3").is_err());
+        assert!(parse_guides("normal,albedo").is_err());
+    }
+}

@@ -52,7 +52,8 @@ fn bad_inputs_give_clear_errors() {
     let nodepth = tmp("nodepth.exr");
     let (ok, _, e) = lrd(&["denoise", &room, "-o", nodepth.to_str().unwrap(), "--guides", "normal", "--only-output"]);
     assert!(ok, "{e}");
-    fails_with(&["denoise", nodepth.to_str().unwrap(), "-o", out, "--guides", "depth"], &["noisy"]);
+    // (a frame holding only `denoised`: the noisy layer it needs is named)
+    fails_with(&["denoise", nodepth.to_str().unwrap(), "-o", out, "--guides", "depth"], &["missing layer 'noisy'"]);
 }
 
 #[test]
