@@ -193,7 +193,17 @@ mod tests {
     use super::*;
 
     fn inputs() -> Inputs {
-        Inputs { w: 2, h: 1, noisy: vec![0.0; 6], normal: Some(vec![0.0; 6]), depth: None, position: None, ao: Some(vec![1.0; 2]), albedo: None, reference: None }
+        Inputs {
+            w: 2,
+            h: 1,
+            noisy: vec![0.0; 6],
+            normal: Some(vec![0.0; 6]),
+            depth: None,
+            position: None,
+            ao: Some(vec![1.0; 2]),
+            albedo: None,
+            reference: None,
+        }
     }
 
     #[test]
@@ -208,7 +218,14 @@ mod tests {
 
     #[test]
     fn flags_round_trip() {
-        let a = FlrArgs { guides: Some("normal,ao".into()), block: Some(16), sigma: Some(7.5), regularization: Some("tikhonov:1e-5".into()), upsample: Some(2), ..Default::default() };
+        let a = FlrArgs {
+            guides: Some("normal,ao".into()),
+            block: Some(16),
+            sigma: Some(7.5),
+            regularization: Some("tikhonov:1e-5".into()),
+            upsample: Some(2),
+            ..Default::default()
+        };
         let c = a.config(&inputs()).unwrap();
         let line = flag_line(&c);
         assert_eq!(line, "--method flr --guides normal,ao --block 16 --sigma 7.5 --regularization tikhonov:1e-5 --upsample 2");

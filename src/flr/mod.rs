@@ -57,12 +57,21 @@ impl core::ops::AddAssign for Report {
     }
 }
 
-/// `mask[i] = 0` where `v[i]` is NaN or ±Inf (branch-free, vectorisable).
+/// `mask[i] = 0` where `v[i]` is NaN or ±Inf. Written as a multiply by 0/1 so
+/// it vectorises to compare + and + multiply with plain stores (a conditional
+/// store compiles to slow masked stores).
 #[inline]
 fn mask_finite(v: &[f32], mask: &mut [f32]) {
     for (m, x) in mask.iter_mut().zip(v) {
-        *m = if x.abs() <= f32::MAX { *m } else { 0.0 };
+        let keep = (x.abs() <= f32::MAX) as u32 as f32;
+        *m *= keep;
     }
+}
+
+/// Number of zero entries (integer count: vectorises, unlike an f32 sum).
+#[inline]
+fn count_zero(mask: &[f32]) -> usize {
+    mask.iter().map(|&m| (m == 0.0) as usize).sum()
 }
 
 /// Per-frame constants: the reference each guide is measured from (a sample
@@ -336,8 +345,7 @@ impl Flr {
                     }
                     mask_finite(dst, wrow);
                 }
-                let valid: f32 = wrow.iter().sum();
-                if (valid as usize) < self.in_w {
+                if count_zero(wrow) > 0 {
                     // rare: count what was not finite and zero those pixels everywhere
                     for x in 0..self.in_w {
                         if wrow[x] != 0.0 {
@@ -382,7 +390,7 @@ impl Flr {
             let (mean, var) = if n > 0.0 { (s[a] / n, ss[a] / n - (s[a] / n) * (s[a] / n)) } else { (0.0, 0.0) };
             // A guide cannot vary by less than f32 resolution of its magnitude.
             let floor = 1e-6 * (stats.reference[a] as f64 + mean).abs();
-            let sd = libm::sqrt(var.max(0.0)).max(floor);
+            let sd = crate::kernels::sqrt(var.max(0.0)).max(floor);
             stats.mean[a] = if mean.is_finite() { mean } else { 0.0 };
             stats.scale[a] = if sd.is_finite() && sd > 0.0 { sd } else { 1.0 };
         }
@@ -485,8 +493,7 @@ impl Flr {
                 }
                 mask_finite(dst, valid);
             }
-            let nvalid: f32 = valid.iter().sum();
-            if (nvalid as usize) < w {
+            if count_zero(valid) > 0 {
                 for x in 0..w {
                     if valid[x] == 0.0 {
                         rep.fallback_pixels += 1;

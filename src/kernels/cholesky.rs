@@ -26,7 +26,7 @@ pub fn factor(a: &mut [f64], n: usize, ld: usize, rel_floor: f64) -> u32 {
             }
             continue;
         }
-        let l = libm::sqrt(d);
+        let l = super::sqrt(d);
         a[j * ld + j] = l;
         for i in j + 1..n {
             let mut s = a[i * ld + j];
@@ -71,8 +71,11 @@ pub fn solve(l: &[f64], n: usize, ld: usize, b: &mut [f64], nrhs: usize) {
 }
 
 /// [`factor`] for a compile-time size: fully unrollable, no zeroed scratch.
+/// Returns the dropped-pivot mask; `inv_diag[j]` = 1 / L_jj (0 for dropped pivots),
+/// so the substitutions multiply instead of dividing (divisions are long-latency
+/// and sit on the dependency chain).
 #[inline(always)]
-pub fn factor_n<const N: usize>(a: &mut [[f64; N]; N], rel_floor: f64) -> u32 {
+pub fn factor_n<const N: usize>(a: &mut [[f64; N]; N], rel_floor: f64, inv_diag: &mut [f64; N]) -> u32 {
     let mut dropped = 0u32;
     let mut maxdiag = 0f64;
     for (i, row) in a.iter().enumerate() {
@@ -87,14 +90,16 @@ pub fn factor_n<const N: usize>(a: &mut [[f64; N]; N], rel_floor: f64) -> u32 {
         if !(d > floor) || !d.is_finite() {
             dropped |= 1 << j;
             a[j][j] = 0.0;
+            inv_diag[j] = 0.0;
             for row in a.iter_mut().skip(j + 1) {
                 row[j] = 0.0;
             }
             continue;
         }
-        let l = libm::sqrt(d);
+        let l = super::sqrt(d);
         let inv = 1.0 / l;
         a[j][j] = l;
+        inv_diag[j] = inv;
         for i in j + 1..N {
             let mut s = a[i][j];
             for p in 0..j {
@@ -106,27 +111,30 @@ pub fn factor_n<const N: usize>(a: &mut [[f64; N]; N], rel_floor: f64) -> u32 {
     dropped
 }
 
-/// [`solve`] for a compile-time size and 3 right-hand sides.
+/// [`solve`] for a compile-time size and 3 right-hand sides, with the
+/// reciprocal diagonal from [`factor_n`] (0 for dropped variables → 0).
 #[inline(always)]
-pub fn solve_n<const N: usize>(l: &[[f64; N]; N], b: &mut [[f64; 3]; N]) {
+pub fn solve_n<const N: usize>(l: &[[f64; N]; N], inv_diag: &[f64; N], b: &mut [[f64; 3]; N]) {
     for i in 0..N {
-        let d = l[i][i];
-        for c in 0..3 {
-            let mut s = b[i][c];
-            for p in 0..i {
-                s -= l[i][p] * b[p][c];
+        let mut s = b[i];
+        for p in 0..i {
+            for c in 0..3 {
+                s[c] -= l[i][p] * b[p][c];
             }
-            b[i][c] = if d == 0.0 { 0.0 } else { s / d };
+        }
+        for c in 0..3 {
+            b[i][c] = s[c] * inv_diag[i];
         }
     }
     for i in (0..N).rev() {
-        let d = l[i][i];
-        for c in 0..3 {
-            let mut s = b[i][c];
-            for p in i + 1..N {
-                s -= l[p][i] * b[p][c];
+        let mut s = b[i];
+        for p in i + 1..N {
+            for c in 0..3 {
+                s[c] -= l[p][i] * b[p][c];
             }
-            b[i][c] = if d == 0.0 { 0.0 } else { s / d };
+        }
+        for c in 0..3 {
+            b[i][c] = s[c] * inv_diag[i];
         }
     }
 }

@@ -52,7 +52,8 @@ pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bo
         *gi = band.plane(4 + i);
     }
     let mut acc = [0f32; MAX_K];
-    let mut accv = [f32x8::ZERO; MAX_K];
+    // group vectors of the SIMD path, reused for every block of the band
+    let mut groups = [[f32x8::ZERO; VW]; MAX_GROUPS];
     let mut empty = 0;
     for (cx, cell) in cells.chunks_exact_mut(k).enumerate() {
         let x0 = cx * block;
@@ -76,14 +77,10 @@ pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bo
             empty += 1;
             continue;
         }
-        acc[..k].fill(0.0);
-        if simd && block % 8 == 0 {
-            accv[..k].fill(f32x8::ZERO);
-            block_simd::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut accv);
-            for (a, v) in acc[..k].iter_mut().zip(&accv[..k]) {
-                *a = v.reduce_add();
-            }
+        if simd && block % 8 == 0 && band.rows * block / 8 <= MAX_GROUPS {
+            block_simd::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc, &mut groups);
         } else {
+            acc[..k].fill(0.0);
             block_scalar::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc);
         }
         store_shifted::<Q>(&acc, &r, &lay, cell);
@@ -134,6 +131,16 @@ fn block_scalar<const Q: usize>(
     }
 }
 
+/// Most 8-pixel groups in one block (B = 16: 16 rows × 2).
+const MAX_GROUPS: usize = 32;
+/// Vectors per group: Q centred guides, then 3 colours.
+const VW: usize = MAX_GUIDES + 3;
+
+/// SIMD block accumulation. First every 8-pixel group of the block is turned
+/// into vectors `v = [e_0..e_Q, y_0, y_1, y_2]` (e = (g − r)·w); then for each
+/// guide `a` the whole row `Σ v_a v_b, b ≥ a` (that is `S_a·` and `P_a·`) is
+/// accumulated in registers over the groups, one fused multiply-add per
+/// product, and reduced once.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn block_simd<const Q: usize>(
@@ -145,7 +152,8 @@ fn block_simd<const Q: usize>(
     g: &[&[f32]; MAX_GUIDES],
     r: &[f32; MAX_GUIDES],
     lay: &CellLayout,
-    acc: &mut [f32x8; MAX_K],
+    acc: &mut [f32; MAX_K],
+    v: &mut [[f32x8; VW]; MAX_GROUPS],
 ) {
     #[inline(always)]
     fn load(s: &[f32], i: usize) -> f32x8 {
@@ -158,35 +166,56 @@ fn block_simd<const Q: usize>(
     for q in 0..Q {
         rv[q] = f32x8::splat(r[q]);
     }
+    let mut wsum = f32x8::ZERO;
+    let mut ng = 0;
     for row in 0..band.rows {
         let base = row * band.width;
         let mut i = base + x0;
-        while i < base + x0 + block {
+        while i < base + x0 + block && ng < MAX_GROUPS {
             let wi = load(w, i);
-            let mut e = [f32x8::ZERO; MAX_GUIDES];
+            wsum += wi;
+            let vg = &mut v[ng];
             for q in 0..Q {
-                e[q] = (load(g[q], i) - rv[q]) * wi;
-            }
-            let yy = [load(y[0], i), load(y[1], i), load(y[2], i)];
-            acc[0] += wi;
-            let mut p = lay.ss;
-            for a in 0..Q {
-                acc[lay.s + a] += e[a];
-                for b in a..Q {
-                    acc[p] = e[a].mul_add(e[b], acc[p]);
-                    p += 1;
-                }
+                vg[q] = (load(g[q], i) - rv[q]) * wi;
             }
             for c in 0..3 {
-                acc[lay.t + c] += yy[c];
+                vg[Q + c] = load(y[c], i);
             }
-            for a in 0..Q {
-                for c in 0..3 {
-                    let j = lay.p + 3 * a + c;
-                    acc[j] = e[a].mul_add(yy[c], acc[j]);
-                }
-            }
+            ng += 1;
             i += 8;
+        }
+    }
+    let groups = &v[..ng];
+    acc[0] = wsum.reduce_add();
+    // s and t: plain sums of the vectors.
+    let mut sums = [f32x8::ZERO; VW];
+    for vg in groups {
+        for j in 0..Q + 3 {
+            sums[j] += vg[j];
+        }
+    }
+    for a in 0..Q {
+        acc[lay.s + a] = sums[a].reduce_add();
+    }
+    for c in 0..3 {
+        acc[lay.t + c] = sums[Q + c].reduce_add();
+    }
+    // S (upper triangle, row a) and P (row a), row by row.
+    let mut p = lay.ss;
+    for a in 0..Q {
+        let mut row = [f32x8::ZERO; VW];
+        for vg in groups {
+            let va = vg[a];
+            for b in a..Q + 3 {
+                row[b] = va.mul_add(vg[b], row[b]);
+            }
+        }
+        for b in a..Q {
+            acc[p] = row[b].reduce_add();
+            p += 1;
+        }
+        for c in 0..3 {
+            acc[lay.p + 3 * a + c] = row[Q + c].reduce_add();
         }
     }
 }

@@ -54,16 +54,20 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
         Regularization::Normalized { eps_mul, eps_add } => {
             let mut mu = [0f64; Q];
             let mut muz = [0f64; Q];
+            let mut inv_scale = [0f64; Q];
+            for a in 0..Q {
+                inv_scale[a] = 1.0 / p.scale[a];
+            }
             for a in 0..Q {
                 mu[a] = cell[lay.s + a] * inv_n;
-                muz[a] = (mu[a] - p.mean[a]) / p.scale[a];
+                muz[a] = (mu[a] - p.mean[a]) * inv_scale[a];
             }
             // Ŵ (eq. 18) on standardised guides; W = S/n − μμᵀ in f64.
             let mut wh = [[0f64; Q]; Q];
             let mut idx = lay.ss;
             for a in 0..Q {
                 for b in a..Q {
-                    let w = (cell[idx] * inv_n - mu[a] * mu[b]) / (p.scale[a] * p.scale[b]);
+                    let w = (cell[idx] * inv_n - mu[a] * mu[b]) * (inv_scale[a] * inv_scale[b]);
                     let mut v = w + eps_mul * muz[a] * muz[b];
                     if a == b {
                         v += eps_mul * muz[a] * muz[a] + eps_add;
@@ -76,7 +80,7 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
             // σ̂ (eq. 19), Ĉ + ϵI (eqs. 20, 22), B̂ (eq. 21).
             let mut isig = [0f64; Q];
             for a in 0..Q {
-                isig[a] = 1.0 / libm::sqrt(wh[a][a].max(1e-300));
+                isig[a] = 1.0 / super::sqrt(wh[a][a].max(1e-300));
             }
             let mut bh = [[0f64; 3]; Q];
             for a in 0..Q {
@@ -86,15 +90,16 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
                 wh[a][a] += eps_add;
                 for c in 0..3 {
                     let cxy = cell[lay.p + 3 * a + c] * inv_n - mu[a] * muy[c];
-                    bh[a][c] = cxy * isig[a] / p.scale[a];
+                    bh[a][c] = cxy * isig[a] * inv_scale[a];
                 }
             }
-            let dropped = cholesky::factor_n(&mut wh, 1e-12);
-            cholesky::solve_n(&wh, &mut bh);
+            let mut inv_diag = [0f64; Q];
+            let dropped = cholesky::factor_n(&mut wh, 1e-12, &mut inv_diag);
+            cholesky::solve_n(&wh, &inv_diag, &mut bh);
             // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
             for a in 0..Q {
                 for c in 0..3 {
-                    let beta = bh[a][c] * isig[a] / p.scale[a];
+                    let beta = bh[a][c] * isig[a] * inv_scale[a];
                     coef[a][c] = beta;
                     c0[c] -= beta * mu[a];
                 }
