@@ -161,6 +161,39 @@ impl<'a> ImageView<'a> {
         Some(())
     }
 
+    /// Reads channels `0..N` of row `y`, pixels `x0..x0 + len`, into `N` planes in one
+    /// pass over the row (interleaved data is touched once, not once per channel).
+    #[inline]
+    pub fn read_row_n<const N: usize>(&self, y: usize, x0: usize, dst: [&mut [f32]; N]) -> Option<()> {
+        let len = dst[0].len();
+        if N == 0 || y >= self.height || N > self.channels || x0.checked_add(len)? > self.width || dst.iter().any(|d| d.len() != len) {
+            return None;
+        }
+        let l = &self.layout;
+        let start = l.offset + y * l.row_stride + x0 * l.pixel_stride;
+        let (ps, cs) = (l.pixel_stride, l.channel_stride);
+        let mut dst = dst;
+        match self.samples {
+            Samples::F32(s) => {
+                for i in 0..len {
+                    for (c, d) in dst.iter_mut().enumerate() {
+                        // SAFETY: validated at construction (see `read_row`); i < len, c < N ≤ channels.
+                        unsafe { *d.get_unchecked_mut(i) = *s.get_unchecked(start + i * ps + c * cs) };
+                    }
+                }
+            }
+            Samples::F16(s) => {
+                for i in 0..len {
+                    for (c, d) in dst.iter_mut().enumerate() {
+                        // SAFETY: as above.
+                        unsafe { *d.get_unchecked_mut(i) = s.get_unchecked(start + i * ps + c * cs).to_f32() };
+                    }
+                }
+            }
+        }
+        Some(())
+    }
+
     /// One element, bounds-checked (slow path, for tests and tools).
     pub fn get(&self, x: usize, y: usize, c: usize) -> Option<f32> {
         let mut v = [0.0f32];
@@ -238,6 +271,37 @@ impl<'a> ImageViewMut<'a> {
                 for (i, v) in src.iter().enumerate() {
                     // SAFETY: as above.
                     unsafe { *s.get_unchecked_mut(start + i * ps) = f16::from_f32(*v) };
+                }
+            }
+        }
+        Some(())
+    }
+
+    /// Writes `N` planes to channels `0..N` of row `y` in one pass over the row.
+    #[inline]
+    pub fn write_row_n<const N: usize>(&mut self, y: usize, x0: usize, src: [&[f32]; N]) -> Option<()> {
+        let len = src[0].len();
+        if N == 0 || y >= self.height || N > self.channels || x0.checked_add(len)? > self.width || src.iter().any(|d| d.len() != len) {
+            return None;
+        }
+        let l = &self.layout;
+        let start = l.offset + y * l.row_stride + x0 * l.pixel_stride;
+        let (ps, cs) = (l.pixel_stride, l.channel_stride);
+        match &mut self.samples {
+            SamplesMut::F32(s) => {
+                for i in 0..len {
+                    for (c, p) in src.iter().enumerate() {
+                        // SAFETY: validated at construction; i < len ≤ width − x0, c < N ≤ channels.
+                        unsafe { *s.get_unchecked_mut(start + i * ps + c * cs) = *p.get_unchecked(i) };
+                    }
+                }
+            }
+            SamplesMut::F16(s) => {
+                for i in 0..len {
+                    for (c, p) in src.iter().enumerate() {
+                        // SAFETY: as above.
+                        unsafe { *s.get_unchecked_mut(start + i * ps + c * cs) = f16::from_f32(*p.get_unchecked(i)) };
+                    }
                 }
             }
         }

@@ -330,10 +330,14 @@ impl Flr {
                 let (wplane, rest) = buf.split_at_mut(plane);
                 let wrow = &mut wplane[o..o + self.in_w];
                 wrow.fill(1.0);
-                for c in 0..3 {
-                    let dst = &mut rest[c * plane + o..c * plane + o + self.in_w];
-                    frame.noisy.read_row(y, c, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
-                    mask_finite(dst, wrow);
+                {
+                    let (p0, p12) = rest.split_at_mut(plane);
+                    let (p1, p2) = p12.split_at_mut(plane);
+                    let rgb = [&mut p0[o..o + self.in_w], &mut p1[o..o + self.in_w], &mut p2[o..o + self.in_w]];
+                    frame.noisy.read_row_n(y, 0, rgb).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+                    for p in [&p0[o..o + self.in_w], &p1[o..o + self.in_w], &p2[o..o + self.in_w]] {
+                        mask_finite(p, wrow);
+                    }
                 }
                 for q in 0..self.q {
                     let v = frame.fit[q].ok_or(Error::GuideMismatch)?;
@@ -507,9 +511,9 @@ impl Flr {
             let guides = RowGuides { data: gbuf, width: w };
             let clamp = self.cfg.clamp_negative;
             dispatch_q!(self.q, apply_row(row_models, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
-            for c in 0..3 {
-                out_band.write_row(y - y0, c, 0, &outbuf[c * w..(c + 1) * w]).ok_or(Error::InvalidTile { index: t, count: 0 })?;
-            }
+            let (r, gb) = outbuf.split_at(w);
+            let (g, b) = gb.split_at(w);
+            out_band.write_row_n(y - y0, 0, [r, g, &b[..w]]).ok_or(Error::InvalidTile { index: t, count: 0 })?;
         }
         Ok(rep)
     }
