@@ -1,0 +1,122 @@
+//! The C entry points called from Rust: null pointers, bad strides and sizes,
+//! f16 images, planar outputs, status strings.
+
+use lrdenoise::*;
+use std::ffi::CStr;
+use std::ptr::{null, null_mut};
+
+fn img(data: *const f32, w: u32, h: u32, ch: usize) -> LrdImage {
+    LrdImage { data: data as *const _, format: 0, width: w, height: h, pixel_stride: ch * 4, row_stride: 0, channel_stride: 0 }
+}
+fn none() -> LrdImage {
+    LrdImage { data: null(), format: 0, width: 0, height: 0, pixel_stride: 0, row_stride: 0, channel_stride: 0 }
+}
+fn guides_none() -> LrdGuides {
+    LrdGuides { normal: none(), depth: none(), position: none(), ao: none(), user: [none(); 4] }
+}
+
+#[test]
+fn entry_points_validate_everything() {
+    let (w, h) = (37u32, 21u32);
+    let n = (w * h) as usize;
+    let noisy: Vec<f32> = (0..3 * n).map(|i| (i % 7) as f32 * 0.1).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 1.0 + (i / w as usize) as f32 * 0.1).collect();
+    let mut cfg = lrd_flr_config_default();
+    cfg.guides = LRD_GUIDE_DEPTH;
+    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
+    frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+    let mut out = vec![0f32; 3 * n];
+    let o =
+        LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
+    let mut bytes = 0usize;
+    unsafe {
+        assert_eq!(lrd_flr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
+        let mut scratch = vec![0f64; bytes / 8 + 1];
+        let sp = scratch.as_mut_ptr() as *mut _;
+        let mut rep = LrdReport::default();
+        assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, &mut rep), LrdStatus::LRD_STATUS_OK);
+        assert!(out.iter().all(|v| v.is_finite()));
+        // nulls
+        assert_eq!(lrd_flr_denoise(null(), &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        assert_eq!(lrd_flr_denoise(&cfg, &frame, null(), sp, bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, null_mut(), bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        let mut nf = frame;
+        nf.noisy.data = null();
+        assert_eq!(lrd_flr_denoise(&cfg, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        // misaligned scratch, short scratch
+        assert_eq!(
+            lrd_flr_denoise(&cfg, &frame, &o, (sp as *mut u8).add(4) as *mut _, bytes, null_mut()),
+            LrdStatus::LRD_STATUS_INVALID_ARGUMENT
+        );
+        assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes - 1, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
+        // bad format, odd stride, size mismatch, guide mismatch, bad config
+        let mut bf = frame;
+        bf.noisy.format = 7;
+        assert_eq!(lrd_flr_denoise(&cfg, &bf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        bf = frame;
+        bf.guides.depth.row_stride = 3;
+        assert_eq!(lrd_flr_denoise(&cfg, &bf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        bf = frame;
+        bf.guides.depth.width = w - 1;
+        assert_eq!(lrd_flr_denoise(&cfg, &bf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_SIZE_MISMATCH);
+        bf = frame;
+        bf.guides.ao = img(depth.as_ptr(), w, h, 1);
+        assert_eq!(lrd_flr_denoise(&cfg, &bf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_GUIDE_MISMATCH);
+        let mut bc = cfg;
+        bc.sigma = f32::NAN;
+        assert_eq!(lrd_flr_scratch_size(&bc, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        bc = cfg;
+        bc.blur = 9;
+        assert_eq!(lrd_flr_scratch_size(&bc, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        assert_eq!(lrd_flr_scratch_size(&cfg, 0, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        // tiles: bad stage / tile / worker
+        let mut tb = 0;
+        assert_eq!(lrd_flr_tiled_scratch_size(&cfg, w, h, 1, &mut tb), LrdStatus::LRD_STATUS_OK);
+        for (stage, tile, worker) in [(6, 0, 0), (0, 1, 0), (1, 99, 0), (1, 0, 1)] {
+            assert_eq!(lrd_flr_run_tile(&cfg, &frame, &o, sp, tb, 1, stage, tile, worker, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        }
+        // f16 noisy + planar f32 output give the same result as f32 interleaved
+        let n16: Vec<half::f16> = noisy.iter().map(|v| half::f16::from_f32(*v)).collect();
+        let noisy_r: Vec<f32> = n16.iter().map(|v| v.to_f32()).collect();
+        let mut fr = frame;
+        fr.noisy.data = noisy_r.as_ptr() as *const _;
+        let mut want = vec![0f32; 3 * n];
+        let ow = LrdImageMut { data: want.as_mut_ptr() as *mut _, ..o };
+        assert_eq!(lrd_flr_denoise(&cfg, &fr, &ow, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_OK);
+        fr.noisy =
+            LrdImage { data: n16.as_ptr() as *const _, format: 1, width: w, height: h, pixel_stride: 6, row_stride: 0, channel_stride: 0 };
+        let mut planar = vec![0f32; 3 * n];
+        let op = LrdImageMut {
+            data: planar.as_mut_ptr() as *mut _,
+            format: 0,
+            width: w,
+            height: h,
+            pixel_stride: 4,
+            row_stride: 4 * w as usize,
+            channel_stride: 4 * n,
+        };
+        assert_eq!(lrd_flr_denoise(&cfg, &fr, &op, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_OK);
+        for i in 0..n {
+            for c in 0..3 {
+                assert_eq!(planar[c * n + i], want[3 * i + c]);
+            }
+        }
+        // planar output cannot be split into row bands for APPLY
+        let mut nt = 0u32;
+        assert_eq!(lrd_flr_tile_count(&cfg, w, h, &mut nt), LrdStatus::LRD_STATUS_OK);
+        assert!(nt >= 1);
+        for stage in 0..5 {
+            let tiles = if stage == 0 || stage == 2 { 1 } else { nt };
+            for t in 0..tiles {
+                assert_eq!(lrd_flr_run_tile(&cfg, &fr, &op, sp, tb, 1, stage, t, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
+            }
+        }
+        assert_eq!(lrd_flr_run_tile(&cfg, &fr, &op, sp, tb, 1, 5, 0, 0, null_mut()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+    }
+    for s in 0..12 {
+        let m = unsafe { CStr::from_ptr(lrd_status_string(s)) };
+        assert!(!m.to_bytes().is_empty());
+    }
+    assert_eq!(unsafe { CStr::from_ptr(lrd_version()) }.to_str().unwrap(), env!("CARGO_PKG_VERSION"));
+    assert_eq!(lrd_features() & LRD_FEATURE_FLR, LRD_FEATURE_FLR);
+}
