@@ -372,6 +372,7 @@ LrdStatus lrd_flr_denoise(const struct LrdFlrConfig *config,
  *   different `worker` in [0, workers);
  * - APPLY needs an output whose rows do not overlap in memory (e.g. interleaved
  *   RGB/RGBA); planar outputs return LRD_STATUS_UNSUPPORTED (use lrd_flr_denoise).
+ *
  * The result is bit-identical to lrd_flr_denoise. `report` may be NULL; give
  * concurrent calls distinct reports and sum them.
  */
