@@ -1,11 +1,11 @@
 //! Evaluation: run variants (method + flags + input layer) on frames with a
 //! reference, score them with the quality protocol, time them.
 
-use crate::exrio::ExrFrame;
 use crate::methods::{label, FlrArgs, Method};
-use crate::metrics::{score, Scores};
 use crate::runner::Inputs;
 use indicatif::{ProgressBar, ProgressStyle};
+use lrdenoise_cli::exrio::ExrFrame;
+use lrdenoise_cli::metrics::{score, Scores};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -156,7 +156,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
         let mut fi = FrameImages { frame: name.clone(), w, h, reference_tm: vec![], rows: vec![] };
         if opt.keep_images {
             let r: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
-            fi.reference_tm = crate::metrics::tonemap(&r, crate::metrics::mean_luminance(&r));
+            fi.reference_tm = lrdenoise_cli::metrics::tonemap(&r, lrdenoise_cli::metrics::mean_luminance(&r));
         }
         for v in variants {
             pb.inc(1);
@@ -198,7 +198,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
             if opt.keep_images {
                 let i: Vec<f32> = out.iter().zip(&albedo).map(|(a, b)| a * b).collect();
                 let r: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
-                fi.rows.push((cfg_label.clone(), crate::metrics::tonemap(&i, crate::metrics::mean_luminance(&r)), fmap));
+                fi.rows.push((cfg_label.clone(), lrdenoise_cli::metrics::tonemap(&i, lrdenoise_cli::metrics::mean_luminance(&r)), fmap));
             }
             records.push(Record {
                 method: v.method.clone(),

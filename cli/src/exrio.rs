@@ -35,6 +35,10 @@ pub struct ExrFrame {
     pub layers: BTreeMap<String, Layer>,
 }
 
+/// Most samples (pixels × channels, all parts) a frame may declare: 2^28, i.e.
+/// 16K×16K with one channel or 8K×4K with 8 channels.
+pub const MAX_SAMPLES: usize = 1 << 28;
+
 const ORDER: [&str; 8] = ["R", "G", "B", "X", "Y", "Z", "A", "W"];
 
 fn comp_rank(c: &str) -> usize {
@@ -48,18 +52,42 @@ impl ExrFrame {
         if !path.exists() {
             return Err(format!("{name}: no such file"));
         }
+        let bytes = std::fs::read(path).map_err(|e| format!("{name}: {e}"))?;
+        Self::read_bytes(&bytes, &name.to_string())
+    }
+
+    /// Reads a frame from EXR bytes; `name` is used in error messages.
+    pub fn read_bytes(bytes: &[u8], name: &str) -> Result<Self, String> {
+        // Headers first: refuse absurd declared sizes before any pixel memory is
+        // allocated (a corrupt or hostile header must not exhaust memory).
+        let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+            .map_err(|e| format!("{name}: not a readable OpenEXR file ({e})"))?;
+        for h in meta.headers.iter() {
+            let samples = h.layer_size.0.checked_mul(h.layer_size.1).and_then(|n| n.checked_mul(h.channels.list.len().max(1)));
+            if samples.is_none_or(|n| n > MAX_SAMPLES) {
+                return Err(format!(
+                    "{name}: declared image too large ({}x{} with {} channels)",
+                    h.layer_size.0,
+                    h.layer_size.1,
+                    h.channels.list.len()
+                ));
+            }
+        }
         let img = read()
             .no_deep_data()
             .largest_resolution_level()
             .all_channels()
             .all_layers()
             .all_attributes()
-            .from_file(path)
+            .from_buffered(std::io::Cursor::new(bytes))
             .map_err(|e| format!("{name}: not a readable OpenEXR file ({e})"))?;
         let mut layers: BTreeMap<String, Layer> = BTreeMap::new();
         let (mut width, mut height) = (0, 0);
         for (li, part) in img.layer_data.iter().enumerate() {
             let size = part.size;
+            if size.0.checked_mul(size.1).is_none_or(|n| n > 1 << 28) {
+                return Err(format!("{name}: image too large ({}x{})", size.0, size.1));
+            }
             if li == 0 {
                 width = size.0;
                 height = size.1;
@@ -78,6 +106,9 @@ impl ExrFrame {
                     None => (String::new(), full.clone()), // un-layered RGB: the "" layer
                 };
                 let plane: Vec<f32> = ch.sample_data.values_as_f32().collect();
+                if plane.len() != width * height {
+                    return Err(format!("{name}: channel '{full}' has {} samples, expected {}", plane.len(), width * height));
+                }
                 let e = layers.entry(layer).or_insert(Layer { comps: vec![], planes: vec![] });
                 e.comps.push(comp);
                 e.planes.push(plane);

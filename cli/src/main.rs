@@ -2,11 +2,11 @@
 //! run time, advise what a scene can drop, benchmark. See the README.
 
 mod evaluate;
-mod exrio;
 mod methods;
-mod metrics;
 mod report;
 mod runner;
+
+use lrdenoise_cli::{exrio, metrics};
 
 use clap::{Parser, Subcommand};
 use evaluate::{evaluate, list_frames, means, time_method, EvalOptions, Record, Variant};

@@ -1,8 +1,8 @@
 //! Frame inputs for the denoisers, and running FLR with its tiles spread over
 //! threads (each stage's tiles split into one contiguous group per thread).
 
-use crate::exrio::ExrFrame;
 use lrdenoise::{Error, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Report};
+use lrdenoise_cli::exrio::ExrFrame;
 use std::path::Path;
 
 /// The layers of one frame, interleaved f32, at full resolution.

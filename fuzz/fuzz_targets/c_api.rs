@@ -1,0 +1,80 @@
+//! (c) The C entry points with arbitrary sizes, strides, formats, configs and
+//! NULL pointers. Buffers are allocated to span whatever layout is passed (the
+//! C contract), so any crash or non-finite output is a library bug.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+use lrdenoise_ffi::*;
+use std::ptr::{null, null_mut};
+
+fn u32_at(d: &[u8], i: usize) -> u32 {
+    u32::from_le_bytes([0, 1, 2, 3].map(|k| d.get(i + k).copied().unwrap_or(0)))
+}
+
+/// An image with fuzzed layout, backed by `buf` sized to its span (capped).
+fn image(d: &[u8], at: usize, ch: usize, w: u32, h: u32, buf: &mut Vec<u32>) -> LrdImage {
+    let fmt = d.get(at).copied().unwrap_or(0) as u32 % 3; // 2 = invalid
+    let elem = if fmt == 1 { 2 } else { 4 };
+    let ps = (d.get(at + 1).copied().unwrap_or(0) as usize % 6) * elem + if d.get(at + 2).copied().unwrap_or(0) == 7 { 1 } else { 0 };
+    let rs = (d.get(at + 3).copied().unwrap_or(0) as usize) * elem;
+    let cs = (d.get(at + 4).copied().unwrap_or(0) as usize % 3) * elem;
+    let eff = |s: usize, dflt: usize| if s == 0 { dflt } else { s };
+    let cs_e = eff(cs, elem);
+    let ps_e = eff(ps, ch * cs_e);
+    let rs_e = eff(rs, w as usize * ps_e);
+    let span = (h as usize).saturating_sub(1) * rs_e + (w as usize).saturating_sub(1) * ps_e + (ch - 1) * cs_e + elem;
+    buf.clear();
+    buf.resize(span.min(1 << 22) / 4 + 2, 0x3f000000); // 0.5f (or a small f16 pair)
+    if span > 1 << 22 {
+        return LrdImage { data: null(), format: fmt, width: w, height: h, pixel_stride: ps, row_stride: rs, channel_stride: cs };
+    }
+    for (i, v) in buf.iter_mut().enumerate() {
+        *v = 0x3e000000 + ((i as u32 * 2654435761) >> 12);
+    }
+    LrdImage { data: buf.as_ptr() as *const _, format: fmt, width: w, height: h, pixel_stride: ps, row_stride: rs, channel_stride: cs }
+}
+
+fuzz_target!(|d: &[u8]| {
+    if d.len() < 24 {
+        return;
+    }
+    let w = 1 + u32_at(d, 0) % 48;
+    let h = 1 + u32_at(d, 4) % 48;
+    let mut cfg = lrd_flr_config_default();
+    cfg.guides = d[8] as u32 & 0x1f; // may include an invalid bit
+    cfg.block = [1, 2, 4, 8, 16, 3, 0][d[9] as usize % 7];
+    cfg.blur = d[10] as u32 % 3;
+    cfg.sigma = d[11] as f32 / 10.0;
+    cfg.radius = d[12] as f32 - 8.0;
+    cfg.regularization = d[13] as u32 % 3;
+    cfg.upsample = [1, 1, 2, 4, 3][d[14] as usize % 5];
+    let (lw, lh) = (w.div_ceil(cfg.upsample.max(1)), h.div_ceil(cfg.upsample.max(1)));
+    let mut bufs: Vec<Vec<u32>> = (0..10).map(|_| Vec::new()).collect();
+    let none = LrdImage { data: null(), format: 0, width: 0, height: 0, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
+    let mut it = bufs.iter_mut();
+    let mut next = || it.next().unwrap();
+    let noisy = image(d, 15, 3, lw, lh, next());
+    let mut gs = LrdGuides { normal: none, depth: none, position: none, ao: none, user: [none; 4] };
+    let mut gl = gs;
+    if cfg.guides & LRD_GUIDE_NORMAL != 0 { gs.normal = image(d, 20, 3, w, h, next()); }
+    if cfg.guides & LRD_GUIDE_DEPTH != 0 { gs.depth = image(d, 16, 1, w, h, next()); }
+    if cfg.guides & LRD_GUIDE_AO != 0 { gs.ao = image(d, 17, 1, w, h, next()); }
+    if cfg.upsample > 1 && cfg.guides & LRD_GUIDE_DEPTH != 0 { gl.depth = image(d, 18, 1, lw, lh, next()); }
+    let frame = LrdFrame { noisy: if d[19] == 0 { none } else { noisy }, guides: gs, guides_low: gl };
+    let mut out = vec![0f32; (w * h * 4) as usize];
+    let o = LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 16, row_stride: 0, channel_stride: 0 };
+    let mut bytes = 0usize;
+    let st = unsafe { lrd_flr_scratch_size(&cfg, w, h, &mut bytes) };
+    if st != LrdStatus::LRD_STATUS_OK {
+        return;
+    }
+    let mut scratch = vec![0f64; bytes / 8 + 1];
+    let sp = scratch.as_mut_ptr() as *mut _;
+    let s = unsafe { lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, null_mut()) };
+    if s == LrdStatus::LRD_STATUS_OK {
+        assert!(out.iter().all(|v| v.is_finite()));
+    }
+    assert_ne!(s, LrdStatus::LRD_STATUS_PANIC);
+    let t = unsafe { lrd_flr_run_tile(&cfg, &frame, &o, sp, bytes, 1, d[21] as u32 % 8, d[22] as u32 % 4, d[23] as u32 % 2, null_mut()) };
+    assert_ne!(t, LrdStatus::LRD_STATUS_PANIC);
+    let _ = unsafe { lrd_flr_denoise(&cfg, null(), &o, sp, bytes, null_mut()) };
+});
