@@ -21,7 +21,7 @@ use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
 use crate::kernels::blur::{blur_cols_band, blur_row, Taps};
-use crate::kernels::moments::{moments_band, BandPlanes};
+use crate::kernels::moments::{moments_band, BandPlanes, BlockScratch};
 use crate::kernels::solve::{solve_cell, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
 
@@ -306,69 +306,91 @@ impl Flr {
         if cells_tile.len() != self.cells_tile_len(t)? || worker.len() < self.worker_len() {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
         }
-        let pw = self.cells_x * self.bin;
-        let plane = self.bin * pw;
-        let buf = &mut worker[..BandPlanes::len(self.q, self.bin, pw)];
         let row_len = self.cells_x * self.lay.k;
         let mut rep = Report::default();
-        let np = 4 + self.q;
+        let mut block_scratch = BlockScratch::default();
         for (j, cells_row) in (r0..r1).zip(cells_tile.chunks_exact_mut(row_len)) {
-            for r in 0..self.bin {
-                let y = j * self.bin + r;
-                let o = r * pw;
-                if y >= self.in_h {
-                    // below the image: an empty row (weight 0, values 0)
-                    for p in 0..np {
-                        buf[p * plane + o..p * plane + o + pw].fill(0.0);
-                    }
-                    continue;
-                }
+            // (Splitting rows into column chunks to keep the planes in L2 was
+            // measured slower: whole rows it is.)
+            rep += self.moments_chunk(frame, stats, (t, j, 0, self.cells_x), cells_row, worker, &mut block_scratch)?;
+        }
+        Ok(rep)
+    }
+
+    /// Gathers input rows of cell row `j` (blocks `c0..c0 + ncx`) into planes and
+    /// accumulates their block moments.
+    fn moments_chunk(
+        &self,
+        frame: &CheckedFrame<'_>,
+        stats: &Stats,
+        (t, j, c0, ncx): (usize, usize, usize, usize),
+        cells: &mut [f64],
+        worker: &mut [f32],
+        block_scratch: &mut BlockScratch,
+    ) -> Result<Report, Error> {
+        let pw = ncx * self.bin; // chunk width (whole blocks)
+        let x0 = c0 * self.bin;
+        let vw = self.in_w.saturating_sub(x0).min(pw); // pixels inside the image
+        let plane = self.bin * pw;
+        let buf = &mut worker[..BandPlanes::len(self.q, self.bin, pw)];
+        let mut rep = Report::default();
+        let np = 4 + self.q;
+        let bad = Error::InvalidTile { index: t, count: 0 };
+        for r in 0..self.bin {
+            let y = j * self.bin + r;
+            let o = r * pw;
+            if y >= self.in_h {
+                // below the image: an empty row (weight 0, values 0)
                 for p in 0..np {
-                    // padding to whole blocks
-                    buf[p * plane + o + self.in_w..p * plane + o + pw].fill(0.0);
+                    buf[p * plane + o..p * plane + o + pw].fill(0.0);
                 }
-                let (wplane, rest) = buf.split_at_mut(plane);
-                let wrow = &mut wplane[o..o + self.in_w];
-                wrow.fill(1.0);
-                {
-                    let (p0, p12) = rest.split_at_mut(plane);
-                    let (p1, p2) = p12.split_at_mut(plane);
-                    let rgb = [&mut p0[o..o + self.in_w], &mut p1[o..o + self.in_w], &mut p2[o..o + self.in_w]];
-                    frame.noisy.read_row_n(y, 0, rgb).ok_or(Error::InvalidTile { index: t, count: 0 })?;
-                    for p in [&p0[o..o + self.in_w], &p1[o..o + self.in_w], &p2[o..o + self.in_w]] {
-                        mask_finite(p, wrow);
+                continue;
+            }
+            for p in 0..np {
+                // padding to whole blocks
+                buf[p * plane + o + vw..p * plane + o + pw].fill(0.0);
+            }
+            let (wplane, rest) = buf.split_at_mut(plane);
+            let wrow = &mut wplane[o..o + vw];
+            wrow.fill(1.0);
+            {
+                let (p0, p12) = rest.split_at_mut(plane);
+                let (p1, p2) = p12.split_at_mut(plane);
+                let rgb = [&mut p0[o..o + vw], &mut p1[o..o + vw], &mut p2[o..o + vw]];
+                frame.noisy.read_row_n(y, x0, rgb).ok_or(bad)?;
+                for p in [&p0[o..o + vw], &p1[o..o + vw], &p2[o..o + vw]] {
+                    mask_finite(p, wrow);
+                }
+            }
+            for q in 0..self.q {
+                let v = frame.fit[q].ok_or(Error::GuideMismatch)?;
+                let dst = &mut rest[(3 + q) * plane + o..(3 + q) * plane + o + vw];
+                v.read_row(y, 0, x0, dst).ok_or(bad)?;
+                let m = stats.reference[q];
+                for d in dst.iter_mut() {
+                    *d -= m;
+                }
+                mask_finite(dst, wrow);
+            }
+            if count_zero(wrow) > 0 {
+                // rare: count what was not finite and zero those pixels everywhere
+                for x in 0..vw {
+                    if wrow[x] != 0.0 {
+                        continue;
                     }
-                }
-                for q in 0..self.q {
-                    let v = frame.fit[q].ok_or(Error::GuideMismatch)?;
-                    let dst = &mut rest[(3 + q) * plane + o..(3 + q) * plane + o + self.in_w];
-                    v.read_row(y, 0, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
-                    let m = stats.reference[q];
-                    for d in dst.iter_mut() {
-                        *d -= m;
-                    }
-                    mask_finite(dst, wrow);
-                }
-                if count_zero(wrow) > 0 {
-                    // rare: count what was not finite and zero those pixels everywhere
-                    for x in 0..self.in_w {
-                        if wrow[x] != 0.0 {
-                            continue;
-                        }
-                        let bad = |p: usize| !rest[p * plane + o + x].is_finite();
-                        rep.nonfinite_noisy += (0..3).any(bad) as u64;
-                        rep.nonfinite_guides += (3..3 + self.q).any(bad) as u64;
-                        for p in 0..3 + self.q {
-                            rest[p * plane + o + x] = 0.0;
-                        }
+                    let bad = |p: usize| !rest[p * plane + o + x].is_finite();
+                    rep.nonfinite_noisy += (0..3).any(bad) as u64;
+                    rep.nonfinite_guides += (3..3 + self.q).any(bad) as u64;
+                    for p in 0..3 + self.q {
+                        rest[p * plane + o + x] = 0.0;
                     }
                 }
             }
-            let band = BandPlanes { data: buf, rows: self.bin, width: pw };
-            let simd = self.kernel_simd();
-            let empty = dispatch_q!(self.q, moments_band(band, self.bin, simd, cells_row));
-            rep.empty_blocks += empty as u64;
         }
+        let band = BandPlanes { data: buf, rows: self.bin, width: pw };
+        let simd = self.kernel_simd();
+        let empty = dispatch_q!(self.q, moments_band(band, self.bin, simd, cells, block_scratch));
+        rep.empty_blocks += empty as u64;
         Ok(rep)
     }
 

@@ -35,9 +35,28 @@ impl BandPlanes<'_> {
     }
 }
 
+/// Register-sized working space of the SIMD block accumulation (15 KB); make one
+/// per thread and reuse it for many bands.
+#[derive(Clone, Debug)]
+pub struct BlockScratch {
+    groups: [[f32x8; VW]; MAX_GROUPS],
+}
+
+impl Default for BlockScratch {
+    fn default() -> Self {
+        BlockScratch { groups: [[f32x8::ZERO; VW]; MAX_GROUPS] }
+    }
+}
+
 /// Accumulates the moments of every block of the band into `cells`
 /// (`cells.len() == (width / block) * k`). Returns the number of empty cells.
-pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bool, cells: &mut [f64]) -> usize {
+pub fn moments_band<const Q: usize>(
+    band: BandPlanes<'_>,
+    block: usize,
+    simd: bool,
+    cells: &mut [f64],
+    scratch: &mut BlockScratch,
+) -> usize {
     let lay = CellLayout::new(Q);
     let k = lay.k;
     // The SIMD path reads planes unchecked: establish its preconditions here.
@@ -52,8 +71,6 @@ pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bo
         *gi = band.plane(4 + i);
     }
     let mut acc = [0f32; MAX_K];
-    // group vectors of the SIMD path, reused for every block of the band
-    let mut groups = [[f32x8::ZERO; VW]; MAX_GROUPS];
     let mut empty = 0;
     for (cx, cell) in cells.chunks_exact_mut(k).enumerate() {
         let x0 = cx * block;
@@ -78,7 +95,7 @@ pub fn moments_band<const Q: usize>(band: BandPlanes<'_>, block: usize, simd: bo
             continue;
         }
         if simd && block % 8 == 0 && band.rows * block / 8 <= MAX_GROUPS {
-            block_simd::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc, &mut groups);
+            block_simd::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc, &mut scratch.groups);
         } else {
             acc[..k].fill(0.0);
             block_scalar::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc);
