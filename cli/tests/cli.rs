@@ -159,3 +159,26 @@ fn advise_bench_and_sequences() {
     assert!(so.contains("6 frames"), "{so}");
     assert!(outdir.join("frame_0005.exr").exists());
 }
+
+#[test]
+fn mismatched_layer_sizes_are_named() {
+    use exr::prelude::*;
+    let part = |name: &str, w: usize, h: usize| {
+        let chans = AnyChannels::sort(smallvec::smallvec![
+            AnyChannel::new("R", FlatSamples::F32(vec![0.5; w * h])),
+            AnyChannel::new("G", FlatSamples::F32(vec![0.5; w * h])),
+            AnyChannel::new("B", FlatSamples::F32(vec![0.5; w * h])),
+        ]);
+        Layer::new((w, h), LayerAttributes::named(name), Encoding::UNCOMPRESSED, chans)
+    };
+    let img = Image::from_layers(
+        ImageAttributes::new(IntegerBounds::from_dimensions((16, 16))),
+        smallvec::smallvec![part("noisy", 16, 16), part("albedo", 8, 16)],
+    );
+    let path = tmp("mismatch.exr");
+    img.write().to_file(&path).unwrap();
+    fails_with(
+        &["denoise", path.to_str().unwrap(), "-o", tmp("m_out.exr").to_str().unwrap(), "--guides", "none"],
+        &["mismatch.exr", "different sizes"],
+    );
+}

@@ -217,22 +217,28 @@ fn block_simd<const Q: usize>(
     for c in 0..3 {
         acc[lay.t + c] = sums[Q + c].reduce_add();
     }
-    // S (upper triangle, row a) and P (row a), row by row.
+    // S (upper triangle) and P: each product pair summed over the groups in
+    // two registers, then reduced (keeping a whole row in registers does not
+    // fit, and a row in memory serialises on store-to-load forwarding).
     let mut p = lay.ss;
     for a in 0..Q {
-        let mut row = [f32x8::ZERO; VW];
-        for vg in groups {
-            let va = vg[a];
-            for b in a..Q + 3 {
-                row[b] = va.mul_add(vg[b], row[b]);
+        for b in a..Q + 3 {
+            let (mut s0, mut s1) = (f32x8::ZERO, f32x8::ZERO);
+            let mut pairs = groups.chunks_exact(2);
+            for gg in &mut pairs {
+                s0 = gg[0][a].mul_add(gg[0][b], s0);
+                s1 = gg[1][a].mul_add(gg[1][b], s1);
             }
-        }
-        for b in a..Q {
-            acc[p] = row[b].reduce_add();
-            p += 1;
-        }
-        for c in 0..3 {
-            acc[lay.p + 3 * a + c] = row[Q + c].reduce_add();
+            if let [g] = pairs.remainder() {
+                s0 = g[a].mul_add(g[b], s0);
+            }
+            let sum = (s0 + s1).reduce_add();
+            if b < Q {
+                acc[p] = sum;
+                p += 1;
+            } else {
+                acc[lay.p + 3 * a + (b - Q)] = sum;
+            }
         }
     }
 }
