@@ -62,8 +62,13 @@ impl Samples<'_> {
 /// f16 → f32, exact for every input (NaN stays NaN), branch-free so it
 /// vectorises: F. Giesen's "half_to_float_fast5" (magic-number denormals).
 /// `half::f16::to_f32` is a branchy software routine unless F16C is compiled in.
+/// With F16C compiled in (e.g. `-C target-cpu=x86-64-v3`), `half`'s hardware
+/// conversion is used instead.
 #[inline(always)]
 pub fn f16_to_f32(h: f16) -> f32 {
+    if cfg!(all(target_arch = "x86_64", target_feature = "f16c")) {
+        return h.to_f32();
+    }
     const MAGIC: f32 = f32::from_bits((254 - 15) << 23); // 2^112
     let b = h.to_bits() as u32;
     let sign = (b & 0x8000) << 16;
