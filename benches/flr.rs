@@ -7,7 +7,6 @@
 //! Bytes per frame = inputs read by the moments stage (noisy + Q guides) +
 //! guides read by the apply stage + the f32 RGB output written.
 
-#![allow(clippy::needless_range_loop)]
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use half::f16;
 use lrdenoise::*;
@@ -120,46 +119,36 @@ fn bench_stages(c: &mut Criterion) {
     flr.denoise(&fr, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
     let p = flr.split_scratch(&mut scratch, 1).unwrap();
     let nt = flr.tile_count();
-    let cl: Vec<usize> = (0..nt).map(|t| flr.cells_tile_len(t).unwrap()).collect();
-    let ml: Vec<usize> = (0..nt).map(|t| flr.models_tile_len(t).unwrap()).collect();
     let mut stats = flr.prepare(&f);
     flr.finish_stats(p.cells, &mut stats).unwrap();
     let mut g = c.benchmark_group("stages_1920x1080_q5");
     g.sample_size(10).measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(300));
     g.bench_function("1_moments", |b| {
         b.iter(|| {
-            let mut o = 0;
             for t in 0..nt {
-                flr.moments_tile(&f, &stats, t, &mut p.cells[o..o + cl[t]], p.workers).unwrap();
-                o += cl[t];
+                flr.moments_tile(&f, &stats, t, &mut p.cells[flr.cells_tile_range(t).unwrap()], p.workers).unwrap();
             }
         })
     });
     g.bench_function("2_blur_rows", |b| {
         b.iter(|| {
-            let mut o = 0;
             for t in 0..nt {
-                flr.blur_rows_tile(t, p.cells, &mut p.tmp[o..o + cl[t]]).unwrap();
-                o += cl[t];
+                flr.blur_rows_tile(t, p.cells, &mut p.tmp[flr.cells_tile_range(t).unwrap()]).unwrap();
             }
         })
     });
     g.bench_function("3_blur_cols", |b| {
         b.iter(|| {
-            let mut o = 0;
             for t in 0..nt {
-                flr.blur_cols_tile(t, p.tmp, &mut p.cells[o..o + cl[t]]).unwrap();
-                o += cl[t];
+                flr.blur_cols_tile(t, p.tmp, &mut p.cells[flr.cells_tile_range(t).unwrap()]).unwrap();
             }
         })
     });
     g.bench_function("4_solve", |b| {
         b.iter(|| {
-            let (mut o, mut m) = (0, 0);
             for t in 0..nt {
-                flr.solve_tile(&stats, t, &p.cells[o..o + cl[t]], &mut p.models[m..m + ml[t]]).unwrap();
-                o += cl[t];
-                m += ml[t];
+                flr.solve_tile(&stats, t, &p.cells[flr.cells_tile_range(t).unwrap()], &mut p.models[flr.models_tile_range(t).unwrap()])
+                    .unwrap();
             }
         })
     });

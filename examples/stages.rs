@@ -1,6 +1,5 @@
 //! Times each FLR stage on a synthetic 1920×1080 frame (one thread).
 //! `cargo run --release --example stages [WIDTH HEIGHT]`
-#![allow(clippy::needless_range_loop)]
 use lrdenoise::*;
 use std::time::Instant;
 
@@ -28,35 +27,25 @@ fn main() {
         let f = flr.check_frame(&frame).unwrap();
         let p = flr.split_scratch(&mut scratch, 1).unwrap();
         let nt = flr.tile_count();
-        let lens: Vec<usize> = (0..nt).map(|t| flr.cells_tile_len(t).unwrap()).collect();
-        let mlens: Vec<usize> = (0..nt).map(|t| flr.models_tile_len(t).unwrap()).collect();
         let s = Instant::now();
         let mut stats = flr.prepare(&f);
-        let mut o = 0;
         for k in 0..nt {
-            flr.moments_tile(&f, &stats, k, &mut p.cells[o..o + lens[k]], p.workers).unwrap();
-            o += lens[k];
+            flr.moments_tile(&f, &stats, k, &mut p.cells[flr.cells_tile_range(k).unwrap()], p.workers).unwrap();
         }
         let t0 = s.elapsed().as_secs_f64();
         flr.finish_stats(p.cells, &mut stats).unwrap();
         let t1 = s.elapsed().as_secs_f64();
-        let mut o = 0;
         for k in 0..nt {
-            flr.blur_rows_tile(k, p.cells, &mut p.tmp[o..o + lens[k]]).unwrap();
-            o += lens[k];
+            flr.blur_rows_tile(k, p.cells, &mut p.tmp[flr.cells_tile_range(k).unwrap()]).unwrap();
         }
         let t2 = s.elapsed().as_secs_f64();
-        let mut o = 0;
         for k in 0..nt {
-            flr.blur_cols_tile(k, p.tmp, &mut p.cells[o..o + lens[k]]).unwrap();
-            o += lens[k];
+            flr.blur_cols_tile(k, p.tmp, &mut p.cells[flr.cells_tile_range(k).unwrap()]).unwrap();
         }
         let t3 = s.elapsed().as_secs_f64();
-        let (mut o, mut mo) = (0, 0);
         for k in 0..nt {
-            flr.solve_tile(&stats, k, &p.cells[o..o + lens[k]], &mut p.models[mo..mo + mlens[k]]).unwrap();
-            o += lens[k];
-            mo += mlens[k];
+            flr.solve_tile(&stats, k, &p.cells[flr.cells_tile_range(k).unwrap()], &mut p.models[flr.models_tile_range(k).unwrap()])
+                .unwrap();
         }
         let t4 = s.elapsed().as_secs_f64();
         let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();

@@ -134,21 +134,21 @@ fn tiled_equals_whole_frame() {
             let workers = [w0, w1];
             let mut stats = flr.prepare(&frame);
             let nt = flr.tile_count();
-            let offs: Vec<usize> = (0..=nt).map(|t| (0..t).map(|i| flr.cells_tile_len(i).unwrap()).sum()).collect();
-            let moffs: Vec<usize> = (0..=nt).map(|t| (0..t).map(|i| flr.models_tile_len(i).unwrap()).sum()).collect();
+            let c = |t: usize| flr.cells_tile_range(t).unwrap();
+            let m = |t: usize| flr.models_tile_range(t).unwrap();
             let mut rep = Report::default();
             for t in (0..nt).rev() {
-                rep += flr.moments_tile(&frame, &stats, t, &mut p.cells[offs[t]..offs[t + 1]], workers[t % 2]).unwrap();
+                rep += flr.moments_tile(&frame, &stats, t, &mut p.cells[c(t)], workers[t % 2]).unwrap();
             }
             flr.finish_stats(p.cells, &mut stats).unwrap();
             for t in (0..nt).rev() {
-                flr.blur_rows_tile(t, p.cells, &mut p.tmp[offs[t]..offs[t + 1]]).unwrap();
+                flr.blur_rows_tile(t, p.cells, &mut p.tmp[c(t)]).unwrap();
             }
             for t in (0..nt).rev() {
-                flr.blur_cols_tile(t, p.tmp, &mut p.cells[offs[t]..offs[t + 1]]).unwrap();
+                flr.blur_cols_tile(t, p.tmp, &mut p.cells[c(t)]).unwrap();
             }
             for t in (0..nt).rev() {
-                rep += flr.solve_tile(&stats, t, &p.cells[offs[t]..offs[t + 1]], &mut p.models[moffs[t]..moffs[t + 1]]).unwrap();
+                rep += flr.solve_tile(&stats, t, &p.cells[c(t)], &mut p.models[m(t)]).unwrap();
             }
             let mut out = vec![0f32; w * h * 3];
             let mut rest = Some(ImageViewMut::interleaved(&mut out, w, h, 3).unwrap());

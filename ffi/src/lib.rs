@@ -579,10 +579,8 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
         let k = lrdenoise_core::kernels::moment_count(flr.guide_channels());
         let ml = lrdenoise_core::kernels::model_len(flr.guide_channels());
         let grid = cx * cy * k;
-        let off =
-            |t: usize| -> Result<usize, LrdStatus> { (0..t).map(|i| flr.cells_tile_len(i)).sum::<Result<usize, _>>().map_err(status_of) };
-        let moff =
-            |t: usize| -> Result<usize, LrdStatus> { (0..t).map(|i| flr.models_tile_len(i)).sum::<Result<usize, _>>().map_err(status_of) };
+        let off = |t: usize| flr.cells_tile_range(t).map(|r| r.start).map_err(status_of);
+        let moff = |t: usize| flr.models_tile_range(t).map(|r| r.start).map_err(status_of);
         // SAFETY: the images satisfy the LrdImage contract (caller). Scratch regions
         // are inside the buffer (size checked by split_raw). Under the documented
         // rules, the mutable slices built here (this tile's cells/tmp/models band,

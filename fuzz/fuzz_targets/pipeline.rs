@@ -62,18 +62,18 @@ fuzz_target!(|d: &[u8]| {
     let f = flr.check_frame(&frame).unwrap();
     let mut st = flr.prepare(&f);
     let nt = flr.tile_count();
-    let off: Vec<usize> = (0..=nt).map(|t| (0..t).map(|i| flr.cells_tile_len(i).unwrap()).sum()).collect();
-    let moff: Vec<usize> = (0..=nt).map(|t| (0..t).map(|i| flr.models_tile_len(i).unwrap()).sum()).collect();
+    let c = |t: usize| flr.cells_tile_range(t).unwrap();
+    let m = |t: usize| flr.models_tile_range(t).unwrap();
     for t in (0..nt).rev() {
-        flr.moments_tile(&f, &st, t, &mut p.cells[off[t]..off[t + 1]], p.workers).unwrap();
+        flr.moments_tile(&f, &st, t, &mut p.cells[c(t)], p.workers).unwrap();
     }
     flr.finish_stats(p.cells, &mut st).unwrap();
     for t in (0..nt).rev() {
-        flr.blur_rows_tile(t, p.cells, &mut p.tmp[off[t]..off[t + 1]]).unwrap();
+        flr.blur_rows_tile(t, p.cells, &mut p.tmp[c(t)]).unwrap();
     }
     for t in (0..nt).rev() {
-        flr.blur_cols_tile(t, p.tmp, &mut p.cells[off[t]..off[t + 1]]).unwrap();
-        flr.solve_tile(&st, t, &p.cells[off[t]..off[t + 1]], &mut p.models[moff[t]..moff[t + 1]]).unwrap();
+        flr.blur_cols_tile(t, p.tmp, &mut p.cells[c(t)]).unwrap();
+        flr.solve_tile(&st, t, &p.cells[c(t)], &mut p.models[m(t)]).unwrap();
     }
     let mut tiled = vec![0f32; 3 * n];
     let mut ov = ImageViewMut::interleaved(&mut tiled, w, h, 3).unwrap();

@@ -199,6 +199,19 @@ impl Flr {
         let (a, b) = self.tile_rows(t)?;
         Ok((a * self.cfg.block, (b * self.cfg.block).min(self.height)))
     }
+    /// Where tile `t`'s band lies in `cells` (and `tmp`): tiles are consecutive
+    /// row bands, so `&mut cells[range]` is that tile's slice.
+    pub fn cells_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
+        let (a, b) = self.tile_rows(t)?;
+        let row = self.cells_x * self.lay.k;
+        Ok(a * row..b * row)
+    }
+    /// Where tile `t`'s band lies in `models`.
+    pub fn models_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
+        let (a, b) = self.tile_rows(t)?;
+        let row = self.cells_x * self.ml;
+        Ok(a * row..b * row)
+    }
     /// f64 values in `cells` (and `tmp`) for tile `t`.
     pub fn cells_tile_len(&self, t: usize) -> Result<usize, Error> {
         let (a, b) = self.tile_rows(t)?;
@@ -552,27 +565,17 @@ impl Flr {
         let mut stats = self.prepare(&f);
         let mut rep = Report::default();
         let tiles = self.tile_count();
-        let mut off = 0;
         for t in 0..tiles {
-            let n = self.cells_tile_len(t)?;
-            rep += self.moments_tile(&f, &stats, t, &mut parts.cells[off..off + n], parts.workers)?;
-            off += n;
+            rep += self.moments_tile(&f, &stats, t, &mut parts.cells[self.cells_tile_range(t)?], parts.workers)?;
         }
         self.finish_stats(parts.cells, &mut stats)?;
-        let mut off = 0;
         for t in 0..tiles {
-            let n = self.cells_tile_len(t)?;
-            self.blur_rows_tile(t, parts.cells, &mut parts.tmp[off..off + n])?;
-            off += n;
+            self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
         }
-        let (mut off, mut moff) = (0, 0);
         for t in 0..tiles {
-            let n = self.cells_tile_len(t)?;
-            let m = self.models_tile_len(t)?;
-            self.blur_cols_tile(t, parts.tmp, &mut parts.cells[off..off + n])?;
-            rep += self.solve_tile(&stats, t, &parts.cells[off..off + n], &mut parts.models[moff..moff + m])?;
-            off += n;
-            moff += m;
+            let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
+            self.blur_cols_tile(t, parts.tmp, &mut parts.cells[c.clone()])?;
+            rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
         }
         for t in 0..tiles {
             let (y0, y1) = self.tile_pixel_rows(t)?;
