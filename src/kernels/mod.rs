@@ -13,6 +13,7 @@ pub mod apply;
 pub mod blur;
 pub mod cholesky;
 pub mod moments;
+pub mod qr;
 pub mod solve;
 
 /// Number of upper-triangle entries of a Q×Q matrix.

@@ -1,0 +1,120 @@
+//! Householder QR least squares for tall-skinny blocks (BMFR, Koskela et al.
+//! 2019): `min ‖T α − z_c‖` for up to 3 right-hand sides at once, on the
+//! augmented matrix `[T | z]` (rows × (m + k), column-major, overwritten).
+//!
+//! Each Householder reflection zeroes one column below the diagonal and is
+//! applied to every later column, right-hand sides included, so `Qᵀz` is
+//! formed without storing Q. Back-substitution on the m×m triangle drops a
+//! coefficient (sets it to 0) when its pivot is not clearly non-zero relative to
+//! the largest pivot, instead of dividing by ~0: rank-deficient blocks (flat
+//! walls, empty sky) give finite, minimum-effort fits. Dot products and updates
+//! run over the rows in `f32x8` lanes, with a scalar remainder.
+
+use wide::f32x8;
+
+/// Most features per block.
+pub const MAX_FEATURES: usize = 16;
+/// Most right-hand sides.
+pub const MAX_RHS: usize = 3;
+
+/// Outcome of one fit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Fit {
+    /// Bit `i` set: feature `i` was dropped (zero pivot).
+    pub dropped: u32,
+}
+
+#[inline]
+fn dot(a: &[f32], b: &[f32], simd: bool) -> f32 {
+    let n = a.len().min(b.len());
+    let (mut i, mut acc) = (0, f32x8::ZERO);
+    if simd {
+        while i + 8 <= n {
+            let x: [f32; 8] = a[i..i + 8].try_into().unwrap_or([0.0; 8]);
+            let y: [f32; 8] = b[i..i + 8].try_into().unwrap_or([0.0; 8]);
+            acc = f32x8::from(x).mul_add(f32x8::from(y), acc);
+            i += 8;
+        }
+    }
+    let mut s = acc.reduce_add();
+    while i < n {
+        s += a[i] * b[i];
+        i += 1;
+    }
+    s
+}
+
+#[inline]
+fn axpy(y: &mut [f32], alpha: f32, x: &[f32], simd: bool) {
+    let n = y.len().min(x.len());
+    let mut i = 0;
+    if simd {
+        let av = f32x8::splat(alpha);
+        while i + 8 <= n {
+            let xv: [f32; 8] = x[i..i + 8].try_into().unwrap_or([0.0; 8]);
+            let yv: [f32; 8] = y[i..i + 8].try_into().unwrap_or([0.0; 8]);
+            let r: [f32; 8] = f32x8::from(xv).mul_add(av, f32x8::from(yv)).into();
+            y[i..i + 8].copy_from_slice(&r);
+            i += 8;
+        }
+    }
+    while i < n {
+        y[i] += alpha * x[i];
+        i += 1;
+    }
+}
+
+/// Factors the first `m` columns of the column-major `rows × (m + k)` matrix
+/// `a` in place (R on and above the diagonal — below it, the reflection
+/// vectors' tails — and `Qᵀz` in the top `m` rows of the last `k` columns) and solves for `x` (`m × k`, row-major: `x[i * k + c]`).
+/// Pivots below `rel_tol × max|R_jj|` drop their feature. Returns `None` for
+/// inconsistent sizes (`rows < 1`, `m > 16`, `k > 3`, short slices).
+pub fn lstsq(a: &mut [f32], rows: usize, m: usize, k: usize, rel_tol: f32, simd: bool, x: &mut [f32]) -> Option<Fit> {
+    if rows == 0 || m > MAX_FEATURES || k > MAX_RHS || a.len() < rows * (m + k) || x.len() < m * k {
+        return None;
+    }
+    let mut diag = [0f32; MAX_FEATURES];
+    for j in 0..m.min(rows) {
+        let (head, tail) = a.split_at_mut((j + 1) * rows);
+        let v = &mut head[j * rows + j..];
+        let norm = libm::sqrtf(dot(v, v, simd));
+        if !(norm > 0.0) || !norm.is_finite() {
+            diag[j] = 0.0;
+            continue;
+        }
+        let alpha = if v[0] > 0.0 { -norm } else { norm };
+        v[0] -= alpha; // v = x − α e1
+        let vv = dot(v, v, simd); // = 2 ‖x‖ (‖x‖ + |x0|) > 0
+        for c in 0..(m + k - j - 1) {
+            let col = &mut tail[c * rows + j..c * rows + rows];
+            let s = -2.0 * dot(v, col, simd) / vv;
+            axpy(col, s, v, simd);
+        }
+        v[0] = alpha; // column j now holds R's column j on and above the diagonal
+        diag[j] = alpha;
+    }
+    // Back-substitution with pivot dropping.
+    let rmax = diag[..m].iter().fold(0f32, |acc, d| acc.max(d.abs()));
+    let floor = rmax * rel_tol;
+    let mut fit = Fit::default();
+    for i in (0..m).rev() {
+        let r = if i < rows { diag[i] } else { 0.0 };
+        let drop = !(r.abs() > floor) || i >= rows;
+        for c in 0..k {
+            if drop {
+                x[i * k + c] = 0.0;
+                continue;
+            }
+            let mut s = a[(m + c) * rows + i];
+            for j in i + 1..m {
+                s -= a[j * rows + i] * x[j * k + c];
+            }
+            let v = s / r;
+            x[i * k + c] = if v.is_finite() { v } else { 0.0 };
+        }
+        if drop {
+            fit.dropped |= 1 << i;
+        }
+    }
+    Some(fit)
+}

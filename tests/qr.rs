@@ -1,0 +1,204 @@
+//! Householder QR least squares (BMFR's kernel) against f64 oracles.
+
+mod common;
+use common::Rng;
+use lrdenoise::kernels::qr::lstsq;
+use proptest::prelude::*;
+
+/// Column-major rows × (m + k) matrix.
+struct Problem {
+    rows: usize,
+    m: usize,
+    k: usize,
+    a: Vec<f32>,
+}
+
+impl Problem {
+    fn random(rows: usize, m: usize, k: usize, seed: u64) -> Problem {
+        let mut r = Rng(seed * 7919 + 1);
+        let mut a = vec![0f32; rows * (m + k)];
+        for i in 0..rows {
+            a[i] = 1.0; // intercept feature
+        }
+        for v in a.iter_mut().skip(rows) {
+            *v = r.f32() * 2.0 - 1.0;
+        }
+        Problem { rows, m, k, a }
+    }
+    fn col(&self, j: usize) -> &[f32] {
+        &self.a[j * self.rows..(j + 1) * self.rows]
+    }
+    fn solve(&self, simd: bool) -> (Vec<f32>, u32) {
+        let mut a = self.a.clone();
+        let mut x = vec![0f32; self.m * self.k];
+        let fit = lstsq(&mut a, self.rows, self.m, self.k, 1e-4, simd, &mut x).unwrap();
+        (x, fit.dropped)
+    }
+    /// ‖A x − z_c‖² summed over right-hand sides, in f64.
+    fn residual(&self, x: &[f32]) -> f64 {
+        let mut s = 0.0;
+        for c in 0..self.k {
+            for i in 0..self.rows {
+                let mut v = -(self.col(self.m + c)[i] as f64);
+                for j in 0..self.m {
+                    v += self.col(j)[i] as f64 * x[j * self.k + c] as f64;
+                }
+                s += v * v;
+            }
+        }
+        s
+    }
+    /// f64 normal equations solved by Gaussian elimination with pivoting.
+    fn oracle(&self) -> Vec<f64> {
+        let (m, k) = (self.m, self.k);
+        let mut ata = vec![0f64; m * m];
+        let mut atz = vec![0f64; m * k];
+        for i in 0..m {
+            for j in 0..m {
+                ata[i * m + j] = self.col(i).iter().zip(self.col(j)).map(|(a, b)| *a as f64 * *b as f64).sum();
+            }
+            for c in 0..k {
+                atz[i * k + c] = self.col(i).iter().zip(self.col(m + c)).map(|(a, b)| *a as f64 * *b as f64).sum();
+            }
+        }
+        for col in 0..m {
+            let p = (col..m).max_by(|&a, &b| ata[a * m + col].abs().total_cmp(&ata[b * m + col].abs())).unwrap();
+            for t in 0..m {
+                ata.swap(col * m + t, p * m + t);
+            }
+            for t in 0..k {
+                atz.swap(col * k + t, p * k + t);
+            }
+            for r in col + 1..m {
+                let f = ata[r * m + col] / ata[col * m + col];
+                for t in col..m {
+                    ata[r * m + t] -= f * ata[col * m + t];
+                }
+                for t in 0..k {
+                    atz[r * k + t] -= f * atz[col * k + t];
+                }
+            }
+        }
+        let mut x = vec![0f64; m * k];
+        for c in 0..k {
+            for r in (0..m).rev() {
+                let mut s = atz[r * k + c];
+                for t in r + 1..m {
+                    s -= ata[r * m + t] * x[t * k + c];
+                }
+                x[r * k + c] = s / ata[r * m + r];
+            }
+        }
+        x
+    }
+}
+
+#[test]
+fn matches_f64_on_well_conditioned_problems() {
+    for (rows, m, k) in [(10, 1, 1), (33, 3, 2), (64, 10, 3), (1024, 10, 3), (257, 16, 3), (16, 16, 1)] {
+        for seed in 0..5 {
+            let p = Problem::random(rows, m, k, seed);
+            let want = p.oracle();
+            for simd in [true, false] {
+                let (x, dropped) = p.solve(simd);
+                assert_eq!(dropped, 0);
+                let err = x.iter().zip(&want).map(|(a, b)| (*a as f64 - b).abs()).fold(0f64, f64::max);
+                let scale = want.iter().fold(1f64, |a, b| a.max(b.abs()));
+                // f32 Householder: backward stable; condition numbers here are < 1e2.
+                assert!(err < 2e-3 * scale, "{rows}x{m}x{k} seed {seed} simd {simd}: {err}");
+            }
+        }
+    }
+}
+
+/// R from the factorisation satisfies RᵀR = AᵀA (Q orthogonal), checked in f64,
+/// and the fit's residual equals the f64 optimum.
+#[test]
+fn r_reconstructs_gram_matrix() {
+    for (rows, m) in [(40, 5), (1024, 10), (19, 16)] {
+        let p = Problem::random(rows, m, 1, 3);
+        let mut a = p.a.clone();
+        let mut x = vec![0f32; m];
+        lstsq(&mut a, rows, m, 1, 1e-6, true, &mut x).unwrap();
+        let r = |i: usize, j: usize| if i <= j { a[j * rows + i] as f64 } else { 0.0 };
+        let mut worst = 0f64;
+        let mut scale = 0f64;
+        for i in 0..m {
+            for j in 0..m {
+                let rtr: f64 = (0..m).map(|l| r(l, i) * r(l, j)).sum();
+                let ata: f64 = p.col(i).iter().zip(p.col(j)).map(|(a, b)| *a as f64 * *b as f64).sum();
+                worst = worst.max((rtr - ata).abs());
+                scale = scale.max(ata.abs());
+            }
+        }
+        assert!(worst < 1e-5 * scale * (rows as f64).sqrt(), "{rows}x{m}: |RᵀR − AᵀA| = {worst} (scale {scale})");
+        let want: Vec<f32> = p.oracle().iter().map(|v| *v as f32).collect();
+        let (r_ours, r_opt) = (p.residual(&x), p.residual(&want));
+        assert!(r_ours <= r_opt * (1.0 + 1e-3) + 1e-6, "{r_ours} vs {r_opt}");
+    }
+}
+
+/// Flat wall (constant normal and position: features constant, p² ∝ p), a
+/// duplicated column, an all-zero column, empty sky (all-zero block): finite
+/// output, dropped features flagged, residual as good as without the redundant columns.
+#[test]
+fn rank_deficient_blocks() {
+    let rows = 1024;
+    let base = Problem::random(rows, 4, 3, 11);
+    let cases: Vec<(&str, Box<dyn Fn(&[f32], usize) -> f32>)> = vec![
+        ("constant feature", Box::new(|_, _| 0.37)),
+        ("duplicate of column 2", Box::new(|c2, i| c2[i])),
+        ("scaled duplicate", Box::new(|c2, i| 3.0 * c2[i])),
+        ("all zero", Box::new(|_, _| 0.0)),
+    ];
+    let full_res = base.residual(&base.solve(true).0);
+    for (name, f) in cases {
+        // insert the redundant column as feature 4 (before the rhs columns)
+        let c2: Vec<f32> = base.col(2).to_vec();
+        let mut a = base.a[..4 * rows].to_vec();
+        a.extend((0..rows).map(|i| f(&c2, i)));
+        a.extend_from_slice(&base.a[4 * rows..]);
+        let p = Problem { rows, m: 5, k: 3, a };
+        let (x, dropped) = p.solve(true);
+        assert!(x.iter().all(|v| v.is_finite()), "{name}");
+        assert!(dropped != 0, "{name}: nothing dropped");
+        let r = p.residual(&x);
+        assert!(r <= full_res * (1.0 + 1e-3) + 1e-6, "{name}: residual {r} vs {full_res}");
+    }
+    let sky = Problem { rows, m: 10, k: 3, a: vec![0.0; rows * 13] };
+    let (x, dropped) = sky.solve(true);
+    assert!(x.iter().all(|v| *v == 0.0));
+    assert_eq!(dropped, (1 << 10) - 1);
+    // more features than rows
+    let p = Problem::random(5, 10, 2, 4);
+    let (x, _) = p.solve(true);
+    assert!(x.iter().all(|v| v.is_finite()));
+    assert!(lstsq(&mut [0.0; 4], 2, 17, 1, 1e-4, true, &mut [0.0; 17]).is_none());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+    /// Conditioning (near-collinear columns), scale and offset: finite output and a
+    /// residual no worse than the f64 optimum beyond f32 rounding of the data.
+    #[test]
+    fn stable_over_conditioning_scale_offset(seed in 0u64..10_000, log_scale in -3.0f32..3.0, offset in -100.0f32..100.0, mix in 0.0f32..1.0, rows in 16usize..300) {
+        let mut p = Problem::random(rows, 6, 3, seed);
+        let s = 10f32.powf(log_scale);
+        let mut rng = Rng(seed + 5);
+        for i in 0..rows {
+            let c1 = p.a[rows + i];
+            p.a[2 * rows + i] = c1 + (1.0 - mix) * 1e-3 * rng.f32(); // nearly collinear with column 1
+            for j in 3..6 {
+                p.a[j * rows + i] = p.a[j * rows + i] * s + offset;
+            }
+        }
+        let (x, _) = p.solve(true);
+        prop_assert!(x.iter().all(|v| v.is_finite()));
+        let (xs, _) = p.solve(false);
+        let (rs, r) = (p.residual(&xs), p.residual(&x));
+        let z2: f64 = (6..9).flat_map(|c| p.col(c).to_vec()).map(|v| (v as f64).powi(2)).sum();
+        // both paths fit about equally well; neither worse than predicting 0
+        prop_assert!(r <= z2 * (1.0 + 1e-3) + 1e-3 && rs <= z2 * (1.0 + 1e-3) + 1e-3);
+        prop_assert!((r - rs).abs() <= 1e-2 * z2.max(1.0), "simd {} vs scalar {}", r, rs);
+    }
+}
