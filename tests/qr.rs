@@ -17,9 +17,7 @@ impl Problem {
     fn random(rows: usize, m: usize, k: usize, seed: u64) -> Problem {
         let mut r = Rng(seed * 7919 + 1);
         let mut a = vec![0f32; rows * (m + k)];
-        for i in 0..rows {
-            a[i] = 1.0; // intercept feature
-        }
+        a[..rows].fill(1.0); // intercept feature
         for v in a.iter_mut().skip(rows) {
             *v = r.f32() * 2.0 - 1.0;
         }
@@ -145,7 +143,8 @@ fn r_reconstructs_gram_matrix() {
 fn rank_deficient_blocks() {
     let rows = 1024;
     let base = Problem::random(rows, 4, 3, 11);
-    let cases: Vec<(&str, Box<dyn Fn(&[f32], usize) -> f32>)> = vec![
+    type Column = Box<dyn Fn(&[f32], usize) -> f32>;
+    let cases: Vec<(&str, Column)> = vec![
         ("constant feature", Box::new(|_, _| 0.37)),
         ("duplicate of column 2", Box::new(|c2, i| c2[i])),
         ("scaled duplicate", Box::new(|c2, i| 3.0 * c2[i])),
