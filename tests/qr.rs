@@ -46,7 +46,7 @@ impl Problem {
         }
         s
     }
-    /// f64 normal equations solved by Gaussian elimination with pivoting.
+    /// f64 normal equations solved by Gaussian elimination with pivoting (tests/common).
     fn oracle(&self) -> Vec<f64> {
         let (m, k) = (self.m, self.k);
         let mut ata = vec![0f64; m * m];
@@ -59,35 +59,7 @@ impl Problem {
                 atz[i * k + c] = self.col(i).iter().zip(self.col(m + c)).map(|(a, b)| *a as f64 * *b as f64).sum();
             }
         }
-        for col in 0..m {
-            let p = (col..m).max_by(|&a, &b| ata[a * m + col].abs().total_cmp(&ata[b * m + col].abs())).unwrap();
-            for t in 0..m {
-                ata.swap(col * m + t, p * m + t);
-            }
-            for t in 0..k {
-                atz.swap(col * k + t, p * k + t);
-            }
-            for r in col + 1..m {
-                let f = ata[r * m + col] / ata[col * m + col];
-                for t in col..m {
-                    ata[r * m + t] -= f * ata[col * m + t];
-                }
-                for t in 0..k {
-                    atz[r * k + t] -= f * atz[col * k + t];
-                }
-            }
-        }
-        let mut x = vec![0f64; m * k];
-        for c in 0..k {
-            for r in (0..m).rev() {
-                let mut s = atz[r * k + c];
-                for t in r + 1..m {
-                    s -= ata[r * m + t] * x[t * k + c];
-                }
-                x[r * k + c] = s / ata[r * m + r];
-            }
-        }
-        x
+        common::gauss(ata, m, atz, k)
     }
 }
 

@@ -31,36 +31,22 @@ enum Cmd {
         frame: PathBuf,
         #[arg(short, long)]
         output: PathBuf,
-        #[arg(long, default_value = "flr")]
-        method: String,
         #[command(flatten)]
-        flr: FlrArgs,
-        /// The noisy layer to denoise (e.g. noisy4)
-        #[arg(long, default_value = "noisy")]
-        input_layer: String,
+        run: RunArgs,
         /// Also write a tone-mapped PNG preview of albedo * denoised
         #[arg(long)]
         png: Option<PathBuf>,
         /// Write only the `denoised` layer
         #[arg(long)]
         only_output: bool,
-        /// Threads (default: all cores)
-        #[arg(long)]
-        threads: Option<usize>,
     },
     /// Denoise a sequence directory (frame_NNNN.exr) into OUTDIR, same file names
     DenoiseSeq {
         dir: PathBuf,
         #[arg(short, long)]
         output: PathBuf,
-        #[arg(long, default_value = "flr")]
-        method: String,
         #[command(flatten)]
-        flr: FlrArgs,
-        #[arg(long, default_value = "noisy")]
-        input_layer: String,
-        #[arg(long)]
-        threads: Option<usize>,
+        run: RunArgs,
     },
     /// Score methods on frames with a reference: PSNR, SSIM, FLIP, rMSE and median time
     Eval {
@@ -128,6 +114,21 @@ enum Cmd {
         #[arg(long)]
         threads: Option<usize>,
     },
+}
+
+/// Flags shared by `denoise` and `denoise-seq`.
+#[derive(clap::Args)]
+struct RunArgs {
+    #[arg(long, default_value = "flr")]
+    method: String,
+    #[command(flatten)]
+    flr: FlrArgs,
+    /// The noisy layer to denoise (e.g. noisy4)
+    #[arg(long, default_value = "noisy")]
+    input_layer: String,
+    /// Threads (default: all cores)
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 fn threads_or_all(t: Option<usize>) -> usize {
@@ -429,13 +430,13 @@ fn data_dir() -> Result<PathBuf, String> {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
-        Cmd::Denoise { frame, output, method, flr, input_layer, png, only_output, threads } => {
+        Cmd::Denoise { frame, output, run: RunArgs { method, flr, input_layer, threads }, png, only_output } => {
             let t = threads_or_all(threads);
             let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
             let (cfg, ms, w, h) = denoise_file(&job, &frame, &output, png.as_deref(), only_output)?;
             println!("{method} [{cfg}] {w}x{h} threads {t}: {ms:.2} ms -> {}", output.display());
         }
-        Cmd::DenoiseSeq { dir, output, method, flr, input_layer, threads } => {
+        Cmd::DenoiseSeq { dir, output, run: RunArgs { method, flr, input_layer, threads } } => {
             let t = threads_or_all(threads);
             let frames = list_frames(std::slice::from_ref(&dir))?;
             std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;

@@ -153,7 +153,7 @@ pub fn run_frame(cfg: FlrConfig, w: usize, h: usize, frame: &Frame<'_>) -> (Vec<
 /// Solves the dense system `a x = b` (n×n, nrhs columns) by Gaussian
 /// elimination with partial pivoting (a different algorithm from the library's
 /// Cholesky on purpose). Singular pivots give 0.
-fn gauss(mut a: Vec<f64>, n: usize, mut b: Vec<f64>, nrhs: usize) -> Vec<f64> {
+pub fn gauss(mut a: Vec<f64>, n: usize, mut b: Vec<f64>, nrhs: usize) -> Vec<f64> {
     for col in 0..n {
         let piv = (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs())).unwrap();
         for k in 0..n {
