@@ -339,7 +339,7 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
     let inputs = match frame {
         Some(p) => {
             let exr = ExrFrame::read(p)?;
-            resample(&Inputs::from_exr(&exr, p, "noisy")?, w, h)
+            Inputs::from_exr(&exr, p, "noisy")?.resample(w, h)
         }
         None => synthetic(w, h),
     };
@@ -357,32 +357,6 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
         (w * h) as f64 / med / 1e3
     );
     Ok(())
-}
-
-/// Nearest-neighbour resample of every layer to w×h.
-fn resample(i: &Inputs, w: usize, h: usize) -> Inputs {
-    let map = |v: &Vec<f32>, c: usize| -> Vec<f32> {
-        let mut o = Vec::with_capacity(w * h * c);
-        for y in 0..h {
-            let sy = y * i.h / h;
-            for x in 0..w {
-                let sx = x * i.w / w;
-                o.extend_from_slice(&v[(sy * i.w + sx) * c..(sy * i.w + sx + 1) * c]);
-            }
-        }
-        o
-    };
-    Inputs {
-        w,
-        h,
-        noisy: map(&i.noisy, 3),
-        normal: i.normal.as_ref().map(|v| map(v, 3)),
-        depth: i.depth.as_ref().map(|v| map(v, 1)),
-        position: i.position.as_ref().map(|v| map(v, 3)),
-        ao: i.ao.as_ref().map(|v| map(v, 1)),
-        albedo: None,
-        reference: None,
-    }
 }
 
 /// A synthetic frame with every guide (for benchmarks: content does not change the work).

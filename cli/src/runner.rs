@@ -60,32 +60,42 @@ impl Inputs {
         .map(|(_, _, n)| n)
     }
 
-    /// Every `u`-th pixel (the centre-most of each u×u block): what a renderer
-    /// tracing at 1/u resolution with the same sample count would produce.
-    pub fn subsample(&self, u: usize) -> Inputs {
-        let (lw, lh) = (self.w.div_ceil(u), self.h.div_ceil(u));
-        let pick = |v: &Vec<f32>, c: usize| -> Vec<f32> {
-            let mut o = Vec::with_capacity(lw * lh * c);
-            for y in 0..lh {
-                let sy = (y * u + u / 2).min(self.h - 1);
-                for x in 0..lw {
-                    let sx = (x * u + u / 2).min(self.w - 1);
-                    o.extend_from_slice(&v[(sy * self.w + sx) * c..(sy * self.w + sx + 1) * c]);
+    /// A `w`×`h` frame whose pixel (x, y) is this frame's pixel `src(x, y)`
+    /// (every layer the denoisers read; albedo and reference are dropped).
+    pub fn pick(&self, w: usize, h: usize, src: impl Fn(usize, usize) -> (usize, usize)) -> Inputs {
+        let layer = |v: &Vec<f32>, c: usize| -> Vec<f32> {
+            let mut o = Vec::with_capacity(w * h * c);
+            for y in 0..h {
+                for x in 0..w {
+                    let (sx, sy) = src(x, y);
+                    let i = sy.min(self.h - 1) * self.w + sx.min(self.w - 1);
+                    o.extend_from_slice(&v[i * c..(i + 1) * c]);
                 }
             }
             o
         };
         Inputs {
-            w: lw,
-            h: lh,
-            noisy: pick(&self.noisy, 3),
-            normal: self.normal.as_ref().map(|v| pick(v, 3)),
-            depth: self.depth.as_ref().map(|v| pick(v, 1)),
-            position: self.position.as_ref().map(|v| pick(v, 3)),
-            ao: self.ao.as_ref().map(|v| pick(v, 1)),
+            w,
+            h,
+            noisy: layer(&self.noisy, 3),
+            normal: self.normal.as_ref().map(|v| layer(v, 3)),
+            depth: self.depth.as_ref().map(|v| layer(v, 1)),
+            position: self.position.as_ref().map(|v| layer(v, 3)),
+            ao: self.ao.as_ref().map(|v| layer(v, 1)),
             albedo: None,
             reference: None,
         }
+    }
+
+    /// Every `u`-th pixel (the centre-most of each u×u block): what a renderer
+    /// tracing at 1/u resolution with the same sample count would produce.
+    pub fn subsample(&self, u: usize) -> Inputs {
+        self.pick(self.w.div_ceil(u), self.h.div_ceil(u), |x, y| (x * u + u / 2, y * u + u / 2))
+    }
+
+    /// Nearest-neighbour resample to `w`×`h` (for `lrd bench` on a given frame).
+    pub fn resample(&self, w: usize, h: usize) -> Inputs {
+        self.pick(w, h, |x, y| (x * self.w / w, y * self.h / h))
     }
 
     pub fn guides(&self, set: &GuideSet) -> Result<Guides<'_>, Error> {
