@@ -34,6 +34,8 @@
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![warn(missing_debug_implementations)]
 
+#[cfg(feature = "bmfr")]
+pub mod bmfr;
 pub mod config;
 pub mod error;
 #[cfg(feature = "flr")]
@@ -46,6 +48,8 @@ pub use config::{Blur, FlrConfig, Kernel, Regularization};
 pub use error::{Arg, Error};
 #[cfg(feature = "flr")]
 pub use flr::{CheckedFrame, Flr, Parts, Report, Stats};
+#[cfg(feature = "bmfr")]
+pub use bmfr::{Bmfr, BmfrConfig, History};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
 

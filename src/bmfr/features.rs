@@ -1,0 +1,289 @@
+//! BMFR's per-block feature matrix: gathering (with mirrored borders and
+//! NaN/Inf exclusion), per-block rescaling to `[0, 1]`, squared features, and
+//! the stochastic regularisation noise.
+//!
+//! Column-major block matrices, `n = B²` rows (row `j·B + i` = pixel `(i, j)`
+//! of the block):
+//! * `clean`: the `m` features as applied (column 0 = 1);
+//! * `valid`: 1 on rows the fit uses (noisy and guides finite), else 0;
+//! * `a`: the fit matrix `[features + noise | noisy r, g, b]`, `n × (m + 3)`,
+//!   overwritten by the QR.
+
+use super::CheckedFrame;
+use crate::error::Error;
+use crate::guides::{GuideSet, MAX_GUIDES};
+use crate::image::ImageView;
+
+/// Most block edge (64) — sizes the per-row buffers.
+const MAX_BLOCK: usize = 64;
+
+/// Which guide channels become which features.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FeatureSet {
+    /// Guide channels Q (features `1..=Q`).
+    pub q: usize,
+    /// Channels rescaled to `[0, 1]` per block (depth, position, user);
+    /// normals and AO are used as given (already bounded).
+    pub scaled: [bool; MAX_GUIDES],
+    /// Channels whose square is a feature (after rescaling).
+    pub squares: [usize; 3],
+    pub n_squares: usize,
+}
+
+impl FeatureSet {
+    pub fn new(set: &GuideSet, quadratic: bool) -> Self {
+        let mut scaled = [false; MAX_GUIDES];
+        let mut squares = [0; 3];
+        let mut n_squares = 0;
+        let mut q = 0;
+        if set.normal {
+            q += 3;
+        }
+        let depth = q;
+        if set.depth {
+            scaled[q] = true;
+            q += 1;
+        }
+        let pos = q;
+        if set.position {
+            for s in &mut scaled[q..q + 3] {
+                *s = true;
+            }
+            q += 3;
+        }
+        if set.ao {
+            q += 1;
+        }
+        for _ in 0..set.user.min(4) {
+            if q < MAX_GUIDES {
+                scaled[q] = true;
+            }
+            q += 1;
+        }
+        if quadratic {
+            if set.position {
+                squares = [pos, pos + 1, pos + 2];
+                n_squares = 3;
+            } else if set.depth {
+                squares[0] = depth;
+                n_squares = 1;
+            }
+        }
+        FeatureSet { q, scaled, squares, n_squares }
+    }
+    /// Number of features M (the constant included).
+    pub const fn count(&self) -> usize {
+        1 + self.q + self.n_squares
+    }
+}
+
+/// f32 values of a worker for `n` rows and `m` features.
+pub const fn worker_len(n: usize, m: usize) -> usize {
+    n * (m + 3) + n * m + 2 * n + 3 * MAX_BLOCK
+}
+
+/// A worker buffer split into its regions.
+#[derive(Debug)]
+pub struct Worker<'w> {
+    pub a: &'w mut [f32],
+    pub clean: &'w mut [f32],
+    /// 1 where the pixel's own guides are finite (it can use the model).
+    pub guide_ok: &'w mut [f32],
+    /// 1 where the row takes part in the fit.
+    pub valid: &'w mut [f32],
+    /// One output row, planar RGB.
+    pub out: &'w mut [f32],
+}
+
+impl<'w> Worker<'w> {
+    pub fn split(buf: &'w mut [f32], n: usize, m: usize) -> Option<Self> {
+        if buf.len() < worker_len(n, m) {
+            return None;
+        }
+        let (a, rest) = buf.split_at_mut(n * (m + 3));
+        let (clean, rest) = rest.split_at_mut(n * m);
+        let (guide_ok, rest) = rest.split_at_mut(n);
+        let (valid, rest) = rest.split_at_mut(n);
+        Some(Worker { a, clean, guide_ok, valid, out: &mut rest[..3 * MAX_BLOCK] })
+    }
+}
+
+/// `i` reflected into `0..n` (… 1 0 | 0 1 … n−1 | n−1 n−2 …), for any `i`.
+pub fn mirror(i: i64, n: usize) -> usize {
+    let n = n as i64;
+    let p = i.rem_euclid(2 * n);
+    (if p < n { p } else { 2 * n - 1 - p }) as usize
+}
+
+/// Reads `dst.len()` pixels of channel `c`, row `y`, from column `x0` on,
+/// mirroring columns outside the image.
+fn read_span(v: &ImageView<'_>, c: usize, y: usize, x0: i64, dst: &mut [f32]) -> Option<()> {
+    let w = v.width() as i64;
+    let len = dst.len() as i64;
+    let a = x0.clamp(0, w);
+    let b = (x0 + len).clamp(0, w);
+    if b > a {
+        v.read_row(y, c, a as usize, &mut dst[(a - x0) as usize..(b - x0) as usize])?;
+    }
+    for (i, d) in dst.iter_mut().enumerate() {
+        let x = x0 + i as i64;
+        if x < 0 || x >= w {
+            *d = v.get(mirror(x, w as usize), y, c)?;
+        }
+    }
+    Some(())
+}
+
+/// What gathering one block found.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Gathered {
+    /// Rows used by the fit.
+    pub valid: usize,
+    /// Mean noisy colour of the valid rows (fallback output).
+    pub mean: [f32; 3],
+    /// NaN/Inf counts over the block's pixels inside the image (mirrored
+    /// copies are not counted twice).
+    pub nonfinite_noisy: u64,
+    pub nonfinite_guides: u64,
+}
+
+#[inline]
+fn finite(x: f32) -> bool {
+    x.abs() <= f32::MAX
+}
+
+/// Fills `wb.clean` (features, rescaled, squared) and the noisy columns of
+/// `wb.a` for the block whose top-left pixel is `origin`; invalid rows are 0.
+pub fn gather_block(
+    fs: &FeatureSet,
+    frame: &CheckedFrame<'_>,
+    (w, h): (usize, usize),
+    origin: (i64, i64),
+    b: usize,
+    wb: &mut Worker<'_>,
+) -> Result<Gathered, Error> {
+    let n = b * b;
+    let m = fs.count();
+    let q = fs.q;
+    let bad = Error::InvalidTile { index: 0, count: 0 };
+    for j in 0..b {
+        let y = mirror(origin.1 + j as i64, h);
+        for c in 0..3 {
+            let dst = &mut wb.a[(m + c) * n + j * b..(m + c) * n + (j + 1) * b];
+            read_span(&frame.noisy, c, y, origin.0, dst).ok_or(bad)?;
+        }
+        for g in 0..q {
+            let v = frame.guides[g].as_ref().ok_or(Error::GuideMismatch)?;
+            let dst = &mut wb.clean[(1 + g) * n + j * b..(1 + g) * n + (j + 1) * b];
+            read_span(v, 0, y, origin.0, dst).ok_or(bad)?;
+        }
+    }
+    // Validity masks: guide_ok (own guides finite), valid (guides and noisy).
+    let (ones, feats) = wb.clean.split_at_mut(n);
+    ones.fill(1.0);
+    let valid = &mut *wb.valid;
+    wb.guide_ok.fill(1.0);
+    for g in 0..q {
+        for (ok, &v) in wb.guide_ok.iter_mut().zip(&feats[g * n..(g + 1) * n]) {
+            *ok = if finite(v) { *ok } else { 0.0 };
+        }
+    }
+    valid.copy_from_slice(wb.guide_ok);
+    for c in 0..3 {
+        for (ok, &v) in valid.iter_mut().zip(&wb.a[(m + c) * n..(m + c + 1) * n]) {
+            *ok = if finite(v) { *ok } else { 0.0 };
+        }
+    }
+    let mut g = Gathered { valid: valid.iter().filter(|&&v| v != 0.0).count(), ..Default::default() };
+    if g.valid < n {
+        // Rare: count what was not finite (inside the image only) and zero it.
+        for r in 0..n {
+            if valid[r] != 0.0 {
+                continue;
+            }
+            let (x, y) = (origin.0 + (r % b) as i64, origin.1 + (r / b) as i64);
+            let inside = x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h;
+            let noisy_bad = (0..3).any(|c| !finite(wb.a[(m + c) * n + r]));
+            if inside {
+                g.nonfinite_noisy += noisy_bad as u64;
+                g.nonfinite_guides += (wb.guide_ok[r] == 0.0) as u64;
+            }
+            for c in 0..3 {
+                wb.a[(m + c) * n + r] = 0.0;
+            }
+            if wb.guide_ok[r] == 0.0 {
+                for f in 0..q {
+                    feats[f * n + r] = 0.0;
+                }
+            }
+        }
+    }
+    for c in 0..3 {
+        let s: f64 = wb.a[(m + c) * n..(m + c + 1) * n].iter().map(|&v| v as f64).sum();
+        g.mean[c] = if g.valid > 0 { (s / g.valid as f64) as f32 } else { 0.0 };
+    }
+    // Per-block rescaling to [0, 1] over the valid rows.
+    for f in 0..q {
+        if !fs.scaled[f] {
+            continue;
+        }
+        let col = &mut feats[f * n..(f + 1) * n];
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (&v, &ok) in col.iter().zip(valid.iter()) {
+            lo = if ok != 0.0 { lo.min(v) } else { lo };
+            hi = if ok != 0.0 { hi.max(v) } else { hi };
+        }
+        let range = hi - lo;
+        if range > 0.0 && range.is_finite() {
+            let inv = 1.0 / range;
+            // (rows excluded only for their noisy value keep a clamped feature)
+            for (v, &ok) in col.iter_mut().zip(wb.guide_ok.iter()) {
+                *v = ((*v - lo) * inv).clamp(0.0, 1.0) * ok;
+            }
+        } else {
+            col.fill(0.0); // constant: collinear with the constant feature
+        }
+    }
+    for s in 0..fs.n_squares {
+        let src = fs.squares[s];
+        let (head, tail) = feats.split_at_mut((q + s) * n);
+        for (d, &v) in tail[..n].iter_mut().zip(&head[src * n..(src + 1) * n]) {
+            *d = v * v;
+        }
+    }
+    Ok(g)
+}
+
+/// Per-(frame, block) seed of the regularisation noise.
+pub fn seed(index: u32, block_id: u32) -> u32 {
+    hash(index.wrapping_mul(0x9E37_79B9) ^ hash(block_id.wrapping_add(0x68E3_1DA4)))
+}
+
+/// A 32-bit integer hash (C. Wellons' "lowbias32"): cheap, vectorises.
+#[inline(always)]
+fn hash(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
+}
+
+/// Fills the feature columns of `a`: `clean` on valid rows (0 elsewhere),
+/// plus uniform noise in `[−amp, amp]` on every feature but the constant
+/// (stochastic regularisation, for the fit only).
+pub fn regularize(fs: &FeatureSet, wb: &mut Worker<'_>, n: usize, amp: f32, seed: u32) {
+    let m = fs.count();
+    let valid = &*wb.valid;
+    wb.a[..n].copy_from_slice(valid);
+    let scale = 2.0 * amp / (1u32 << 24) as f32;
+    for f in 1..m {
+        let base = seed ^ ((f as u32) << 24);
+        let col = &mut wb.a[f * n..(f + 1) * n];
+        let clean = &wb.clean[f * n..(f + 1) * n];
+        for (r, ((v, &c), &ok)) in col.iter_mut().zip(clean).zip(valid).enumerate() {
+            let u = (hash(base.wrapping_add(r as u32)) >> 8) as f32;
+            *v = (c + (u * scale - amp)) * ok;
+        }
+    }
+}

@@ -1,0 +1,387 @@
+//! BMFR — Blockwise Multi-Order Feature Regression (Koskela et al. 2019).
+//!
+//! Per block of B×B pixels (32×32 by default) the noisy colour is regressed
+//! on the features `1, g, g²` (every guide channel, plus the squares of the
+//! position channels — or of depth when a frame has no positions) by
+//! Householder QR least squares ([`crate::kernels::qr`]), and the fitted model
+//! is evaluated on the same block. Differences from the authors' OpenCL code,
+//! all deliberate:
+//!
+//! * positions, depth and user guides are rescaled to `[0, 1]` per block
+//!   *before* squaring (`(p − min)/(max − min)` and its square span the same
+//!   model space as `p, p²`, without squaring 1e4-sized coordinates in f32),
+//!   and always by their range (the original skips the division for ranges
+//!   below 1 world unit, which makes the fit depend on the scene's units);
+//! * NaN/Inf samples are excluded from the fit (their row is zeroed) and
+//!   counted; a pixel whose own guides are not finite gets the block mean.
+//!
+//! The block grid shifts every frame by one of 16 offsets ([`BLOCK_OFFSETS`],
+//! the original's table, in 1/32 of a block), so temporal accumulation hides
+//! the seams; blocks that cross the image border read mirrored pixels.
+//! [`Bmfr::denoise`] is the single-frame fit; [`temporal`] adds the
+//! paper's pipeline (noisy accumulation → fit → filtered accumulation → TAA).
+
+pub mod features;
+pub mod temporal;
+
+use crate::config::Kernel;
+use crate::error::{Arg, Error};
+use crate::guides::{Frame, GuideSet, MAX_GUIDES};
+use crate::image::{ImageView, ImageViewMut};
+use crate::kernels::qr::{lstsq, MAX_FEATURES};
+use features::{gather_block, FeatureSet};
+
+pub use temporal::History;
+
+/// The grid offsets of the original implementation (in pixels for 32×32
+/// blocks; scaled by B/32 for other block sizes), one per frame, cycling.
+pub const BLOCK_OFFSETS: [(i32, i32); 16] = [
+    (-14, -14),
+    (4, -6),
+    (-8, 14),
+    (8, 0),
+    (-10, -8),
+    (2, 12),
+    (12, -12),
+    (-10, 0),
+    (12, 14),
+    (-8, -16),
+    (6, 6),
+    (-2, -2),
+    (6, -14),
+    (-16, 12),
+    (14, -4),
+    (-6, 4),
+];
+
+/// Everything that defines a BMFR run. `BmfrConfig::default()` is the paper's
+/// configuration for normal + position guides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BmfrConfig {
+    /// Guides the frames carry. Features: 1, every guide channel, and the
+    /// squares of the position channels (of depth without positions).
+    pub guides: GuideSet,
+    /// Block edge B (8..=64, default 32): one model per B×B pixels.
+    pub block: usize,
+    /// Add the squared features (`false`: first-order BMFR).
+    pub quadratic: bool,
+    /// Amplitude of the stochastic regularisation: uniform noise in
+    /// `[−noise, noise]` added to every non-constant feature for the fit only
+    /// (default 0.01, as in the paper). 0 turns it off.
+    pub noise: f32,
+    /// Back-substitution drops a feature whose pivot is below `pivot_tol` ×
+    /// the largest pivot (default 1e-4).
+    pub pivot_tol: f32,
+    /// Shift the block grid every frame by [`BLOCK_OFFSETS`] (default on;
+    /// off: blocks start at pixel (0, 0)).
+    pub shift: bool,
+    /// Clamp negative output to 0.
+    pub clamp_negative: bool,
+    /// Kernel implementation (SIMD or the scalar oracle).
+    pub kernel: Kernel,
+    /// Temporal pipeline settings (ignored by the single-frame fit).
+    pub temporal: temporal::TemporalConfig,
+}
+
+impl Default for BmfrConfig {
+    fn default() -> Self {
+        BmfrConfig {
+            guides: GuideSet { normal: true, depth: false, position: true, ao: false, user: 0 },
+            block: 32,
+            quadratic: true,
+            noise: 0.01,
+            pivot_tol: 1e-4,
+            shift: true,
+            clamp_negative: true,
+            kernel: Kernel::Simd,
+            temporal: temporal::TemporalConfig::default(),
+        }
+    }
+}
+
+impl BmfrConfig {
+    /// The default configuration with these guides.
+    pub fn with_guides(guides: GuideSet) -> Self {
+        BmfrConfig { guides, ..Default::default() }
+    }
+
+    pub fn validate(&self) -> Result<(), Error> {
+        self.guides.validate()?;
+        if !(8..=64).contains(&self.block) {
+            return Err(Error::InvalidConfig("block (8..=64)"));
+        }
+        if !(self.noise >= 0.0 && self.noise <= 1.0) {
+            return Err(Error::InvalidConfig("noise (0..=1)"));
+        }
+        if !(self.pivot_tol >= 0.0 && self.pivot_tol < 1.0) {
+            return Err(Error::InvalidConfig("pivot_tol (0..1)"));
+        }
+        self.temporal.validate()?;
+        if FeatureSet::new(&self.guides, self.quadratic).count() > MAX_FEATURES {
+            return Err(Error::TooManyGuides { got: self.guides.channels() });
+        }
+        Ok(())
+    }
+}
+
+/// What happened during a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Report {
+    /// Input pixels with a NaN/Inf noisy value (excluded from the fit).
+    pub nonfinite_noisy: u64,
+    /// Input pixels with a NaN/Inf guide value (excluded from the fit).
+    pub nonfinite_guides: u64,
+    /// Output pixels whose own guides were not finite: given the block mean.
+    pub fallback_pixels: u64,
+    /// Blocks without any valid sample (output 0 there).
+    pub empty_blocks: u64,
+    /// Features dropped by the QR pivot test, summed over blocks.
+    pub dropped_features: u64,
+    /// Temporal only: pixels without usable history (disocclusion, first frame).
+    pub history_rejected: u64,
+}
+
+impl core::ops::AddAssign for Report {
+    fn add_assign(&mut self, o: Report) {
+        self.nonfinite_noisy += o.nonfinite_noisy;
+        self.nonfinite_guides += o.nonfinite_guides;
+        self.fallback_pixels += o.fallback_pixels;
+        self.empty_blocks += o.empty_blocks;
+        self.dropped_features += o.dropped_features;
+        self.history_rejected += o.history_rejected;
+    }
+}
+
+/// A frame checked against the plan: the noisy view and one view per guide channel.
+#[derive(Clone, Copy, Debug)]
+pub struct CheckedFrame<'a> {
+    pub(crate) noisy: ImageView<'a>,
+    pub(crate) guides: [Option<ImageView<'a>>; MAX_GUIDES],
+}
+
+/// BMFR for one frame size and configuration.
+#[derive(Clone, Copy, Debug)]
+pub struct Bmfr {
+    cfg: BmfrConfig,
+    width: usize,
+    height: usize,
+    fs: FeatureSet,
+}
+
+impl Bmfr {
+    /// Plans BMFR for `width`×`height` frames.
+    pub fn new(cfg: BmfrConfig, width: usize, height: usize) -> Result<Self, Error> {
+        cfg.validate()?;
+        if width == 0 || height == 0 || width > crate::image::MAX_DIM || height > crate::image::MAX_DIM {
+            return Err(Error::InvalidSize { arg: Arg::Output, width, height });
+        }
+        Ok(Bmfr { cfg, width, height, fs: FeatureSet::new(&cfg.guides, cfg.quadratic) })
+    }
+
+    pub fn config(&self) -> &BmfrConfig {
+        &self.cfg
+    }
+    /// Frame size.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+    /// Number of features M (constant included).
+    pub fn feature_count(&self) -> usize {
+        self.fs.count()
+    }
+
+    /// Top-left pixel of block (0, 0) for frame `index`: in `(−B, 0]`.
+    pub fn grid_origin(&self, index: u32) -> (i64, i64) {
+        if !self.cfg.shift {
+            return (0, 0);
+        }
+        let b = self.cfg.block as i64;
+        let (ox, oy) = BLOCK_OFFSETS[index as usize % BLOCK_OFFSETS.len()];
+        let wrap = |o: i32| {
+            let o = (o as i64 * b / 32 - b / 2).rem_euclid(b);
+            if o == 0 {
+                0
+            } else {
+                o - b
+            }
+        };
+        (wrap(ox), wrap(oy))
+    }
+    /// Blocks per row and per column for frame `index`.
+    pub fn block_grid(&self, index: u32) -> (usize, usize) {
+        let (x0, y0) = self.grid_origin(index);
+        let b = self.cfg.block;
+        ((self.width + (-x0) as usize).div_ceil(b), (self.height + (-y0) as usize).div_ceil(b))
+    }
+    /// Tiles (block rows) of frame `index`: each can run on its own thread.
+    pub fn tile_count(&self, index: u32) -> usize {
+        self.block_grid(index).1
+    }
+    /// Output pixel rows `[start, end)` that tile `t` of frame `index` writes.
+    pub fn tile_pixel_rows(&self, index: u32, t: usize) -> Result<(usize, usize), Error> {
+        let n = self.tile_count(index);
+        if t >= n {
+            return Err(Error::InvalidTile { index: t, count: n });
+        }
+        let y0 = self.grid_origin(index).1 + (t * self.cfg.block) as i64;
+        let a = y0.max(0) as usize;
+        let b = ((y0 + self.cfg.block as i64).max(0) as usize).min(self.height);
+        Ok((a, b))
+    }
+
+    /// f32 values of one worker's private buffer (one block's matrices).
+    pub fn worker_len(&self) -> usize {
+        features::worker_len(self.cfg.block * self.cfg.block, self.fs.count())
+    }
+    /// Scratch length (f32) for [`Bmfr::denoise`].
+    pub fn scratch_len(&self) -> usize {
+        self.worker_len()
+    }
+
+    /// Checks a frame against the plan (sizes, channels, guide set).
+    pub fn check_frame<'a>(&self, frame: &Frame<'a>) -> Result<CheckedFrame<'a>, Error> {
+        let n = &frame.noisy;
+        if (n.width(), n.height()) != (self.width, self.height) {
+            return Err(Error::SizeMismatch { arg: Arg::Noisy, expected: (self.width, self.height), got: (n.width(), n.height()) });
+        }
+        if n.channel_count() < 3 {
+            return Err(Error::ChannelCount { arg: Arg::Noisy, expected: 3, got: n.channel_count() });
+        }
+        if frame.guides_low.is_some() {
+            return Err(Error::Unsupported("BMFR has no joint upsampling (guides_low given)"));
+        }
+        let guides = frame.guides.channel_views(&self.cfg.guides, self.width, self.height, Arg::Guide)?;
+        Ok(CheckedFrame { noisy: frame.noisy, guides })
+    }
+
+    fn check_out(&self, out: &ImageViewMut<'_>, rows: (usize, usize)) -> Result<(), Error> {
+        if out.width() != self.width || out.height() != rows.1 - rows.0 || out.channel_count() < 3 {
+            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, rows.1 - rows.0), got: (out.width(), out.height()) });
+        }
+        Ok(())
+    }
+
+    /// Fits and applies every block of tile `t` (a row of blocks) of frame
+    /// `index`. `out_band` holds exactly the rows `tile_pixel_rows(index, t)`,
+    /// numbered from 0. Tiles are independent: any order, any thread.
+    pub fn fit_tile(
+        &self,
+        frame: &CheckedFrame<'_>,
+        index: u32,
+        t: usize,
+        worker: &mut [f32],
+        out_band: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        let rows = self.tile_pixel_rows(index, t)?;
+        self.check_out(out_band, rows)?;
+        if worker.len() < self.worker_len() {
+            return Err(Error::ScratchTooSmall { needed: self.worker_len(), got: worker.len() });
+        }
+        let (x0, y0) = self.grid_origin(index);
+        let b = self.cfg.block;
+        let (bx_n, _) = self.block_grid(index);
+        let mut rep = Report::default();
+        for bx in 0..bx_n {
+            let origin = (x0 + (bx * b) as i64, y0 + (t * b) as i64);
+            let block_id = (t * bx_n + bx) as u32;
+            rep += self.fit_block(frame, index, block_id, origin, rows.0, worker, out_band)?;
+        }
+        Ok(rep)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn fit_block(
+        &self,
+        frame: &CheckedFrame<'_>,
+        index: u32,
+        block_id: u32,
+        origin: (i64, i64),
+        band_y0: usize,
+        worker: &mut [f32],
+        out_band: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        let b = self.cfg.block;
+        let n = b * b;
+        let m = self.fs.count();
+        let simd = self.cfg.kernel == Kernel::Simd;
+        let mut wb = features::Worker::split(worker, n, m).ok_or(Error::ScratchTooSmall { needed: self.worker_len(), got: 0 })?;
+        let mut rep = Report::default();
+        let g = gather_block(&self.fs, frame, (self.width, self.height), origin, b, &mut wb)?;
+        rep.nonfinite_noisy += g.nonfinite_noisy;
+        rep.nonfinite_guides += g.nonfinite_guides;
+        let seed = features::seed(index, block_id);
+        features::regularize(&self.fs, &mut wb, n, self.cfg.noise, seed);
+        let mut coef = [0f32; MAX_FEATURES * 3];
+        if g.valid > 0 {
+            let fit = lstsq(wb.a, n, m, 3, self.cfg.pivot_tol, simd, &mut coef[..m * 3]).ok_or(Error::Unsupported("QR sizes"))?;
+            rep.dropped_features += fit.dropped.count_ones() as u64;
+        } else {
+            rep.empty_blocks += 1;
+        }
+        // Apply to the block's pixels inside the image.
+        let xa = origin.0.max(0) as usize;
+        let xb = ((origin.0 + b as i64).max(0) as usize).min(self.width);
+        let ya = origin.1.max(0) as usize;
+        let yb = ((origin.1 + b as i64).max(0) as usize).min(self.height);
+        if xa >= xb {
+            return Ok(rep);
+        }
+        let len = xb - xa;
+        let dx = (xa as i64 - origin.0) as usize;
+        for y in ya..yb {
+            let j = (y as i64 - origin.1) as usize;
+            let r0 = j * b + dx;
+            let out = &mut wb.out[..3 * len];
+            let (o_r, o_gb) = out.split_at_mut(len);
+            let (o_g, o_b) = o_gb.split_at_mut(len);
+            let outs = [o_r, o_g, o_b];
+            for (c, o) in outs.into_iter().enumerate() {
+                o.fill(0.0);
+                for f in 0..m {
+                    let w = coef[f * 3 + c];
+                    let col = &wb.clean[f * n + r0..f * n + r0 + len];
+                    for (o, v) in o.iter_mut().zip(col) {
+                        *o += w * v;
+                    }
+                }
+                let gv = &wb.guide_ok[r0..r0 + len];
+                let mean = g.mean[c];
+                for (o, &ok) in o.iter_mut().zip(gv) {
+                    let v = if ok != 0.0 { *o } else { mean };
+                    let v = if self.cfg.clamp_negative { v.max(0.0) } else { v };
+                    *o = if v.is_finite() { v } else { 0.0 };
+                }
+            }
+            rep.fallback_pixels += wb.guide_ok[r0..r0 + len].iter().filter(|&&ok| ok == 0.0).count() as u64;
+            let (o_r, o_gb) = wb.out[..3 * len].split_at(len);
+            let (o_g, o_b) = o_gb.split_at(len);
+            out_band.write_row_n(y - band_y0, xa, [o_r, o_g, o_b]).ok_or(Error::InvalidTile { index: 0, count: 0 })?;
+        }
+        Ok(rep)
+    }
+
+    /// Single-frame BMFR: fits every block of frame `index` (which picks the
+    /// grid offset and the regularisation noise) on the calling thread.
+    /// `scratch`: at least [`Bmfr::scratch_len`] f32. Allocates nothing.
+    pub fn denoise(&self, frame: &Frame<'_>, index: u32, scratch: &mut [f32], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, (0, self.height))?;
+        if scratch.len() < self.scratch_len() {
+            return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
+        }
+        self.fit_frame(&f, index, scratch, out)
+    }
+
+    fn fit_frame(&self, f: &CheckedFrame<'_>, index: u32, worker: &mut [f32], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        let mut rep = Report::default();
+        for t in 0..self.tile_count(index) {
+            let (a, b) = self.tile_pixel_rows(index, t)?;
+            if a == b {
+                continue;
+            }
+            let mut band = out.rows(a, b - a)?;
+            rep += self.fit_tile(f, index, t, worker, &mut band)?;
+        }
+        Ok(rep)
+    }
+}

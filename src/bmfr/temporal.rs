@@ -1,0 +1,450 @@
+//! BMFR's temporal pipeline (Koskela et al. 2019, §3.2; the authors' OpenCL
+//! kernels `accumulate_noisy_data`, `accumulate_filtered_data`, `taa`):
+//!
+//! 1. **noisy accumulation**: reproject the previous accumulated noisy colour
+//!    with `motion` (bilinear, 4 taps), drop taps whose world position, normal
+//!    (or, without positions, depth) differs too much, and blend with weight
+//!    `max(1/n, noisy_alpha)` (a cumulative average that becomes exponential);
+//! 2. the block **fit** on the accumulated colour;
+//! 3. **filtered accumulation**: the same reprojection (same accepted taps) of
+//!    the previous filtered output, blend `max(1/n, filtered_alpha)`;
+//! 4. **TAA**: the previous TAA output, reprojected without rejection and
+//!    clamped to the current 3×3 neighbourhood in YCoCg, blend `taa_alpha`.
+//!
+//! All state lives in a caller-owned [`History`]; planes are f32, full size.
+
+use super::{Bmfr, Report};
+use crate::error::{Arg, Error};
+use crate::guides::Frame;
+use crate::image::{ImageView, ImageViewMut, Layout, SamplesMut};
+
+/// Settings of the temporal pipeline.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TemporalConfig {
+    /// Lowest blend weight of the new noisy sample (0.2 in the paper).
+    pub noisy_alpha: f32,
+    /// Lowest blend weight of the new filtered frame (0.1).
+    pub filtered_alpha: f32,
+    /// Blend weight of the new frame in TAA (0.2; 1 turns TAA off).
+    pub taa_alpha: f32,
+    /// Largest squared distance between previous and current unit normals
+    /// (1.0, the original's: an angle of 60°).
+    pub normal_limit: f32,
+    /// Largest distance between previous and current world positions, as a
+    /// fraction of the camera distance when the frame has depth (0.05), in
+    /// world units when it has none.
+    pub position_limit: f32,
+    /// Without positions: largest relative depth difference (0.05).
+    pub depth_limit: f32,
+}
+
+impl Default for TemporalConfig {
+    fn default() -> Self {
+        TemporalConfig { noisy_alpha: 0.2, filtered_alpha: 0.1, taa_alpha: 0.2, normal_limit: 1.0, position_limit: 0.05, depth_limit: 0.05 }
+    }
+}
+
+impl TemporalConfig {
+    pub fn validate(&self) -> Result<(), Error> {
+        let unit = |v: f32| v > 0.0 && v <= 1.0;
+        if !unit(self.noisy_alpha) || !unit(self.filtered_alpha) || !unit(self.taa_alpha) {
+            return Err(Error::InvalidConfig("temporal blend weights (0, 1]"));
+        }
+        let pos = |v: f32| v >= 0.0 && v.is_finite();
+        if !pos(self.normal_limit) || !pos(self.position_limit) || !pos(self.depth_limit) {
+            return Err(Error::InvalidConfig("temporal rejection limits (≥ 0, finite)"));
+        }
+        Ok(())
+    }
+}
+
+/// The temporal state, owned by the caller: `Bmfr::history_len()` f32 and a
+/// frame counter. Keep one per sequence; [`History::reset`] after a cut.
+#[derive(Debug)]
+pub struct History<'h> {
+    data: &'h mut [f32],
+    frames: u32,
+}
+
+impl<'h> History<'h> {
+    /// Wraps a buffer (contents are ignored until a first frame is written).
+    pub fn new(data: &'h mut [f32]) -> Self {
+        History { data, frames: 0 }
+    }
+    /// Frames accumulated so far.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+    /// Forget the past (camera cut).
+    pub fn reset(&mut self) {
+        self.frames = 0;
+    }
+}
+
+// History planes.
+const H_ACC: usize = 0; // 3
+const H_COUNT: usize = 3;
+const H_FILT: usize = 4; // 3
+const H_TAA: usize = 7; // 3
+const H_GUIDES: usize = 10; // normal 3, position 3, depth 1 (those present)
+
+// Scratch planes.
+const S_ACC: usize = 0; // 3
+const S_COUNT: usize = 3;
+const S_PREV: usize = 4; // 2: previous-frame pixel coordinates
+const S_ACCEPT: usize = 6; // accepted taps, bit mask as f32
+const S_FIT: usize = 7; // 3: fit, then filtered accumulation in place
+const S_TAA: usize = 10; // 3
+const S_PLANES: usize = 13;
+
+/// Channels of the current frame used for rejection: (first guide channel, count).
+#[derive(Clone, Copy, Debug)]
+struct Rejection {
+    normal: Option<usize>,
+    position: Option<usize>,
+    depth: Option<usize>,
+    planes: usize,
+}
+
+impl Bmfr {
+    fn rejection(&self) -> Rejection {
+        let s = &self.cfg.guides;
+        let normal = s.normal.then_some(0);
+        let depth = s.depth.then_some(3 * s.normal as usize);
+        let position = s.position.then_some(3 * s.normal as usize + s.depth as usize);
+        Rejection { normal, position, depth, planes: 3 * s.normal as usize + 3 * s.position as usize + s.depth as usize }
+    }
+    fn plane(&self) -> usize {
+        self.width * self.height
+    }
+    /// f32 values of the [`History`] buffer.
+    pub fn history_len(&self) -> usize {
+        (H_GUIDES + self.rejection().planes) * self.plane()
+    }
+    /// f32 values of the scratch for [`Bmfr::denoise_temporal`].
+    pub fn temporal_scratch_len(&self) -> usize {
+        S_PLANES * self.plane() + 12 * self.width + self.worker_len()
+    }
+
+    /// One frame of the temporal pipeline. `motion` (2 channels: previous −
+    /// current pixel position) may be `None` for a static camera; it is ignored
+    /// on the first frame. Allocates nothing.
+    pub fn denoise_temporal(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, (0, self.height))?;
+        if let Some(m) = motion {
+            if (m.width(), m.height()) != (self.width, self.height) {
+                return Err(Error::SizeMismatch { arg: Arg::Guide, expected: (self.width, self.height), got: (m.width(), m.height()) });
+            }
+            if m.channel_count() < 2 {
+                return Err(Error::ChannelCount { arg: Arg::Guide, expected: 2, got: m.channel_count() });
+            }
+        }
+        if scratch.len() < self.temporal_scratch_len() {
+            return Err(Error::ScratchTooSmall { needed: self.temporal_scratch_len(), got: scratch.len() });
+        }
+        if history.data.len() < self.history_len() {
+            return Err(Error::BufferTooSmall { arg: Arg::Scratch, needed: self.history_len(), len: history.data.len() });
+        }
+        let (w, h, np) = (self.width, self.height, self.plane());
+        let (planes, rest) = scratch.split_at_mut(S_PLANES * np);
+        let (rows, worker) = rest.split_at_mut(12 * w);
+        let index = history.frames;
+        let mut rep = self.accumulate_noisy(&f, motion, history, planes, rows)?;
+
+        // 2. fit on the accumulated colour
+        let (acc, fit_and_rest) = planes.split_at_mut(S_FIT * np);
+        let acc_view = ImageView::f32(&acc[..3 * np], w, h, 3, Layout::planar(w, h))?;
+        let mut fit_frame = f;
+        fit_frame.noisy = acc_view;
+        {
+            let mut fit_out = ImageViewMut::new(SamplesMut::F32(&mut fit_and_rest[..3 * np]), w, h, 3, Layout::planar(w, h))?;
+            let r = self.fit_frame(&fit_frame, index, worker, &mut fit_out)?;
+            // (non-finite noisy samples were counted, and bridged, by the accumulation)
+            rep += Report { nonfinite_noisy: 0, ..r };
+        }
+        self.accumulate_filtered(history, planes);
+        self.taa(history, planes);
+
+        // 5. commit the new state and write the output
+        let hd = &mut *history.data;
+        hd[H_ACC * np..(H_COUNT + 1) * np].copy_from_slice(&planes[S_ACC * np..(S_COUNT + 1) * np]);
+        hd[H_FILT * np..(H_FILT + 3) * np].copy_from_slice(&planes[S_FIT * np..(S_FIT + 3) * np]);
+        hd[H_TAA * np..(H_TAA + 3) * np].copy_from_slice(&planes[S_TAA * np..(S_TAA + 3) * np]);
+        self.store_guides(&f, hd, rows)?;
+        for y in 0..h {
+            let o = S_TAA * np + y * w;
+            let (r, gb) = planes[o..o + 2 * np + w].split_at(np);
+            let src = [&r[..w], &gb[..w], &gb[np..np + w]];
+            out.write_row_n(y, 0, src).ok_or(Error::InvalidTile { index: y, count: h })?;
+        }
+        history.frames = history.frames.wrapping_add(1).max(1);
+        Ok(rep)
+    }
+
+    /// Reads the rejection guides of row `y` into `dst` (planes of `w`).
+    fn read_rejection_row(&self, f: &super::CheckedFrame<'_>, y: usize, dst: &mut [f32]) -> Result<(), Error> {
+        let rj = self.rejection();
+        let w = self.width;
+        let mut p = 0;
+        for (first, n) in [(rj.normal, 3), (rj.position, 3), (rj.depth, 1)] {
+            let Some(first) = first else { continue };
+            for c in 0..n {
+                let v = f.guides[first + c].as_ref().ok_or(Error::GuideMismatch)?;
+                v.read_row(y, 0, 0, &mut dst[p * w..(p + 1) * w]).ok_or(Error::InvalidTile { index: y, count: 0 })?;
+                p += 1;
+            }
+        }
+        Ok(())
+    }
+
+    fn store_guides(&self, f: &super::CheckedFrame<'_>, hd: &mut [f32], rows: &mut [f32]) -> Result<(), Error> {
+        let (w, np) = (self.width, self.plane());
+        let planes = self.rejection().planes;
+        for y in 0..self.height {
+            self.read_rejection_row(f, y, rows)?;
+            for p in 0..planes {
+                hd[(H_GUIDES + p) * np + y * w..(H_GUIDES + p) * np + (y + 1) * w].copy_from_slice(&rows[p * w..(p + 1) * w]);
+            }
+        }
+        Ok(())
+    }
+
+    /// Stage 1: reprojection, rejection and noisy accumulation → scratch planes.
+    fn accumulate_noisy(
+        &self,
+        f: &super::CheckedFrame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &History<'_>,
+        planes: &mut [f32],
+        rows: &mut [f32],
+    ) -> Result<Report, Error> {
+        let (w, h, np) = (self.width, self.height, self.plane());
+        let t = &self.cfg.temporal;
+        let rj = self.rejection();
+        let hd = &*history.data;
+        let has_history = history.frames > 0;
+        let mut rep = Report::default();
+        let bad = Error::InvalidTile { index: 0, count: 0 };
+        let (cur, rest) = rows.split_at_mut(7 * w);
+        let (rgb, mv) = rest.split_at_mut(3 * w);
+        for y in 0..h {
+            self.read_rejection_row(f, y, cur)?;
+            {
+                let (r, gb) = rgb.split_at_mut(w);
+                let (g, b) = gb.split_at_mut(w);
+                f.noisy.read_row_n(y, 0, [r, g, &mut b[..w]]).ok_or(bad)?;
+            }
+            match motion {
+                Some(m) if has_history => {
+                    let (mx, my) = mv.split_at_mut(w);
+                    m.read_row_n(y, 0, [mx, &mut my[..w]]).ok_or(bad)?;
+                }
+                _ => mv[..2 * w].fill(0.0),
+            }
+            for x in 0..w {
+                let i = y * w + x;
+                let c = [rgb[x], rgb[w + x], rgb[2 * w + x]];
+                let cur_ok = c.iter().all(|v| v.is_finite());
+                rep.nonfinite_noisy += !cur_ok as u64;
+                let (mx, my) = (mv[x], mv[w + x]);
+                let (mx, my) = if mx.is_finite() && my.is_finite() { (mx, my) } else { (0.0, 0.0) };
+                let (px, py) = (x as f32 + mx, y as f32 + my);
+                let mut accept = 0u32;
+                let (mut tw, mut spp, mut prev) = (0f32, 0f32, [0f32; 3]);
+                if has_history {
+                    let g = |p: usize| cur[p * w + x];
+                    for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
+                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || !(wt > 0.0) {
+                            continue;
+                        }
+                        let j = ty as usize * w + tx as usize;
+                        let hg = |p: usize| hd[(H_GUIDES + p) * np + j];
+                        let mut p = 0;
+                        let mut ok = true;
+                        if rj.normal.is_some() {
+                            let d2: f32 = (0..3).map(|c| (hg(c) - g(c)) * (hg(c) - g(c))).sum();
+                            ok &= d2 < t.normal_limit;
+                            p = 3;
+                        }
+                        let depth_plane = rj.depth.map(|_| p + 3 * rj.position.is_some() as usize);
+                        let depth = depth_plane.map(|d| g(d).abs());
+                        if rj.position.is_some() {
+                            let d2: f32 = (p..p + 3).map(|c| (hg(c) - g(c)) * (hg(c) - g(c))).sum();
+                            let lim = t.position_limit * depth.unwrap_or(1.0);
+                            ok &= d2 < lim * lim;
+                        } else if let Some(d) = depth_plane {
+                            ok &= (hg(d) - g(d)).abs() < t.depth_limit * g(d).abs();
+                        }
+                        let pc = [hd[H_ACC * np + j], hd[(H_ACC + 1) * np + j], hd[(H_ACC + 2) * np + j]];
+                        let n = hd[H_COUNT * np + j];
+                        ok &= pc.iter().all(|v| v.is_finite()) && n.is_finite();
+                        if ok {
+                            accept |= 1 << k;
+                            tw += wt;
+                            spp += wt * n;
+                            for ch in 0..3 {
+                                prev[ch] += wt * pc[ch];
+                            }
+                        }
+                    }
+                }
+                let (acc, count) = if tw > 0.0 {
+                    let spp = spp / tw;
+                    let prev = prev.map(|v| v / tw);
+                    if cur_ok {
+                        let a = (1.0 / (spp + 1.0)).max(t.noisy_alpha);
+                        ([0, 1, 2].map(|ch| a * c[ch] + (1.0 - a) * prev[ch]), spp.min(254.0) + 1.0)
+                    } else {
+                        (prev, spp) // bridge a NaN/Inf sample with the history
+                    }
+                } else {
+                    rep.history_rejected += has_history as u64;
+                    (c, 1.0)
+                };
+                for ch in 0..3 {
+                    planes[(S_ACC + ch) * np + i] = acc[ch];
+                }
+                planes[S_COUNT * np + i] = count;
+                planes[S_PREV * np + i] = px;
+                planes[(S_PREV + 1) * np + i] = py;
+                planes[S_ACCEPT * np + i] = accept as f32;
+            }
+        }
+        Ok(rep)
+    }
+
+    /// Stage 3: filtered accumulation, in place on the fit planes.
+    fn accumulate_filtered(&self, history: &History<'_>, planes: &mut [f32]) {
+        if history.frames == 0 {
+            return;
+        }
+        let (w, np) = (self.width, self.plane());
+        let hd = &*history.data;
+        let alpha = self.cfg.temporal.filtered_alpha;
+        for i in 0..np {
+            let accept = planes[S_ACCEPT * np + i] as u32;
+            if accept == 0 {
+                continue;
+            }
+            let (px, py) = (planes[S_PREV * np + i], planes[(S_PREV + 1) * np + i]);
+            let (mut tw, mut prev) = (0f32, [0f32; 3]);
+            for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
+                if accept & (1 << k) == 0 {
+                    continue;
+                }
+                let j = ty as usize * w + tx as usize;
+                let pc = [hd[H_FILT * np + j], hd[(H_FILT + 1) * np + j], hd[(H_FILT + 2) * np + j]];
+                if pc.iter().all(|v| v.is_finite()) {
+                    tw += wt;
+                    for ch in 0..3 {
+                        prev[ch] += wt * pc[ch];
+                    }
+                }
+            }
+            if tw > 0.0 {
+                let a = (1.0 / planes[S_COUNT * np + i]).max(alpha);
+                for ch in 0..3 {
+                    let f = &mut planes[(S_FIT + ch) * np + i];
+                    *f = a * *f + (1.0 - a) * prev[ch] / tw;
+                }
+            }
+        }
+    }
+
+    /// Stage 4: TAA with neighbourhood clamping in YCoCg → the TAA planes.
+    fn taa(&self, history: &History<'_>, planes: &mut [f32]) {
+        let (w, h, np) = (self.width, self.height, self.plane());
+        let hd = &*history.data;
+        let alpha = self.cfg.temporal.taa_alpha;
+        let (head, taa) = planes.split_at_mut(S_TAA * np);
+        let filt = &head[S_FIT * np..(S_FIT + 3) * np];
+        let at = |p: &[f32], i: usize| [p[i], p[np + i], p[2 * np + i]];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let cur = at(filt, i);
+                let (px, py) = (head[S_PREV * np + i], head[(S_PREV + 1) * np + i]);
+                let (fx, fy) = (libm::floorf(px), libm::floorf(py));
+                let outside = !(fx >= -1.0 && fy >= -1.0 && fx < w as f32 && fy < h as f32);
+                let mut res = cur;
+                if history.frames > 0 && !outside {
+                    let (mut bmin, mut bmax) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+                    let (mut cmin, mut cmax) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+                    for dy in -1i64..=1 {
+                        for dx in -1i64..=1 {
+                            let (sx, sy) = (x as i64 + dx, y as i64 + dy);
+                            if sx < 0 || sy < 0 || sx >= w as i64 || sy >= h as i64 {
+                                continue;
+                            }
+                            let s = ycocg(at(filt, sy as usize * w + sx as usize));
+                            for c in 0..3 {
+                                bmin[c] = bmin[c].min(s[c]);
+                                bmax[c] = bmax[c].max(s[c]);
+                                if dx == 0 || dy == 0 {
+                                    cmin[c] = cmin[c].min(s[c]);
+                                    cmax[c] = cmax[c].max(s[c]);
+                                }
+                            }
+                        }
+                    }
+                    let (mut tw, mut prev) = (0f32, [0f32; 3]);
+                    for (tx, ty, wt) in bilinear_taps(px, py) {
+                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 {
+                            continue;
+                        }
+                        let pc = at(&hd[H_TAA * np..(H_TAA + 3) * np], ty as usize * w + tx as usize);
+                        if pc.iter().all(|v| v.is_finite()) {
+                            tw += wt;
+                            for c in 0..3 {
+                                prev[c] += wt * pc[c];
+                            }
+                        }
+                    }
+                    if tw > 0.0 {
+                        let p = ycocg(prev.map(|v| v / tw));
+                        let clamped = [0, 1, 2].map(|c| p[c].clamp(0.5 * (bmin[c] + cmin[c]), 0.5 * (bmax[c] + cmax[c])));
+                        let prev = rgb(clamped);
+                        res = [0, 1, 2].map(|c| alpha * cur[c] + (1.0 - alpha) * prev[c]);
+                    }
+                }
+                for c in 0..3 {
+                    let v = res[c];
+                    let v = if self.cfg.clamp_negative { v.max(0.0) } else { v };
+                    taa[c * np + i] = if v.is_finite() { v } else { 0.0 };
+                }
+            }
+        }
+    }
+}
+
+/// The 4 bilinear taps `(x, y, weight)` around the continuous pixel
+/// position `(px, py)` (pixel centres at integers).
+fn bilinear_taps(px: f32, py: f32) -> [(i64, i64, f32); 4] {
+    let (fx, fy) = (libm::floorf(px), libm::floorf(py));
+    let (ax, ay) = (px - fx, py - fy);
+    let (ix, iy) = (fx as i64, fy as i64);
+    [
+        (ix, iy, (1.0 - ax) * (1.0 - ay)),
+        (ix + 1, iy, ax * (1.0 - ay)),
+        (ix, iy + 1, (1.0 - ax) * ay),
+        (ix + 1, iy + 1, ax * ay),
+    ]
+}
+
+/// RGB → YCoCg (the original's unnormalised form, ×4).
+fn ycocg(c: [f32; 3]) -> [f32; 3] {
+    [c[0] + 2.0 * c[1] + c[2], 2.0 * c[0] - 2.0 * c[2], -c[0] + 2.0 * c[1] - c[2]]
+}
+
+/// Inverse of [`ycocg`].
+fn rgb(c: [f32; 3]) -> [f32; 3] {
+    [0.25 * (c[0] + c[1] - c[2]), 0.25 * (c[0] + c[2]), 0.25 * (c[0] - c[1] - c[2])]
+}

@@ -1,0 +1,396 @@
+//! BMFR: the blockwise fit against an f64 oracle, rank-deficient blocks,
+//! stability over scale/offset/HDR/NaN, tiles, SIMD vs scalar, awkward sizes,
+//! and the temporal pipeline on a static-camera sequence.
+
+mod common;
+use common::*;
+use lrdenoise::bmfr::features::mirror as mirror_index;
+use lrdenoise::bmfr::{temporal::TemporalConfig, Report as BmfrReport};
+use lrdenoise::*;
+use proptest::prelude::*;
+
+const NP: GuideSet = GuideSet { normal: true, depth: false, position: true, ao: false, user: 0 };
+
+fn run(cfg: BmfrConfig, f: &Owned, index: u32) -> (Vec<f32>, BmfrReport) {
+    let b = Bmfr::new(cfg, f.w, f.h).unwrap();
+    let mut scratch = vec![0f32; b.scratch_len()];
+    let mut out = vec![f32::NAN; f.w * f.h * 3];
+    let rep = b.denoise(&f.frame(cfg.guides), index, &mut scratch, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap()).unwrap();
+    (out, rep)
+}
+
+fn rel_err(out: &[f32], clean: &[f32]) -> f64 {
+    let e: f64 = out.iter().zip(clean).map(|(a, b)| (a - b).abs() as f64).sum();
+    e / clean.iter().map(|b| b.abs() as f64).sum::<f64>()
+}
+
+/// A frame whose guides are random (well-conditioned blocks): depth and two
+/// user channels; light affine in them plus noise.
+fn random_guides(w: usize, h: usize, seed: u64) -> Owned {
+    let mut f = Owned::synthetic(w, h, seed, 0.5);
+    let mut rng = Rng(seed * 7 + 1);
+    f.user = (0..2).map(|_| (0..w * h).map(|_| rng.f32() * 3.0 - 1.0).collect()).collect();
+    for i in 0..w * h {
+        f.depth[i] = 1.0 + 4.0 * rng.f32();
+        for c in 0..3 {
+            let v = 0.5 + 0.1 * f.depth[i] + 0.2 * f.user[0][i] * (c as f32 - 1.0) + 0.05 * f.user[1][i];
+            f.clean[3 * i + c] = v;
+            f.noisy[3 * i + c] = v + 0.3 * (rng.f32() - 0.5);
+        }
+    }
+    f
+}
+
+/// The obvious f64 version of one noise-free BMFR frame: per block, features
+/// `1, d̂, û₁, û₂, d̂²` (hats: rescaled to [0,1] over the block, mirrored
+/// borders), normal equations solved by Gaussian elimination.
+fn oracle(b: &Bmfr, f: &Owned, index: u32) -> Vec<f64> {
+    let (w, h) = (f.w, f.h);
+    let bs = b.config().block;
+    let (x0, y0) = b.grid_origin(index);
+    let (nbx, nby) = b.block_grid(index);
+    let mut out = vec![0.0; 3 * w * h];
+    for by in 0..nby {
+        for bx in 0..nbx {
+            let (ox, oy) = (x0 + (bx * bs) as i64, y0 + (by * bs) as i64);
+            let mut px = vec![];
+            for j in 0..bs as i64 {
+                for i in 0..bs as i64 {
+                    px.push((mirror_index(ox + i, w), mirror_index(oy + j, h), ox + i, oy + j));
+                }
+            }
+            let raw: Vec<[f64; 3]> =
+                px.iter().map(|&(x, y, _, _)| [f.depth[y * w + x] as f64, f.user[0][y * w + x] as f64, f.user[1][y * w + x] as f64]).collect();
+            let mut lo = [f64::INFINITY; 3];
+            let mut hi = [f64::NEG_INFINITY; 3];
+            for r in &raw {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(r[k]);
+                    hi[k] = hi[k].max(r[k]);
+                }
+            }
+            let feats: Vec<Vec<f64>> = raw
+                .iter()
+                .map(|r| {
+                    let s: Vec<f64> = (0..3).map(|k| (r[k] - lo[k]) / (hi[k] - lo[k])).collect();
+                    vec![1.0, s[0], s[1], s[2], s[0] * s[0]]
+                })
+                .collect();
+            let m = 5;
+            let mut ata = vec![0.0; m * m];
+            let mut aty = vec![0.0; m * 3];
+            for (r, &(x, y, _, _)) in feats.iter().zip(&px) {
+                for a in 0..m {
+                    for c in 0..m {
+                        ata[a * m + c] += r[a] * r[c];
+                    }
+                    for c in 0..3 {
+                        aty[a * 3 + c] += r[a] * f.noisy[3 * (y * w + x) + c] as f64;
+                    }
+                }
+            }
+            let coef = gauss(ata, m, aty, 3);
+            for (r, &(x, y, ux, uy)) in feats.iter().zip(&px) {
+                if ux < 0 || uy < 0 || ux as usize >= w || uy as usize >= h {
+                    continue;
+                }
+                for c in 0..3 {
+                    out[3 * (y * w + x) + c] = (0..m).map(|a| r[a] * coef[a * 3 + c]).sum::<f64>().max(0.0);
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn matches_f64_oracle_without_noise() {
+    let set = GuideSet { depth: true, user: 2, ..GuideSet::NONE };
+    for (w, h, block, index) in [(70, 50, 32, 0u32), (64, 64, 16, 5), (40, 33, 8, 11)] {
+        let f = random_guides(w, h, w as u64);
+        let cfg = BmfrConfig { noise: 0.0, block, ..BmfrConfig::with_guides(set) };
+        let b = Bmfr::new(cfg, w, h).unwrap();
+        assert_eq!(b.feature_count(), 5);
+        let (out, rep) = run(cfg, &f, index);
+        assert_eq!(rep.dropped_features, 0);
+        let want = oracle(&b, &f, index);
+        let (mean, max) = diff(&out, &want);
+        assert!(max < 2e-3 && mean < 2e-4, "{w}x{h} B={block}: mean {mean:.2e} max {max:.2e}");
+    }
+}
+
+#[test]
+fn stochastic_regularisation_changes_little_and_is_deterministic() {
+    let set = GuideSet { depth: true, user: 2, ..GuideSet::NONE };
+    let f = random_guides(64, 48, 3);
+    let (a, _) = run(BmfrConfig::with_guides(set), &f, 2);
+    let (b, _) = run(BmfrConfig::with_guides(set), &f, 2);
+    let (c, _) = run(BmfrConfig { noise: 0.0, ..BmfrConfig::with_guides(set) }, &f, 2);
+    assert_eq!(a, b, "same frame index → same noise → same output");
+    let d = rel_err(&a, &c);
+    assert!(d > 0.0 && d < 0.02, "regularisation changed the fit by {d}");
+    let (e, _) = run(BmfrConfig::with_guides(set), &f, 3);
+    assert_ne!(a, e, "the frame index moves the grid and the noise");
+}
+
+/// A flat wall: constant normal, positions on a plane (p_z constant, p_x and
+/// p_y linear: p² is a function of p): every feature but a few is redundant.
+fn wall(w: usize, h: usize, sky_from: usize) -> Owned {
+    let mut f = Owned::synthetic(w, h, 9, 0.5);
+    let mut rng = Rng(77);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let sky = x >= sky_from;
+            let n = if sky { [0.0; 3] } else { [0.0, 0.0, 1.0] };
+            let p = if sky { [0.0; 3] } else { [x as f32 * 0.01, y as f32 * 0.01, 5.0] };
+            f.normal[3 * i..3 * i + 3].copy_from_slice(&n);
+            f.position[3 * i..3 * i + 3].copy_from_slice(&p);
+            for c in 0..3 {
+                let v = if sky { 0.0 } else { 0.3 + 0.001 * x as f32 + 0.1 * c as f32 };
+                f.clean[3 * i + c] = v;
+                f.noisy[3 * i + c] = if sky { 0.0 } else { v * 2.0 * rng.f32() };
+            }
+        }
+    }
+    f
+}
+
+#[test]
+fn rank_deficient_blocks_are_finite_and_sensible() {
+    for noise in [0.0, 0.01] {
+        for sky_from in [200, 50, 0] {
+            let f = wall(96, 64, sky_from);
+            let cfg = BmfrConfig { noise, ..BmfrConfig::with_guides(NP) };
+            let (out, rep) = run(cfg, &f, 0);
+            assert!(out.iter().all(|v| v.is_finite() && *v >= 0.0));
+            if noise == 0.0 {
+                assert!(rep.dropped_features > 0, "the constant normal must be dropped");
+            }
+            for y in 0..f.h {
+                for x in 0..f.w {
+                    let i = y * f.w + x;
+                    if x >= sky_from {
+                        // (a least-squares fit: ~0, not exactly 0; albedo is 0 there anyway)
+                        assert!(out[3 * i..3 * i + 3].iter().all(|&v| v.abs() < 5e-3), "sky stays black: {:?}", &out[3 * i..3 * i + 3]);
+                    }
+                }
+            }
+            if sky_from > 0 {
+                // the wall: a smooth ramp, estimated from 1-spp-like noise
+                let (o, c): (Vec<f32>, Vec<f32>) =
+                    (0..f.w * f.h).filter(|i| i % f.w < sky_from).flat_map(|i| (0..3).map(move |c| 3 * i + c)).map(|k| (out[k], f.clean[k])).unzip();
+                let e = rel_err(&o, &c);
+                assert!(e < 0.08, "noise {noise} sky_from {sky_from}: wall error {e}");
+            }
+        }
+    }
+}
+
+#[test]
+fn nonfinite_inputs_are_excluded_and_counted() {
+    let mut f = Owned::synthetic(80, 40, 4, 0.5);
+    f.noisy[3 * 100] = f32::NAN;
+    f.noisy[3 * 200 + 1] = f32::INFINITY;
+    f.position[3 * 300] = f32::NAN;
+    f.normal[3 * 400 + 2] = f32::NEG_INFINITY;
+    let (out, rep) = run(BmfrConfig::with_guides(NP), &f, 0);
+    assert!(out.iter().all(|v| v.is_finite()));
+    assert_eq!(rep.nonfinite_noisy, 2);
+    assert_eq!(rep.nonfinite_guides, 2);
+    assert_eq!(rep.fallback_pixels, 2);
+    let (clean_out, _) = run(BmfrConfig::with_guides(NP), &Owned::synthetic(80, 40, 4, 0.5), 0);
+    assert!(rel_err(&out, &clean_out) < 0.02, "a few bad samples must not spread");
+}
+
+#[test]
+fn tiles_in_any_order_equal_the_whole_frame() {
+    let f = Owned::synthetic(150, 97, 5, 0.5);
+    let cfg = BmfrConfig::with_guides(NP);
+    let b = Bmfr::new(cfg, f.w, f.h).unwrap();
+    for index in [0u32, 7] {
+        let (whole, _) = run(cfg, &f, index);
+        let frame = b.check_frame(&f.frame(NP)).unwrap();
+        let mut out = vec![0f32; f.w * f.h * 3];
+        let mut worker = vec![0f32; b.worker_len()];
+        for t in (0..b.tile_count(index)).rev() {
+            let (y0, y1) = b.tile_pixel_rows(index, t).unwrap();
+            let mut view = ImageViewMut::interleaved(&mut out[3 * f.w * y0..3 * f.w * y1], f.w, y1 - y0, 3).unwrap();
+            b.fit_tile(&frame, index, t, &mut worker, &mut view).unwrap();
+        }
+        assert_eq!(out, whole);
+    }
+}
+
+#[test]
+fn simd_matches_scalar() {
+    let f = Owned::synthetic(128, 96, 6, 0.6);
+    let (a, _) = run(BmfrConfig::with_guides(NP), &f, 1);
+    let (b, _) = run(BmfrConfig { kernel: Kernel::Scalar, ..BmfrConfig::with_guides(NP) }, &f, 1);
+    let m = a.iter().zip(&b).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max);
+    assert!(m < 1e-2, "max relative difference {m}");
+    assert!(rel_err(&a, &b) < 1e-4);
+}
+
+#[test]
+fn awkward_sizes() {
+    for (w, h) in [(1, 1), (7, 3), (255, 9), (256, 9), (257, 9), (33, 65), (5, 70)] {
+        let f = Owned::synthetic(w, h, 8, 0.5);
+        for set in [NP, GuideSet::NORMAL_DEPTH, GuideSet::NONE, GuideSet { ao: true, user: 0, ..GuideSet::NORMAL_DEPTH }] {
+            for index in [0, 3] {
+                let (out, _) = run(BmfrConfig::with_guides(set), &f, index);
+                assert!(out.iter().all(|v| v.is_finite()), "{w}x{h} {set:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn grid_shift_covers_every_pixel_once() {
+    let b = Bmfr::new(BmfrConfig::default(), 100, 70).unwrap();
+    for index in 0..16 {
+        let (x0, y0) = b.grid_origin(index);
+        assert!(x0 <= 0 && x0 > -32 && y0 <= 0 && y0 > -32);
+        let rows: Vec<_> = (0..b.tile_count(index)).map(|t| b.tile_pixel_rows(index, t).unwrap()).collect();
+        assert_eq!(rows[0].0, 0);
+        assert_eq!(rows.last().unwrap().1, 70);
+        assert!(rows.windows(2).all(|p| p[0].1 == p[1].0 && p[0].0 < p[0].1));
+    }
+}
+
+#[test]
+fn typed_errors() {
+    let f = Owned::synthetic(40, 30, 1, 0.5);
+    assert!(matches!(Bmfr::new(BmfrConfig { block: 4, ..Default::default() }, 40, 30), Err(Error::InvalidConfig(_))));
+    assert!(matches!(Bmfr::new(BmfrConfig { noise: f32::NAN, ..Default::default() }, 40, 30), Err(Error::InvalidConfig(_))));
+    let bad_t = TemporalConfig { noisy_alpha: 0.0, ..Default::default() };
+    assert!(matches!(Bmfr::new(BmfrConfig { temporal: bad_t, ..Default::default() }, 40, 30), Err(Error::InvalidConfig(_))));
+    let all = GuideSet { normal: true, depth: true, position: true, ao: true, user: 4 };
+    assert_eq!(Bmfr::new(BmfrConfig::with_guides(all), 40, 30).unwrap().feature_count(), 16, "every guide + 3 squares fits");
+    assert!(matches!(Bmfr::new(BmfrConfig::default(), 0, 30), Err(Error::InvalidSize { .. })));
+    let b = Bmfr::new(BmfrConfig::with_guides(NP), 40, 30).unwrap();
+    let mut out = vec![0f32; 40 * 30 * 3];
+    let mut small = vec![0f32; b.scratch_len() - 1];
+    let mut ov = ImageViewMut::interleaved(&mut out, 40, 30, 3).unwrap();
+    assert!(matches!(b.denoise(&f.frame(NP), 0, &mut small, &mut ov), Err(Error::ScratchTooSmall { .. })));
+    let mut scratch = vec![0f32; b.scratch_len()];
+    assert_eq!(b.denoise(&f.frame(GuideSet::NORMAL_DEPTH), 0, &mut scratch, &mut ov).unwrap_err(), Error::GuideMismatch);
+    let mut hist = vec![0f32; b.history_len() - 1];
+    let mut ts = vec![0f32; b.temporal_scratch_len()];
+    let mut h = History::new(&mut hist);
+    assert!(matches!(b.denoise_temporal(&f.frame(NP), None, &mut h, &mut ts, &mut ov), Err(Error::BufferTooSmall { .. })));
+    let mut hist = vec![0f32; b.history_len()];
+    let mut h = History::new(&mut hist);
+    let one = vec![0f32; 40 * 30];
+    let m1 = ImageView::interleaved(&one, 40, 30, 1).unwrap();
+    assert!(matches!(b.denoise_temporal(&f.frame(NP), Some(&m1), &mut h, &mut ts, &mut ov), Err(Error::ChannelCount { .. })));
+}
+
+/// A static-camera sequence: the same scene, fresh 1-spp-like noise per frame.
+fn static_sequence(frames: usize) -> Vec<Owned> {
+    let base = Owned::synthetic(96, 80, 12, 0.8);
+    (0..frames)
+        .map(|k| {
+            let mut f = base.clone();
+            let mut rng = Rng(1000 + k as u64);
+            for (n, c) in f.noisy.iter_mut().zip(&base.clean) {
+                let u = rng.f32();
+                *n = c * if u < 0.7 { 0.3 } else { 0.3 + 0.7 / 0.3 * 1.0 * (u - 0.7) / 0.3 * 2.0 };
+            }
+            f
+        })
+        .collect()
+}
+
+#[test]
+fn temporal_accumulation_lowers_the_error_frame_over_frame() {
+    let seq = static_sequence(8);
+    let (w, h) = (seq[0].w, seq[0].h);
+    for set in [NP, GuideSet::NORMAL_DEPTH] {
+        let b = Bmfr::new(BmfrConfig::with_guides(set), w, h).unwrap();
+        let mut hist = vec![0f32; b.history_len()];
+        let mut history = History::new(&mut hist);
+        let mut scratch = vec![0f32; b.temporal_scratch_len()];
+        let zero = vec![0f32; 2 * w * h];
+        let motion = ImageView::interleaved(&zero, w, h, 2).unwrap();
+        let mut errs = vec![];
+        let mut single = vec![];
+        for (k, f) in seq.iter().enumerate() {
+            let mut out = vec![0f32; 3 * w * h];
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            let rep = b.denoise_temporal(&f.frame(set), Some(&motion), &mut history, &mut scratch, &mut ov).unwrap();
+            assert_eq!(rep.history_rejected, 0, "static camera: nothing to reject");
+            assert!(out.iter().all(|v| v.is_finite()));
+            errs.push(rel_err(&out, &f.clean));
+            single.push(rel_err(&run(BmfrConfig::with_guides(set), f, k as u32).0, &f.clean));
+        }
+        assert_eq!(history.frames(), 8);
+        for k in 1..errs.len() {
+            assert!(errs[k] < errs[k - 1] * 1.02, "{set:?}: error rose at frame {k}: {errs:?}");
+        }
+        assert!(errs[7] < 0.6 * errs[0], "{set:?}: {errs:?}");
+        assert!(errs[7] < 0.6 * single[7], "{set:?}: temporal {} vs single {}", errs[7], single[7]);
+    }
+}
+
+#[test]
+fn temporal_rejects_disocclusions_and_survives_nan() {
+    let seq = static_sequence(3);
+    let (w, h) = (seq[0].w, seq[0].h);
+    let b = Bmfr::new(BmfrConfig::with_guides(NP), w, h).unwrap();
+    let mut hist = vec![0f32; b.history_len()];
+    let mut history = History::new(&mut hist);
+    let mut scratch = vec![0f32; b.temporal_scratch_len()];
+    let mut out = vec![0f32; 3 * w * h];
+    let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+    b.denoise_temporal(&seq[0].frame(NP), None, &mut history, &mut scratch, &mut ov).unwrap();
+    // frame 1: the left half moves 10 units away (a new surface)
+    let mut f1 = seq[1].clone();
+    for i in 0..w * h {
+        if i % w < w / 2 {
+            f1.position[3 * i + 1] += 10.0;
+        }
+    }
+    f1.noisy[7] = f32::NAN;
+    let rep = b.denoise_temporal(&f1.frame(NP), None, &mut history, &mut scratch, &mut ov).unwrap();
+    assert_eq!(rep.history_rejected as usize, h * (w / 2));
+    assert_eq!(rep.nonfinite_noisy, 1);
+    // motion that points outside the image rejects everything
+    let far = vec![1e4f32; 2 * w * h];
+    let mv = ImageView::interleaved(&far, w, h, 2).unwrap();
+    let rep = b.denoise_temporal(&seq[2].frame(NP), Some(&mv), &mut history, &mut scratch, &mut ov).unwrap();
+    assert_eq!(rep.history_rejected as usize, w * h);
+    drop(ov);
+    assert!(out.iter().all(|v| v.is_finite()));
+    history.reset();
+    assert_eq!(history.frames(), 0);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    /// Positions at any offset and scale, light at any scale: finite output,
+    /// invariant to the positions' affine change (per-block rescaling), and
+    /// linear in the light's scale.
+    #[test]
+    fn stable_over_offset_scale_and_hdr(seed in 0u64..1000, log_scale in -3.0f32..3.0, offset in -1e4f32..1e4, log_light in -8.0f32..6.0) {
+        let f = Owned::synthetic(48, 40, seed, 0.6);
+        let (base, _) = run(BmfrConfig::with_guides(NP), &f, seed as u32);
+        let mut g = f.clone();
+        let s = 10f32.powf(log_scale);
+        for p in g.position.iter_mut() {
+            *p = *p * s + offset;
+        }
+        let l = 10f32.powf(log_light);
+        for v in g.noisy.iter_mut() {
+            *v *= l;
+        }
+        let (out, _) = run(BmfrConfig::with_guides(NP), &g, seed as u32);
+        prop_assert!(out.iter().all(|v| v.is_finite()));
+        let scaled: Vec<f32> = out.iter().map(|v| v / l).collect();
+        // f32 positions near 1e4 keep ~1e-3 absolute resolution, which the
+        // per-block range (≥ 0.1·scale) turns into a small relative error.
+        let tol = if offset.abs() * 1e-6 > 1e-4 * s { 0.05 } else { 2e-3 };
+        let e = rel_err(&scaled, &base);
+        prop_assert!(e < tol, "scale {} offset {} light {}: {}", s, offset, l, e);
+    }
+}
