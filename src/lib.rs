@@ -44,12 +44,12 @@ pub mod guides;
 pub mod image;
 pub mod kernels;
 
+#[cfg(feature = "bmfr")]
+pub use bmfr::{Bmfr, BmfrConfig, History};
 pub use config::{Blur, FlrConfig, Kernel, Regularization};
 pub use error::{Arg, Error};
 #[cfg(feature = "flr")]
 pub use flr::{CheckedFrame, Flr, Parts, Report, Stats};
-#[cfg(feature = "bmfr")]
-pub use bmfr::{Bmfr, BmfrConfig, History};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
 

@@ -59,8 +59,10 @@ fn oracle(b: &Bmfr, f: &Owned, index: u32) -> Vec<f64> {
                     px.push((mirror_index(ox + i, w), mirror_index(oy + j, h), ox + i, oy + j));
                 }
             }
-            let raw: Vec<[f64; 3]> =
-                px.iter().map(|&(x, y, _, _)| [f.depth[y * w + x] as f64, f.user[0][y * w + x] as f64, f.user[1][y * w + x] as f64]).collect();
+            let raw: Vec<[f64; 3]> = px
+                .iter()
+                .map(|&(x, y, _, _)| [f.depth[y * w + x] as f64, f.user[0][y * w + x] as f64, f.user[1][y * w + x] as f64])
+                .collect();
             let mut lo = [f64::INFINITY; 3];
             let mut hi = [f64::NEG_INFINITY; 3];
             for r in &raw {
@@ -178,8 +180,11 @@ fn rank_deficient_blocks_are_finite_and_sensible() {
             }
             if sky_from > 0 {
                 // the wall: a smooth ramp, estimated from 1-spp-like noise
-                let (o, c): (Vec<f32>, Vec<f32>) =
-                    (0..f.w * f.h).filter(|i| i % f.w < sky_from).flat_map(|i| (0..3).map(move |c| 3 * i + c)).map(|k| (out[k], f.clean[k])).unzip();
+                let (o, c): (Vec<f32>, Vec<f32>) = (0..f.w * f.h)
+                    .filter(|i| i % f.w < sky_from)
+                    .flat_map(|i| (0..3).map(move |c| 3 * i + c))
+                    .map(|k| (out[k], f.clean[k]))
+                    .unzip();
                 let e = rel_err(&o, &c);
                 assert!(e < 0.08, "noise {noise} sky_from {sky_from}: wall error {e}");
             }
@@ -360,7 +365,6 @@ fn temporal_rejects_disocclusions_and_survives_nan() {
     let mv = ImageView::interleaved(&far, w, h, 2).unwrap();
     let rep = b.denoise_temporal(&seq[2].frame(NP), Some(&mv), &mut history, &mut scratch, &mut ov).unwrap();
     assert_eq!(rep.history_rejected as usize, w * h);
-    drop(ov);
     assert!(out.iter().all(|v| v.is_finite()));
     history.reset();
     assert_eq!(history.frames(), 0);

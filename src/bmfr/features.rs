@@ -14,9 +14,6 @@ use crate::error::Error;
 use crate::guides::{GuideSet, MAX_GUIDES};
 use crate::image::ImageView;
 
-/// Most block edge (64) — sizes the per-row buffers.
-const MAX_BLOCK: usize = 64;
-
 /// Which guide channels become which features.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FeatureSet {
@@ -79,7 +76,7 @@ impl FeatureSet {
 
 /// f32 values of a worker for `n` rows and `m` features.
 pub const fn worker_len(n: usize, m: usize) -> usize {
-    n * (m + 3) + n * m + 2 * n + 3 * MAX_BLOCK
+    n * (m + 3) + n * m + 2 * n
 }
 
 /// A worker buffer split into its regions.
@@ -91,8 +88,6 @@ pub struct Worker<'w> {
     pub guide_ok: &'w mut [f32],
     /// 1 where the row takes part in the fit.
     pub valid: &'w mut [f32],
-    /// One output row, planar RGB.
-    pub out: &'w mut [f32],
 }
 
 impl<'w> Worker<'w> {
@@ -103,8 +98,8 @@ impl<'w> Worker<'w> {
         let (a, rest) = buf.split_at_mut(n * (m + 3));
         let (clean, rest) = rest.split_at_mut(n * m);
         let (guide_ok, rest) = rest.split_at_mut(n);
-        let (valid, rest) = rest.split_at_mut(n);
-        Some(Worker { a, clean, guide_ok, valid, out: &mut rest[..3 * MAX_BLOCK] })
+        let valid = &mut rest[..n];
+        Some(Worker { a, clean, guide_ok, valid })
     }
 }
 
@@ -125,11 +120,10 @@ fn read_span(v: &ImageView<'_>, c: usize, y: usize, x0: i64, dst: &mut [f32]) ->
     if b > a {
         v.read_row(y, c, a as usize, &mut dst[(a - x0) as usize..(b - x0) as usize])?;
     }
-    for (i, d) in dst.iter_mut().enumerate() {
-        let x = x0 + i as i64;
-        if x < 0 || x >= w {
-            *d = v.get(mirror(x, w as usize), y, c)?;
-        }
+    // the mirrored margins, pixel by pixel
+    let (left, right) = ((a - x0).min(len) as usize, ((b - x0).max(0) as usize).max((a - x0).min(len) as usize));
+    for i in (0..left).chain(right..dst.len()) {
+        dst[i] = v.get(mirror(x0 + i as i64, w as usize), y, c)?;
     }
     Some(())
 }
@@ -152,30 +146,65 @@ fn finite(x: f32) -> bool {
     x.abs() <= f32::MAX
 }
 
+/// The frame rows of one tile (a row of blocks), one plane per channel
+/// (noisy r, g, b, then the guide channels), `rows` rows of `stride` pixels
+/// starting at the grid's left edge, with mirrored margins filled in.
+#[derive(Debug)]
+pub struct Band<'b> {
+    pub data: &'b mut [f32],
+    pub rows: usize,
+    pub stride: usize,
+}
+
+impl Band<'_> {
+    /// f32 values of a band for `channels` channels.
+    pub const fn len(channels: usize, rows: usize, stride: usize) -> usize {
+        channels * rows * stride
+    }
+    /// Reads the rows `y0..y0 + rows` (mirrored) of every channel, columns
+    /// `x0..x0 + stride` (mirrored): each frame row is read once per channel.
+    pub fn fill(&mut self, frame: &CheckedFrame<'_>, q: usize, (x0, y0): (i64, i64), h: usize) -> Result<(), Error> {
+        let bad = Error::InvalidTile { index: 0, count: 0 };
+        let plane = self.rows * self.stride;
+        for j in 0..self.rows {
+            let y = mirror(y0 + j as i64, h);
+            for ch in 0..3 + q {
+                let dst = &mut self.data[ch * plane + j * self.stride..ch * plane + (j + 1) * self.stride];
+                if ch < 3 {
+                    read_span(&frame.noisy, ch, y, x0, dst).ok_or(bad)?;
+                } else {
+                    let v = frame.guides[ch - 3].as_ref().ok_or(Error::GuideMismatch)?;
+                    read_span(v, 0, y, x0, dst).ok_or(bad)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Fills `wb.clean` (features, rescaled, squared) and the noisy columns of
-/// `wb.a` for the block whose top-left pixel is `origin`; invalid rows are 0.
+/// `wb.a` for block `bx` of the band; `origin` is the block's top-left pixel
+/// (for counting only pixels inside the image). Invalid rows are 0.
 pub fn gather_block(
     fs: &FeatureSet,
-    frame: &CheckedFrame<'_>,
+    band: &Band<'_>,
+    bx: usize,
     (w, h): (usize, usize),
     origin: (i64, i64),
-    b: usize,
     wb: &mut Worker<'_>,
 ) -> Result<Gathered, Error> {
+    let b = band.rows;
     let n = b * b;
     let m = fs.count();
     let q = fs.q;
-    let bad = Error::InvalidTile { index: 0, count: 0 };
+    let plane = band.rows * band.stride;
     for j in 0..b {
-        let y = mirror(origin.1 + j as i64, h);
+        let src = |ch: usize| &band.data[ch * plane + j * band.stride + bx * b..ch * plane + j * band.stride + (bx + 1) * b];
         for c in 0..3 {
-            let dst = &mut wb.a[(m + c) * n + j * b..(m + c) * n + (j + 1) * b];
-            read_span(&frame.noisy, c, y, origin.0, dst).ok_or(bad)?;
+            wb.a[(m + c) * n + j * b..(m + c) * n + (j + 1) * b].copy_from_slice(src(c));
         }
         for g in 0..q {
-            let v = frame.guides[g].as_ref().ok_or(Error::GuideMismatch)?;
-            let dst = &mut wb.clean[(1 + g) * n + j * b..(1 + g) * n + (j + 1) * b];
-            read_span(v, 0, y, origin.0, dst).ok_or(bad)?;
+            wb.clean[(1 + g) * n + j * b..(1 + g) * n + (j + 1) * b].copy_from_slice(src(3 + g));
         }
     }
     // Validity masks: guide_ok (own guides finite), valid (guides and noisy).
@@ -218,9 +247,12 @@ pub fn gather_block(
             }
         }
     }
-    for c in 0..3 {
-        let s: f64 = wb.a[(m + c) * n..(m + c + 1) * n].iter().map(|&v| v as f64).sum();
-        g.mean[c] = if g.valid > 0 { (s / g.valid as f64) as f32 } else { 0.0 };
+    if wb.guide_ok.contains(&0.0) {
+        // only needed as the fallback of pixels with non-finite guides
+        for c in 0..3 {
+            let s: f64 = wb.a[(m + c) * n..(m + c + 1) * n].iter().map(|&v| v as f64).sum();
+            g.mean[c] = if g.valid > 0 { (s / g.valid as f64) as f32 } else { 0.0 };
+        }
     }
     // Per-block rescaling to [0, 1] over the valid rows.
     for f in 0..q {
@@ -228,11 +260,7 @@ pub fn gather_block(
             continue;
         }
         let col = &mut feats[f * n..(f + 1) * n];
-        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (&v, &ok) in col.iter().zip(valid.iter()) {
-            lo = if ok != 0.0 { lo.min(v) } else { lo };
-            hi = if ok != 0.0 { hi.max(v) } else { hi };
-        }
+        let (lo, hi) = min_max(col, valid);
         let range = hi - lo;
         if range > 0.0 && range.is_finite() {
             let inv = 1.0 / range;
@@ -252,6 +280,29 @@ pub fn gather_block(
         }
     }
     Ok(g)
+}
+
+/// Minimum and maximum of `v` over the rows where `mask != 0` (f32x8 lanes).
+fn min_max(v: &[f32], mask: &[f32]) -> (f32, f32) {
+    use wide::f32x8;
+    let (mut lo, mut hi) = (f32x8::splat(f32::INFINITY), f32x8::splat(f32::NEG_INFINITY));
+    let (vc, mc) = (v.chunks_exact(8), mask.chunks_exact(8));
+    let (vr, mr) = (vc.remainder(), mc.remainder());
+    for (x, m) in vc.zip(mc) {
+        let x = f32x8::from(<[f32; 8]>::try_from(x).unwrap_or([0.0; 8]));
+        let keep = f32x8::from(<[f32; 8]>::try_from(m).unwrap_or([0.0; 8])).simd_ne(f32x8::ZERO);
+        lo = keep.select(lo.fast_min(x), lo);
+        hi = keep.select(hi.fast_max(x), hi);
+    }
+    let (mut l, mut h) =
+        (lo.to_array().into_iter().fold(f32::INFINITY, f32::min), hi.to_array().into_iter().fold(f32::NEG_INFINITY, f32::max));
+    for (&x, &m) in vr.iter().zip(mr) {
+        if m != 0.0 {
+            l = l.min(x);
+            h = h.max(x);
+        }
+    }
+    (l, h)
 }
 
 /// Per-(frame, block) seed of the regularisation noise.

@@ -29,7 +29,7 @@ use crate::error::{Arg, Error};
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::qr::{lstsq, MAX_FEATURES};
-use features::{gather_block, FeatureSet};
+use features::{gather_block, Band, FeatureSet};
 
 pub use temporal::History;
 
@@ -229,9 +229,12 @@ impl Bmfr {
         Ok((a, b))
     }
 
-    /// f32 values of one worker's private buffer (one block's matrices).
+    /// f32 values of one worker's private buffer: one block's matrices, the
+    /// tile's input rows (3 + Q planes) and output rows (3 planes).
     pub fn worker_len(&self) -> usize {
-        features::worker_len(self.cfg.block * self.cfg.block, self.fs.count())
+        let b = self.cfg.block;
+        let stride = (self.width + b).div_ceil(b) * b;
+        features::worker_len(b * b, self.fs.count()) + Band::len(3 + self.fs.q, b, stride) + 3 * b * self.width
     }
     /// Scratch length (f32) for [`Bmfr::denoise`].
     pub fn scratch_len(&self) -> usize {
@@ -256,7 +259,11 @@ impl Bmfr {
 
     fn check_out(&self, out: &ImageViewMut<'_>, rows: (usize, usize)) -> Result<(), Error> {
         if out.width() != self.width || out.height() != rows.1 - rows.0 || out.channel_count() < 3 {
-            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, rows.1 - rows.0), got: (out.width(), out.height()) });
+            return Err(Error::SizeMismatch {
+                arg: Arg::Output,
+                expected: (self.width, rows.1 - rows.0),
+                got: (out.width(), out.height()),
+            });
         }
         Ok(())
     }
@@ -279,38 +286,54 @@ impl Bmfr {
         }
         let (x0, y0) = self.grid_origin(index);
         let b = self.cfg.block;
+        let (n, m, w) = (b * b, self.fs.count(), self.width);
         let (bx_n, _) = self.block_grid(index);
+        let stride = bx_n * b;
+        let (blk, rest) = worker.split_at_mut(features::worker_len(n, m));
+        let (band, outp) = rest.split_at_mut(Band::len(3 + self.fs.q, b, stride));
+        let mut wb = features::Worker::split(blk, n, m).ok_or(Error::ScratchTooSmall { needed: self.worker_len(), got: 0 })?;
+        let mut band = Band { data: band, rows: b, stride };
+        let ty0 = y0 + (t * b) as i64;
+        band.fill(frame, self.fs.q, (x0, ty0), self.height)?;
         let mut rep = Report::default();
+        let nrows = rows.1 - rows.0;
+        let outp = &mut outp[..3 * b * w];
         for bx in 0..bx_n {
-            let origin = (x0 + (bx * b) as i64, y0 + (t * b) as i64);
+            let origin = (x0 + (bx * b) as i64, ty0);
             let block_id = (t * bx_n + bx) as u32;
-            rep += self.fit_block(frame, index, block_id, origin, rows.0, worker, out_band)?;
+            rep += self.fit_block(&band, bx, index, block_id, origin, &mut wb, outp)?;
+        }
+        for r in 0..nrows {
+            let (pr, gb) = outp.split_at(b * w);
+            let (pg, pb) = gb.split_at(b * w);
+            let src = [&pr[r * w..(r + 1) * w], &pg[r * w..(r + 1) * w], &pb[r * w..(r + 1) * w]];
+            out_band.write_row_n(r, 0, src).ok_or(Error::InvalidTile { index: t, count: 0 })?;
         }
         Ok(rep)
     }
 
+    /// Fits block `bx` of the band and writes its pixels inside the image
+    /// into the tile's output planes (`3 × B × width`, rows from the tile's first
+    /// row inside the image).
     #[allow(clippy::too_many_arguments)]
     fn fit_block(
         &self,
-        frame: &CheckedFrame<'_>,
+        band: &Band<'_>,
+        bx: usize,
         index: u32,
         block_id: u32,
         origin: (i64, i64),
-        band_y0: usize,
-        worker: &mut [f32],
-        out_band: &mut ImageViewMut<'_>,
+        wb: &mut features::Worker<'_>,
+        outp: &mut [f32],
     ) -> Result<Report, Error> {
         let b = self.cfg.block;
-        let n = b * b;
-        let m = self.fs.count();
+        let (n, m, w) = (b * b, self.fs.count(), self.width);
         let simd = self.cfg.kernel == Kernel::Simd;
-        let mut wb = features::Worker::split(worker, n, m).ok_or(Error::ScratchTooSmall { needed: self.worker_len(), got: 0 })?;
         let mut rep = Report::default();
-        let g = gather_block(&self.fs, frame, (self.width, self.height), origin, b, &mut wb)?;
+        let g = gather_block(&self.fs, band, bx, (w, self.height), origin, wb)?;
         rep.nonfinite_noisy += g.nonfinite_noisy;
         rep.nonfinite_guides += g.nonfinite_guides;
-        let seed = features::seed(index, block_id);
-        features::regularize(&self.fs, &mut wb, n, self.cfg.noise, seed);
+        features::regularize(&self.fs, wb, n, self.cfg.noise, features::seed(index, block_id));
         let mut coef = [0f32; MAX_FEATURES * 3];
         if g.valid > 0 {
             let fit = lstsq(wb.a, n, m, 3, self.cfg.pivot_tol, simd, &mut coef[..m * 3]).ok_or(Error::Unsupported("QR sizes"))?;
@@ -320,7 +343,7 @@ impl Bmfr {
         }
         // Apply to the block's pixels inside the image.
         let xa = origin.0.max(0) as usize;
-        let xb = ((origin.0 + b as i64).max(0) as usize).min(self.width);
+        let xb = ((origin.0 + b as i64).max(0) as usize).min(w);
         let ya = origin.1.max(0) as usize;
         let yb = ((origin.1 + b as i64).max(0) as usize).min(self.height);
         if xa >= xb {
@@ -328,34 +351,34 @@ impl Bmfr {
         }
         let len = xb - xa;
         let dx = (xa as i64 - origin.0) as usize;
-        for y in ya..yb {
-            let j = (y as i64 - origin.1) as usize;
-            let r0 = j * b + dx;
-            let out = &mut wb.out[..3 * len];
-            let (o_r, o_gb) = out.split_at_mut(len);
-            let (o_g, o_b) = o_gb.split_at_mut(len);
-            let outs = [o_r, o_g, o_b];
-            for (c, o) in outs.into_iter().enumerate() {
-                o.fill(0.0);
-                for f in 0..m {
-                    let w = coef[f * 3 + c];
-                    let col = &wb.clean[f * n + r0..f * n + r0 + len];
-                    for (o, v) in o.iter_mut().zip(col) {
-                        *o += w * v;
-                    }
-                }
-                let gv = &wb.guide_ok[r0..r0 + len];
-                let mean = g.mean[c];
-                for (o, &ok) in o.iter_mut().zip(gv) {
-                    let v = if ok != 0.0 { *o } else { mean };
-                    let v = if self.cfg.clamp_negative { v.max(0.0) } else { v };
-                    *o = if v.is_finite() { v } else { 0.0 };
+        // The model over the whole block (long vectorised loops), into the
+        // now free QR matrix; then the rows inside the image are copied out.
+        let (model, _) = wb.a.split_at_mut(3 * n);
+        for c in 0..3 {
+            let o = &mut model[c * n..(c + 1) * n];
+            o.fill(coef[c]);
+            for f in 1..m {
+                let wf = coef[f * 3 + c];
+                for (o, v) in o.iter_mut().zip(&wb.clean[f * n..(f + 1) * n]) {
+                    *o += wf * v;
                 }
             }
+            let mean = g.mean[c];
+            let clamp = self.cfg.clamp_negative;
+            for (o, &ok) in o.iter_mut().zip(wb.guide_ok.iter()) {
+                let v = if ok != 0.0 { *o } else { mean };
+                let v = if clamp { v.max(0.0) } else { v };
+                *o = if v.abs() <= f32::MAX { v } else { 0.0 };
+            }
+        }
+        let row0 = ya; // first image row of this tile
+        for y in ya..yb {
+            let r0 = (y as i64 - origin.1) as usize * b + dx;
+            for c in 0..3 {
+                let o = c * b * w + (y - row0) * w;
+                outp[o + xa..o + xb].copy_from_slice(&model[c * n + r0..c * n + r0 + len]);
+            }
             rep.fallback_pixels += wb.guide_ok[r0..r0 + len].iter().filter(|&&ok| ok == 0.0).count() as u64;
-            let (o_r, o_gb) = wb.out[..3 * len].split_at(len);
-            let (o_g, o_b) = o_gb.split_at(len);
-            out_band.write_row_n(y - band_y0, xa, [o_r, o_g, o_b]).ok_or(Error::InvalidTile { index: 0, count: 0 })?;
         }
         Ok(rep)
     }

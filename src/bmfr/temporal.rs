@@ -262,7 +262,7 @@ impl Bmfr {
                 if has_history {
                     let g = |p: usize| cur[p * w + x];
                     for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
-                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || !(wt > 0.0) {
+                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt <= 0.0 || wt.is_nan() {
                             continue;
                         }
                         let j = ty as usize * w + tx as usize;
@@ -431,12 +431,7 @@ fn bilinear_taps(px: f32, py: f32) -> [(i64, i64, f32); 4] {
     let (fx, fy) = (libm::floorf(px), libm::floorf(py));
     let (ax, ay) = (px - fx, py - fy);
     let (ix, iy) = (fx as i64, fy as i64);
-    [
-        (ix, iy, (1.0 - ax) * (1.0 - ay)),
-        (ix + 1, iy, ax * (1.0 - ay)),
-        (ix, iy + 1, (1.0 - ax) * ay),
-        (ix + 1, iy + 1, ax * ay),
-    ]
+    [(ix, iy, (1.0 - ax) * (1.0 - ay)), (ix + 1, iy, ax * (1.0 - ay)), (ix, iy + 1, (1.0 - ax) * ay), (ix + 1, iy + 1, ax * ay)]
 }
 
 /// RGB → YCoCg (the original's unnormalised form, ×4).
