@@ -391,9 +391,12 @@ proptest! {
         let (out, _) = run(BmfrConfig::with_guides(NP), &g, seed as u32);
         prop_assert!(out.iter().all(|v| v.is_finite()));
         let scaled: Vec<f32> = out.iter().map(|v| v / l).collect();
-        // f32 positions near 1e4 keep ~1e-3 absolute resolution, which the
-        // per-block range (≥ 0.1·scale) turns into a small relative error.
-        let tol = if offset.abs() * 1e-6 > 1e-4 * s { 0.05 } else { 2e-3 };
+        // f32 positions carry only ulp(offset) of absolute resolution: where
+        // that is a visible fraction of the positions' scale, the input itself
+        // has lost the geometry, so the bound grows with that fraction.
+        let ulp = offset.abs().max(1.0) * f32::EPSILON;
+        prop_assume!(ulp < 1e-3 * s);
+        let tol = 2e-3 + 30.0 * (ulp / s) as f64;
         let e = rel_err(&scaled, &base);
         prop_assert!(e < tol, "scale {} offset {} light {}: {}", s, offset, l, e);
     }
