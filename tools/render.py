@@ -236,7 +236,8 @@ def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_ra
 
     if prev_sensor is not None:
         ds, _ = prev_sensor.sample_direction(si, mi.Point2f(0.5, 0.5), valid)
-        uv = arr3(ds.uv).reshape(h, w, 2)
+        uv = np.array(ds.uv)
+        uv = (uv.T if uv.ndim == 2 and uv.shape[0] == 2 else uv).reshape(h, w, 2)  # (2, n) -> (h, w, 2)
         cur = np.stack(np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), axis=-1)
         mo = np.where(np.array(valid).reshape(h, w, 1), uv - cur, 0.0)
         out["motion"] = mo

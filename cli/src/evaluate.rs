@@ -1,7 +1,7 @@
 //! Evaluation: run variants (method + flags + input layer) on frames with a
 //! reference, score them with the quality protocol, time them.
 
-use crate::methods::{label, FlrArgs, Method};
+use crate::methods::{Built, FlrArgs, Method};
 use crate::runner::Inputs;
 use indicatif::{ProgressBar, ProgressStyle};
 use lrdenoise_cli::exrio::ExrFrame;
@@ -13,7 +13,7 @@ use std::time::Instant;
 /// One row of a table: a method with its flags on one input layer.
 #[derive(Clone, Debug)]
 pub struct Variant {
-    /// "noisy" (the input itself) or "flr".
+    /// "noisy" (the input itself) or one of `methods::METHODS`.
     pub method: String,
     pub args: FlrArgs,
     pub input_layer: String,
@@ -24,7 +24,10 @@ impl Variant {
         Variant { method: "noisy".into(), args: FlrArgs::default(), input_layer: layer.into() }
     }
     pub fn flr(args: FlrArgs) -> Self {
-        Variant { method: "flr".into(), args, input_layer: "noisy".into() }
+        Self::method("flr", args)
+    }
+    pub fn method(name: &str, args: FlrArgs) -> Self {
+        Variant { method: name.into(), args, input_layer: "noisy".into() }
     }
     pub fn on(mut self, layer: &str) -> Self {
         self.input_layer = layer.into();
@@ -54,6 +57,10 @@ pub struct Record {
     /// Flags that reproduce this row with `lrd denoise`.
     #[serde(default)]
     pub flags: String,
+    /// Sequences, frames after the first: temporal instability
+    /// (`metrics::flicker`); `None` elsewhere.
+    #[serde(default)]
+    pub flicker: Option<f64>,
 }
 
 /// Outputs kept for image strips: (config label, tone-mapped RGB, FLIP map).
@@ -113,11 +120,15 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
-/// Times `runs` calls after one warm-up; returns the median in ms.
+/// Times `runs` calls after one warm-up; returns the median in ms. A temporal
+/// method restarts every run from the same state (restoring is not timed), so
+/// it ends one frame further, as if run once.
 pub fn time_method(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize) -> Result<(f64, Vec<f64>), String> {
+    m.save();
     m.run(inputs, out)?;
     let mut t = Vec::with_capacity(runs);
     for _ in 0..runs.max(1) {
+        m.restore();
         let s = Instant::now();
         m.run(inputs, out)?;
         t.push(s.elapsed().as_secs_f64() * 1e3);
@@ -136,11 +147,31 @@ fn frame_name(p: &Path) -> String {
     p.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()
 }
 
-/// Runs every variant on every frame that has a reference.
+/// Sequence key of a frame: its directory when named `frame_NNNN.exr` (the
+/// layout of shared/DATA.md), else `None` (a lone frame).
+fn sequence_of(p: &Path) -> Option<PathBuf> {
+    let stem = p.file_stem()?.to_string_lossy().to_string();
+    stem.strip_prefix("frame_").filter(|n| n.chars().all(|c| c.is_ascii_digit())).and_then(|_| p.parent().map(Path::to_path_buf))
+}
+
+/// What a variant carries from one frame of a sequence to the next.
+struct Carry {
+    seq: PathBuf,
+    /// Temporal methods keep their runner (and history).
+    built: Option<Built>,
+    /// Tone-mapped output and reference of the previous frame (for flicker).
+    prev: (Vec<f32>, Vec<f32>),
+}
+
+/// Runs every variant on every frame that has a reference. Frames of a
+/// sequence directory (`frame_NNNN.exr`) are taken in order: temporal methods
+/// carry their history from frame to frame, and every variant gets a flicker
+/// figure from the second frame on.
 pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> Result<(Vec<Record>, Vec<FrameImages>), String> {
     let pb = progress((frames.len() * variants.len()) as u64, "evaluating");
     let mut records = vec![];
     let mut images = vec![];
+    let mut carry: Vec<Option<Carry>> = variants.iter().map(|_| None).collect();
     for path in frames {
         let exr = ExrFrame::read(path)?;
         if !exr.has("reference") {
@@ -148,17 +179,20 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
             pb.inc(variants.len() as u64);
             continue;
         }
+        let seq = sequence_of(path);
         let base = Inputs::from_exr(&exr, path, "noisy")?;
         let reference = base.reference.clone().unwrap_or_default();
         let albedo = base.albedo.clone().ok_or_else(|| format!("{}: missing layer 'albedo' (needed to score)", path.display()))?;
         let (w, h) = (base.w, base.h);
         let name = frame_name(path);
+        let r_mod: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
+        let l = lrdenoise_cli::metrics::mean_luminance(&r_mod);
+        let ref_tm = lrdenoise_cli::metrics::tonemap(&r_mod, l);
         let mut fi = FrameImages { frame: name.clone(), w, h, reference_tm: vec![], rows: vec![] };
         if opt.keep_images {
-            let r: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
-            fi.reference_tm = lrdenoise_cli::metrics::tonemap(&r, lrdenoise_cli::metrics::mean_luminance(&r));
+            fi.reference_tm = ref_tm.clone();
         }
-        for v in variants {
+        for (vi, v) in variants.iter().enumerate() {
             pb.inc(1);
             if !exr.has(&v.input_layer) {
                 pb.println(format!("{}: no '{}' layer, variant skipped", path.display(), v.input_layer));
@@ -169,40 +203,51 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
             } else {
                 Inputs { noisy: exr.layer(&v.input_layer, 3, path)?.interleaved(3), ..base.clone() }
             };
-            let (mut m, cfg_label, flags) = match v.method.as_str() {
-                "noisy" => (Method::Noisy, v.input_layer.clone(), String::new()),
-                _ => {
-                    let cfg = match v.args.config(&inputs) {
-                        Ok(c) => c,
-                        Err(e) => {
-                            pb.println(format!("{}: {e}; variant skipped", path.display()));
-                            continue;
-                        }
+            // The previous frame of the same sequence, if this variant saw it.
+            let prev = match (&seq, carry[vi].take()) {
+                (Some(s), Some(c)) if &c.seq == s => Some(c),
+                _ => None,
+            };
+            let mut prev = prev;
+            let mut built = match prev.as_mut().and_then(|c| c.built.take()) {
+                Some(b) => b, // a temporal method, one frame further into its sequence
+                None => {
+                    let mut b = match v.method.as_str() {
+                        "noisy" => Built { method: Method::Noisy, label: v.input_layer.clone(), flags: String::new() },
+                        name => match Method::build(name, &v.args, &inputs, opt.threads) {
+                            Ok(b) => b,
+                            Err(e) => {
+                                pb.println(format!("{}: {e}; variant skipped", path.display()));
+                                continue;
+                            }
+                        },
                     };
-                    let mut l = label(&cfg);
-                    let mut f = crate::methods::flag_line(&cfg);
-                    if v.input_layer != "noisy" {
-                        l += &format!(" [{}]", v.input_layer);
-                        f += &format!(" --input-layer {}", v.input_layer);
+                    if v.input_layer != "noisy" && v.method != "noisy" {
+                        b.label += &format!(" [{}]", v.input_layer);
+                        b.flags += &format!(" --input-layer {}", v.input_layer);
                     }
-                    (Method::flr(cfg, &inputs, opt.threads)?, l, f)
+                    b
                 }
             };
             let mut out = vec![0f32; w * h * 3];
             let (ms, _) = if v.method == "noisy" {
-                m.run(&inputs, &mut out).map(|_| (0.0, vec![]))?
+                built.method.run(&inputs, &mut out).map(|_| (0.0, vec![]))?
             } else {
-                time_method(&mut m, &inputs, &mut out, opt.runs)?
+                time_method(&mut built.method, &inputs, &mut out, opt.runs)?
             };
             let (s, fmap): (Scores, Vec<f32>) = score(&out, &reference, &albedo, w, h);
+            let i_mod: Vec<f32> = out.iter().zip(&albedo).map(|(a, b)| a * b).collect();
+            let out_tm = lrdenoise_cli::metrics::tonemap(&i_mod, l);
+            let flicker = match (&prev, &inputs.motion) {
+                (Some(c), Some(mv)) => lrdenoise_cli::metrics::flicker(&out_tm, &c.prev.0, &ref_tm, &c.prev.1, mv, w, h),
+                _ => None,
+            };
             if opt.keep_images {
-                let i: Vec<f32> = out.iter().zip(&albedo).map(|(a, b)| a * b).collect();
-                let r: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
-                fi.rows.push((cfg_label.clone(), lrdenoise_cli::metrics::tonemap(&i, lrdenoise_cli::metrics::mean_luminance(&r)), fmap));
+                fi.rows.push((built.label.clone(), out_tm.clone(), fmap));
             }
             records.push(Record {
                 method: v.method.clone(),
-                config: cfg_label,
+                config: built.label.clone(),
                 frame: name.clone(),
                 psnr: s.psnr,
                 ssim: s.ssim,
@@ -212,8 +257,13 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 threads: if v.method == "noisy" { 0 } else { opt.threads },
                 width: w,
                 height: h,
-                flags,
+                flags: built.flags.clone(),
+                flicker,
             });
+            if let Some(sq) = &seq {
+                let temporal = matches!(built.method, Method::BmfrTemporal(_));
+                carry[vi] = Some(Carry { seq: sq.clone(), built: temporal.then_some(built), prev: (out_tm, ref_tm.clone()) });
+            }
         }
         if opt.keep_images {
             images.push(fi);
@@ -250,6 +300,10 @@ pub fn means(records: &[Record]) -> Vec<Record> {
                 width: rs[0].width,
                 height: rs[0].height,
                 flags: rs[0].flags.clone(),
+                flicker: {
+                    let f: Vec<f64> = rs.iter().filter_map(|r| r.flicker).collect();
+                    (!f.is_empty()).then(|| f.iter().sum::<f64>() / f.len() as f64)
+                },
             }
         })
         .collect()

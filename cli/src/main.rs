@@ -11,7 +11,7 @@ use lrdenoise_cli::{exrio, metrics};
 use clap::{Parser, Subcommand};
 use evaluate::{evaluate, list_frames, means, time_method, EvalOptions, Record, Variant};
 use exrio::{ExrFrame, Layer};
-use methods::{check_method, flag_line, label, FlrArgs, Method};
+use methods::{check_method, Built, FlrArgs, Method};
 use runner::Inputs;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -155,9 +155,12 @@ struct DenoiseJob<'a> {
     threads: usize,
 }
 
-/// Reads, denoises and writes one frame; returns (config label, ms, width, height).
+/// Reads, denoises and writes one frame; returns (config label, ms, width,
+/// height). `method` is built from the first frame and kept (sequences: the
+/// temporal history lives in it).
 fn denoise_file(
     job: &DenoiseJob,
+    method: &mut Option<Built>,
     input: &Path,
     output: &Path,
     png: Option<&Path>,
@@ -166,11 +169,13 @@ fn denoise_file(
     check_method(job.method)?;
     let exr = ExrFrame::read(input)?;
     let inputs = Inputs::from_exr(&exr, input, job.input_layer)?;
-    let cfg = job.flr.config(&inputs).map_err(|e| format!("{}: {e}", input.display()))?;
-    let mut m = Method::flr(cfg, &inputs, job.threads)?;
+    if method.is_none() {
+        *method = Some(Method::build(job.method, job.flr, &inputs, job.threads).map_err(|e| format!("{}: {e}", input.display()))?);
+    }
+    let m = method.as_mut().ok_or("no method")?;
     let mut out = vec![0f32; inputs.w * inputs.h * 3];
     let t = Instant::now();
-    m.run(&inputs, &mut out)?;
+    m.method.run(&inputs, &mut out).map_err(|e| format!("{}: {e}", input.display()))?;
     let ms = t.elapsed().as_secs_f64() * 1e3;
     let den = layer_of(&["R", "G", "B"], &out);
     let mut layers: Vec<(&str, &Layer)> = vec![("denoised", &den)];
@@ -191,7 +196,7 @@ fn denoise_file(
         };
         write_png(p, &metrics::tonemap(&i, l), inputs.w, inputs.h)?;
     }
-    Ok((label(&cfg), ms, inputs.w, inputs.h))
+    Ok((m.label.clone(), ms, inputs.w, inputs.h))
 }
 
 fn print_table(records: &[Record]) {
@@ -219,6 +224,8 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
         Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
         Variant::flr(FlrArgs::default()).on("noisy4"),
+        Variant::method("bmfr", FlrArgs::default()),
+        Variant::method("bmfr-temporal", FlrArgs::default()),
     ]
 }
 
@@ -343,15 +350,14 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
         }
         None => synthetic(w, h),
     };
-    let cfg = flr.config(&inputs)?;
-    let mut m = Method::flr(cfg, &inputs, threads)?;
+    let mut b = Method::build(method, flr, &inputs, threads)?;
     let mut out = vec![0f32; w * h * 3];
-    let (med, all) = time_method(&mut m, &inputs, &mut out, runs.max(5))?;
+    let (med, all) = time_method(&mut b.method, &inputs, &mut out, runs.max(5))?;
     let min = all.iter().copied().fold(f64::MAX, f64::min);
     let max = all.iter().copied().fold(0.0, f64::max);
     println!(
         "{method} {w}x{h} [{}] threads {threads} simd {}: median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
-        label(&cfg),
+        b.label,
         lrdenoise::SIMD_LEVEL,
         all.len(),
         (w * h) as f64 / med / 1e3
@@ -388,7 +394,9 @@ fn synthetic(w: usize, h: usize) -> Inputs {
             }
         }
     }
-    Inputs { w, h, noisy, normal: Some(normal), depth: Some(depth), position: Some(position), ao: Some(ao), albedo: None, reference: None }
+    // a quarter-pixel pan, so temporal methods reproject every pixel
+    let motion = Some(vec![0.25f32; 2 * n]);
+    Inputs { w, h, noisy, normal: Some(normal), depth: Some(depth), position: Some(position), ao: Some(ao), albedo: None, reference: None, motion }
 }
 
 /// The bundled sample frames: `data/` next to the workspace, or ./data.
@@ -407,19 +415,22 @@ fn run(cli: Cli) -> Result<(), String> {
         Cmd::Denoise { frame, output, run: RunArgs { method, flr, input_layer, threads }, png, only_output } => {
             let t = threads_or_all(threads);
             let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
-            let (cfg, ms, w, h) = denoise_file(&job, &frame, &output, png.as_deref(), only_output)?;
+            let (cfg, ms, w, h) = denoise_file(&job, &mut None, &frame, &output, png.as_deref(), only_output)?;
             println!("{method} [{cfg}] {w}x{h} threads {t}: {ms:.2} ms -> {}", output.display());
         }
         Cmd::DenoiseSeq { dir, output, run: RunArgs { method, flr, input_layer, threads } } => {
             let t = threads_or_all(threads);
             let frames = list_frames(std::slice::from_ref(&dir))?;
             std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
+            // On a sequence, bmfr means its temporal pipeline.
+            let method = if method == "bmfr" { "bmfr-temporal".to_string() } else { method };
             let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
             let pb = evaluate::progress(frames.len() as u64, "denoising");
             let mut total = 0.0;
+            let mut built = None;
             for f in &frames {
                 let name = f.file_name().ok_or("bad frame name")?;
-                let (_, ms, _, _) = denoise_file(&job, f, &output.join(name), None, false)?;
+                let (_, ms, _, _) = denoise_file(&job, &mut built, f, &output.join(name), None, false)?;
                 total += ms;
                 pb.inc(1);
             }
@@ -435,7 +446,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let mut variants = vec![Variant::noisy("noisy")];
             for m in methods.split(',').map(str::trim) {
                 check_method(m)?;
-                variants.push(Variant::flr(flr.clone()));
+                variants.push(Variant::method(m, flr.clone()));
             }
             let t = threads_or_all(threads);
             let (records, _) =
@@ -459,18 +470,18 @@ fn run(cli: Cli) -> Result<(), String> {
         Cmd::Demo { output, threads } => {
             let d = data_dir()?;
             let mut frames = list_frames(std::slice::from_ref(&d))?;
-            // plus the last frame of each bundled sequence
+            // plus every frame of each bundled sequence, in order (temporal
+            // methods accumulate over it; flicker is measured on it)
             if let Ok(rd) = std::fs::read_dir(&d) {
                 let mut seqs: Vec<PathBuf> = rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
                 seqs.sort();
                 for s in seqs {
-                    if let Ok(mut f) = list_frames(&[s]) {
-                        frames.extend(f.pop());
+                    if let Ok(f) = list_frames(&[s]) {
+                        frames.extend(f);
                     }
                 }
             }
             write_report(&frames, &output, &[], 7, threads_or_all(threads))?;
-            let _ = flag_line;
         }
     }
     Ok(())

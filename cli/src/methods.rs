@@ -2,10 +2,15 @@
 //! `--guides normal,depth,ao` (default: those of normal, depth, ao present),
 //! `--block B`, `--sigma S`, `--radius R` (full-resolution pixels; default 3σ),
 //! `--regularization normalized:EPS_MUL,EPS_ADD | tikhonov:EPS`, `--upsample 2|4`.
+//!
+//! BMFR (`--method bmfr`, single frame; `bmfr-temporal`, the pipeline over a
+//! sequence) reads `--guides` (default: normal and position, or normal and
+//! depth without positions) and `--block` (default 32); the other flags are
+//! FLR's and are refused with it.
 
-use crate::runner::{FlrRunner, Inputs};
+use crate::runner::{BmfrRunner, FlrRunner, Inputs, TemporalRunner};
 use clap::Args;
-use lrdenoise::{Blur, FlrConfig, GuideSet, Regularization};
+use lrdenoise::{BmfrConfig, Blur, FlrConfig, GuideSet, Regularization};
 
 #[derive(Args, Clone, Debug, Default)]
 pub struct FlrArgs {
@@ -111,6 +116,32 @@ impl FlrArgs {
     }
 }
 
+/// BMFR's configuration from the shared flags.
+pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
+    if a.sigma.is_some() || a.radius.is_some() || a.box_radius.is_some() || a.regularization.is_some() || a.upsample.is_some() {
+        return Err("--sigma, --radius, --box, --regularization and --upsample are FLR flags; bmfr takes --guides and --block".into());
+    }
+    let guides = match &a.guides {
+        Some(s) => parse_guides(s)?,
+        None => GuideSet {
+            normal: inputs.normal.is_some(),
+            position: inputs.position.is_some(),
+            depth: inputs.position.is_none() && inputs.depth.is_some(),
+            ..GuideSet::NONE
+        },
+    };
+    if let Some(m) = inputs.missing(&guides) {
+        return Err(format!("--guides asks for '{m}' but the frame has no '{m}' layer"));
+    }
+    let c = BmfrConfig { block: a.block.unwrap_or(32), ..BmfrConfig::with_guides(guides) };
+    c.validate().map_err(|e| format!("bmfr flags: {e}"))?;
+    Ok(c)
+}
+
+fn short_guides(g: &GuideSet) -> String {
+    guides_string(g).split(',').map(|p| if p == "none" { "-".to_string() } else { p[..1].to_uppercase() }).collect()
+}
+
 /// A flag line that reproduces `c` on the command line.
 pub fn flag_line(c: &FlrConfig) -> String {
     let mut s = format!("--method flr --guides {} --block {}", guides_string(&c.guides), c.block);
@@ -135,8 +166,7 @@ pub fn flag_line(c: &FlrConfig) -> String {
 
 /// A short label for tables and plots.
 pub fn label(c: &FlrConfig) -> String {
-    let g: String =
-        guides_string(&c.guides).split(',').map(|p| if p == "none" { "-".to_string() } else { p[..1].to_uppercase() }).collect();
+    let g = short_guides(&c.guides);
     let blur = match c.blur {
         Blur::Gaussian { sigma, .. } => format!("s{sigma}"),
         Blur::Box { radius } => format!("box{radius}"),
@@ -157,12 +187,48 @@ pub enum Method {
         runner: Box<FlrRunner>,
         low: Option<Inputs>,
     },
+    /// Single-frame BMFR (frame index 0: no grid shift between runs).
+    Bmfr(Box<BmfrRunner>),
+    /// BMFR's temporal pipeline: every `run` is the next frame of a sequence.
+    BmfrTemporal(Box<TemporalRunner>),
+}
+
+/// A method built for one frame: the runner, its table label and the flags
+/// that reproduce it.
+pub struct Built {
+    pub method: Method,
+    pub label: String,
+    pub flags: String,
 }
 
 impl Method {
     pub fn flr(cfg: FlrConfig, inputs: &Inputs, threads: usize) -> Result<Self, String> {
         let low = (cfg.upsample > 1).then(|| inputs.subsample(cfg.upsample));
         Ok(Method::Flr { runner: Box::new(FlrRunner::new(cfg, inputs.w, inputs.h, threads)?), low })
+    }
+
+    /// Builds method `name` (one of [`METHODS`]) with flags `a` for this frame.
+    pub fn build(name: &str, a: &FlrArgs, inputs: &Inputs, threads: usize) -> Result<Built, String> {
+        check_method(name)?;
+        let (w, h) = (inputs.w, inputs.h);
+        match name {
+            "flr" => {
+                let cfg = a.config(inputs)?;
+                Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg) })
+            }
+            _ => {
+                let cfg = bmfr_config(a, inputs)?;
+                let temporal = name == "bmfr-temporal";
+                let label = format!("{name} {} b{}", short_guides(&cfg.guides), cfg.block);
+                let flags = format!("--method {name} --guides {} --block {}", guides_string(&cfg.guides), cfg.block);
+                let method = if temporal {
+                    Method::BmfrTemporal(Box::new(TemporalRunner::new(cfg, w, h)?))
+                } else {
+                    Method::Bmfr(Box::new(BmfrRunner::new(cfg, w, h, threads)?))
+                };
+                Ok(Built { method, label, flags })
+            }
+        }
     }
 
     /// One denoise call (what is timed).
@@ -173,12 +239,27 @@ impl Method {
                 Ok(())
             }
             Method::Flr { runner, low } => runner.run(inputs, low.as_ref(), out).map(|_| ()),
+            Method::Bmfr(r) => r.run(inputs, 0, out).map(|_| ()),
+            Method::BmfrTemporal(r) => r.run(inputs, out).map(|_| ()),
+        }
+    }
+
+    /// Temporal methods: remember the state, so repeated timing runs of one
+    /// frame can each start from it ([`Method::restore`]).
+    pub fn save(&mut self) {
+        if let Method::BmfrTemporal(r) = self {
+            r.save();
+        }
+    }
+    pub fn restore(&mut self) {
+        if let Method::BmfrTemporal(r) = self {
+            r.restore();
         }
     }
 }
 
 /// Known method names for `--methods` / `--method`.
-pub const METHODS: &[&str] = &["flr"];
+pub const METHODS: &[&str] = &["flr", "bmfr", "bmfr-temporal"];
 
 pub fn check_method(m: &str) -> Result<(), String> {
     if METHODS.contains(&m) {
@@ -203,6 +284,7 @@ mod tests {
             ao: Some(vec![1.0; 2]),
             albedo: None,
             reference: None,
+            motion: None,
         }
     }
 

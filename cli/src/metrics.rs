@@ -148,3 +148,62 @@ pub fn score(estimate: &[f32], reference: &[f32], albedo: &[f32], w: usize, h: u
     let flip = fmap.iter().map(|v| *v as f64).sum::<f64>() / fmap.len().max(1) as f64;
     (Scores { psnr: psnr(&ti, &tr), ssim: ssim(&ti, &tr, w, h), flip, rmse: rmse(&i, &r) }, fmap)
 }
+
+/// Bilinear sample of the 3-channel image `img` at continuous pixel position
+/// `(px, py)`; `None` unless all 4 taps are inside.
+fn bilinear(img: &[f32], w: usize, h: usize, px: f32, py: f32) -> Option<[f32; 3]> {
+    let (fx, fy) = (px.floor(), py.floor());
+    if !(fx >= 0.0 && fy >= 0.0 && fx + 1.0 < w as f32 && fy + 1.0 < h as f32) {
+        return None;
+    }
+    let (x, y, ax, ay) = (fx as usize, fy as usize, px - fx, py - fy);
+    let at = |x: usize, y: usize, c: usize| img[3 * (y * w + x) + c];
+    Some([0, 1, 2].map(|c| {
+        (1.0 - ay) * ((1.0 - ax) * at(x, y, c) + ax * at(x + 1, y, c)) + ay * ((1.0 - ax) * at(x, y + 1, c) + ax * at(x + 1, y + 1, c))
+    }))
+}
+
+/// **Temporal instability (flicker)** of frame t of a sequence: the RMS over
+/// pixels and channels of `(O_t − W O_{t−1}) − (R_t − W R_{t−1})`, where `O`, `R`
+/// are the tone-mapped albedo-modulated output and reference (as scored), and
+/// `W` warps the previous frame to this one with `motion` (previous − current
+/// pixel offset, bilinear). Motion-compensated differences of the reference
+/// hold what really changes (new surfaces, moving light); what the output adds
+/// on top is flicker. Pixels whose 4 taps are not all inside are skipped.
+/// 0 = as steady as the reference. `None` without any usable pixel.
+pub fn flicker(out_tm: &[f32], prev_out_tm: &[f32], ref_tm: &[f32], prev_ref_tm: &[f32], motion: &[f32], w: usize, h: usize) -> Option<f64> {
+    let (mut s, mut n) = (0f64, 0usize);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let (px, py) = (x as f32 + motion[2 * i], y as f32 + motion[2 * i + 1]);
+            let (Some(po), Some(pr)) = (bilinear(prev_out_tm, w, h, px, py), bilinear(prev_ref_tm, w, h, px, py)) else { continue };
+            for c in 0..3 {
+                let d = (out_tm[3 * i + c] - po[c]) as f64 - (ref_tm[3 * i + c] - pr[c]) as f64;
+                s += d * d;
+                n += 1;
+            }
+        }
+    }
+    (n > 0).then(|| (s / n as f64).sqrt())
+}
+
+#[cfg(test)]
+mod flicker_tests {
+    use super::flicker;
+
+    #[test]
+    fn steady_output_has_no_flicker_and_noise_has_some() {
+        let (w, h) = (16, 8);
+        // a ramp that moves one pixel right per frame: motion = (−1, 0)
+        let img = |shift: f32| -> Vec<f32> { (0..w * h).flat_map(|i| [((i % w) as f32 - shift) * 0.05; 3]).collect() };
+        let motion = vec![-1.0f32, 0.0].repeat(w * h);
+        let (r0, r1) = (img(0.0), img(1.0));
+        assert_eq!(flicker(&r1, &r0, &r1, &r0, &motion, w, h), Some(0.0));
+        let noisy: Vec<f32> = r1.iter().enumerate().map(|(i, v)| v + if i % 2 == 0 { 0.1 } else { -0.1 }).collect();
+        let f = flicker(&noisy, &r0, &r1, &r0, &motion, w, h).unwrap();
+        assert!((f - 0.1).abs() < 1e-6, "{f}");
+        // motion pointing outside: nothing to compare
+        assert_eq!(flicker(&r1, &r0, &r1, &r0, &vec![100.0; 2 * w * h], w, h), None);
+    }
+}

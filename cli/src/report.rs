@@ -26,17 +26,21 @@ pub fn pareto(rows: &[&Record], better: impl Fn(&Record, &Record) -> bool) -> Ve
 pub fn table(rows: &[Record], with_frame: bool) -> String {
     let mut s = String::new();
     if with_frame {
-        s += "| frame | config | PSNR dB | SSIM | FLIP | rMSE | ms |\n|---|---|---:|---:|---:|---:|---:|\n";
+        s += "| frame | config | PSNR dB | SSIM | FLIP | rMSE | flicker | ms |\n|---|---|---:|---:|---:|---:|---:|---:|\n";
     } else {
-        s += "| config | PSNR dB | SSIM | FLIP | rMSE | ms | flags |\n|---|---:|---:|---:|---:|---:|---|\n";
+        s += "| config | PSNR dB | SSIM | FLIP | rMSE | flicker | ms | flags |\n|---|---:|---:|---:|---:|---:|---:|---|\n";
     }
     for r in rows {
         let ms = if r.method == "noisy" { "–".to_string() } else { format!("{:.3}", r.ms) };
+        let fl = r.flicker.map(|f| format!("{f:.4}")).unwrap_or_else(|| "–".into());
         if with_frame {
-            let _ = writeln!(s, "| {} | {} | {:.2} | {:.4} | {:.4} | {:.4} | {} |", r.frame, r.config, r.psnr, r.ssim, r.flip, r.rmse, ms);
+            let _ = writeln!(s, "| {} | {} | {:.2} | {:.4} | {:.4} | {:.4} | {fl} | {} |", r.frame, r.config, r.psnr, r.ssim, r.flip, r.rmse, ms);
         } else {
-            let _ =
-                writeln!(s, "| {} | {:.2} | {:.4} | {:.4} | {:.4} | {} | `{}` |", r.config, r.psnr, r.ssim, r.flip, r.rmse, ms, r.flags);
+            let _ = writeln!(
+                s,
+                "| {} | {:.2} | {:.4} | {:.4} | {:.4} | {fl} | {} | `{}` |",
+                r.config, r.psnr, r.ssim, r.flip, r.rmse, ms, r.flags
+            );
         }
     }
     s

@@ -1,7 +1,8 @@
 //! Frame inputs for the denoisers, and running FLR with its tiles spread over
 //! threads (each stage's tiles split into one contiguous group per thread).
 
-use lrdenoise::{Error, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Report};
+use lrdenoise::bmfr::Report as BmfrReport;
+use lrdenoise::{Bmfr, BmfrConfig, Error, Flr, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Report};
 use lrdenoise_cli::exrio::ExrFrame;
 use std::path::Path;
 
@@ -17,6 +18,8 @@ pub struct Inputs {
     pub ao: Option<Vec<f32>>,
     pub albedo: Option<Vec<f32>>,
     pub reference: Option<Vec<f32>>,
+    /// Sequences: previous − current pixel position (2 channels).
+    pub motion: Option<Vec<f32>>,
 }
 
 impl Inputs {
@@ -39,6 +42,7 @@ impl Inputs {
             ao: get("ao", 1)?,
             albedo: get("albedo", 3)?,
             reference: get("reference", 3)?,
+            motion: get("motion", 2)?,
         })
     }
 
@@ -84,6 +88,7 @@ impl Inputs {
             ao: self.ao.as_ref().map(|v| layer(v, 1)),
             albedo: None,
             reference: None,
+            motion: self.motion.as_ref().map(|v| layer(v, 2)),
         }
     }
 
@@ -257,4 +262,131 @@ pub fn denoise_parallel(
     }
     rep += par_groups(pool, bands, &mut workers, &|(t, mut band), w| flr.apply_tile(&f, &st, t, models, w, &mut band))?;
     Ok(rep)
+}
+
+/// Single-frame BMFR for one size: plan, one worker buffer per thread; the
+/// tiles (block rows) are spread over threads (bit-identical to one thread).
+pub struct BmfrRunner {
+    pub bmfr: Bmfr,
+    workers: Vec<f32>,
+    threads: usize,
+    pool: Option<rayon::ThreadPool>,
+}
+
+fn pool(threads: usize) -> Result<Option<rayon::ThreadPool>, String> {
+    if threads > 1 {
+        Ok(Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?))
+    } else {
+        Ok(None)
+    }
+}
+
+impl BmfrRunner {
+    pub fn new(cfg: BmfrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+        let bmfr = Bmfr::new(cfg, w, h).map_err(|e| format!("bmfr: {e}"))?;
+        let threads = threads.max(1);
+        Ok(BmfrRunner { workers: vec![0f32; bmfr.worker_len() * threads], bmfr, threads, pool: pool(threads)? })
+    }
+
+    /// Fits frame `index` (grid offset and regularisation noise) into `out`.
+    pub fn run(&mut self, inputs: &Inputs, index: u32, out: &mut [f32]) -> Result<BmfrReport, String> {
+        let set = self.bmfr.config().guides;
+        let noisy = ImageView::interleaved(&inputs.noisy, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
+        let ov = ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let b = &self.bmfr;
+        let r = match &self.pool {
+            None => {
+                let mut ov = ov;
+                b.denoise(&frame, index, &mut self.workers, &mut ov)
+            }
+            Some(pool) => (|| {
+                let f = b.check_frame(&frame)?;
+                let nt = b.tile_count(index);
+                let mut bands = Vec::with_capacity(nt);
+                let mut rest = Some(ov);
+                for t in 0..nt {
+                    let (y0, y1) = b.tile_pixel_rows(index, t)?;
+                    let r = rest.take().ok_or(Error::InvalidTile { index: t, count: nt })?;
+                    let (band, r) = r.split_rows(y1 - y0)?;
+                    bands.push((t, band));
+                    rest = r;
+                }
+                let per = nt.div_ceil(self.threads).max(1);
+                let mut results: Vec<Result<BmfrReport, Error>> = (0..self.threads).map(|_| Ok(BmfrReport::default())).collect();
+                let mut groups: Vec<Vec<_>> = (0..self.threads).map(|_| Vec::new()).collect();
+                for (i, it) in bands.into_iter().enumerate() {
+                    groups[i / per].push(it);
+                }
+                let f = &f;
+                pool.scope(|s| {
+                    for ((group, w), res) in groups.into_iter().zip(self.workers.chunks_exact_mut(b.worker_len())).zip(results.iter_mut()) {
+                        s.spawn(move |_| {
+                            let mut acc = BmfrReport::default();
+                            for (t, mut band) in group {
+                                match b.fit_tile(f, index, t, w, &mut band) {
+                                    Ok(r) => acc += r,
+                                    Err(e) => {
+                                        *res = Err(e);
+                                        return;
+                                    }
+                                }
+                            }
+                            *res = Ok(acc);
+                        });
+                    }
+                });
+                let mut total = BmfrReport::default();
+                for r in results {
+                    total += r?;
+                }
+                Ok(total)
+            })(),
+        };
+        r.map_err(|e| format!("bmfr: {e}"))
+    }
+}
+
+/// BMFR's temporal pipeline over a sequence: the plan, its scratch and the
+/// history. [`TemporalRunner::save`] / [`TemporalRunner::restore`] let a
+/// benchmark repeat one frame without advancing the sequence.
+pub struct TemporalRunner {
+    pub bmfr: Bmfr,
+    scratch: Vec<f32>,
+    history: Vec<f32>,
+    frames: u32,
+    saved: Option<(Vec<f32>, u32)>,
+}
+
+impl TemporalRunner {
+    pub fn new(cfg: BmfrConfig, w: usize, h: usize) -> Result<Self, String> {
+        let bmfr = Bmfr::new(cfg, w, h).map_err(|e| format!("bmfr: {e}"))?;
+        Ok(TemporalRunner { scratch: vec![0f32; bmfr.temporal_scratch_len()], history: vec![0f32; bmfr.history_len()], bmfr, frames: 0, saved: None })
+    }
+    pub fn save(&mut self) {
+        self.saved = Some((self.history.clone(), self.frames));
+    }
+    pub fn restore(&mut self) {
+        if let Some((h, f)) = &self.saved {
+            self.history.copy_from_slice(h);
+            self.frames = *f;
+        }
+    }
+    /// The next frame of the sequence (its `motion` layer is used when present).
+    pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<BmfrReport, String> {
+        let set = self.bmfr.config().guides;
+        let (w, h) = (inputs.w, inputs.h);
+        let noisy = ImageView::interleaved(&inputs.noisy, w, h, 3).map_err(|e| e.to_string())?;
+        let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
+        let motion = match &inputs.motion {
+            Some(m) => Some(ImageView::interleaved(m, w, h, 2).map_err(|e| e.to_string())?),
+            None => None,
+        };
+        let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
+        let mut history = History::resume(&mut self.history, self.frames);
+        let r = self.bmfr.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov);
+        if std::env::var("LRD_DEBUG").is_ok() { eprintln!("{:?}", r); }
+        self.frames = self.frames.saturating_add(1);
+        r.map_err(|e| format!("bmfr: {e}"))
+    }
 }

@@ -71,6 +71,12 @@ impl<'h> History<'h> {
     pub fn new(data: &'h mut [f32]) -> Self {
         History { data, frames: 0 }
     }
+    /// Re-wraps a buffer that already holds the state after `frames` frames
+    /// (for callers that keep the buffer and the count themselves, e.g. across
+    /// an FFI boundary).
+    pub fn resume(data: &'h mut [f32], frames: u32) -> Self {
+        History { data, frames }
+    }
     /// Frames accumulated so far.
     pub fn frames(&self) -> u32 {
         self.frames
