@@ -4,15 +4,13 @@ mod common;
 use common::*;
 use lrdenoise::*;
 use std::alloc::{GlobalAlloc, Layout as AllocLayout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
 
 // SAFETY: forwards to the system allocator unchanged; only counts calls.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, l: AllocLayout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        let _ = MINE.try_with(|c| c.set(c.get() + 1));
         // SAFETY: same contract as our caller's.
         unsafe { System.alloc(l) }
     }
@@ -21,7 +19,7 @@ unsafe impl GlobalAlloc for Counting {
         unsafe { System.dealloc(p, l) }
     }
     unsafe fn realloc(&self, p: *mut u8, l: AllocLayout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        let _ = MINE.try_with(|c| c.set(c.get() + 1));
         // SAFETY: same contract as our caller's.
         unsafe { System.realloc(p, l, n) }
     }
@@ -29,6 +27,15 @@ unsafe impl GlobalAlloc for Counting {
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
+
+thread_local! {
+    /// Allocations made by this thread (the harness allocates on other threads).
+    static MINE: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+fn mine() -> usize {
+    MINE.with(|c| c.get())
+}
 
 #[test]
 fn denoise_allocates_nothing() {
@@ -43,11 +50,32 @@ fn denoise_allocates_nothing() {
         let mut scratch = vec![0f64; flr.scratch_len()];
         let mut out = vec![0f32; f.w * f.h * 3];
         let frame = f.frame(set);
-        let before = ALLOCS.load(Ordering::SeqCst);
+        let before = mine();
         for _ in 0..3 {
             let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
             flr.denoise(&frame, &mut scratch, &mut ov).unwrap();
         }
-        assert_eq!(ALLOCS.load(Ordering::SeqCst) - before, 0, "{set:?}");
+        assert_eq!(mine() - before, 0, "{set:?}");
     }
+}
+
+#[test]
+fn bmfr_single_frame_and_temporal_allocate_nothing() {
+    let f = Owned::synthetic(131, 77, 2, 0.5);
+    let set = GuideSet { normal: true, position: true, ..GuideSet::NONE };
+    let b = Bmfr::new(BmfrConfig::with_guides(set), f.w, f.h).unwrap();
+    let mut scratch = vec![0f32; b.temporal_scratch_len()];
+    let mut hist = vec![0f32; b.history_len()];
+    let mut out = vec![0f32; f.w * f.h * 3];
+    let motion = vec![0.3f32; 2 * f.w * f.h];
+    let frame = f.frame(set);
+    let mv = ImageView::interleaved(&motion, f.w, f.h, 2).unwrap();
+    let mut history = History::new(&mut hist);
+    let before = mine();
+    for i in 0..3 {
+        let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
+        b.denoise(&frame, i, &mut scratch, &mut ov).unwrap();
+        b.denoise_temporal(&frame, Some(&mv), &mut history, &mut scratch, &mut ov).unwrap();
+    }
+    assert_eq!(mine() - before, 0);
 }

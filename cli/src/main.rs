@@ -396,7 +396,18 @@ fn synthetic(w: usize, h: usize) -> Inputs {
     }
     // a quarter-pixel pan, so temporal methods reproject every pixel
     let motion = Some(vec![0.25f32; 2 * n]);
-    Inputs { w, h, noisy, normal: Some(normal), depth: Some(depth), position: Some(position), ao: Some(ao), albedo: None, reference: None, motion }
+    Inputs {
+        w,
+        h,
+        noisy,
+        normal: Some(normal),
+        depth: Some(depth),
+        position: Some(position),
+        ao: Some(ao),
+        albedo: None,
+        reference: None,
+        motion,
+    }
 }
 
 /// The bundled sample frames: `data/` next to the workspace, or ./data.

@@ -10,7 +10,7 @@
 
 use crate::runner::{BmfrRunner, FlrRunner, Inputs, TemporalRunner};
 use clap::Args;
-use lrdenoise::{BmfrConfig, Blur, FlrConfig, GuideSet, Regularization};
+use lrdenoise::{Blur, BmfrConfig, FlrConfig, GuideSet, Regularization};
 
 #[derive(Args, Clone, Debug, Default)]
 pub struct FlrArgs {

@@ -171,7 +171,15 @@ fn bilinear(img: &[f32], w: usize, h: usize, px: f32, py: f32) -> Option<[f32; 3
 /// hold what really changes (new surfaces, moving light); what the output adds
 /// on top is flicker. Pixels whose 4 taps are not all inside are skipped.
 /// 0 = as steady as the reference. `None` without any usable pixel.
-pub fn flicker(out_tm: &[f32], prev_out_tm: &[f32], ref_tm: &[f32], prev_ref_tm: &[f32], motion: &[f32], w: usize, h: usize) -> Option<f64> {
+pub fn flicker(
+    out_tm: &[f32],
+    prev_out_tm: &[f32],
+    ref_tm: &[f32],
+    prev_ref_tm: &[f32],
+    motion: &[f32],
+    w: usize,
+    h: usize,
+) -> Option<f64> {
     let (mut s, mut n) = (0f64, 0usize);
     for y in 0..h {
         for x in 0..w {

@@ -34,7 +34,11 @@ pub fn table(rows: &[Record], with_frame: bool) -> String {
         let ms = if r.method == "noisy" { "–".to_string() } else { format!("{:.3}", r.ms) };
         let fl = r.flicker.map(|f| format!("{f:.4}")).unwrap_or_else(|| "–".into());
         if with_frame {
-            let _ = writeln!(s, "| {} | {} | {:.2} | {:.4} | {:.4} | {:.4} | {fl} | {} |", r.frame, r.config, r.psnr, r.ssim, r.flip, r.rmse, ms);
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.2} | {:.4} | {:.4} | {:.4} | {fl} | {} |",
+                r.frame, r.config, r.psnr, r.ssim, r.flip, r.rmse, ms
+            );
         } else {
             let _ = writeln!(
                 s,

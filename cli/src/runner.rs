@@ -361,7 +361,13 @@ pub struct TemporalRunner {
 impl TemporalRunner {
     pub fn new(cfg: BmfrConfig, w: usize, h: usize) -> Result<Self, String> {
         let bmfr = Bmfr::new(cfg, w, h).map_err(|e| format!("bmfr: {e}"))?;
-        Ok(TemporalRunner { scratch: vec![0f32; bmfr.temporal_scratch_len()], history: vec![0f32; bmfr.history_len()], bmfr, frames: 0, saved: None })
+        Ok(TemporalRunner {
+            scratch: vec![0f32; bmfr.temporal_scratch_len()],
+            history: vec![0f32; bmfr.history_len()],
+            bmfr,
+            frames: 0,
+            saved: None,
+        })
     }
     pub fn save(&mut self) {
         self.saved = Some((self.history.clone(), self.frames));
@@ -385,7 +391,9 @@ impl TemporalRunner {
         let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
         let mut history = History::resume(&mut self.history, self.frames);
         let r = self.bmfr.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov);
-        if std::env::var("LRD_DEBUG").is_ok() { eprintln!("{:?}", r); }
+        if std::env::var("LRD_DEBUG").is_ok() {
+            eprintln!("{:?}", r);
+        }
         self.frames = self.frames.saturating_add(1);
         r.map_err(|e| format!("bmfr: {e}"))
     }

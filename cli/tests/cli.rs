@@ -182,3 +182,39 @@ fn mismatched_layer_sizes_are_named() {
         &["mismatch.exr", "different sizes"],
     );
 }
+
+#[test]
+fn bmfr_single_frame_temporal_and_flicker() {
+    let json = tmp("bmfr.json");
+    let seq = data("seq_box_7");
+    let (ok, so, e) = lrd(&["eval", &seq, "--methods", "flr,bmfr,bmfr-temporal", "--runs", "5", "--json", json.to_str().unwrap()]);
+    assert!(ok, "{e}");
+    assert!(so.contains("flicker") && so.contains("bmfr-temporal NP b32"), "{so}");
+    let recs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let recs = recs.as_array().unwrap();
+    let get = |method: &str, frame: &str| recs.iter().find(|r| r["method"] == method && r["frame"] == frame).unwrap().clone();
+    for m in ["noisy", "flr", "bmfr", "bmfr-temporal"] {
+        assert!(get(m, "frame_0000")["flicker"].is_null(), "no previous frame, no flicker");
+        for f in 1..6 {
+            let r = get(m, &format!("frame_{f:04}"));
+            assert!(r["psnr"].as_f64().unwrap().is_finite());
+            assert!(r["flicker"].as_f64().is_some(), "{m} frame {f}: {r}");
+        }
+    }
+    let fl = |m: &str| get(m, "frame_0005")["flicker"].as_f64().unwrap();
+    assert!(fl("bmfr") < 0.5 * fl("noisy") && fl("bmfr-temporal") < 0.5 * fl("noisy"));
+    // the temporal pipeline improves along the sequence
+    let ps = |m: &str, f: &str| get(m, f)["psnr"].as_f64().unwrap();
+    assert!(ps("bmfr-temporal", "frame_0005") > ps("bmfr-temporal", "frame_0000"));
+
+    let outdir = tmp("seq-bmfr");
+    let (ok, so, e) = lrd(&["denoise-seq", &seq, "-o", outdir.to_str().unwrap(), "--method", "bmfr"]);
+    assert!(ok, "{e}");
+    assert!(so.contains("bmfr-temporal") && so.contains("6 frames"), "{so}");
+    let (ok, so, e) = lrd(&["bench", "--method", "bmfr-temporal", "--size", "128x96", "--runs", "5"]);
+    assert!(ok && so.contains("median"), "{e}");
+    let (ok, so, e) = lrd(&["bench", "--method", "bmfr", "--size", "128x96", "--runs", "5", "--threads", "2"]);
+    assert!(ok && so.contains("median"), "{e}");
+    fails_with(&["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--sigma", "3"], &["FLR flags"]);
+    fails_with(&["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--block", "4"], &["block"]);
+}
