@@ -185,7 +185,7 @@ pub enum Method {
     Noisy,
     Flr {
         runner: Box<FlrRunner>,
-        low: Option<Inputs>,
+        low: Option<Box<Inputs>>,
     },
     /// Single-frame BMFR (frame index 0: no grid shift between runs).
     Bmfr(Box<BmfrRunner>),
@@ -203,7 +203,7 @@ pub struct Built {
 
 impl Method {
     pub fn flr(cfg: FlrConfig, inputs: &Inputs, threads: usize) -> Result<Self, String> {
-        let low = (cfg.upsample > 1).then(|| inputs.subsample(cfg.upsample));
+        let low = (cfg.upsample > 1).then(|| Box::new(inputs.subsample(cfg.upsample)));
         Ok(Method::Flr { runner: Box::new(FlrRunner::new(cfg, inputs.w, inputs.h, threads)?), low })
     }
 
@@ -238,7 +238,7 @@ impl Method {
                 out.copy_from_slice(&inputs.noisy);
                 Ok(())
             }
-            Method::Flr { runner, low } => runner.run(inputs, low.as_ref(), out).map(|_| ()),
+            Method::Flr { runner, low } => runner.run(inputs, low.as_deref(), out).map(|_| ()),
             Method::Bmfr(r) => r.run(inputs, 0, out).map(|_| ()),
             Method::BmfrTemporal(r) => r.run(inputs, out).map(|_| ()),
         }

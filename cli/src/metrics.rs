@@ -205,7 +205,7 @@ mod flicker_tests {
         let (w, h) = (16, 8);
         // a ramp that moves one pixel right per frame: motion = (−1, 0)
         let img = |shift: f32| -> Vec<f32> { (0..w * h).flat_map(|i| [((i % w) as f32 - shift) * 0.05; 3]).collect() };
-        let motion = vec![-1.0f32, 0.0].repeat(w * h);
+        let motion = [-1.0f32, 0.0].repeat(w * h);
         let (r0, r1) = (img(0.0), img(1.0));
         assert_eq!(flicker(&r1, &r0, &r1, &r0, &motion, w, h), Some(0.0));
         let noisy: Vec<f32> = r1.iter().enumerate().map(|(i, v)| v + if i % 2 == 0 { 0.1 } else { -0.1 }).collect();

@@ -391,9 +391,6 @@ impl TemporalRunner {
         let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
         let mut history = History::resume(&mut self.history, self.frames);
         let r = self.bmfr.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov);
-        if std::env::var("LRD_DEBUG").is_ok() {
-            eprintln!("{:?}", r);
-        }
         self.frames = self.frames.saturating_add(1);
         r.map_err(|e| format!("bmfr: {e}"))
     }
