@@ -55,13 +55,29 @@ fuzz_target!(|d: &[u8]| {
     let noisy = image(d, 15, 3, lw, lh, next());
     let mut gs = LrdGuides { normal: none, depth: none, position: none, ao: none, user: [none; 4] };
     let mut gl = gs;
-    if cfg.guides & LRD_GUIDE_NORMAL != 0 { gs.normal = image(d, 20, 3, w, h, next()); }
-    if cfg.guides & LRD_GUIDE_DEPTH != 0 { gs.depth = image(d, 16, 1, w, h, next()); }
-    if cfg.guides & LRD_GUIDE_AO != 0 { gs.ao = image(d, 17, 1, w, h, next()); }
-    if cfg.upsample > 1 && cfg.guides & LRD_GUIDE_DEPTH != 0 { gl.depth = image(d, 18, 1, lw, lh, next()); }
+    if cfg.guides & LRD_GUIDE_NORMAL != 0 {
+        gs.normal = image(d, 20, 3, w, h, next());
+    }
+    if cfg.guides & LRD_GUIDE_DEPTH != 0 {
+        gs.depth = image(d, 16, 1, w, h, next());
+    }
+    if cfg.guides & LRD_GUIDE_AO != 0 {
+        gs.ao = image(d, 17, 1, w, h, next());
+    }
+    if cfg.upsample > 1 && cfg.guides & LRD_GUIDE_DEPTH != 0 {
+        gl.depth = image(d, 18, 1, lw, lh, next());
+    }
     let frame = LrdFrame { noisy: if d[19] == 0 { none } else { noisy }, guides: gs, guides_low: gl };
     let mut out = vec![0f32; (w * h * 4) as usize];
-    let o = LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 16, row_stride: 0, channel_stride: 0 };
+    let o = LrdImageMut {
+        data: out.as_mut_ptr() as *mut _,
+        format: 0,
+        width: w,
+        height: h,
+        pixel_stride: 16,
+        row_stride: 0,
+        channel_stride: 0,
+    };
     let mut bytes = 0usize;
     let st = unsafe { lrd_flr_scratch_size(&cfg, w, h, &mut bytes) };
     if st != LrdStatus::LRD_STATUS_OK {

@@ -20,7 +20,14 @@ fuzz_target!(|d: &[u8]| {
     let guides = GuideSet { normal: d[7] & 1 != 0, depth: d[7] & 2 != 0, position: d[7] & 4 != 0, ao: d[7] & 8 != 0, user: 0 };
     let pad = d[8] as usize % 3; // extra elements per pixel (RGBA-like strides)
     let blur = if d[9] & 1 == 0 { Blur::Gaussian { sigma, radius: None } } else { Blur::Box { radius: sigma } };
-    let cfg = FlrConfig { guides, block, blur, regularization: reg, kernel: if d[9] & 2 == 0 { Kernel::Simd } else { Kernel::Scalar }, ..FlrConfig::default() };
+    let cfg = FlrConfig {
+        guides,
+        block,
+        blur,
+        regularization: reg,
+        kernel: if d[9] & 2 == 0 { Kernel::Simd } else { Kernel::Scalar },
+        ..FlrConfig::default()
+    };
     let body = &d[12..];
     let val = |i: usize| -> f32 {
         if body.is_empty() {

@@ -33,8 +33,12 @@ fn run<const Q: usize>(d: &[u8]) {
         p.mean[q] = f64_at(d, 2 + k + Q + q).clamp(-1e6, 1e6);
         let s = f64_at(d, 2 + k + 2 * Q + q).abs();
         p.scale[q] = if s.is_finite() && s > 1e-30 && s < 1e30 { s } else { 1.0 };
-        if !p.reference[q].is_finite() { p.reference[q] = 0.0; }
-        if !p.mean[q].is_finite() { p.mean[q] = 0.0; }
+        if !p.reference[q].is_finite() {
+            p.reference[q] = 0.0;
+        }
+        if !p.mean[q].is_finite() {
+            p.mean[q] = 0.0;
+        }
     }
     let mut model = vec![0f32; model_len(Q)];
     solve_cell::<Q>(&cell, &p, &mut model);
