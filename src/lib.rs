@@ -41,8 +41,14 @@ pub mod error;
 #[cfg(feature = "flr")]
 pub mod flr;
 pub mod guides;
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+mod hash;
 pub mod image;
 pub mod kernels;
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+mod reproject;
+#[cfg(feature = "walr")]
+pub mod walr;
 
 #[cfg(feature = "bmfr")]
 pub use bmfr::{Bmfr, BmfrConfig, History};
@@ -52,6 +58,8 @@ pub use error::{Arg, Error};
 pub use flr::{CheckedFrame, Flr, Parts, Report, Stats};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
+#[cfg(feature = "walr")]
+pub use walr::{Walr, WalrConfig};
 
 /// The SIMD instruction set `wide` was compiled for (chosen at compile time by
 /// `-C target-feature`/`target-cpu`).

@@ -310,15 +310,7 @@ pub fn seed(index: u32, block_id: u32) -> u32 {
     hash(index.wrapping_mul(0x9E37_79B9) ^ hash(block_id.wrapping_add(0x68E3_1DA4)))
 }
 
-/// A 32-bit integer hash (C. Wellons' "lowbias32"): cheap, vectorises.
-#[inline(always)]
-fn hash(mut x: u32) -> u32 {
-    x ^= x >> 16;
-    x = x.wrapping_mul(0x7feb_352d);
-    x ^= x >> 15;
-    x = x.wrapping_mul(0x846c_a68b);
-    x ^ (x >> 16)
-}
+use crate::hash::lowbias32 as hash;
 
 /// Fills the feature columns of `a`: `clean` on valid rows (0 elsewhere),
 /// plus uniform noise in `[−amp, amp]` on every feature but the constant

@@ -17,6 +17,7 @@ use super::{Bmfr, Report};
 use crate::error::{Arg, Error};
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut, Layout, SamplesMut};
+use crate::reproject::{bilinear_taps, rgb, ycocg};
 
 /// Settings of the temporal pipeline.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -429,23 +430,4 @@ impl Bmfr {
             }
         }
     }
-}
-
-/// The 4 bilinear taps `(x, y, weight)` around the continuous pixel
-/// position `(px, py)` (pixel centres at integers).
-fn bilinear_taps(px: f32, py: f32) -> [(i64, i64, f32); 4] {
-    let (fx, fy) = (libm::floorf(px), libm::floorf(py));
-    let (ax, ay) = (px - fx, py - fy);
-    let (ix, iy) = (fx as i64, fy as i64);
-    [(ix, iy, (1.0 - ax) * (1.0 - ay)), (ix + 1, iy, ax * (1.0 - ay)), (ix, iy + 1, (1.0 - ax) * ay), (ix + 1, iy + 1, ax * ay)]
-}
-
-/// RGB → YCoCg (the original's unnormalised form, ×4).
-fn ycocg(c: [f32; 3]) -> [f32; 3] {
-    [c[0] + 2.0 * c[1] + c[2], 2.0 * c[0] - 2.0 * c[2], -c[0] + 2.0 * c[1] - c[2]]
-}
-
-/// Inverse of [`ycocg`].
-fn rgb(c: [f32; 3]) -> [f32; 3] {
-    [0.25 * (c[0] + c[1] - c[2]), 0.25 * (c[0] + c[2]), 0.25 * (c[0] - c[1] - c[2])]
 }

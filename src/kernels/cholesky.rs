@@ -138,3 +138,121 @@ pub fn solve_n<const N: usize>(l: &[[f64; N]; N], inv_diag: &[f64; N], b: &mut [
         }
     }
 }
+
+/// Arithmetic the WALR Cholesky runs on: `f32` (scalar path), `f64` (oracle) or
+/// [`wide::f32x8`] (8 pixels per call, one per lane).
+pub trait Lane:
+    Copy + core::ops::Add<Output = Self> + core::ops::Sub<Output = Self> + core::ops::Mul<Output = Self> + core::ops::Div<Output = Self>
+{
+    fn splat(v: f32) -> Self;
+    fn max_(self, o: Self) -> Self;
+    fn sqrt_(self) -> Self;
+}
+
+impl Lane for f32 {
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        v
+    }
+    #[inline(always)]
+    fn max_(self, o: Self) -> Self {
+        // NaN-safe: a NaN pivot becomes the floor.
+        if self > o {
+            self
+        } else {
+            o
+        }
+    }
+    #[inline(always)]
+    fn sqrt_(self) -> Self {
+        super::sqrt(self as f64) as f32
+    }
+}
+
+impl Lane for f64 {
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        v as f64
+    }
+    #[inline(always)]
+    fn max_(self, o: Self) -> Self {
+        if self > o {
+            self
+        } else {
+            o
+        }
+    }
+    #[inline(always)]
+    fn sqrt_(self) -> Self {
+        super::sqrt(self)
+    }
+}
+
+impl Lane for wide::f32x8 {
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        wide::f32x8::splat(v)
+    }
+    #[inline(always)]
+    fn max_(self, o: Self) -> Self {
+        // `o` (the floor) wherever `self > o` is false, NaN included.
+        self.simd_gt(o).select(self, o)
+    }
+    #[inline(always)]
+    fn sqrt_(self) -> Self {
+        self.sqrt()
+    }
+}
+
+/// WALR Algorithm 1: `C Cᵀ = A` for the symmetric `M×M` matrix `a` (lower
+/// triangle read), with the per-pivot floor `C_ii = √max(C_ii, ε_i)` so a
+/// singular or indefinite `A` still factors. `a`'s lower triangle becomes `C`;
+/// returns `1 / C_ii`.
+#[inline(always)]
+pub fn factor_floor<T: Lane, const M: usize>(a: &mut [[T; M]; M], eps: &[T; M]) -> [T; M] {
+    let one = T::splat(1.0);
+    let mut inv = [one; M];
+    for i in 0..M {
+        let mut d = a[i][i];
+        for j in 0..i {
+            d = d - a[i][j] * a[i][j];
+        }
+        let c = d.max_(eps[i]).sqrt_();
+        a[i][i] = c;
+        inv[i] = one / c;
+        for j in i + 1..M {
+            let mut s = a[j][i];
+            for k in 0..i {
+                s = s - a[i][k] * a[j][k];
+            }
+            a[j][i] = s * inv[i];
+        }
+    }
+    inv
+}
+
+/// WALR Algorithm 2: forward then backward substitution with the factor of
+/// [`factor_floor`], for `R` right-hand sides at once (`b[i][r]`), in place.
+#[inline(always)]
+pub fn substitute<T: Lane, const M: usize, const R: usize>(c: &[[T; M]; M], inv: &[T; M], b: &mut [[T; R]; M]) {
+    for i in 0..M {
+        for j in 0..i {
+            for r in 0..R {
+                b[i][r] = b[i][r] - c[i][j] * b[j][r];
+            }
+        }
+        for r in 0..R {
+            b[i][r] = b[i][r] * inv[i];
+        }
+    }
+    for j in (0..M).rev() {
+        for i in j + 1..M {
+            for r in 0..R {
+                b[j][r] = b[j][r] - c[i][j] * b[i][r];
+            }
+        }
+        for r in 0..R {
+            b[j][r] = b[j][r] * inv[j];
+        }
+    }
+}

@@ -1,0 +1,246 @@
+//! WALR's inputs: the frame-wide constants ([`Walr::prepare`]), the
+//! octahedral normal features (§5.2) and the first averages `Z_0`
+//! ([`Walr::features_rows`]).
+
+use super::store::Store;
+use super::{CheckedFrame, Prepared, Report, Storage, Walr, GEO_FIXED, G_INV_SCALE, G_N, G_P, G_VALID, MAX_FEATURES};
+use crate::error::Error;
+
+/// Octahedral map of a direction in a local frame whose third axis is the
+/// pole (Cigolle et al. 2014), remapped from [−1, 1]² to [0, 1]². Continuous
+/// on the hemisphere around the pole; the zero vector maps to the centre.
+pub fn octahedral(n: [f32; 3]) -> [f32; 2] {
+    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+    if !(l1 > 0.0) || !l1.is_finite() {
+        return [0.5, 0.5];
+    }
+    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
+    if n[2] < 0.0 {
+        let sx = if x >= 0.0 { 1.0 } else { -1.0 };
+        let sy = if y >= 0.0 { 1.0 } else { -1.0 };
+        (x, y) = ((1.0 - y.abs()) * sx, (1.0 - x.abs()) * sy);
+    }
+    [0.5 * x + 0.5, 0.5 * y + 0.5]
+}
+
+/// An orthonormal basis `[t, b, v]` with `v` along `pole` (normalised).
+pub fn basis(pole: [f32; 3]) -> [[f32; 3]; 3] {
+    let l = libm::sqrtf(pole[0] * pole[0] + pole[1] * pole[1] + pole[2] * pole[2]);
+    let v = if l > 1e-12 && l.is_finite() { pole.map(|c| c / l) } else { [0.0, 0.0, 1.0] };
+    // Frisvad / Duff et al. 2017 branchless basis.
+    let s = if v[2] >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (s + v[2]);
+    let b = v[0] * v[1] * a;
+    let t = [1.0 + s * v[0] * v[0] * a, s * b, -s * v[0]];
+    let bb = [b, s + v[1] * v[1] * a, -v[1]];
+    [t, bb, v]
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Subsampling step of [`Walr::prepare`] in x and y.
+const PREP_STEP: usize = 4;
+
+impl Walr {
+    /// Guide channel indices: (normal, position, depth, first extra).
+    fn channels(&self) -> (usize, usize, Option<usize>, usize) {
+        let s = &self.cfg.guides;
+        let depth = s.depth.then_some(3);
+        let pos = 3 + s.depth as usize;
+        (0, pos, depth, pos + 3)
+    }
+
+    /// Frame-wide constants: the octahedral pole, the light scale and the
+    /// ranges of the extra guides, from every 4th pixel of every 4th row.
+    /// `index` seeds the replacement choices.
+    pub fn prepare(&self, f: &CheckedFrame<'_>, index: u32) -> Prepared {
+        let (w, h) = (self.width, self.height);
+        let (cn, _, _, ce) = self.channels();
+        let extras = self.m - 3;
+        let mut nsum = [0f64; 3];
+        let (mut lsum, mut lcount) = (0f64, 0u64);
+        let mut ext = [(f32::INFINITY, f32::NEG_INFINITY); MAX_FEATURES - 3];
+        let mut row = [0f32; 1];
+        let get = |q: usize, x: usize, y: usize, row: &mut [f32; 1]| -> Option<f32> {
+            f.guides[q].as_ref()?.read_row(y, 0, x, row)?;
+            Some(row[0])
+        };
+        for y in (0..h).step_by(PREP_STEP) {
+            for x in (0..w).step_by(PREP_STEP) {
+                let n = [0, 1, 2].map(|c| get(cn + c, x, y, &mut row).unwrap_or(f32::NAN));
+                if n.iter().all(|v| v.is_finite()) {
+                    for c in 0..3 {
+                        nsum[c] += n[c] as f64;
+                    }
+                }
+                for c in 0..3 {
+                    if let Some(v) = f.noisy.get(x, y, c).filter(|v| v.is_finite()) {
+                        lsum += v.abs() as f64;
+                        lcount += 1;
+                    }
+                }
+                for (e, r) in ext.iter_mut().enumerate().take(extras) {
+                    if let Some(v) = get(ce + e, x, y, &mut row).filter(|v| v.is_finite()) {
+                        *r = (r.0.min(v), r.1.max(v));
+                    }
+                }
+            }
+        }
+        let pole = self.cfg.view.unwrap_or(nsum.map(|v| v as f32));
+        let ls = if lcount > 0 { (lsum / lcount as f64) as f32 } else { 1.0 };
+        let light_scale = if ls > 1e-30 && ls.is_finite() { ls } else { 1.0 };
+        let extra = ext.map(|(lo, hi)| {
+            if lo.is_finite() && hi > lo && (hi - lo).is_finite() {
+                (lo, 1.0 / (hi - lo))
+            } else if lo.is_finite() {
+                (lo, 1.0)
+            } else {
+                (0.0, 1.0)
+            }
+        });
+        let seed = crate::hash::lowbias32(index.wrapping_mul(0x9E37_79B9) ^ 0x5A17_0001);
+        Prepared { basis: basis(pole), light_scale, extra, seed }
+    }
+
+    /// Stage 1 on rows `y0..`: geometry planes and `Z_0` (products of the
+    /// features with themselves and with the light, sample count 1; 0 for a
+    /// NaN/Inf noisy sample, which is thereby excluded). `geo_rows` and
+    /// `z_rows` hold the same whole rows of [`super::Parts::geo`] and
+    /// [`super::Parts::z`]`[0]`.
+    pub fn features_rows(
+        &self,
+        f: &CheckedFrame<'_>,
+        p: &Prepared,
+        y0: usize,
+        geo_rows: &mut [f32],
+        z_rows: &mut [f32],
+    ) -> Result<Report, Error> {
+        let rows = self.check_band(y0, geo_rows.len(), self.geo_row_len())?;
+        if z_rows.len() != rows * self.z_row_len() {
+            return Err(Error::InvalidTile { index: y0, count: self.height });
+        }
+        match self.cfg.storage {
+            Storage::F32 => self.features_impl::<f32>(f, p, y0, rows, geo_rows, z_rows),
+            Storage::F16 => self.features_impl::<u16>(f, p, y0, rows, geo_rows, bytemuck::cast_slice_mut(z_rows)),
+        }
+    }
+
+    fn features_impl<S: Store>(
+        &self,
+        f: &CheckedFrame<'_>,
+        p: &Prepared,
+        y0: usize,
+        rows: usize,
+        geo_rows: &mut [f32],
+        z_rows: &mut [S],
+    ) -> Result<Report, Error> {
+        let (w, m) = (self.width, self.m);
+        let (cn, cp, cd, ce) = self.channels();
+        let gl = self.geo_row_len();
+        let zl = self.z_row_values();
+        let planes = self.planes();
+        let bad = Error::InvalidTile { index: y0, count: self.height };
+        let mut rep = Report::default();
+        let inv_light = 1.0 / p.light_scale;
+        for r in 0..rows {
+            let y = y0 + r;
+            let geo = &mut geo_rows[r * gl..(r + 1) * gl];
+            // Raw guides straight into the geometry planes, features after.
+            for c in 0..3 {
+                let v = f.guides[cn + c].as_ref().ok_or(Error::GuideMismatch)?;
+                v.read_row(y, 0, 0, &mut geo[(G_N + c) * w..(G_N + c + 1) * w]).ok_or(bad)?;
+                let v = f.guides[cp + c].as_ref().ok_or(Error::GuideMismatch)?;
+                v.read_row(y, 0, 0, &mut geo[(G_P + c) * w..(G_P + c + 1) * w]).ok_or(bad)?;
+            }
+            match cd {
+                Some(d) => {
+                    let v = f.guides[d].as_ref().ok_or(Error::GuideMismatch)?;
+                    v.read_row(y, 0, 0, &mut geo[G_INV_SCALE * w..(G_INV_SCALE + 1) * w]).ok_or(bad)?;
+                }
+                None => geo[G_INV_SCALE * w..(G_INV_SCALE + 1) * w].fill(1.0),
+            }
+            for e in 0..m - 3 {
+                let o = (GEO_FIXED + 2 + e) * w;
+                let v = f.guides[ce + e].as_ref().ok_or(Error::GuideMismatch)?;
+                v.read_row(y, 0, 0, &mut geo[o..o + w]).ok_or(bad)?;
+            }
+            {
+                // The noisy row goes to planes that are only written per pixel, after reading.
+                let (a, rest) = geo[G_VALID * w..(G_VALID + 3) * w].split_at_mut(w);
+                let (b, c) = rest.split_at_mut(w);
+                f.noisy.read_row_n(y, 0, [a, b, c]).ok_or(bad)?;
+            }
+            let z = &mut z_rows[r * zl..(r + 1) * zl];
+            for x in 0..w {
+                let g = |c: usize| geo[c * w + x];
+                let rgb = [g(G_VALID), g(GEO_FIXED), g(GEO_FIXED + 1)];
+                let n = [g(G_N), g(G_N + 1), g(G_N + 2)];
+                let pos = [g(G_P), g(G_P + 1), g(G_P + 2)];
+                let scale = g(G_INV_SCALE);
+                let mut extra = [0f32; MAX_FEATURES - 3];
+                for e in 0..m - 3 {
+                    extra[e] = g(GEO_FIXED + 2 + e);
+                }
+                let finite =
+                    n.iter().chain(&pos).all(|v| v.is_finite()) && scale.is_finite() && extra[..m - 3].iter().all(|v| v.is_finite());
+                rep.nonfinite_guides += !finite as u64;
+                let nl = libm::sqrtf(dot(n, n));
+                let valid = finite && nl > 1e-6 && nl.is_finite() && (cd.is_none() || scale > 0.0);
+                let mut x_feat = [0f32; MAX_FEATURES];
+                x_feat[0] = 1.0;
+                let (nn, pp, inv_scale) = if valid {
+                    let nn = n.map(|c| c / nl);
+                    let local = [dot(nn, p.basis[0]), dot(nn, p.basis[1]), dot(nn, p.basis[2])];
+                    let o = octahedral(local);
+                    x_feat[1] = o[0];
+                    x_feat[2] = o[1];
+                    for e in 0..m - 3 {
+                        x_feat[3 + e] = (extra[e] - p.extra[e].0) * p.extra[e].1;
+                    }
+                    (nn, pos, if cd.is_some() { 1.0 / scale } else { 1.0 })
+                } else {
+                    x_feat[1] = 0.5;
+                    x_feat[2] = 0.5;
+                    ([0.0; 3], [0.0; 3], 0.0)
+                };
+                let set = |geo: &mut [f32], c: usize, v: f32| geo[c * w + x] = v;
+                for c in 0..3 {
+                    set(geo, G_P + c, pp[c]);
+                    set(geo, G_N + c, nn[c]);
+                }
+                set(geo, G_INV_SCALE, inv_scale);
+                set(geo, G_VALID, valid as u32 as f32);
+                for j in 1..m {
+                    set(geo, GEO_FIXED + j - 1, x_feat[j]);
+                }
+                let ok = rgb.iter().all(|v| v.is_finite());
+                rep.nonfinite_noisy += !ok as u64;
+                let yv = if ok { rgb.map(|v| (v * inv_light).clamp(-S::LIMIT, S::LIMIT)) } else { [0.0; 3] };
+                let wgt = if ok { 1.0 } else { 0.0 };
+                let mut k = 0;
+                let mut put = |v: f32| {
+                    S::set(z, k * w + x, v);
+                    k += 1;
+                };
+                for q in 1..m {
+                    put(wgt * x_feat[q]);
+                }
+                for a in 1..m {
+                    for b in a..m {
+                        put(wgt * x_feat[a] * x_feat[b]);
+                    }
+                }
+                for c in 0..3 {
+                    for q in 0..m {
+                        put(yv[c] * x_feat[q]);
+                    }
+                }
+                put(wgt);
+                debug_assert_eq!(k, planes);
+            }
+        }
+        Ok(rep)
+    }
+}

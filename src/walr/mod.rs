@@ -1,0 +1,372 @@
+//! WALR — Weighted À-trous Linear Regression (Meunier & Harada,
+//! `papers/walr-meunier-harada.txt`).
+//!
+//! A per-pixel weighted linear regression of the noisy light on the features
+//! `X = (1, octahedral normal (2 values in [0, 1]), extra guides)`, solved from
+//! weighted **averages** (§3.1):
+//! `XX̄_pq = Σ w X_p X_q / Σ w`, `YX̄_p = Σ w X_p Y / Σ w` by Cholesky with a
+//! per-pivot floor (Algorithm 1) and substitution (Algorithm 2,
+//! [`crate::kernels::cholesky::factor_floor`]). The averages come from an
+//! **edge-aware à-trous** transform (§3.2): iteration `t` averages a 3×3 box of
+//! taps spaced `3^t` apart, carrying the sample count `W` so that every sample
+//! is counted once (`Z_{t+1} = Σ f W_t Z_t / Σ f W_t`); 4 iterations cover
+//! 81×81 pixels. The weight `f` of a tap is the plane-distance edge-stopping
+//! function (§4.3) **traced** along the segment from the centre (§3.3): its
+//! minimum over the pixels crossed, so a thin object is never jumped over.
+//! Tracing steps with the signed distance field of the previous iteration
+//! (§5.2), and a tap cut off by an edge is replaced by the average at a random
+//! point of its segment before the edge (§3.3), so neighbouring pixels do not
+//! disagree abruptly (no à-trous seams).
+//!
+//! Stages (each callable on any band of rows; bands are independent and
+//! bit-identical to the whole frame): [`Walr::prepare`] (frame-wide constants),
+//! [`Walr::features_rows`], [`Walr::iterate_rows`] × T, [`Walr::solve_rows`].
+//! [`Walr::denoise`] runs them all. [`Walr::reference`] is REFWLR, the slow
+//! exact per-pixel version used as the test oracle, and [`temporal`] the
+//! paper's pipeline around it.
+//!
+//! Deliberate choices where the paper is silent or GPU-specific:
+//! * edge-stopping distances are relative to the centre's camera distance when
+//!   the frame has depth (world units without), so they do not depend on scale;
+//! * pixels without geometry (zero normal) or with NaN/Inf guides are a
+//!   surface of their own: nothing is averaged across their border;
+//! * the octahedral map's pole is the frame's mean normal unless
+//!   [`WalrConfig::view`] gives the direction towards the camera (the paper
+//!   maps view-space normals; this keeps visible normals on the seam-free half);
+//! * light is divided by the frame's mean before it is stored (and multiplied
+//!   back), so f16 averages neither overflow nor lose HDR frames; in f16 the
+//!   stored value is clamped to ±60000 × that mean;
+//! * SIMD tracing steps 8 neighbouring pixels together, by the smallest SDF
+//!   step of the 8, so it evaluates a superset of the scalar path's points
+//!   (identical away from edges; never less careful).
+
+pub mod atrous;
+pub mod features;
+pub mod reference;
+mod regress;
+mod store;
+pub mod temporal;
+
+use crate::config::Kernel;
+use crate::error::{Arg, Error};
+use crate::guides::{Frame, GuideSet, MAX_GUIDES};
+use crate::image::{ImageView, ImageViewMut};
+
+pub use temporal::{History, TemporalConfig};
+
+/// Largest number of regression features (1 + 2 normal + AO + 4 user).
+pub const MAX_FEATURES: usize = 8;
+/// Largest number of à-trous iterations (5: 243×243 pixels).
+pub const MAX_ITERATIONS: u8 = 5;
+
+/// How the averages are stored between iterations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Storage {
+    /// Half floats, as in the paper (half the memory traffic).
+    #[default]
+    F16,
+    /// Single floats.
+    F32,
+}
+
+/// Everything that defines a WALR run. The default is the paper's
+/// configuration (m = 3 features, 4 iterations, tracing and replacement on, f16).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WalrConfig {
+    /// Guides the frames carry. Normal and position are required; depth, if
+    /// present, makes the edge-stopping distances relative; AO and user
+    /// guides become extra features (rescaled to [0, 1] over the frame).
+    pub guides: GuideSet,
+    /// À-trous iterations T (1..=5, default 4: an 81×81 window).
+    pub iterations: u8,
+    /// Plane distance (relative to camera distance with depth) below which a
+    /// tap has full weight (default 0.01).
+    pub near: f32,
+    /// Plane distance at and beyond which a tap has weight 0 (default 0.04).
+    pub far: f32,
+    /// Trace the edge-stopping function along each tap's segment (§3.3).
+    /// Off: evaluate it at the tap only (the plain à-trous of Dammertz et al.).
+    pub tracing: bool,
+    /// Replace a tap cut off by an edge with a random average before the edge.
+    pub replace: bool,
+    /// Fraction of the previous iteration's edge distance that tracing may skip
+    /// (0..=1, default 0.5; 0 visits every pixel of every segment).
+    pub sdf_step: f32,
+    /// Pivot floor ε_i of Algorithm 1 for the feature pivots (features live in
+    /// [0, 1]; default 1e-3, above f16 rounding of the averages).
+    pub epsilon: f32,
+    /// Storage of the averages.
+    pub storage: Storage,
+    /// Direction towards the camera in the normals' space, if known: the pole
+    /// of the octahedral map. `None`: the frame's mean normal.
+    pub view: Option<[f32; 3]>,
+    /// Clamp negative output to 0.
+    pub clamp_negative: bool,
+    /// Kernel implementation (SIMD or the scalar oracle).
+    pub kernel: Kernel,
+    /// Temporal pipeline settings (ignored by the single-frame filter).
+    pub temporal: TemporalConfig,
+}
+
+impl Default for WalrConfig {
+    fn default() -> Self {
+        WalrConfig {
+            guides: GuideSet { normal: true, depth: true, position: true, ao: false, user: 0 },
+            iterations: 4,
+            near: 0.01,
+            far: 0.04,
+            tracing: true,
+            replace: true,
+            sdf_step: 0.5,
+            epsilon: 1e-3,
+            storage: Storage::F16,
+            view: None,
+            clamp_negative: true,
+            kernel: Kernel::Simd,
+            temporal: TemporalConfig::default(),
+        }
+    }
+}
+
+impl WalrConfig {
+    /// The default configuration with these guides.
+    pub fn with_guides(guides: GuideSet) -> Self {
+        WalrConfig { guides, ..Default::default() }
+    }
+
+    pub fn validate(&self) -> Result<(), Error> {
+        self.guides.validate()?;
+        if !self.guides.normal || !self.guides.position {
+            return Err(Error::InvalidConfig("guides: WALR needs normal and position"));
+        }
+        if !(1..=MAX_ITERATIONS).contains(&self.iterations) {
+            return Err(Error::InvalidConfig("iterations (1..=5)"));
+        }
+        if !(self.near >= 0.0 && self.far > self.near && self.far.is_finite()) {
+            return Err(Error::InvalidConfig("near/far (0 ≤ near < far, finite)"));
+        }
+        if !(0.0..=1.0).contains(&self.sdf_step) {
+            return Err(Error::InvalidConfig("sdf_step (0..=1)"));
+        }
+        if !(self.epsilon > 0.0 && self.epsilon < 1.0) {
+            return Err(Error::InvalidConfig("epsilon (0..1)"));
+        }
+        if let Some(v) = self.view {
+            let l = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            if !(l > 1e-12 && l.is_finite()) {
+                return Err(Error::InvalidConfig("view (non-zero, finite)"));
+            }
+        }
+        self.temporal.validate()
+    }
+
+    /// Regression features m: 1 + 2 (normal) + AO + user guides.
+    pub const fn feature_count(&self) -> usize {
+        3 + self.guides.ao as usize + self.guides.user as usize
+    }
+}
+
+/// What happened during a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Report {
+    /// Input pixels with a NaN/Inf noisy value (excluded from every average).
+    pub nonfinite_noisy: u64,
+    /// Input pixels with a NaN/Inf guide value (treated as "no geometry").
+    pub nonfinite_guides: u64,
+    /// Output pixels without a single usable sample in their window (output 0).
+    pub fallback_pixels: u64,
+    /// Temporal only: pixels without usable history (disocclusion, first frame).
+    pub history_rejected: u64,
+}
+
+impl core::ops::AddAssign for Report {
+    fn add_assign(&mut self, o: Self) {
+        self.nonfinite_noisy += o.nonfinite_noisy;
+        self.nonfinite_guides += o.nonfinite_guides;
+        self.fallback_pixels += o.fallback_pixels;
+        self.history_rejected += o.history_rejected;
+    }
+}
+
+/// A frame checked against the plan: the noisy view and one view per guide channel.
+#[derive(Clone, Copy, Debug)]
+pub struct CheckedFrame<'a> {
+    pub(crate) noisy: ImageView<'a>,
+    pub(crate) guides: [Option<ImageView<'a>>; MAX_GUIDES],
+}
+
+/// Frame-wide constants computed once per frame by [`Walr::prepare`] (from
+/// every 4th pixel of every 4th row, so it costs ~1/16 of a pass).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prepared {
+    /// Orthonormal basis whose third vector is the octahedral map's pole.
+    pub basis: [[f32; 3]; 3],
+    /// Light is stored divided by this (the mean of the finite noisy values).
+    pub light_scale: f32,
+    /// (min, 1 / range) of each extra guide (AO, user), for rescaling to [0, 1].
+    pub extra: [(f32, f32); MAX_FEATURES - 3],
+    /// Seed of the replacement choices (from the frame index).
+    pub seed: u32,
+}
+
+/// The scratch split into its buffers (see [`Walr::parts`]). Rows are
+/// contiguous in every buffer, so a band of rows is one sub-slice.
+#[derive(Debug)]
+pub struct Parts<'s> {
+    /// Geometry: per row, planes p (3), n (3), 1/scale, valid, features X_1.. (m − 1).
+    pub geo: &'s mut [f32],
+    /// The edge-distance fields of two consecutive iterations.
+    pub sdf: [&'s mut [f32]; 2],
+    /// Averages of two consecutive iterations (f32, or f16 bits packed in f32).
+    pub z: [&'s mut [f32]; 2],
+}
+
+/// WALR for one frame size and configuration.
+#[derive(Clone, Copy, Debug)]
+pub struct Walr {
+    pub(crate) cfg: WalrConfig,
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    /// Features m.
+    pub(crate) m: usize,
+}
+
+/// Planes of [`Parts::geo`] before the features.
+pub(crate) const GEO_FIXED: usize = 8;
+pub(crate) const G_P: usize = 0;
+pub(crate) const G_N: usize = 3;
+pub(crate) const G_INV_SCALE: usize = 6;
+pub(crate) const G_VALID: usize = 7;
+
+impl Walr {
+    /// Plans WALR for `width × height` frames.
+    pub fn new(cfg: WalrConfig, width: usize, height: usize) -> Result<Self, Error> {
+        cfg.validate()?;
+        if width == 0 || height == 0 || width > crate::image::MAX_DIM || height > crate::image::MAX_DIM {
+            return Err(Error::InvalidSize { arg: Arg::Config, width, height });
+        }
+        Ok(Walr { cfg, width, height, m: cfg.feature_count() })
+    }
+    pub fn config(&self) -> &WalrConfig {
+        &self.cfg
+    }
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+    /// Regression features m.
+    pub fn feature_count(&self) -> usize {
+        self.m
+    }
+    /// Stored averages per pixel: `m(m+1)/2 − 1` of XX̄ (XX̄₀₀ = 1 is implicit)
+    /// and `3m` of YX̄ — 14 for m = 3 — plus the sample count W.
+    pub fn planes(&self) -> usize {
+        self.m * (self.m + 1) / 2 - 1 + 3 * self.m + 1
+    }
+    /// Geometry planes per row.
+    pub fn geo_planes(&self) -> usize {
+        GEO_FIXED + self.m - 1
+    }
+    /// f32 per row of [`Parts::geo`].
+    pub fn geo_row_len(&self) -> usize {
+        self.geo_planes() * self.width
+    }
+    /// Stored values per row of an averages buffer (f16 rows padded to an even count).
+    pub(crate) fn z_row_values(&self) -> usize {
+        let n = self.planes() * self.width;
+        match self.cfg.storage {
+            Storage::F32 => n,
+            Storage::F16 => (n + 1) & !1,
+        }
+    }
+    /// f32 per row of each [`Parts::z`] buffer.
+    pub fn z_row_len(&self) -> usize {
+        match self.cfg.storage {
+            Storage::F32 => self.z_row_values(),
+            Storage::F16 => self.z_row_values() / 2,
+        }
+    }
+    /// f32 of scratch [`Walr::denoise`] needs.
+    pub fn scratch_len(&self) -> usize {
+        self.height * (self.geo_row_len() + 2 * self.width + 2 * self.z_row_len())
+    }
+    /// Which averages buffer iteration `t` reads (it writes the other one);
+    /// [`Walr::solve_rows`] reads buffer `iterations % 2`.
+    pub fn buffer_of(t: u8) -> usize {
+        (t % 2) as usize
+    }
+
+    /// Splits a scratch of at least [`Walr::scratch_len`] f32 into its buffers.
+    pub fn parts<'s>(&self, scratch: &'s mut [f32]) -> Result<Parts<'s>, Error> {
+        if scratch.len() < self.scratch_len() {
+            return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
+        }
+        let h = self.height;
+        let (geo, rest) = scratch.split_at_mut(h * self.geo_row_len());
+        let (s0, rest) = rest.split_at_mut(h * self.width);
+        let (s1, rest) = rest.split_at_mut(h * self.width);
+        let (z0, rest) = rest.split_at_mut(h * self.z_row_len());
+        let z1 = &mut rest[..h * self.z_row_len()];
+        Ok(Parts { geo, sdf: [s0, s1], z: [z0, z1] })
+    }
+
+    /// Checks a frame against the plan (sizes, channels, guide set).
+    pub fn check_frame<'a>(&self, frame: &Frame<'a>) -> Result<CheckedFrame<'a>, Error> {
+        let n = &frame.noisy;
+        if (n.width(), n.height()) != (self.width, self.height) {
+            return Err(Error::SizeMismatch { arg: Arg::Noisy, expected: (self.width, self.height), got: (n.width(), n.height()) });
+        }
+        if n.channel_count() < 3 {
+            return Err(Error::ChannelCount { arg: Arg::Noisy, expected: 3, got: n.channel_count() });
+        }
+        if frame.guides_low.is_some() {
+            return Err(Error::Unsupported("WALR has no joint upsampling (guides_low given)"));
+        }
+        let guides = frame.guides.channel_views(&self.cfg.guides, self.width, self.height, Arg::Guide)?;
+        Ok(CheckedFrame { noisy: frame.noisy, guides })
+    }
+
+    pub(crate) fn check_out(&self, out: &ImageViewMut<'_>, rows: usize) -> Result<(), Error> {
+        if out.width() != self.width || out.height() != rows || out.channel_count() < 3 {
+            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, rows), got: (out.width(), out.height()) });
+        }
+        Ok(())
+    }
+
+    /// Checks that a band `y0..y0 + rows` of a row-major buffer with `row_len`
+    /// values per row fits the frame and the slice.
+    pub(crate) fn check_band(&self, y0: usize, slice_len: usize, row_len: usize) -> Result<usize, Error> {
+        let rows = if row_len == 0 { 0 } else { slice_len / row_len };
+        if rows == 0 || slice_len != rows * row_len || y0 + rows > self.height {
+            return Err(Error::InvalidTile { index: y0, count: self.height });
+        }
+        Ok(rows)
+    }
+
+    /// Single-frame WALR on the calling thread. `index` (the frame number)
+    /// seeds the replacement choices. `scratch`: at least
+    /// [`Walr::scratch_len`] f32. Allocates nothing.
+    pub fn denoise(&self, frame: &Frame<'_>, index: u32, scratch: &mut [f32], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, self.height)?;
+        let prep = self.prepare(&f, index);
+        let parts = self.parts(scratch)?;
+        self.run(&f, &prep, parts, out)
+    }
+
+    /// The stages on one thread, on an already checked frame.
+    pub(crate) fn run(&self, f: &CheckedFrame<'_>, prep: &Prepared, parts: Parts<'_>, out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = parts;
+        let mut rep = self.features_rows(f, prep, 0, geo, z0)?;
+        let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
+        for t in 0..self.cfg.iterations {
+            let [sa, sb] = &mut sdf;
+            let [za, zb] = &mut z;
+            let (sin, sout, zin, zout) =
+                if Self::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
+            self.iterate_rows(t, prep, 0, geo, sin, zin, sout, zout)?;
+        }
+        let zr = &*z[Self::buffer_of(self.cfg.iterations)];
+        rep += self.solve_rows(prep, 0, geo, zr, out)?;
+        Ok(rep)
+    }
+}

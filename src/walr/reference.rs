@@ -1,0 +1,132 @@
+//! REFWLR (§6): the slow, exact per-pixel weighted regression WALR
+//! approximates, and the oracle of its tests. Same features, edge-stopping
+//! function and pivot floor, but every pixel of the `(3^T)²` window is
+//! weighted directly — by the minimum of the edge-stopping function along
+//! the digital line from the centre (every pixel visited, no SDF, no
+//! replacement, no à-trous) — and sums are in f64. O(pixels × window ×
+//! line length): for small frames only.
+
+use super::store::Store;
+use super::{Parts, Report, Storage, Walr, GEO_FIXED, G_INV_SCALE, G_N, G_P, G_VALID, MAX_FEATURES};
+use crate::error::Error;
+use crate::guides::Frame;
+use crate::image::ImageViewMut;
+
+impl Walr {
+    /// REFWLR on one frame (slow). Same scratch as [`Walr::denoise`].
+    pub fn reference(&self, frame: &Frame<'_>, index: u32, scratch: &mut [f32], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, self.height)?;
+        let prep = self.prepare(&f, index);
+        let Parts { geo, z: [z0, _], .. } = self.parts(scratch)?;
+        let mut rep = self.features_rows(&f, &prep, 0, geo, z0)?;
+        let r = match self.cfg.storage {
+            Storage::F32 => self.reference_impl::<f32>(geo, z0, prep.light_scale, out),
+            Storage::F16 => self.reference_impl::<u16>(geo, bytemuck::cast_slice(z0), prep.light_scale, out),
+        }?;
+        rep.fallback_pixels = r;
+        Ok(rep)
+    }
+
+    fn reference_impl<S: Store>(&self, geo: &[f32], z0: &[S], scale: f32, out: &mut ImageViewMut<'_>) -> Result<u64, Error> {
+        let (w, h, m) = (self.width as i64, self.height as i64, self.m);
+        let (gp, kp, zl) = (self.geo_planes(), self.planes(), self.z_row_values());
+        let radius = (3i64.pow(self.cfg.iterations as u32) - 1) / 2;
+        let g = |c: usize, x: i64, y: i64| geo[(y as usize * gp + c) * w as usize + x as usize] as f64;
+        let (far, range) = (self.cfg.far as f64, (self.cfg.far - self.cfg.near) as f64);
+        let weight = |cx: i64, cy: i64, x: i64, y: i64| -> f64 {
+            if g(G_VALID, x, y) != g(G_VALID, cx, cy) {
+                return 0.0;
+            }
+            let d: f64 = (0..3).map(|a| g(G_N + a, cx, cy) * (g(G_P + a, x, y) - g(G_P + a, cx, cy))).sum();
+            ((far - d.abs() * g(G_INV_SCALE, cx, cy)) / range).clamp(0.0, 1.0)
+        };
+        let mut fallback = 0;
+        for cy in 0..h {
+            for cx in 0..w {
+                // moments of the stored Z_0 (products, W) with weights w
+                let mut sum = [0f64; 64];
+                for y in (cy - radius).max(0)..=(cy + radius).min(h - 1) {
+                    for x in (cx - radius).max(0)..=(cx + radius).min(w - 1) {
+                        let (dx, dy) = (x - cx, y - cy);
+                        let n = dx.abs().max(dy.abs());
+                        let mut wt = 1f64;
+                        if self.cfg.tracing {
+                            for k in 1..=n {
+                                let px = cx + round_div(k * dx, n);
+                                let py = cy + round_div(k * dy, n);
+                                wt = wt.min(weight(cx, cy, px, py));
+                                if wt == 0.0 {
+                                    break;
+                                }
+                            }
+                        } else if n > 0 {
+                            wt = weight(cx, cy, x, y);
+                        }
+                        if wt == 0.0 {
+                            continue;
+                        }
+                        let base = y as usize * zl + x as usize;
+                        let wz = S::get(z0, base + (kp - 1) * w as usize) as f64;
+                        for k in 0..kp - 1 {
+                            sum[k] += wt * wz * S::get(z0, base + k * w as usize) as f64;
+                        }
+                        sum[kp - 1] += wt * wz;
+                    }
+                }
+                let mut y = [0f64; 3];
+                if sum[kp - 1] > 0.0 {
+                    let inv = 1.0 / sum[kp - 1];
+                    let zz: [f64; 64] = core::array::from_fn(|k| sum[k] * inv);
+                    let mut x = [1f64; MAX_FEATURES];
+                    for q in 1..m {
+                        x[q] = g(GEO_FIXED + q - 1, cx, cy);
+                    }
+                    y = solve_f64(&zz[..kp - 1], &x[..m], self.cfg.epsilon as f64);
+                } else {
+                    fallback += 1;
+                }
+                let v = y.map(|c| {
+                    let c = c * scale as f64;
+                    let c = if self.cfg.clamp_negative { c.max(0.0) } else { c };
+                    if c.is_finite() {
+                        c as f32
+                    } else {
+                        0.0
+                    }
+                });
+                out.write_row_n(cy as usize, cx as usize, [&v[0..1], &v[1..2], &v[2..3]])
+                    .ok_or(Error::InvalidTile { index: cy as usize, count: h as usize })?;
+            }
+        }
+        Ok(fallback)
+    }
+}
+
+/// `round(a / b)` for `b > 0` (halves away from zero).
+fn round_div(a: i64, b: i64) -> i64 {
+    if a >= 0 {
+        (2 * a + b) / (2 * b)
+    } else {
+        -((-2 * a + b) / (2 * b))
+    }
+}
+
+/// The regression of one pixel in f64 with the same floor (Algorithms 1–2).
+fn solve_f64(z: &[f64], x: &[f64], eps: f64) -> [f64; 3] {
+    macro_rules! go {
+        ($m:literal) => {{
+            let mut xa = [1f64; $m];
+            xa.copy_from_slice(x);
+            super::regress::solve_pixel::<f64, $m>(z, &xa, eps)
+        }};
+    }
+    match x.len() {
+        3 => go!(3),
+        4 => go!(4),
+        5 => go!(5),
+        6 => go!(6),
+        7 => go!(7),
+        _ => go!(8),
+    }
+}

@@ -1,0 +1,61 @@
+//! The two storage formats of the averages: f32, or f16 bits in `u16`.
+
+use half::f16;
+use wide::f32x8;
+
+/// A stored sample type (f32 or f16 bits).
+pub(crate) trait Store: bytemuck::Pod {
+    /// Largest magnitude stored without overflow.
+    const LIMIT: f32;
+    fn get(s: &[Self], i: usize) -> f32;
+    fn set(s: &mut [Self], i: usize, v: f32);
+    #[inline(always)]
+    fn load8(s: &[Self], i: usize) -> f32x8 {
+        let mut a = [0f32; 8];
+        let src = &s[i..i + 8];
+        for (d, v) in a.iter_mut().zip(src) {
+            *d = Self::get(core::slice::from_ref(v), 0);
+        }
+        f32x8::from(a)
+    }
+    #[inline(always)]
+    fn store8(s: &mut [Self], i: usize, v: f32x8) {
+        let a = v.to_array();
+        for (k, x) in a.into_iter().enumerate() {
+            Self::set(s, i + k, x);
+        }
+    }
+}
+
+impl Store for f32 {
+    const LIMIT: f32 = f32::MAX;
+    #[inline(always)]
+    fn get(s: &[Self], i: usize) -> f32 {
+        s[i]
+    }
+    #[inline(always)]
+    fn set(s: &mut [Self], i: usize, v: f32) {
+        s[i] = v;
+    }
+    #[inline(always)]
+    fn load8(s: &[Self], i: usize) -> f32x8 {
+        let a: &[f32; 8] = s[i..i + 8].try_into().unwrap_or(&[0.0; 8]);
+        f32x8::from(*a)
+    }
+    #[inline(always)]
+    fn store8(s: &mut [Self], i: usize, v: f32x8) {
+        s[i..i + 8].copy_from_slice(&v.to_array());
+    }
+}
+
+impl Store for u16 {
+    const LIMIT: f32 = 60000.0;
+    #[inline(always)]
+    fn get(s: &[Self], i: usize) -> f32 {
+        f16::from_bits(s[i]).to_f32()
+    }
+    #[inline(always)]
+    fn set(s: &mut [Self], i: usize, v: f32) {
+        s[i] = f16::from_f32(v).to_bits();
+    }
+}
