@@ -261,7 +261,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 flicker,
             });
             if let Some(sq) = &seq {
-                let temporal = matches!(built.method, Method::BmfrTemporal(_));
+                let temporal = matches!(built.method, Method::Temporal(_));
                 carry[vi] = Some(Carry { seq: sq.clone(), built: temporal.then_some(built), prev: (out_tm, ref_tm.clone()) });
             }
         }

@@ -226,6 +226,10 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(FlrArgs::default()).on("noisy4"),
         Variant::method("bmfr", FlrArgs::default()),
         Variant::method("bmfr-temporal", FlrArgs::default()),
+        Variant::method("walr", FlrArgs::default()),
+        Variant::method("walr", FlrArgs { no_tracing: true, ..Default::default() }),
+        Variant::method("walr", FlrArgs { storage: Some("f32".into()), ..Default::default() }),
+        Variant::method("walr-temporal", FlrArgs::default()),
     ]
 }
 
@@ -433,8 +437,8 @@ fn run(cli: Cli) -> Result<(), String> {
             let t = threads_or_all(threads);
             let frames = list_frames(std::slice::from_ref(&dir))?;
             std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
-            // On a sequence, bmfr means its temporal pipeline.
-            let method = if method == "bmfr" { "bmfr-temporal".to_string() } else { method };
+            // On a sequence, bmfr and walr mean their temporal pipelines.
+            let method = if method == "bmfr" || method == "walr" { format!("{method}-temporal") } else { method };
             let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
             let pb = evaluate::progress(frames.len() as u64, "denoising");
             let mut total = 0.0;

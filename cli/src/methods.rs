@@ -7,10 +7,16 @@
 //! sequence) reads `--guides` (default: normal and position, or normal and
 //! depth without positions) and `--block` (default 32); the other flags are
 //! FLR's and are refused with it.
+//!
+//! WALR (`--method walr`, single frame; `walr-temporal`, its pipeline) reads
+//! `--guides` (normal and position required; depth makes distances relative;
+//! ao becomes an extra feature), `--iterations`, `--near`, `--far`,
+//! `--no-tracing` and `--storage f16|f32`; those flags are refused elsewhere.
 
-use crate::runner::{BmfrRunner, FlrRunner, Inputs, TemporalRunner};
+use crate::runner::{BmfrRunner, FlrRunner, Inputs, TemporalRunner, WalrRunner};
 use clap::Args;
-use lrdenoise::{Blur, BmfrConfig, FlrConfig, GuideSet, Regularization};
+use lrdenoise::walr::Storage;
+use lrdenoise::{Blur, BmfrConfig, FlrConfig, GuideSet, Regularization, WalrConfig};
 
 #[derive(Args, Clone, Debug, Default)]
 pub struct FlrArgs {
@@ -35,6 +41,27 @@ pub struct FlrArgs {
     /// Joint denoise + upsample: trace at 1/2 or 1/4 resolution (emulated by taking every 2nd/4th pixel of the noisy layer)
     #[arg(long)]
     pub upsample: Option<usize>,
+    /// WALR: à-trous iterations (1..=5; 4 = an 81x81 window)
+    #[arg(long)]
+    pub iterations: Option<u8>,
+    /// WALR: plane distance (relative to camera distance) below which a tap has full weight
+    #[arg(long)]
+    pub near: Option<f32>,
+    /// WALR: plane distance at which a tap's weight reaches 0
+    #[arg(long)]
+    pub far: Option<f32>,
+    /// WALR: evaluate the edge-stopping function at the tap only (no edge tracing)
+    #[arg(long)]
+    pub no_tracing: bool,
+    /// WALR: storage of the averages, f16 or f32
+    #[arg(long)]
+    pub storage: Option<String>,
+}
+
+impl FlrArgs {
+    fn has_walr_flags(&self) -> bool {
+        self.iterations.is_some() || self.near.is_some() || self.far.is_some() || self.no_tracing || self.storage.is_some()
+    }
 }
 
 pub fn parse_guides(s: &str) -> Result<GuideSet, String> {
@@ -96,6 +123,9 @@ impl FlrArgs {
         if let Some(m) = inputs.missing(&guides) {
             return Err(format!("--guides asks for '{m}' but the frame has no '{m}' layer"));
         }
+        if self.has_walr_flags() {
+            return Err("--iterations, --near, --far, --no-tracing and --storage are WALR flags".into());
+        }
         let mut c = FlrConfig::with_guides(guides);
         if let Some(b) = self.block {
             c.block = b;
@@ -121,6 +151,9 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
     if a.sigma.is_some() || a.radius.is_some() || a.box_radius.is_some() || a.regularization.is_some() || a.upsample.is_some() {
         return Err("--sigma, --radius, --box, --regularization and --upsample are FLR flags; bmfr takes --guides and --block".into());
     }
+    if a.has_walr_flags() {
+        return Err("--iterations, --near, --far, --no-tracing and --storage are WALR flags; bmfr takes --guides and --block".into());
+    }
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
         None => GuideSet {
@@ -136,6 +169,66 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
     let c = BmfrConfig { block: a.block.unwrap_or(32), ..BmfrConfig::with_guides(guides) };
     c.validate().map_err(|e| format!("bmfr flags: {e}"))?;
     Ok(c)
+}
+
+/// WALR's configuration from the shared flags.
+pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
+    if a.sigma.is_some()
+        || a.radius.is_some()
+        || a.box_radius.is_some()
+        || a.regularization.is_some()
+        || a.upsample.is_some()
+        || a.block.is_some()
+    {
+        return Err("--block, --sigma, --radius, --box, --regularization and --upsample are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
+    }
+    let guides = match &a.guides {
+        Some(s) => parse_guides(s)?,
+        None => GuideSet { normal: true, position: true, depth: inputs.depth.is_some(), ..GuideSet::NONE },
+    };
+    if !guides.normal || !guides.position {
+        return Err("walr needs the normal and position guides (--guides normal,position[,depth][,ao])".into());
+    }
+    if let Some(m) = inputs.missing(&guides) {
+        return Err(format!("walr needs '{m}' but the frame has no '{m}' layer"));
+    }
+    let mut c = WalrConfig::with_guides(guides);
+    if let Some(t) = a.iterations {
+        c.iterations = t;
+    }
+    if let Some(v) = a.near {
+        c.near = v;
+    }
+    if let Some(v) = a.far {
+        c.far = v;
+    }
+    c.tracing = !a.no_tracing;
+    if let Some(s) = &a.storage {
+        c.storage = match s.as_str() {
+            "f16" => Storage::F16,
+            "f32" => Storage::F32,
+            _ => return Err(format!("--storage: '{s}' is not f16 or f32")),
+        };
+    }
+    c.validate().map_err(|e| format!("walr flags: {e}"))?;
+    Ok(c)
+}
+
+fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
+    let st = match c.storage {
+        Storage::F16 => "f16",
+        Storage::F32 => "f32",
+    };
+    let tr = if c.tracing { "" } else { " --no-tracing" };
+    let label = format!("{name} {} t{} {st}{}", short_guides(&c.guides), c.iterations, if c.tracing { "" } else { " notrace" });
+    let flags = format!(
+        "--method {name} --guides {} --iterations {} --near {} --far {} --storage {st}{tr}",
+        guides_string(&c.guides),
+        c.iterations,
+        c.near,
+        c.far
+    );
+    (label, flags)
 }
 
 fn short_guides(g: &GuideSet) -> String {
@@ -189,8 +282,10 @@ pub enum Method {
     },
     /// Single-frame BMFR (frame index 0: no grid shift between runs).
     Bmfr(Box<BmfrRunner>),
-    /// BMFR's temporal pipeline: every `run` is the next frame of a sequence.
-    BmfrTemporal(Box<TemporalRunner>),
+    /// Single-frame WALR (frame index 0).
+    Walr(Box<WalrRunner>),
+    /// A temporal pipeline (BMFR's or WALR's): every `run` is the next frame of a sequence.
+    Temporal(Box<TemporalRunner>),
 }
 
 /// A method built for one frame: the runner, its table label and the flags
@@ -216,13 +311,23 @@ impl Method {
                 let cfg = a.config(inputs)?;
                 Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg) })
             }
+            "walr" | "walr-temporal" => {
+                let cfg = walr_config(a, inputs)?;
+                let (label, flags) = walr_flags(name, &cfg);
+                let method = if name == "walr" {
+                    Method::Walr(Box::new(WalrRunner::new(cfg, w, h, threads)?))
+                } else {
+                    Method::Temporal(Box::new(TemporalRunner::walr(cfg, w, h)?))
+                };
+                Ok(Built { method, label, flags })
+            }
             _ => {
                 let cfg = bmfr_config(a, inputs)?;
                 let temporal = name == "bmfr-temporal";
                 let label = format!("{name} {} b{}", short_guides(&cfg.guides), cfg.block);
                 let flags = format!("--method {name} --guides {} --block {}", guides_string(&cfg.guides), cfg.block);
                 let method = if temporal {
-                    Method::BmfrTemporal(Box::new(TemporalRunner::new(cfg, w, h)?))
+                    Method::Temporal(Box::new(TemporalRunner::new(cfg, w, h)?))
                 } else {
                     Method::Bmfr(Box::new(BmfrRunner::new(cfg, w, h, threads)?))
                 };
@@ -240,26 +345,27 @@ impl Method {
             }
             Method::Flr { runner, low } => runner.run(inputs, low.as_deref(), out).map(|_| ()),
             Method::Bmfr(r) => r.run(inputs, 0, out).map(|_| ()),
-            Method::BmfrTemporal(r) => r.run(inputs, out).map(|_| ()),
+            Method::Walr(r) => r.run(inputs, 0, out).map(|_| ()),
+            Method::Temporal(r) => r.run(inputs, out),
         }
     }
 
     /// Temporal methods: remember the state, so repeated timing runs of one
     /// frame can each start from it ([`Method::restore`]).
     pub fn save(&mut self) {
-        if let Method::BmfrTemporal(r) = self {
+        if let Method::Temporal(r) = self {
             r.save();
         }
     }
     pub fn restore(&mut self) {
-        if let Method::BmfrTemporal(r) = self {
+        if let Method::Temporal(r) = self {
             r.restore();
         }
     }
 }
 
 /// Known method names for `--methods` / `--method`.
-pub const METHODS: &[&str] = &["flr", "bmfr", "bmfr-temporal"];
+pub const METHODS: &[&str] = &["flr", "bmfr", "bmfr-temporal", "walr", "walr-temporal"];
 
 pub fn check_method(m: &str) -> Result<(), String> {
     if METHODS.contains(&m) {

@@ -2,7 +2,10 @@
 //! threads (each stage's tiles split into one contiguous group per thread).
 
 use lrdenoise::bmfr::Report as BmfrReport;
-use lrdenoise::{Bmfr, BmfrConfig, Error, Flr, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Report};
+use lrdenoise::walr::{Parts, Report as WalrReport};
+use lrdenoise::{
+    Bmfr, BmfrConfig, Error, Flr, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Report, Walr, WalrConfig,
+};
 use lrdenoise_cli::exrio::ExrFrame;
 use std::path::Path;
 
@@ -347,11 +350,116 @@ impl BmfrRunner {
     }
 }
 
-/// BMFR's temporal pipeline over a sequence: the plan, its scratch and the
+/// Single-frame WALR for one size: plan, scratch, and each stage's rows
+/// spread over threads in bands (bit-identical to one thread).
+pub struct WalrRunner {
+    pub walr: Walr,
+    scratch: Vec<f32>,
+    threads: usize,
+    pool: Option<rayon::ThreadPool>,
+}
+
+/// Rows per band when a stage is spread over threads.
+const WALR_BAND: usize = 16;
+
+impl WalrRunner {
+    pub fn new(cfg: WalrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+        let walr = Walr::new(cfg, w, h).map_err(|e| format!("walr: {e}"))?;
+        let threads = threads.max(1);
+        Ok(WalrRunner { scratch: vec![0f32; walr.scratch_len()], walr, threads, pool: pool(threads)? })
+    }
+
+    /// Denoises frame `index` (which seeds the replacement choices) into `out`.
+    pub fn run(&mut self, inputs: &Inputs, index: u32, out: &mut [f32]) -> Result<WalrReport, String> {
+        let set = self.walr.config().guides;
+        let noisy = ImageView::interleaved(&inputs.noisy, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
+        let mut ov = ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let wl = &self.walr;
+        let r = match &self.pool {
+            None => wl.denoise(&frame, index, &mut self.scratch, &mut ov),
+            Some(pool) => walr_parallel(wl, pool, self.threads, &frame, index, &mut self.scratch, ov),
+        };
+        r.map_err(|e| format!("walr: {e}"))
+    }
+}
+
+/// Runs `f` on every item in a scope of `pool`; sums the reports.
+fn par_each<T: Send>(
+    pool: &rayon::ThreadPool,
+    items: Vec<T>,
+    f: &(dyn Fn(T) -> Result<WalrReport, Error> + Sync),
+) -> Result<WalrReport, Error> {
+    let mut results: Vec<Result<WalrReport, Error>> = (0..items.len()).map(|_| Ok(WalrReport::default())).collect();
+    pool.scope(|s| {
+        for (it, res) in items.into_iter().zip(results.iter_mut()) {
+            s.spawn(move |_| *res = f(it));
+        }
+    });
+    let mut total = WalrReport::default();
+    for r in results {
+        total += r?;
+    }
+    Ok(total)
+}
+
+fn walr_parallel(
+    wl: &Walr,
+    pool: &rayon::ThreadPool,
+    threads: usize,
+    frame: &Frame<'_>,
+    index: u32,
+    scratch: &mut [f32],
+    out: ImageViewMut<'_>,
+) -> Result<WalrReport, Error> {
+    let (w, h) = wl.size();
+    let band = WALR_BAND.max(h.div_ceil(threads * 8));
+    let f = wl.check_frame(frame)?;
+    let prep = wl.prepare(&f, index);
+    let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = wl.parts(scratch)?;
+    let (gl, zl) = (wl.geo_row_len(), wl.z_row_len());
+    let starts = || (0..h).step_by(band);
+    let mut rep = {
+        let items: Vec<_> = starts().zip(geo.chunks_mut(band * gl)).zip(z0.chunks_mut(band * zl)).map(|((y, g), z)| (y, g, z)).collect();
+        let (f, prep) = (&f, &prep);
+        par_each(pool, items, &|(y, g, z)| wl.features_rows(f, prep, y, g, z))?
+    };
+    let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
+    let geo = &*geo;
+    for t in 0..wl.config().iterations {
+        let [sa, sb] = &mut sdf;
+        let [za, zb] = &mut z;
+        let (sin, sout, zin, zout) =
+            if Walr::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
+        let items: Vec<_> = starts().zip(sout.chunks_mut(band * w)).zip(zout.chunks_mut(band * zl)).map(|((y, s), z)| (y, s, z)).collect();
+        let prep = &prep;
+        par_each(pool, items, &|(y, s, zo)| wl.iterate_rows(t, prep, y, geo, sin, zin, s, zo).map(|_| WalrReport::default()))?;
+    }
+    let zr = &*z[Walr::buffer_of(wl.config().iterations)];
+    let mut items = Vec::new();
+    let mut rest = Some(out);
+    for y in (0..h).step_by(band) {
+        let r = rest.take().ok_or(Error::InvalidTile { index: y, count: h })?;
+        let (b, r) = r.split_rows(band.min(h - y))?;
+        items.push((y, b));
+        rest = r;
+    }
+    let prep = &prep;
+    rep += par_each(pool, items, &|(y, mut b)| wl.solve_rows(prep, y, geo, zr, &mut b))?;
+    Ok(rep)
+}
+
+/// The pipeline a [`TemporalRunner`] drives.
+pub enum Pipeline {
+    Bmfr(Bmfr),
+    Walr(Walr),
+}
+
+/// A temporal pipeline (BMFR's or WALR's) over a sequence: the plan, its scratch and the
 /// history. [`TemporalRunner::save`] / [`TemporalRunner::restore`] let a
 /// benchmark repeat one frame without advancing the sequence.
 pub struct TemporalRunner {
-    pub bmfr: Bmfr,
+    pub pipeline: Pipeline,
     scratch: Vec<f32>,
     history: Vec<f32>,
     frames: u32,
@@ -361,13 +469,14 @@ pub struct TemporalRunner {
 impl TemporalRunner {
     pub fn new(cfg: BmfrConfig, w: usize, h: usize) -> Result<Self, String> {
         let bmfr = Bmfr::new(cfg, w, h).map_err(|e| format!("bmfr: {e}"))?;
-        Ok(TemporalRunner {
-            scratch: vec![0f32; bmfr.temporal_scratch_len()],
-            history: vec![0f32; bmfr.history_len()],
-            bmfr,
-            frames: 0,
-            saved: None,
-        })
+        Ok(Self::with(bmfr.temporal_scratch_len(), bmfr.history_len(), Pipeline::Bmfr(bmfr)))
+    }
+    pub fn walr(cfg: WalrConfig, w: usize, h: usize) -> Result<Self, String> {
+        let walr = Walr::new(cfg, w, h).map_err(|e| format!("walr: {e}"))?;
+        Ok(Self::with(walr.temporal_scratch_len(), walr.history_len(), Pipeline::Walr(walr)))
+    }
+    fn with(scratch: usize, history: usize, pipeline: Pipeline) -> Self {
+        TemporalRunner { scratch: vec![0f32; scratch], history: vec![0f32; history], pipeline, frames: 0, saved: None }
     }
     pub fn save(&mut self) {
         self.saved = Some((self.history.clone(), self.frames));
@@ -379,8 +488,11 @@ impl TemporalRunner {
         }
     }
     /// The next frame of the sequence (its `motion` layer is used when present).
-    pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<BmfrReport, String> {
-        let set = self.bmfr.config().guides;
+    pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<(), String> {
+        let set = match &self.pipeline {
+            Pipeline::Bmfr(b) => b.config().guides,
+            Pipeline::Walr(w) => w.config().guides,
+        };
         let (w, h) = (inputs.w, inputs.h);
         let noisy = ImageView::interleaved(&inputs.noisy, w, h, 3).map_err(|e| e.to_string())?;
         let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
@@ -389,9 +501,21 @@ impl TemporalRunner {
             None => None,
         };
         let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
-        let mut history = History::resume(&mut self.history, self.frames);
-        let r = self.bmfr.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov);
+        let r = match &self.pipeline {
+            Pipeline::Bmfr(b) => {
+                let mut history = History::resume(&mut self.history, self.frames);
+                b.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
+                    .map(|_| ())
+                    .map_err(|e| format!("bmfr: {e}"))
+            }
+            Pipeline::Walr(wl) => {
+                let mut history = lrdenoise::walr::History::resume(&mut self.history, self.frames);
+                wl.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
+                    .map(|_| ())
+                    .map_err(|e| format!("walr: {e}"))
+            }
+        };
         self.frames = self.frames.saturating_add(1);
-        r.map_err(|e| format!("bmfr: {e}"))
+        r
     }
 }

@@ -16,6 +16,11 @@
 //! replaced by the average at a hashed distance in `[⌈k/2⌉, k − 1]` on the
 //! same segment, weighted by its own edge-stopping value.
 //!
+//! Validity codes: a tap counts only if its code equals the centre's
+//! *absolute* code. Geometry (1) sees geometry, sky (0) sees sky, and a pixel
+//! with NaN/Inf guides (−1) is seen by nobody but sees all geometry (its
+//! normal is 0, so every plane distance is 0): it gets its neighbourhood's fit.
+//!
 //! 8 neighbouring pixels run in `f32x8` lanes when every tap of the group is
 //! inside the row; the rest (borders, replacements) runs per pixel.
 
@@ -73,7 +78,7 @@ impl<S: Store> Ctx<'_, S> {
             p: [self.g(G_P, x, y), self.g(G_P + 1, x, y), self.g(G_P + 2, x, y)],
             n: [self.g(G_N, x, y), self.g(G_N + 1, x, y), self.g(G_N + 2, x, y)],
             inv_scale: self.g(G_INV_SCALE, x, y),
-            valid: self.g(G_VALID, x, y),
+            valid: self.g(G_VALID, x, y).abs(),
         }
     }
     /// Edge-stopping weight of pixel `(x, y)` seen from `c`.
@@ -324,7 +329,7 @@ fn group8<S: Store>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: usize, zo: &mut [S
         ctx.g8(G_N + 1, x0, y),
         ctx.g8(G_N + 2, x0, y),
         ctx.g8(G_INV_SCALE, x0, y),
-        ctx.g8(G_VALID, x0, y),
+        ctx.g8(G_VALID, x0, y).abs(),
     ];
     // centre: weight 1
     {

@@ -40,6 +40,10 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// Stored light is clamped to ± this many frame means: within f16's range,
+/// and a 1e30 firefly cannot swamp its 81×81 window by more than ~9 means.
+pub const LIGHT_LIMIT: f32 = 60000.0;
+
 /// Subsampling step of [`Walr::prepare`] in x and y.
 const PREP_STEP: usize = 4;
 
@@ -76,8 +80,8 @@ impl Walr {
                     }
                 }
                 for c in 0..3 {
-                    if let Some(v) = f.noisy.get(x, y, c).filter(|v| v.is_finite()) {
-                        lsum += v.abs() as f64;
+                    if let Some(v) = f.noisy.get(x, y, c).filter(|v| v.is_finite() && *v != 0.0) {
+                        lsum += libm::log(v.abs() as f64);
                         lcount += 1;
                     }
                 }
@@ -89,7 +93,8 @@ impl Walr {
             }
         }
         let pole = self.cfg.view.unwrap_or(nsum.map(|v| v as f32));
-        let ls = if lcount > 0 { (lsum / lcount as f64) as f32 } else { 1.0 };
+        // the log-average: a 1e30 firefly among the samples barely moves it
+        let ls = if lcount > 0 { libm::exp(lsum / lcount as f64) as f32 } else { 1.0 };
         let light_scale = if ls > 1e-30 && ls.is_finite() { ls } else { 1.0 };
         let extra = ext.map(|(lo, hi)| {
             if lo.is_finite() && hi > lo && (hi - lo).is_finite() {
@@ -211,13 +216,24 @@ impl Walr {
                     set(geo, G_N + c, nn[c]);
                 }
                 set(geo, G_INV_SCALE, inv_scale);
-                set(geo, G_VALID, valid as u32 as f32);
+                // 1: geometry; 0: none (sky); −1: unknown (NaN/Inf guides) — see `atrous`
+                set(
+                    geo,
+                    G_VALID,
+                    if valid {
+                        1.0
+                    } else if finite {
+                        0.0
+                    } else {
+                        -1.0
+                    },
+                );
                 for j in 1..m {
                     set(geo, GEO_FIXED + j - 1, x_feat[j]);
                 }
                 let ok = rgb.iter().all(|v| v.is_finite());
                 rep.nonfinite_noisy += !ok as u64;
-                let yv = if ok { rgb.map(|v| (v * inv_light).clamp(-S::LIMIT, S::LIMIT)) } else { [0.0; 3] };
+                let yv = if ok { rgb.map(|v| (v * inv_light).clamp(-LIGHT_LIMIT, LIGHT_LIMIT)) } else { [0.0; 3] };
                 let wgt = if ok { 1.0 } else { 0.0 };
                 let mut k = 0;
                 let mut put = |v: f32| {

@@ -33,9 +33,10 @@
 //! * the octahedral map's pole is the frame's mean normal unless
 //!   [`WalrConfig::view`] gives the direction towards the camera (the paper
 //!   maps view-space normals; this keeps visible normals on the seam-free half);
-//! * light is divided by the frame's mean before it is stored (and multiplied
-//!   back), so f16 averages neither overflow nor lose HDR frames; in f16 the
-//!   stored value is clamped to ±60000 × that mean;
+//! * light is divided by the frame's log-average before it is stored (and multiplied
+//!   back), so f16 averages neither overflow nor lose HDR frames; the stored
+//!   value is clamped to ±60000 × that scale (both storages), which bounds
+//!   what a 1e30 firefly can do to its window;
 //! * SIMD tracing steps 8 neighbouring pixels together, by the smallest SDF
 //!   step of the 8, so it evaluates a superset of the scalar path's points
 //!   (identical away from edges; never less careful).
@@ -62,15 +63,18 @@ pub const MAX_ITERATIONS: u8 = 5;
 /// How the averages are stored between iterations.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Storage {
-    /// Half floats, as in the paper (half the memory traffic).
-    #[default]
+    /// Half floats, as in the paper (half the memory traffic; the conversions
+    /// cost more than they save on CPUs without F16C-vectorised code).
     F16,
-    /// Single floats.
+    /// Single floats (the default on CPUs: as accurate as f64 sums here, and
+    /// no conversions).
+    #[default]
     F32,
 }
 
 /// Everything that defines a WALR run. The default is the paper's
-/// configuration (m = 3 features, 4 iterations, tracing and replacement on, f16).
+/// configuration (m = 3 features, 4 iterations, tracing and replacement on),
+/// with f32 averages (the paper's f16 is [`Storage::F16`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WalrConfig {
     /// Guides the frames carry. Normal and position are required; depth, if
@@ -119,7 +123,7 @@ impl Default for WalrConfig {
             replace: true,
             sdf_step: 0.5,
             epsilon: 1e-3,
-            storage: Storage::F16,
+            storage: Storage::F32,
             view: None,
             clamp_negative: true,
             kernel: Kernel::Simd,
@@ -173,7 +177,9 @@ pub struct Report {
     pub nonfinite_noisy: u64,
     /// Input pixels with a NaN/Inf guide value (treated as "no geometry").
     pub nonfinite_guides: u64,
-    /// Output pixels without a single usable sample in their window (output 0).
+    /// Output pixels without a single usable sample in their window (output
+    /// 0), or with NaN/Inf guides (output: the weighted mean light of the
+    /// surrounding geometry).
     pub fallback_pixels: u64,
     /// Temporal only: pixels without usable history (disocclusion, first frame).
     pub history_rejected: u64,
@@ -201,7 +207,8 @@ pub struct CheckedFrame<'a> {
 pub struct Prepared {
     /// Orthonormal basis whose third vector is the octahedral map's pole.
     pub basis: [[f32; 3]; 3],
-    /// Light is stored divided by this (the mean of the finite noisy values).
+    /// Light is stored divided by this: the log-average of the finite,
+    /// non-zero noisy values (robust to fireflies, exact under scaling).
     pub light_scale: f32,
     /// (min, 1 / range) of each extra guide (AO, user), for rescaling to [0, 1].
     pub extra: [(f32, f32); MAX_FEATURES - 3],

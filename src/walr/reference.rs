@@ -35,7 +35,7 @@ impl Walr {
         let g = |c: usize, x: i64, y: i64| geo[(y as usize * gp + c) * w as usize + x as usize] as f64;
         let (far, range) = (self.cfg.far as f64, (self.cfg.far - self.cfg.near) as f64);
         let weight = |cx: i64, cy: i64, x: i64, y: i64| -> f64 {
-            if g(G_VALID, x, y) != g(G_VALID, cx, cy) {
+            if g(G_VALID, x, y) != g(G_VALID, cx, cy).abs() {
                 return 0.0;
             }
             let d: f64 = (0..3).map(|a| g(G_N + a, cx, cy) * (g(G_P + a, x, y) - g(G_P + a, cx, cy))).sum();

@@ -2,7 +2,7 @@
 //! and 2) and the model applied to the pixel's own features.
 
 use super::store::Store;
-use super::{Prepared, Report, Storage, Walr, GEO_FIXED};
+use super::{Prepared, Report, Storage, Walr, GEO_FIXED, G_VALID};
 use crate::config::Kernel;
 use crate::error::Error;
 use crate::image::ImageViewMut;
@@ -118,9 +118,13 @@ impl Walr {
                         zv[k] = S::load8(zrow, k * w + x0);
                     }
                     let mut xv = [f32x8::ONE; M];
+                    // unknown geometry (NaN/Inf guides, code −1): evaluate at the
+                    // window's mean features, i.e. output the weighted mean light
+                    let unknown = <f32 as Store>::load8(grow, G_VALID * w + x0).simd_lt(f32x8::ZERO);
                     for q in 1..M {
-                        xv[q] = <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * w + x0);
+                        xv[q] = unknown.select(zv[q - 1], <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * w + x0));
                     }
+                    rep.fallback_pixels += unknown.to_bitmask().count_ones() as u64;
                     let yv = solve_pixel::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(self.cfg.epsilon));
                     let empty = zv[kp - 1].simd_le(f32x8::ZERO);
                     rep.fallback_pixels += empty.to_bitmask().count_ones() as u64;
@@ -133,9 +137,11 @@ impl Walr {
                         zs[k] = S::get(zrow, k * w + x0);
                     }
                     let mut xs = [1f32; M];
+                    let unknown = grow[G_VALID * w + x0] < 0.0;
                     for q in 1..M {
-                        xs[q] = grow[(GEO_FIXED + q - 1) * w + x0];
+                        xs[q] = if unknown { zs[q - 1] } else { grow[(GEO_FIXED + q - 1) * w + x0] };
                     }
+                    rep.fallback_pixels += unknown as u64;
                     let ys = solve_pixel::<f32, M>(&zs[..kp], &xs, self.cfg.epsilon);
                     let empty = !(zs[kp - 1] > 0.0);
                     rep.fallback_pixels += empty as u64;

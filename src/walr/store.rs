@@ -5,8 +5,6 @@ use wide::f32x8;
 
 /// A stored sample type (f32 or f16 bits).
 pub(crate) trait Store: bytemuck::Pod {
-    /// Largest magnitude stored without overflow.
-    const LIMIT: f32;
     fn get(s: &[Self], i: usize) -> f32;
     fn set(s: &mut [Self], i: usize, v: f32);
     #[inline(always)]
@@ -28,7 +26,6 @@ pub(crate) trait Store: bytemuck::Pod {
 }
 
 impl Store for f32 {
-    const LIMIT: f32 = f32::MAX;
     #[inline(always)]
     fn get(s: &[Self], i: usize) -> f32 {
         s[i]
@@ -49,7 +46,6 @@ impl Store for f32 {
 }
 
 impl Store for u16 {
-    const LIMIT: f32 = 60000.0;
     #[inline(always)]
     fn get(s: &[Self], i: usize) -> f32 {
         f16::from_bits(s[i]).to_f32()
