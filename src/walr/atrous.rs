@@ -30,8 +30,6 @@ use crate::config::Kernel;
 use crate::error::Error;
 use wide::f32x8;
 
-/// Most stored planes (m = 8: 35 + 24 + 1).
-const MAX_PLANES: usize = 60;
 
 /// The 8 non-centre tap directions, in accumulation order.
 const DIRS: [(i64, i64); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
@@ -71,7 +69,12 @@ impl<S: Store> Ctx<'_, S> {
     }
     #[inline(always)]
     fn g8(&self, c: usize, x: usize, y: usize) -> f32x8 {
-        <f32 as Store>::load8(self.geo, (y * self.gp + c) * self.w + x)
+        let i = (y * self.gp + c) * self.w + x;
+        debug_assert!(c < self.gp && x + 8 <= self.w && y < self.h && self.geo.len() >= self.h * self.gp * self.w);
+        // SAFETY: `iterate_rows` checked `geo.len() ≥ h · gp · w`; callers pass
+        // y < h, c < gp and x + 8 ≤ w (a group's taps are checked in-row), so
+        // i + 8 ≤ geo.len(). An unaligned read of 8 f32 is a valid f32x8.
+        unsafe { core::ptr::read_unaligned(self.geo.as_ptr().add(i) as *const f32x8) }
     }
     fn centre(&self, x: usize, y: usize) -> Centre {
         Centre {
@@ -89,8 +92,8 @@ impl<S: Store> Ctx<'_, S> {
         }
         let d =
             c.n[0] * (self.g(G_P, x, y) - c.p[0]) + c.n[1] * (self.g(G_P + 1, x, y) - c.p[1]) + c.n[2] * (self.g(G_P + 2, x, y) - c.p[2]);
-        let d = d.abs() * c.inv_scale;
-        let v = (self.far - d) * self.inv_range;
+        // the same operations as `weight8`, for bit-identical lanes
+        let v = self.far * self.inv_range - d.abs() * (c.inv_scale * self.inv_range);
         // NaN-safe clamp to [0, 1]
         if v >= 1.0 {
             1.0
@@ -101,11 +104,25 @@ impl<S: Store> Ctx<'_, S> {
         }
     }
     #[inline(always)]
-    fn weight8(&self, c: &[f32x8; 8], x: usize, y: usize) -> f32x8 {
+    fn weight8(&self, c: &[f32x8; 9], x: usize, y: usize) -> f32x8 {
+        // c: p (3), n (3), inv_scale / (far − near), |valid|, far / (far − near)
         let d = c[3] * (self.g8(G_P, x, y) - c[0]) + c[4] * (self.g8(G_P + 1, x, y) - c[1]) + c[5] * (self.g8(G_P + 2, x, y) - c[2]);
-        let d = d.abs() * c[6];
-        let v = ((f32x8::splat(self.far) - d) * f32x8::splat(self.inv_range)).fast_max(f32x8::ZERO).fast_min(f32x8::ONE);
+        let v = (c[8] - d.abs() * c[6]).fast_max(f32x8::ZERO).fast_min(f32x8::ONE);
         self.g8(G_VALID, x, y).simd_eq(c[7]).select(v, f32x8::ZERO)
+    }
+    /// The most careful SDF step of the 8 pixels `x..x + 8` of row `y`.
+    #[inline(always)]
+    fn step8(&self, x: usize, y: usize) -> usize {
+        let i = y * self.w + x;
+        debug_assert!(x + 8 <= self.w && y < self.h && self.sdf.len() >= self.h * self.w);
+        // SAFETY: `iterate_rows` checked `sdf.len() ≥ h · w`; y < h, x + 8 ≤ w.
+        let v = unsafe { core::ptr::read_unaligned(self.sdf.as_ptr().add(i) as *const f32x8) };
+        let m = v.to_array().into_iter().fold(f32::INFINITY, f32::min) * self.sdf_step;
+        if m >= 2.0 {
+            m as usize
+        } else {
+            1
+        }
     }
     #[inline(always)]
     fn step(&self, x: usize, y: usize) -> usize {
@@ -175,13 +192,13 @@ impl<S: Store> Ctx<'_, S> {
 
     /// Adds `f · W · Z` of the sample at `(qx, qy)` to lane `l` of `acc`.
     #[inline(always)]
-    fn add_lane(&self, acc: &mut [f32x8; MAX_PLANES], l: usize, f: f32, qx: usize, qy: usize) {
+    fn add_lane<const KP: usize>(&self, acc: &mut [f32x8; KP], l: usize, f: f32, qx: usize, qy: usize) {
         let base = qy * self.zl + qx;
-        let fw = f * S::get(self.z, base + (self.kp - 1) * self.w);
-        for k in 0..self.kp - 1 {
+        let fw = f * S::get(self.z, base + (KP - 1) * self.w);
+        for k in 0..KP - 1 {
             acc[k].as_mut_array()[l] += fw * S::get(self.z, base + k * self.w);
         }
-        acc[self.kp - 1].as_mut_array()[l] += fw;
+        acc[KP - 1].as_mut_array()[l] += fw;
     }
 }
 
@@ -254,6 +271,17 @@ impl Walr {
         let s = 3usize.pow(t as u32);
         let w = self.width;
         let simd = cfg.kernel == Kernel::Simd;
+        // the accumulators stay in registers only for a compile-time plane count
+        type Group<S> = fn(&Ctx<'_, S>, usize, usize, usize, &mut [S], &mut [f32]);
+        let (group, one): (Group<S>, Group<S>) = match self.m {
+            3 => (group8::<S, 15>, pixel::<S, 15>),
+            4 => (group8::<S, 22>, pixel::<S, 22>),
+            5 => (group8::<S, 30>, pixel::<S, 30>),
+            6 => (group8::<S, 39>, pixel::<S, 39>),
+            7 => (group8::<S, 49>, pixel::<S, 49>),
+            _ => (group8::<S, 60>, pixel::<S, 60>),
+        };
+        debug_assert_eq!(ctx.kp, self.planes());
         for r in 0..rows {
             let y = y0 + r;
             let zo = &mut z_out[r * ctx.zl..(r + 1) * ctx.zl];
@@ -261,10 +289,10 @@ impl Walr {
             let mut x0 = 0;
             while x0 < w {
                 if simd && x0 + 8 <= w {
-                    group8(&ctx, x0, y, s, zo, so);
+                    group(&ctx, x0, y, s, zo, so);
                     x0 += 8;
                 } else {
-                    pixel(&ctx, x0, y, s, zo, so);
+                    one(&ctx, x0, y, s, zo, so);
                     x0 += 1;
                 }
             }
@@ -274,8 +302,8 @@ impl Walr {
 
 /// Writes the normalised averages of lane `l` (or pixel `x` for a one-lane call).
 #[inline(always)]
-fn finish<S: Store>(ctx: &Ctx<'_, S>, acc: &[f32x8; MAX_PLANES], lanes: usize, x0: usize, zo: &mut [S]) {
-    let kp = ctx.kp;
+fn finish<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, acc: &[f32x8; KP], lanes: usize, x0: usize, zo: &mut [S]) {
+    let kp = KP;
     let wsum = acc[kp - 1];
     let ok = wsum.simd_gt(f32x8::ZERO);
     let inv = ok.select(f32x8::ONE / wsum, f32x8::ZERO);
@@ -300,8 +328,8 @@ fn finish<S: Store>(ctx: &Ctx<'_, S>, acc: &[f32x8; MAX_PLANES], lanes: usize, x
 }
 
 /// One pixel on its own (borders, the scalar kernel).
-fn pixel<S: Store>(ctx: &Ctx<'_, S>, x: usize, y: usize, s: usize, zo: &mut [S], so: &mut [f32]) {
-    let mut acc = [f32x8::ZERO; MAX_PLANES];
+fn pixel<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x: usize, y: usize, s: usize, zo: &mut [S], so: &mut [f32]) {
+    let mut acc = [f32x8::ZERO; KP];
     let c = ctx.centre(x, y);
     ctx.add_lane(&mut acc, 0, 1.0, x, y);
     let mut sdf = s;
@@ -318,18 +346,19 @@ fn pixel<S: Store>(ctx: &Ctx<'_, S>, x: usize, y: usize, s: usize, zo: &mut [S],
 }
 
 /// 8 pixels `x0..x0 + 8` of row `y` in lanes.
-fn group8<S: Store>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: usize, zo: &mut [S], so: &mut [f32]) {
-    let (w, kp) = (ctx.w, ctx.kp);
-    let mut acc = [f32x8::ZERO; MAX_PLANES];
-    let cv: [f32x8; 8] = [
+fn group8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: usize, zo: &mut [S], so: &mut [f32]) {
+    let (w, kp) = (ctx.w, KP);
+    let mut acc = [f32x8::ZERO; KP];
+    let cv: [f32x8; 9] = [
         ctx.g8(G_P, x0, y),
         ctx.g8(G_P + 1, x0, y),
         ctx.g8(G_P + 2, x0, y),
         ctx.g8(G_N, x0, y),
         ctx.g8(G_N + 1, x0, y),
         ctx.g8(G_N + 2, x0, y),
-        ctx.g8(G_INV_SCALE, x0, y),
+        ctx.g8(G_INV_SCALE, x0, y) * f32x8::splat(ctx.inv_range),
         ctx.g8(G_VALID, x0, y).abs(),
+        f32x8::splat(ctx.far * ctx.inv_range),
     ];
     // centre: weight 1
     {
@@ -375,12 +404,7 @@ fn group8<S: Store>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: usize, zo: &mut [S
                 if k == s || wmin.simd_gt(f32x8::ZERO).none() {
                     break;
                 }
-                // the most careful step of the 8 lanes
-                let mut step = usize::MAX;
-                for l in 0..8 {
-                    step = step.min(ctx.step(qx + l, qy));
-                }
-                k = (k + step).min(s);
+                k = (k + ctx.step8(qx, qy)).min(s);
             }
         } else {
             let (qx, qy) = at(s);

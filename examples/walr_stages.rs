@@ -1,0 +1,53 @@
+//! Times WALR's stages separately at 1920×1080 on one thread (a profiling
+//! aid, not a benchmark: `cargo bench --bench walr` is the benchmark).
+//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo run --release --example walr_stages`
+
+use lrdenoise::walr::{Parts, Walr, WalrConfig};
+use lrdenoise::*;
+use std::time::Instant;
+
+fn main() {
+    let (w, h) = (1920, 1080);
+    let n = w * h;
+    let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 1000) as f32 / 1000.0).collect();
+    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == 2 { -1.0 } else { 0.0 }).collect();
+    let position: Vec<f32> = (0..3 * n).map(|i| if i % 3 == 2 { 10.0 } else { ((i / 3) % w) as f32 * 1e-2 }).collect();
+    let depth = vec![10f32; n];
+    let guides = Guides {
+        normal: Some(ImageView::interleaved(&normal, w, h, 3).unwrap()),
+        depth: Some(ImageView::interleaved(&depth, w, h, 1).unwrap()),
+        position: Some(ImageView::interleaved(&position, w, h, 3).unwrap()),
+        ..Default::default()
+    };
+    let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3).unwrap(), guides);
+    let mut out = vec![0f32; 3 * n];
+    for tracing in [false, true] {
+        let wl = Walr::new(WalrConfig { tracing, ..Default::default() }, w, h).unwrap();
+        let mut scratch = vec![0f32; wl.scratch_len()];
+        for _rep in 0..2 {
+            let cf = wl.check_frame(&frame).unwrap();
+            let t0 = Instant::now();
+            let prep = wl.prepare(&cf, 0);
+            let t1 = Instant::now();
+            let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = wl.parts(&mut scratch).unwrap();
+            wl.features_rows(&cf, &prep, 0, geo, z0).unwrap();
+            let t2 = Instant::now();
+            let mut its = vec![];
+            for t in 0..4u8 {
+                let a = Instant::now();
+                if t % 2 == 0 {
+                    wl.iterate_rows(t, &prep, 0, geo, s0, z0, s1, z1).unwrap();
+                } else {
+                    wl.iterate_rows(t, &prep, 0, geo, s1, z1, s0, z0).unwrap();
+                }
+                its.push(a.elapsed().as_secs_f64() * 1e3);
+            }
+            let t3 = Instant::now();
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            wl.solve_rows(&prep, 0, geo, z0, &mut ov).unwrap();
+            let t4 = Instant::now();
+            let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+            println!("tracing {tracing}: prepare {:.1} features {:.1} iterations {:?} solve {:.1} ms", ms(t0, t1), ms(t1, t2), its.iter().map(|v| (v * 10.0).round() / 10.0).collect::<Vec<_>>(), ms(t3, t4));
+        }
+    }
+}
