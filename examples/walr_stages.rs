@@ -47,7 +47,13 @@ fn main() {
             wl.solve_rows(&prep, 0, geo, z0, &mut ov).unwrap();
             let t4 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
-            println!("tracing {tracing}: prepare {:.1} features {:.1} iterations {:?} solve {:.1} ms", ms(t0, t1), ms(t1, t2), its.iter().map(|v| (v * 10.0).round() / 10.0).collect::<Vec<_>>(), ms(t3, t4));
+            println!(
+                "tracing {tracing}: prepare {:.1} features {:.1} iterations {:?} solve {:.1} ms",
+                ms(t0, t1),
+                ms(t1, t2),
+                its.iter().map(|v| (v * 10.0).round() / 10.0).collect::<Vec<_>>(),
+                ms(t3, t4)
+            );
         }
     }
 }

@@ -79,3 +79,27 @@ fn bmfr_single_frame_and_temporal_allocate_nothing() {
     }
     assert_eq!(mine() - before, 0);
 }
+
+#[test]
+fn walr_single_frame_and_temporal_allocate_nothing() {
+    use lrdenoise::walr::{History as WalrHistory, Storage, Walr, WalrConfig};
+    let f = Owned::synthetic(131, 77, 2, 0.5);
+    let set = GuideSet { normal: true, depth: true, position: true, ..GuideSet::NONE };
+    let frame = f.frame(set);
+    let motion = vec![0.3f32; 2 * f.w * f.h];
+    let mv = ImageView::interleaved(&motion, f.w, f.h, 2).unwrap();
+    let mut out = vec![0f32; f.w * f.h * 3];
+    for storage in [Storage::F32, Storage::F16] {
+        let wl = Walr::new(WalrConfig { storage, ..WalrConfig::with_guides(set) }, f.w, f.h).unwrap();
+        let mut scratch = vec![0f32; wl.temporal_scratch_len()];
+        let mut hist = vec![0f32; wl.history_len()];
+        let mut history = WalrHistory::new(&mut hist);
+        let before = mine();
+        for i in 0..3 {
+            let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
+            wl.denoise(&frame, i, &mut scratch, &mut ov).unwrap();
+            wl.denoise_temporal(&frame, Some(&mv), &mut history, &mut scratch, &mut ov).unwrap();
+        }
+        assert_eq!(mine() - before, 0, "{storage:?}");
+    }
+}

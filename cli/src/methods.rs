@@ -56,11 +56,23 @@ pub struct FlrArgs {
     /// WALR: storage of the averages, f16 or f32
     #[arg(long)]
     pub storage: Option<String>,
+    /// WALR: fraction of the previous iteration's edge distance that tracing may skip (0..=1; 0 visits every pixel)
+    #[arg(long)]
+    pub sdf_step: Option<f32>,
+    /// WALR: pivot floor of the per-pixel Cholesky
+    #[arg(long)]
+    pub epsilon: Option<f32>,
 }
 
 impl FlrArgs {
     fn has_walr_flags(&self) -> bool {
-        self.iterations.is_some() || self.near.is_some() || self.far.is_some() || self.no_tracing || self.storage.is_some()
+        self.iterations.is_some()
+            || self.near.is_some()
+            || self.far.is_some()
+            || self.no_tracing
+            || self.storage.is_some()
+            || self.sdf_step.is_some()
+            || self.epsilon.is_some()
     }
 }
 
@@ -124,7 +136,7 @@ impl FlrArgs {
             return Err(format!("--guides asks for '{m}' but the frame has no '{m}' layer"));
         }
         if self.has_walr_flags() {
-            return Err("--iterations, --near, --far, --no-tracing and --storage are WALR flags".into());
+            return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step and --epsilon are WALR flags".into());
         }
         let mut c = FlrConfig::with_guides(guides);
         if let Some(b) = self.block {
@@ -152,7 +164,7 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
         return Err("--sigma, --radius, --box, --regularization and --upsample are FLR flags; bmfr takes --guides and --block".into());
     }
     if a.has_walr_flags() {
-        return Err("--iterations, --near, --far, --no-tracing and --storage are WALR flags; bmfr takes --guides and --block".into());
+        return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step and --epsilon are WALR flags; bmfr takes --guides and --block".into());
     }
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
@@ -203,6 +215,12 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
         c.far = v;
     }
     c.tracing = !a.no_tracing;
+    if let Some(v) = a.sdf_step {
+        c.sdf_step = v;
+    }
+    if let Some(v) = a.epsilon {
+        c.epsilon = v;
+    }
     if let Some(s) = &a.storage {
         c.storage = match s.as_str() {
             "f16" => Storage::F16,

@@ -53,6 +53,7 @@ impl CellLayout {
 }
 
 /// Calls `$f::<Q>(args)` for the runtime guide count `$q` (0..=12).
+#[allow(unused_macros)] // only FLR uses it
 macro_rules! dispatch_q {
     ($q:expr, $f:ident ( $($a:expr),* $(,)? )) => {
         match $q {
@@ -73,6 +74,7 @@ macro_rules! dispatch_q {
         }
     };
 }
+#[allow(unused_imports)]
 pub(crate) use dispatch_q;
 
 /// √x in f64. On x86-64 through the SSE2 intrinsic, which the compiler encodes

@@ -30,7 +30,6 @@ use crate::config::Kernel;
 use crate::error::Error;
 use wide::f32x8;
 
-
 /// The 8 non-centre tap directions, in accumulation order.
 const DIRS: [(i64, i64); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
 
@@ -365,9 +364,9 @@ fn group8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: u
         let base = y * ctx.zl + x0;
         let wv = S::load8(ctx.z, base + (kp - 1) * w);
         for k in 0..kp - 1 {
-            acc[k] = acc[k] + wv * S::load8(ctx.z, base + k * w);
+            acc[k] += wv * S::load8(ctx.z, base + k * w);
         }
-        acc[kp - 1] = acc[kp - 1] + wv;
+        acc[kp - 1] += wv;
     }
     let sv = f32x8::splat(s as f32);
     let mut sdf = sv;
@@ -418,9 +417,9 @@ fn group8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: u
             let base = qy * ctx.zl + qx;
             let fw = wmin * S::load8(ctx.z, base + (kp - 1) * w);
             for k in 0..kp - 1 {
-                acc[k] = acc[k] + fw * S::load8(ctx.z, base + k * w);
+                acc[k] += fw * S::load8(ctx.z, base + k * w);
             }
-            acc[kp - 1] = acc[kp - 1] + fw;
+            acc[kp - 1] += fw;
         }
         if ctx.replace && !live.all() {
             let za = zero_at.to_array();

@@ -41,6 +41,10 @@
 //!   step of the 8, so it evaluates a superset of the scalar path's points
 //!   (identical away from edges; never less careful).
 
+// Index loops mirror the equations (planes, lanes, features); `!(x > 0)` is
+// used on purpose: it is also true for NaN.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod atrous;
 pub mod features;
 pub mod reference;
@@ -84,9 +88,9 @@ pub struct WalrConfig {
     /// À-trous iterations T (1..=5, default 4: an 81×81 window).
     pub iterations: u8,
     /// Plane distance (relative to camera distance with depth) below which a
-    /// tap has full weight (default 0.01).
+    /// tap has full weight (default 0.005, tuned on the training scenes).
     pub near: f32,
-    /// Plane distance at and beyond which a tap has weight 0 (default 0.04).
+    /// Plane distance at and beyond which a tap has weight 0 (default 0.01).
     pub far: f32,
     /// Trace the edge-stopping function along each tap's segment (§3.3).
     /// Off: evaluate it at the tap only (the plain à-trous of Dammertz et al.).
@@ -117,8 +121,8 @@ impl Default for WalrConfig {
         WalrConfig {
             guides: GuideSet { normal: true, depth: true, position: true, ao: false, user: 0 },
             iterations: 4,
-            near: 0.01,
-            far: 0.04,
+            near: 0.005,
+            far: 0.01,
             tracing: true,
             replace: true,
             sdf_step: 0.5,
@@ -342,7 +346,7 @@ impl Walr {
     /// Checks that a band `y0..y0 + rows` of a row-major buffer with `row_len`
     /// values per row fits the frame and the slice.
     pub(crate) fn check_band(&self, y0: usize, slice_len: usize, row_len: usize) -> Result<usize, Error> {
-        let rows = if row_len == 0 { 0 } else { slice_len / row_len };
+        let rows = slice_len.checked_div(row_len).unwrap_or(0);
         if rows == 0 || slice_len != rows * row_len || y0 + rows > self.height {
             return Err(Error::InvalidTile { index: y0, count: self.height });
         }
