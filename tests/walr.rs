@@ -300,10 +300,10 @@ fn atrous_counts_every_sample_once() {
                         assert_eq!(samples.len() as i64, (2 * r + 1) * (2 * r + 1), "interior: the whole window");
                     }
                     let row = &z[y as usize * wl.z_row_len()..];
-                    assert_eq!(row[(kp - 1) * w + x as usize], samples.len() as f32, "{w}x{h} T={iterations} at ({x},{y})");
+                    assert_eq!(row[(kp - 1) * wl.plane_stride() + x as usize], samples.len() as f32, "{w}x{h} T={iterations} at ({x},{y})");
                     let want = samples.iter().map(|&(sx, sy)| f.noisy[3 * (sy as usize * w + sx as usize)] as f64).sum::<f64>()
                         / samples.len() as f64;
-                    let got = row[k_y0 * w + x as usize] as f64 * ls as f64;
+                    let got = row[k_y0 * wl.plane_stride() + x as usize] as f64 * ls as f64;
                     assert!((got - want).abs() <= 1e-5 * want.abs().max(1e-3), "{w}x{h} T={iterations}: {got} vs {want}");
                 }
             }

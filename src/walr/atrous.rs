@@ -38,6 +38,7 @@ struct Ctx<'a, S> {
     w: usize,
     h: usize,
     gp: usize,
+    ps: usize,
     kp: usize,
     zl: usize,
     geo: &'a [f32],
@@ -64,15 +65,15 @@ struct Centre {
 impl<S: Store> Ctx<'_, S> {
     #[inline(always)]
     fn g(&self, c: usize, x: usize, y: usize) -> f32 {
-        self.geo[(y * self.gp + c) * self.w + x]
+        self.geo[(y * self.gp + c) * self.ps + x]
     }
     #[inline(always)]
     fn g8(&self, c: usize, x: usize, y: usize) -> f32x8 {
-        let i = (y * self.gp + c) * self.w + x;
-        debug_assert!(c < self.gp && x + 8 <= self.w && y < self.h && self.geo.len() >= self.h * self.gp * self.w);
-        // SAFETY: `iterate_rows` checked `geo.len() ≥ h · gp · w`; callers pass
-        // y < h, c < gp and x + 8 ≤ w (a group's taps are checked in-row), so
-        // i + 8 ≤ geo.len(). An unaligned read of 8 f32 is a valid f32x8.
+        let i = (y * self.gp + c) * self.ps + x;
+        debug_assert!(c < self.gp && x + 8 <= self.w && y < self.h && self.geo.len() >= self.h * self.gp * self.ps);
+        // SAFETY: `iterate_rows` checked `geo.len() ≥ h · gp · ps` (ps ≥ w);
+        // callers pass y < h, c < gp and x + 8 ≤ w (a group's taps are checked
+        // in-row), so i + 8 ≤ geo.len(). An unaligned read of 8 f32 is a valid f32x8.
         unsafe { core::ptr::read_unaligned(self.geo.as_ptr().add(i) as *const f32x8) }
     }
     fn centre(&self, x: usize, y: usize) -> Centre {
@@ -193,9 +194,9 @@ impl<S: Store> Ctx<'_, S> {
     #[inline(always)]
     fn add_lane<const KP: usize>(&self, acc: &mut [f32x8; KP], l: usize, f: f32, qx: usize, qy: usize) {
         let base = qy * self.zl + qx;
-        let fw = f * S::get(self.z, base + (KP - 1) * self.w);
+        let fw = f * S::get(self.z, base + (KP - 1) * self.ps);
         for k in 0..KP - 1 {
-            acc[k].as_mut_array()[l] += fw * S::get(self.z, base + k * self.w);
+            acc[k].as_mut_array()[l] += fw * S::get(self.z, base + k * self.ps);
         }
         acc[KP - 1].as_mut_array()[l] += fw;
     }
@@ -253,6 +254,7 @@ impl Walr {
             w: self.width,
             h: self.height,
             gp: self.geo_planes(),
+            ps: self.plane_stride(),
             kp: self.planes(),
             zl: self.z_row_values(),
             geo,
@@ -308,20 +310,20 @@ fn finish<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, acc: &[f32x8; KP], lanes:
     let inv = ok.select(f32x8::ONE / wsum, f32x8::ZERO);
     if lanes == 8 {
         for k in 0..kp - 1 {
-            S::store8(zo, k * ctx.w + x0, acc[k] * inv);
+            S::store8(zo, k * ctx.ps + x0, acc[k] * inv);
         }
-        S::store8(zo, (kp - 1) * ctx.w + x0, wsum);
+        S::store8(zo, (kp - 1) * ctx.ps + x0, wsum);
     } else {
         let inv = inv.to_array();
         for k in 0..kp - 1 {
             let a = acc[k].to_array();
             for l in 0..lanes {
-                S::set(zo, k * ctx.w + x0 + l, a[l] * inv[l]);
+                S::set(zo, k * ctx.ps + x0 + l, a[l] * inv[l]);
             }
         }
         let a = wsum.to_array();
         for l in 0..lanes {
-            S::set(zo, (kp - 1) * ctx.w + x0 + l, a[l]);
+            S::set(zo, (kp - 1) * ctx.ps + x0 + l, a[l]);
         }
     }
 }
@@ -346,7 +348,7 @@ fn pixel<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x: usize, y: usize, s: usi
 
 /// 8 pixels `x0..x0 + 8` of row `y` in lanes.
 fn group8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: usize, zo: &mut [S], so: &mut [f32]) {
-    let (w, kp) = (ctx.w, KP);
+    let (w, kp, ps) = (ctx.w, KP, ctx.ps);
     let mut acc = [f32x8::ZERO; KP];
     let cv: [f32x8; 9] = [
         ctx.g8(G_P, x0, y),
@@ -362,9 +364,9 @@ fn group8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: u
     // centre: weight 1
     {
         let base = y * ctx.zl + x0;
-        let wv = S::load8(ctx.z, base + (kp - 1) * w);
+        let wv = S::load8(ctx.z, base + (kp - 1) * ps);
         for k in 0..kp - 1 {
-            acc[k] += wv * S::load8(ctx.z, base + k * w);
+            acc[k] += wv * S::load8(ctx.z, base + k * ps);
         }
         acc[kp - 1] += wv;
     }
@@ -415,9 +417,9 @@ fn group8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, x0: usize, y: usize, s: u
         if live.any() {
             let (qx, qy) = at(s);
             let base = qy * ctx.zl + qx;
-            let fw = wmin * S::load8(ctx.z, base + (kp - 1) * w);
+            let fw = wmin * S::load8(ctx.z, base + (kp - 1) * ps);
             for k in 0..kp - 1 {
-                acc[k] += fw * S::load8(ctx.z, base + k * w);
+                acc[k] += fw * S::load8(ctx.z, base + k * ps);
             }
             acc[kp - 1] += fw;
         }

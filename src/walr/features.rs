@@ -144,6 +144,7 @@ impl Walr {
         let (w, m) = (self.width, self.m);
         let (cn, cp, cd, ce) = self.channels();
         let gl = self.geo_row_len();
+        let ps = self.plane_stride();
         let zl = self.z_row_values();
         let planes = self.planes();
         let bad = Error::InvalidTile { index: y0, count: self.height };
@@ -155,31 +156,31 @@ impl Walr {
             // Raw guides straight into the geometry planes, features after.
             for c in 0..3 {
                 let v = f.guides[cn + c].as_ref().ok_or(Error::GuideMismatch)?;
-                v.read_row(y, 0, 0, &mut geo[(G_N + c) * w..(G_N + c + 1) * w]).ok_or(bad)?;
+                v.read_row(y, 0, 0, &mut geo[(G_N + c) * ps..(G_N + c) * ps + w]).ok_or(bad)?;
                 let v = f.guides[cp + c].as_ref().ok_or(Error::GuideMismatch)?;
-                v.read_row(y, 0, 0, &mut geo[(G_P + c) * w..(G_P + c + 1) * w]).ok_or(bad)?;
+                v.read_row(y, 0, 0, &mut geo[(G_P + c) * ps..(G_P + c) * ps + w]).ok_or(bad)?;
             }
             match cd {
                 Some(d) => {
                     let v = f.guides[d].as_ref().ok_or(Error::GuideMismatch)?;
-                    v.read_row(y, 0, 0, &mut geo[G_INV_SCALE * w..(G_INV_SCALE + 1) * w]).ok_or(bad)?;
+                    v.read_row(y, 0, 0, &mut geo[G_INV_SCALE * ps..G_INV_SCALE * ps + w]).ok_or(bad)?;
                 }
-                None => geo[G_INV_SCALE * w..(G_INV_SCALE + 1) * w].fill(1.0),
+                None => geo[G_INV_SCALE * ps..G_INV_SCALE * ps + w].fill(1.0),
             }
             for e in 0..m - 3 {
-                let o = (GEO_FIXED + 2 + e) * w;
+                let o = (GEO_FIXED + 2 + e) * ps;
                 let v = f.guides[ce + e].as_ref().ok_or(Error::GuideMismatch)?;
                 v.read_row(y, 0, 0, &mut geo[o..o + w]).ok_or(bad)?;
             }
             {
                 // The noisy row goes to planes that are only written per pixel, after reading.
-                let (a, rest) = geo[G_VALID * w..(G_VALID + 3) * w].split_at_mut(w);
-                let (b, c) = rest.split_at_mut(w);
-                f.noisy.read_row_n(y, 0, [a, b, c]).ok_or(bad)?;
+                let (a, rest) = geo[G_VALID * ps..(G_VALID + 3) * ps].split_at_mut(ps);
+                let (b, c) = rest.split_at_mut(ps);
+                f.noisy.read_row_n(y, 0, [&mut a[..w], &mut b[..w], &mut c[..w]]).ok_or(bad)?;
             }
             let z = &mut z_rows[r * zl..(r + 1) * zl];
             for x in 0..w {
-                let g = |c: usize| geo[c * w + x];
+                let g = |c: usize| geo[c * ps + x];
                 let rgb = [g(G_VALID), g(GEO_FIXED), g(GEO_FIXED + 1)];
                 let n = [g(G_N), g(G_N + 1), g(G_N + 2)];
                 let pos = [g(G_P), g(G_P + 1), g(G_P + 2)];
@@ -210,7 +211,7 @@ impl Walr {
                     x_feat[2] = 0.5;
                     ([0.0; 3], [0.0; 3], 0.0)
                 };
-                let set = |geo: &mut [f32], c: usize, v: f32| geo[c * w + x] = v;
+                let set = |geo: &mut [f32], c: usize, v: f32| geo[c * ps + x] = v;
                 for c in 0..3 {
                     set(geo, G_P + c, pp[c]);
                     set(geo, G_N + c, nn[c]);
@@ -237,7 +238,7 @@ impl Walr {
                 let wgt = if ok { 1.0 } else { 0.0 };
                 let mut k = 0;
                 let mut put = |v: f32| {
-                    S::set(z, k * w + x, v);
+                    S::set(z, k * ps + x, v);
                     k += 1;
                 };
                 for q in 1..m {

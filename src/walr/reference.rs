@@ -30,9 +30,9 @@ impl Walr {
 
     fn reference_impl<S: Store>(&self, geo: &[f32], z0: &[S], scale: f32, out: &mut ImageViewMut<'_>) -> Result<u64, Error> {
         let (w, h, m) = (self.width as i64, self.height as i64, self.m);
-        let (gp, kp, zl) = (self.geo_planes(), self.planes(), self.z_row_values());
+        let (gp, kp, zl, ps) = (self.geo_planes(), self.planes(), self.z_row_values(), self.plane_stride());
         let radius = (3i64.pow(self.cfg.iterations as u32) - 1) / 2;
-        let g = |c: usize, x: i64, y: i64| geo[(y as usize * gp + c) * w as usize + x as usize] as f64;
+        let g = |c: usize, x: i64, y: i64| geo[(y as usize * gp + c) * ps + x as usize] as f64;
         let (far, range) = (self.cfg.far as f64, (self.cfg.far - self.cfg.near) as f64);
         let weight = |cx: i64, cy: i64, x: i64, y: i64| -> f64 {
             if g(G_VALID, x, y) != g(G_VALID, cx, cy).abs() {
@@ -67,9 +67,9 @@ impl Walr {
                             continue;
                         }
                         let base = y as usize * zl + x as usize;
-                        let wz = S::get(z0, base + (kp - 1) * w as usize) as f64;
+                        let wz = S::get(z0, base + (kp - 1) * ps) as f64;
                         for k in 0..kp - 1 {
-                            sum[k] += wt * wz * S::get(z0, base + k * w as usize) as f64;
+                            sum[k] += wt * wz * S::get(z0, base + k * ps) as f64;
                         }
                         sum[kp - 1] += wt * wz;
                     }

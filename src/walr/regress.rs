@@ -90,7 +90,7 @@ impl Walr {
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
         let w = self.width;
-        let (gp, kp, zl) = (self.geo_planes(), self.planes(), self.z_row_values());
+        let (gp, kp, zl, ps) = (self.geo_planes(), self.planes(), self.z_row_values(), self.plane_stride());
         let mut rep = Report::default();
         let scale = p.light_scale;
         let clamp = self.cfg.clamp_negative;
@@ -107,7 +107,7 @@ impl Walr {
         for r in 0..rows {
             let y = y0 + r;
             let zrow = &z[y * zl..(y + 1) * zl];
-            let grow = &geo[y * gp * w..(y + 1) * gp * w];
+            let grow = &geo[y * gp * ps..(y + 1) * gp * ps];
             let mut x0 = 0;
             while x0 < w {
                 let n = if simd && x0 + 8 <= w { 8 } else { 1 };
@@ -115,14 +115,14 @@ impl Walr {
                 if n == 8 {
                     let mut zv = [f32x8::ZERO; 64];
                     for k in 0..kp {
-                        zv[k] = S::load8(zrow, k * w + x0);
+                        zv[k] = S::load8(zrow, k * ps + x0);
                     }
                     let mut xv = [f32x8::ONE; M];
                     // unknown geometry (NaN/Inf guides, code −1): evaluate at the
                     // window's mean features, i.e. output the weighted mean light
-                    let unknown = <f32 as Store>::load8(grow, G_VALID * w + x0).simd_lt(f32x8::ZERO);
+                    let unknown = <f32 as Store>::load8(grow, G_VALID * ps + x0).simd_lt(f32x8::ZERO);
                     for q in 1..M {
-                        xv[q] = unknown.select(zv[q - 1], <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * w + x0));
+                        xv[q] = unknown.select(zv[q - 1], <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * ps + x0));
                     }
                     rep.fallback_pixels += unknown.to_bitmask().count_ones() as u64;
                     let yv = solve_pixel::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(self.cfg.epsilon));
@@ -134,12 +134,12 @@ impl Walr {
                 } else {
                     let mut zs = [0f32; 64];
                     for k in 0..kp {
-                        zs[k] = S::get(zrow, k * w + x0);
+                        zs[k] = S::get(zrow, k * ps + x0);
                     }
                     let mut xs = [1f32; M];
-                    let unknown = grow[G_VALID * w + x0] < 0.0;
+                    let unknown = grow[G_VALID * ps + x0] < 0.0;
                     for q in 1..M {
-                        xs[q] = if unknown { zs[q - 1] } else { grow[(GEO_FIXED + q - 1) * w + x0] };
+                        xs[q] = if unknown { zs[q - 1] } else { grow[(GEO_FIXED + q - 1) * ps + x0] };
                     }
                     rep.fallback_pixels += unknown as u64;
                     let ys = solve_pixel::<f32, M>(&zs[..kp], &xs, self.cfg.epsilon);

@@ -36,12 +36,16 @@ impl Store for f32 {
     }
     #[inline(always)]
     fn load8(s: &[Self], i: usize) -> f32x8 {
-        let a: &[f32; 8] = s[i..i + 8].try_into().unwrap_or(&[0.0; 8]);
-        f32x8::from(*a)
+        let c = &s[i..i + 8];
+        // SAFETY: `c` holds exactly 8 f32 (the slice above is bounds-checked);
+        // an unaligned read of them is a valid f32x8.
+        unsafe { core::ptr::read_unaligned(c.as_ptr() as *const f32x8) }
     }
     #[inline(always)]
     fn store8(s: &mut [Self], i: usize, v: f32x8) {
-        s[i..i + 8].copy_from_slice(&v.to_array());
+        let c = &mut s[i..i + 8];
+        // SAFETY: as in `load8`, 8 writable f32.
+        unsafe { core::ptr::write_unaligned(c.as_mut_ptr() as *mut f32x8, v) }
     }
 }
 
