@@ -218,3 +218,34 @@ fn bmfr_single_frame_temporal_and_flicker() {
     fails_with(&["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--sigma", "3"], &["FLR flags"]);
     fails_with(&["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--block", "4"], &["block"]);
 }
+
+#[test]
+fn walr_single_frame_temporal_flags_and_errors() {
+    let json = tmp("walr.json");
+    let seq = data("seq_box_7");
+    let (ok, so, e) = lrd(&["eval", &seq, "--methods", "walr,walr-temporal", "--runs", "5", "--json", json.to_str().unwrap()]);
+    assert!(ok, "{e}");
+    assert!(so.contains("walr-temporal NDP t4 f32"), "{so}");
+    let recs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let recs = recs.as_array().unwrap();
+    let get = |method: &str, frame: &str| recs.iter().find(|r| r["method"] == method && r["frame"] == frame).unwrap().clone();
+    let fl = |m: &str| get(m, "frame_0005")["flicker"].as_f64().unwrap();
+    assert!(fl("walr-temporal") < fl("walr") && fl("walr") < 0.5 * fl("noisy"));
+    for f in 0..6 {
+        assert!(get("walr", &format!("frame_{f:04}"))["psnr"].as_f64().unwrap() > 25.0);
+    }
+    let outdir = tmp("seq-walr");
+    let (ok, so, e) = lrd(&["denoise-seq", &seq, "-o", outdir.to_str().unwrap(), "--method", "walr", "--iterations", "3"]);
+    assert!(ok, "{e}");
+    assert!(so.contains("walr-temporal") && so.contains("6 frames"), "{so}");
+    let (ok, so, e) = lrd(&["bench", "--method", "walr", "--size", "128x96", "--runs", "5", "--threads", "2"]);
+    assert!(ok && so.contains("median"), "{e}");
+    let room = data("room_7.exr");
+    let x = tmp("w.exr");
+    let x = x.to_str().unwrap();
+    fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--block", "8"], &["not WALR flags"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "flr", "--iterations", "3"], &["WALR flags"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--guides", "normal,depth"], &["normal and position"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--storage", "f8"], &["f16 or f32"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--near", "0.5", "--far", "0.1"], &["near/far"]);
+}
