@@ -240,11 +240,13 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
     let tr = if c.tracing { "" } else { " --no-tracing" };
     let label = format!("{name} {} t{} {st}{}", short_guides(&c.guides), c.iterations, if c.tracing { "" } else { " notrace" });
     let flags = format!(
-        "--method {name} --guides {} --iterations {} --near {} --far {} --storage {st}{tr}",
+        "--method {name} --guides {} --iterations {} --near {} --far {} --sdf-step {} --epsilon {:e} --storage {st}{tr}",
         guides_string(&c.guides),
         c.iterations,
         c.near,
-        c.far
+        c.far,
+        c.sdf_step,
+        c.epsilon
     );
     (label, flags)
 }
