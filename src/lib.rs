@@ -43,6 +43,8 @@ pub mod flr;
 pub mod guides;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod hash;
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+mod history;
 pub mod image;
 pub mod kernels;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
@@ -51,12 +53,14 @@ mod reproject;
 pub mod walr;
 
 #[cfg(feature = "bmfr")]
-pub use bmfr::{Bmfr, BmfrConfig, History};
+pub use bmfr::{Bmfr, BmfrConfig};
 pub use config::{Blur, FlrConfig, Kernel, Regularization};
 pub use error::{Arg, Error};
 #[cfg(feature = "flr")]
 pub use flr::{CheckedFrame, Flr, Parts, Report, Stats};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+pub use history::History;
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
 #[cfg(feature = "walr")]
 pub use walr::{Walr, WalrConfig};

@@ -501,19 +501,16 @@ impl TemporalRunner {
             None => None,
         };
         let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
+        let mut history = History::resume(&mut self.history, self.frames);
         let r = match &self.pipeline {
-            Pipeline::Bmfr(b) => {
-                let mut history = History::resume(&mut self.history, self.frames);
-                b.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
-                    .map(|_| ())
-                    .map_err(|e| format!("bmfr: {e}"))
-            }
-            Pipeline::Walr(wl) => {
-                let mut history = lrdenoise::walr::History::resume(&mut self.history, self.frames);
-                wl.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
-                    .map(|_| ())
-                    .map_err(|e| format!("walr: {e}"))
-            }
+            Pipeline::Bmfr(b) => b
+                .denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
+                .map(|_| ())
+                .map_err(|e| format!("bmfr: {e}")),
+            Pipeline::Walr(wl) => wl
+                .denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
+                .map(|_| ())
+                .map_err(|e| format!("walr: {e}")),
         };
         self.frames = self.frames.saturating_add(1);
         r

@@ -59,34 +59,7 @@ impl TemporalConfig {
     }
 }
 
-/// The temporal state, owned by the caller: `Bmfr::history_len()` f32 and a
-/// frame counter. Keep one per sequence; [`History::reset`] after a cut.
-#[derive(Debug)]
-pub struct History<'h> {
-    data: &'h mut [f32],
-    frames: u32,
-}
-
-impl<'h> History<'h> {
-    /// Wraps a buffer (contents are ignored until a first frame is written).
-    pub fn new(data: &'h mut [f32]) -> Self {
-        History { data, frames: 0 }
-    }
-    /// Re-wraps a buffer that already holds the state after `frames` frames
-    /// (for callers that keep the buffer and the count themselves, e.g. across
-    /// an FFI boundary).
-    pub fn resume(data: &'h mut [f32], frames: u32) -> Self {
-        History { data, frames }
-    }
-    /// Frames accumulated so far.
-    pub fn frames(&self) -> u32 {
-        self.frames
-    }
-    /// Forget the past (camera cut).
-    pub fn reset(&mut self) {
-        self.frames = 0;
-    }
-}
+pub use crate::history::History;
 
 // History planes.
 const H_ACC: usize = 0; // 3

@@ -62,32 +62,7 @@ impl TemporalConfig {
     }
 }
 
-/// The temporal state, owned by the caller: [`Walr::history_len`] f32 and a
-/// frame counter. One per sequence; [`History::reset`] after a camera cut.
-#[derive(Debug)]
-pub struct History<'h> {
-    data: &'h mut [f32],
-    frames: u32,
-}
-
-impl<'h> History<'h> {
-    /// Wraps a buffer (its contents are ignored until a first frame is written).
-    pub fn new(data: &'h mut [f32]) -> Self {
-        History { data, frames: 0 }
-    }
-    /// Re-wraps a buffer that already holds the state after `frames` frames.
-    pub fn resume(data: &'h mut [f32], frames: u32) -> Self {
-        History { data, frames }
-    }
-    /// Frames accumulated so far.
-    pub fn frames(&self) -> u32 {
-        self.frames
-    }
-    /// Forget the past (camera cut).
-    pub fn reset(&mut self) {
-        self.frames = 0;
-    }
-}
+pub use crate::history::History;
 
 // History planes: accumulated light (3), sample count, post output (3), rejection guide.
 const H_ACC: usize = 0;
