@@ -132,6 +132,89 @@ impl Walr {
         }
     }
 
+    /// [`Walr::features_rows`] for pixels `x0..x0 + 8` of one row in lanes: the
+    /// same operations in the same order as the per-pixel loop (bit-identical).
+    /// Returns the counts of non-finite guide and noisy pixels.
+    fn features_group8<S: Store>(&self, p: &Prepared, geo: &mut [f32], z: &mut [S], x0: usize, has_depth: bool, inv_light: f32) -> (u32, u32) {
+        use wide::f32x8;
+        let m = self.m;
+        let ps = self.plane_stride();
+        let ld = |geo: &[f32], c: usize| <f32 as Store>::load8(geo, c * ps + x0);
+        let n = [ld(geo, G_N), ld(geo, G_N + 1), ld(geo, G_N + 2)];
+        let pos = [ld(geo, G_P), ld(geo, G_P + 1), ld(geo, G_P + 2)];
+        let scale = ld(geo, G_INV_SCALE);
+        let rgb = [ld(geo, G_VALID), ld(geo, GEO_FIXED), ld(geo, GEO_FIXED + 1)];
+        let mut extra = [f32x8::ZERO; MAX_FEATURES - 3];
+        for e in 0..m - 3 {
+            extra[e] = ld(geo, GEO_FIXED + 2 + e);
+        }
+        let mut finite = scale.is_finite();
+        for v in n.iter().chain(&pos).chain(&extra[..m - 3]) {
+            finite &= v.is_finite();
+        }
+        let nl = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let mut valid = finite & nl.simd_gt(f32x8::splat(1e-6)) & nl.is_finite();
+        if has_depth {
+            valid &= scale.simd_gt(f32x8::ZERO);
+        }
+        let nn = n.map(|c| c / nl);
+        let b = p.basis.map(|r| r.map(f32x8::splat));
+        let dotv = |a: &[f32x8; 3], b: &[f32x8; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let local = [dotv(&nn, &b[0]), dotv(&nn, &b[1]), dotv(&nn, &b[2])];
+        // octahedral map (valid lanes have l1 > 0)
+        let l1 = local[0].abs() + local[1].abs() + local[2].abs();
+        let (ox, oy) = (local[0] / l1, local[1] / l1);
+        let (one, half) = (f32x8::ONE, f32x8::splat(0.5));
+        let sx = ox.simd_ge(f32x8::ZERO).select(one, -one);
+        let sy = oy.simd_ge(f32x8::ZERO).select(one, -one);
+        let lower = local[2].simd_lt(f32x8::ZERO);
+        let fx = lower.select((one - oy.abs()) * sx, ox);
+        let fy = lower.select((one - ox.abs()) * sy, oy);
+        let mut xf = [f32x8::ZERO; MAX_FEATURES];
+        xf[0] = one;
+        xf[1] = valid.select(half * fx + half, half);
+        xf[2] = valid.select(half * fy + half, half);
+        for e in 0..m - 3 {
+            let v = (extra[e] - f32x8::splat(p.extra[e].0)) * f32x8::splat(p.extra[e].1);
+            xf[3 + e] = valid.select(v, f32x8::ZERO);
+        }
+        let inv_scale = if has_depth { one / scale } else { one };
+        let st = |geo: &mut [f32], c: usize, v: f32x8| <f32 as Store>::store8(geo, c * ps + x0, v);
+        for c in 0..3 {
+            st(geo, G_P + c, valid.select(pos[c], f32x8::ZERO));
+            st(geo, G_N + c, valid.select(nn[c], f32x8::ZERO));
+        }
+        st(geo, G_INV_SCALE, valid.select(inv_scale, f32x8::ZERO));
+        st(geo, G_VALID, valid.select(one, finite.select(f32x8::ZERO, -one)));
+        for j in 1..m {
+            st(geo, GEO_FIXED + j - 1, xf[j]);
+        }
+        let ok = rgb[0].is_finite() & rgb[1].is_finite() & rgb[2].is_finite();
+        let lim = f32x8::splat(LIGHT_LIMIT);
+        let yv = rgb.map(|v| ok.select((v * f32x8::splat(inv_light)).max(-lim).min(lim), f32x8::ZERO));
+        let wgt = ok.select(one, f32x8::ZERO);
+        let mut k = 0;
+        let mut put = |v: f32x8| {
+            S::store8(z, k * ps + x0, v);
+            k += 1;
+        };
+        for q in 1..m {
+            put(wgt * xf[q]);
+        }
+        for a in 1..m {
+            for b in a..m {
+                put(wgt * xf[a] * xf[b]);
+            }
+        }
+        for c in 0..3 {
+            for q in 0..m {
+                put(yv[c] * xf[q]);
+            }
+        }
+        put(wgt);
+        (8 - finite.to_bitmask().count_ones(), 8 - ok.to_bitmask().count_ones())
+    }
+
     fn features_impl<S: Store>(
         &self,
         f: &CheckedFrame<'_>,
@@ -179,7 +262,16 @@ impl Walr {
                 f.noisy.read_row_n(y, 0, [&mut a[..w], &mut b[..w], &mut c[..w]]).ok_or(bad)?;
             }
             let z = &mut z_rows[r * zl..(r + 1) * zl];
-            for x in 0..w {
+            let mut x0 = 0;
+            if self.cfg.kernel == crate::config::Kernel::Simd {
+                while x0 + 8 <= w {
+                    let (bad_guides, bad_noisy) = self.features_group8(p, geo, z, x0, cd.is_some(), inv_light);
+                    rep.nonfinite_guides += bad_guides as u64;
+                    rep.nonfinite_noisy += bad_noisy as u64;
+                    x0 += 8;
+                }
+            }
+            for x in x0..w {
                 let g = |c: usize| geo[c * ps + x];
                 let rgb = [g(G_VALID), g(GEO_FIXED), g(GEO_FIXED + 1)];
                 let n = [g(G_N), g(G_N + 1), g(G_N + 2)];
