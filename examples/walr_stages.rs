@@ -7,7 +7,8 @@ use lrdenoise::*;
 use std::time::Instant;
 
 fn main() {
-    let (w, h) = (1920, 1080);
+    let args: Vec<usize> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
+    let (w, h) = if args.len() == 2 { (args[0], args[1]) } else { (1920, 1080) };
     let n = w * h;
     let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 1000) as f32 / 1000.0).collect();
     let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == 2 { -1.0 } else { 0.0 }).collect();
@@ -24,7 +25,7 @@ fn main() {
     for tracing in [false, true] {
         let wl = Walr::new(WalrConfig { tracing, ..Default::default() }, w, h).unwrap();
         let mut scratch = vec![0f32; wl.scratch_len()];
-        for _rep in 0..2 {
+        for _rep in 0..if w * h < 1_000_000 { 20 } else { 2 } {
             let cf = wl.check_frame(&frame).unwrap();
             let t0 = Instant::now();
             let prep = wl.prepare(&cf, 0);

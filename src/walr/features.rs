@@ -135,7 +135,15 @@ impl Walr {
     /// [`Walr::features_rows`] for pixels `x0..x0 + 8` of one row in lanes: the
     /// same operations in the same order as the per-pixel loop (bit-identical).
     /// Returns the counts of non-finite guide and noisy pixels.
-    fn features_group8<S: Store>(&self, p: &Prepared, geo: &mut [f32], z: &mut [S], x0: usize, has_depth: bool, inv_light: f32) -> (u32, u32) {
+    fn features_group8<S: Store>(
+        &self,
+        p: &Prepared,
+        geo: &mut [f32],
+        z: &mut [S],
+        x0: usize,
+        has_depth: bool,
+        inv_light: f32,
+    ) -> (u32, u32) {
         use wide::f32x8;
         let m = self.m;
         let ps = self.plane_stride();
