@@ -47,6 +47,8 @@ mod hash;
 mod history;
 pub mod image;
 pub mod kernels;
+#[cfg(feature = "flnr")]
+pub mod nn;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod reproject;
 #[cfg(feature = "walr")]

@@ -1,0 +1,161 @@
+//! The weight blob of FLNR's network: a small, versioned, little-endian
+//! format written by `train/export.py`, parsed and validated without copying.
+//!
+//! ```text
+//! offset  field
+//! 0       magic  "LRDN"
+//! 4       u32    version (1)
+//! 8       u32    input channels   (1..=64)
+//! 12      u32    output channels  (1..=64)
+//! 16      u32    levels L         (0..=4)
+//! 20      u32    widths c_0..c_L  (L + 1 values, 1..=256 each)
+//! ..      f32    FLR parameters learned with the network: σ (pixels), ε, ϵ
+//! ..      u32    payload length in f16 values
+//! ..      f16    payload: for every layer in the order of [`crate::nn`], the
+//!                weights [out][in][k][k] then the biases [out]
+//! ```
+//!
+//! Every field is checked: bad magic, version, sizes, lengths or non-finite
+//! values give a typed [`Error`], never a panic.
+
+use super::conv::ConvDesc;
+use crate::error::Error;
+use half::f16;
+
+/// Most U-Net levels a blob may have.
+pub const MAX_LEVELS: usize = 4;
+const MAGIC: &[u8; 4] = b"LRDN";
+const VERSION: u32 = 1;
+const MAX_LAYERS: usize = 4 * MAX_LEVELS + 4;
+
+/// A parsed network: shapes and views into the blob's payload.
+#[derive(Clone, Copy, Debug)]
+pub struct UNet<'b> {
+    in_ch: usize,
+    out_ch: usize,
+    levels: usize,
+    widths: [usize; MAX_LEVELS + 1],
+    flr: [f32; 3],
+    layers: [ConvDesc<'b>; MAX_LAYERS],
+    count: usize,
+}
+
+struct Reader<'b> {
+    b: &'b [u8],
+    pos: usize,
+}
+
+impl<'b> Reader<'b> {
+    fn take(&mut self, n: usize) -> Result<&'b [u8], Error> {
+        let end = self.pos.checked_add(n).filter(|&e| e <= self.b.len()).ok_or(Error::InvalidConfig("weights: blob truncated"))?;
+        let s = &self.b[self.pos..end];
+        self.pos = end;
+        Ok(s)
+    }
+    fn u32(&mut self) -> Result<u32, Error> {
+        let s = self.take(4)?;
+        Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+    }
+    fn f32(&mut self) -> Result<f32, Error> {
+        Ok(f32::from_bits(self.u32()?))
+    }
+}
+
+impl<'b> UNet<'b> {
+    /// Parses and validates a blob (see the module docs for the format).
+    pub fn parse(blob: &'b [u8]) -> Result<Self, Error> {
+        let mut r = Reader { b: blob, pos: 0 };
+        if r.take(4)? != MAGIC {
+            return Err(Error::InvalidConfig("weights: bad magic (not an lrdenoise network)"));
+        }
+        if r.u32()? != VERSION {
+            return Err(Error::InvalidConfig("weights: unsupported version"));
+        }
+        let in_ch = r.u32()? as usize;
+        let out_ch = r.u32()? as usize;
+        let levels = r.u32()? as usize;
+        if !(1..=64).contains(&in_ch) || !(1..=64).contains(&out_ch) || levels > MAX_LEVELS {
+            return Err(Error::InvalidConfig("weights: channels (1..=64) or levels (0..=4) out of range"));
+        }
+        let mut widths = [0usize; MAX_LEVELS + 1];
+        for w in widths.iter_mut().take(levels + 1) {
+            *w = r.u32()? as usize;
+            if !(1..=256).contains(w) {
+                return Err(Error::InvalidConfig("weights: layer width out of range (1..=256)"));
+            }
+        }
+        let flr = [r.f32()?, r.f32()?, r.f32()?];
+        if !flr.iter().all(|v| v.is_finite() && *v > 0.0) {
+            return Err(Error::InvalidConfig("weights: FLR parameters must be finite and positive"));
+        }
+        let payload_len = r.u32()? as usize;
+        let payload = r.take(payload_len.checked_mul(2).ok_or(Error::InvalidConfig("weights: payload length overflows"))?)?;
+        if r.pos != blob.len() {
+            return Err(Error::InvalidConfig("weights: trailing bytes after the payload"));
+        }
+        // layer shapes in forward order
+        let c = widths;
+        let mut shapes = [(0usize, 0usize, 0usize, 0usize); MAX_LAYERS];
+        let mut n = 0;
+        let mut push = |cin, cout, k, stride| {
+            shapes[n] = (cin, cout, k, stride);
+            n += 1;
+        };
+        push(in_ch, c[0], 3, 1);
+        push(c[0], c[0], 1, 1);
+        for l in 1..=levels {
+            push(c[l - 1], c[l], 3, 1);
+            push(c[l], c[l], 3, 2);
+        }
+        for l in (1..=levels).rev() {
+            push(c[l] + c[l - 1], c[l - 1], 3, 1);
+            push(c[l - 1], c[l - 1], 3, 1);
+        }
+        push(c[0], c[0], 3, 1);
+        push(c[0], out_ch, 1, 1);
+        let mut layers = [ConvDesc::EMPTY; MAX_LAYERS];
+        let mut off = 0usize;
+        for (i, &(cin, cout, k, stride)) in shapes.iter().enumerate().take(n) {
+            let len = (cout * cin * k * k + cout) * 2;
+            let bytes = payload.get(off..off + len).ok_or(Error::InvalidConfig("weights: payload shorter than the layer shapes"))?;
+            off += len;
+            layers[i] = ConvDesc { cin, cout, k, stride, params: bytes };
+        }
+        if off != payload.len() {
+            return Err(Error::InvalidConfig("weights: payload longer than the layer shapes"));
+        }
+        if payload.chunks_exact(2).any(|p| !f16::from_le_bytes([p[0], p[1]]).is_finite()) {
+            return Err(Error::InvalidConfig("weights: non-finite weight"));
+        }
+        Ok(UNet { in_ch, out_ch, levels, widths, flr, layers, count: n })
+    }
+
+    pub fn in_channels(&self) -> usize {
+        self.in_ch
+    }
+    pub fn out_channels(&self) -> usize {
+        self.out_ch
+    }
+    pub fn levels(&self) -> usize {
+        self.levels
+    }
+    /// Widths `c_0..c_L`.
+    pub fn widths(&self) -> &[usize] {
+        &self.widths[..=self.levels]
+    }
+    /// The FLR parameters trained with the network: σ (pixels), ε, ϵ.
+    pub fn flr_params(&self) -> [f32; 3] {
+        self.flr
+    }
+    /// Number of convolutions.
+    pub fn layer_count(&self) -> usize {
+        self.count
+    }
+    pub(crate) fn conv(&self, i: usize) -> Result<ConvDesc<'b>, Error> {
+        if i < self.count {
+            Ok(self.layers[i])
+        } else {
+            Err(Error::InvalidTile { index: i, count: self.count })
+        }
+    }
+}

@@ -1,0 +1,129 @@
+//! Allocation-free inference of FLNR's guide network (`../shared/ALGORITHMS.md`
+//! §2): a small U-Net read from a weight blob ([`blob`]), run layer by layer on
+//! planar f32 tensors in a caller-provided scratch ([`UNet::forward`]).
+//!
+//! Architecture (the blob's header gives `in`, `out`, and the widths
+//! `c_0..c_L` of the `L` levels):
+//!
+//! ```text
+//! input   conv3×3(in → c0) LReLU, conv1×1(c0 → c0) LReLU          = s_0 (full res)
+//! enc l   conv3×3(c_{l−1} → c_l) LReLU, conv3×3 stride 2 (c_l → c_l) LReLU = s_l (1/2^l), l = 1..L
+//! dec l   up×2 (nearest, cropped to s_{l−1}), concat s_{l−1},
+//!         conv3×3(c_l + c_{l−1} → c_{l−1}) LReLU, conv3×3(c_{l−1} → c_{l−1}) LReLU, l = L..1
+//! output  conv3×3(c0 → c0) LReLU, conv1×1(c0 → out), sigmoid
+//! ```
+//!
+//! Convolutions pad with zeros (PyTorch's `padding=1`); a stride-2 output has
+//! `⌈n/2⌉` rows and columns, so any frame size works without padding the input.
+//! LeakyReLU slope 0.01 (PyTorch's default). `train/flnr.py` builds the same
+//! network; `tests/nn.rs` checks parity on an exported test vector.
+
+pub mod blob;
+pub mod conv;
+
+use crate::error::{Arg, Error};
+pub use blob::{UNet, MAX_LEVELS};
+use conv::{concat_upsampled, conv, Act};
+
+/// Elements of one planar tensor.
+const fn tensor_len(c: usize, w: usize, h: usize) -> usize {
+    c * w * h
+}
+
+/// Size of level `l` (⌈n / 2^l⌉ per axis).
+pub const fn level_size(w: usize, h: usize, l: usize) -> (usize, usize) {
+    let mut s = (w, h);
+    let mut i = 0;
+    while i < l {
+        s = (s.0.div_ceil(2), s.1.div_ceil(2));
+        i += 1;
+    }
+    s
+}
+
+impl UNet<'_> {
+    /// f32 of scratch [`UNet::forward`] needs for a `w × h` input: the skip
+    /// tensors of every level plus two work tensors of the largest layer.
+    pub fn scratch_len(&self, w: usize, h: usize) -> usize {
+        let c = self.widths();
+        let mut skips = 0;
+        let mut work = 0;
+        for l in 0..=self.levels() {
+            let (lw, lh) = level_size(w, h, l);
+            skips += tensor_len(c[l], lw, lh);
+            // the widest tensor at this level: a concat (c_l + c_{l+1}) or c_l
+            let up = if l < self.levels() { c[l + 1] } else { 0 };
+            work = work.max(tensor_len(c[l] + up, lw, lh));
+        }
+        skips + 2 * work
+    }
+
+    /// Runs the network on `input` (`in_channels()` planes of `w × h`,
+    /// plane-major) into `out` (`out_channels()` planes). `scratch`: at least
+    /// [`UNet::scratch_len`] f32. Allocates nothing.
+    pub fn forward(&self, input: &[f32], w: usize, h: usize, scratch: &mut [f32], out: &mut [f32]) -> Result<(), Error> {
+        if w == 0 || h == 0 {
+            return Err(Error::InvalidSize { arg: Arg::Noisy, width: w, height: h });
+        }
+        let n = w * h;
+        if input.len() != self.in_channels() * n {
+            return Err(Error::BufferTooSmall { arg: Arg::Noisy, needed: self.in_channels() * n, len: input.len() });
+        }
+        if out.len() != self.out_channels() * n {
+            return Err(Error::BufferTooSmall { arg: Arg::Output, needed: self.out_channels() * n, len: out.len() });
+        }
+        let need = self.scratch_len(w, h);
+        if scratch.len() < need {
+            return Err(Error::ScratchTooSmall { needed: need, got: scratch.len() });
+        }
+        let c = self.widths();
+        let levels = self.levels();
+        // carve the skips, then two work tensors
+        let mut skip_store: [&mut [f32]; MAX_LEVELS + 1] = Default::default();
+        let mut rest = &mut scratch[..need];
+        for l in 0..=levels {
+            let (lw, lh) = level_size(w, h, l);
+            let (a, b) = rest.split_at_mut(tensor_len(c[l], lw, lh));
+            skip_store[l] = a;
+            rest = b;
+        }
+        let (wa, wb) = rest.split_at_mut(rest.len() / 2);
+        let mut layer = 0;
+        // input block → s_0
+        conv(self.conv(layer)?, input, w, h, wa, Act::Leaky)?;
+        layer += 1;
+        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, skip_store[0], Act::Leaky)?;
+        layer += 1;
+        // encoder
+        for l in 1..=levels {
+            let (pw, ph) = level_size(w, h, l - 1);
+            let (prev, cur) = skip_store.split_at_mut(l);
+            conv(self.conv(layer)?, prev[l - 1], pw, ph, wa, Act::Leaky)?;
+            layer += 1;
+            conv(self.conv(layer)?, &wa[..c[l] * pw * ph], pw, ph, cur[0], Act::Leaky)?;
+            layer += 1;
+        }
+        // decoder: the current tensor lives in `wb` (or s_L at first)
+        for l in (1..=levels).rev() {
+            let (lw, lh) = level_size(w, h, l);
+            let (sw, sh) = level_size(w, h, l - 1);
+            let cur_c = c[l];
+            {
+                let low: &[f32] = if l == levels { &*skip_store[l] } else { &wb[..cur_c * lw * lh] };
+                concat_upsampled(low, cur_c, lw, lh, skip_store[l - 1], c[l - 1], sw, sh, wa)?;
+            }
+            conv(self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sw * sh], sw, sh, wb, Act::Leaky)?;
+            layer += 1;
+            // second conv: wb → wa, then move back to wb for the next level
+            conv(self.conv(layer)?, &wb[..c[l - 1] * sw * sh], sw, sh, wa, Act::Leaky)?;
+            layer += 1;
+            let k = c[l - 1] * sw * sh;
+            wb[..k].copy_from_slice(&wa[..k]);
+        }
+        let cur: &[f32] = if levels == 0 { &*skip_store[0] } else { &wb[..c[0] * n] };
+        conv(self.conv(layer)?, cur, w, h, wa, Act::Leaky)?;
+        layer += 1;
+        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, out, Act::Sigmoid)?;
+        Ok(())
+    }
+}

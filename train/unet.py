@@ -1,0 +1,114 @@
+"""FLNR's guide network and its weight-blob export (the format read by
+`src/nn/blob.rs`; keep the two in step).
+
+    python3 train/unet.py --parity tests/data/nn_parity   # writes .bin (weights) and .vec (test vector)
+"""
+import argparse
+import struct
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+MAGIC, VERSION = b"LRDN", 1
+LEAKY = 0.01
+
+
+class UNet(nn.Module):
+    """input conv3x3 + conv1x1; L encoder blocks (conv3x3, conv3x3 stride 2);
+    L decoder blocks (nearest x2, crop, concat skip, two conv3x3); output
+    conv3x3 + conv1x1 + sigmoid. LeakyReLU(0.01) after every conv but the last."""
+
+    def __init__(self, cin, cout, widths):
+        super().__init__()
+        c = list(widths)
+        self.cin, self.cout, self.widths = cin, cout, c
+        L = len(c) - 1
+        self.inp = nn.ModuleList([nn.Conv2d(cin, c[0], 3, padding=1), nn.Conv2d(c[0], c[0], 1)])
+        self.enc = nn.ModuleList(
+            [nn.ModuleList([nn.Conv2d(c[l - 1], c[l], 3, padding=1), nn.Conv2d(c[l], c[l], 3, stride=2, padding=1)]) for l in range(1, L + 1)]
+        )
+        self.dec = nn.ModuleList(
+            [nn.ModuleList([nn.Conv2d(c[l] + c[l - 1], c[l - 1], 3, padding=1), nn.Conv2d(c[l - 1], c[l - 1], 3, padding=1)]) for l in range(L, 0, -1)]
+        )
+        self.out = nn.ModuleList([nn.Conv2d(c[0], c[0], 3, padding=1), nn.Conv2d(c[0], cout, 1)])
+
+    def convs(self):
+        """The convolutions in the blob's order."""
+        yield from self.inp
+        for e in self.enc:
+            yield from e
+        for d in self.dec:
+            yield from d
+        yield from self.out
+
+    def forward(self, x):
+        a = F.leaky_relu(self.inp[0](x), LEAKY)
+        h = F.leaky_relu(self.inp[1](a), LEAKY)
+        skips = [h]
+        for c1, c2 in self.enc:
+            h = F.leaky_relu(c2(F.leaky_relu(c1(h), LEAKY)), LEAKY)
+            skips.append(h)
+        L = len(self.enc)
+        for i, (c1, c2) in enumerate(self.dec):
+            s = skips[L - 1 - i]
+            u = F.interpolate(h, scale_factor=2, mode="nearest")[:, :, : s.shape[2], : s.shape[3]]
+            h = F.leaky_relu(c2(F.leaky_relu(c1(torch.cat([u, s], 1)), LEAKY)), LEAKY)
+        h = F.leaky_relu(self.out[0](h), LEAKY)
+        return torch.sigmoid(self.out[1](h))
+
+    def round_to_f16(self):
+        """Round every parameter to f16 (what the blob stores), in place."""
+        with torch.no_grad():
+            for p in self.parameters():
+                p.copy_(p.half().float())
+
+
+def export(model, path, flr=(12.0, 1e-3, 1e-2)):
+    payload = []
+    for conv in model.convs():
+        payload.append(conv.weight.detach().numpy().astype(np.float16).ravel())
+        payload.append(conv.bias.detach().numpy().astype(np.float16).ravel())
+    payload = np.concatenate(payload)
+    c = model.widths
+    head = MAGIC + struct.pack("<4I", VERSION, model.cin, model.cout, len(c) - 1)
+    head += struct.pack(f"<{len(c)}I", *c) + struct.pack("<3f", *flr) + struct.pack("<I", payload.size)
+    with open(path, "wb") as f:
+        f.write(head + payload.astype("<f2").tobytes())
+
+
+def write_vector(path, x, y):
+    """Test vector: "LRDT", u32 w, h, cin, cout, f32 input planes, f32 output planes."""
+    _, cin, h, w = x.shape
+    cout = y.shape[1]
+    with open(path, "wb") as f:
+        f.write(b"LRDT" + struct.pack("<4I", w, h, cin, cout))
+        f.write(x.numpy().astype("<f4").tobytes() + y.numpy().astype("<f4").tobytes())
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--parity", required=True, help="path prefix: writes PREFIX.bin and PREFIX.vec")
+    ap.add_argument("--widths", default="4,8,12")
+    ap.add_argument("--size", default="23x19", help="odd sizes exercise the crops")
+    args = ap.parse_args()
+    torch.manual_seed(1)
+    widths = [int(v) for v in args.widths.split(",")]
+    model = UNet(8, 8, widths)
+    # larger weights than the default init, so every layer matters in the output
+    with torch.no_grad():
+        for p in model.parameters():
+            p.mul_(2.0)
+    model.round_to_f16()
+    w, h = (int(v) for v in args.size.split("x"))
+    x = torch.rand(1, 8, h, w) * 2 - 0.5
+    with torch.no_grad():
+        y = model(x)
+    export(model, args.parity + ".bin")
+    write_vector(args.parity + ".vec", x[0:1], y[0:1])
+    print(f"wrote {args.parity}.bin/.vec: widths {widths}, {sum(p.numel() for p in model.parameters())} parameters, output range {y.min():.3f}..{y.max():.3f}")
+
+
+if __name__ == "__main__":
+    main()
