@@ -113,7 +113,10 @@ pub struct Frame<'a> {
     pub noisy: ImageView<'a>,
     /// Guides at the output resolution.
     pub guides: Guides<'a>,
-    /// Joint denoise + upsample only: the guides at the noisy input's resolution.
+    /// The guides the regression is *fitted* on, at the noisy input's
+    /// resolution (FLR only): for joint denoise + upsample, the low-resolution
+    /// guides; at the same resolution, a second guide set (FLNR's `X'_model`,
+    /// with `guides` = `X'_map`). `None`: fit and apply on `guides`.
     pub guides_low: Option<Guides<'a>>,
 }
 

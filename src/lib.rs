@@ -38,6 +38,8 @@
 pub mod bmfr;
 pub mod config;
 pub mod error;
+#[cfg(feature = "flnr")]
+pub mod flnr;
 #[cfg(feature = "flr")]
 pub mod flr;
 pub mod guides;

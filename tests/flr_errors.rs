@@ -59,10 +59,12 @@ fn frame_and_scratch_validation() {
     guides.normal = Some(ImageView::f32(&f.normal, 32, 16, 2, Layout::interleaved(32, 3)).unwrap());
     let frame = Frame::new(ImageView::interleaved(&f.noisy, 32, 16, 3).unwrap(), guides);
     assert!(matches!(flr.denoise(&frame, &mut scratch, &mut ov), Err(Error::ChannelCount { expected: 3, got: 2, .. })));
-    // guides_low without upsampling, and upsampling without guides_low
+    // guides_low of the wrong size (at upsample 1 it is the fit guide set), and
+    // upsampling without guides_low
     let mut fr = f.frame(set);
-    fr.guides_low = Some(f.guides(set));
-    assert!(matches!(flr.denoise(&fr, &mut scratch, &mut ov), Err(Error::Unsupported(_))));
+    let small = Owned::synthetic(16, 8, 1, 0.5);
+    fr.guides_low = Some(small.guides(set));
+    assert!(matches!(flr.denoise(&fr, &mut scratch, &mut ov), Err(Error::SizeMismatch { arg: Arg::GuideLow, .. })));
     let big = Owned::synthetic(64, 32, 1, 0.5);
     let up = Flr::new(FlrConfig { upsample: 2, ..cfg(set, 8) }, 64, 32).unwrap();
     let mut out2 = vec![0f32; 64 * 32 * 3];

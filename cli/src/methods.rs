@@ -13,7 +13,7 @@
 //! ao becomes an extra feature), `--iterations`, `--near`, `--far`,
 //! `--no-tracing` and `--storage f16|f32`; those flags are refused elsewhere.
 
-use crate::runner::{BmfrRunner, FlrRunner, Inputs, TemporalRunner, WalrRunner};
+use crate::runner::{BmfrRunner, FlnrRunner, FlrRunner, Inputs, TemporalRunner, WalrRunner};
 use clap::Args;
 use lrdenoise::walr::Storage;
 use lrdenoise::{Blur, BmfrConfig, FlrConfig, GuideSet, Regularization, WalrConfig};
@@ -62,9 +62,21 @@ pub struct FlrArgs {
     /// WALR: pivot floor of the per-pixel Cholesky
     #[arg(long)]
     pub epsilon: Option<f32>,
+    /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
+    #[arg(long)]
+    pub weights: Option<std::path::PathBuf>,
 }
 
 impl FlrArgs {
+    fn has_flr_flags(&self) -> bool {
+        self.guides.is_some()
+            || self.block.is_some()
+            || self.sigma.is_some()
+            || self.radius.is_some()
+            || self.box_radius.is_some()
+            || self.regularization.is_some()
+            || self.upsample.is_some()
+    }
     fn has_walr_flags(&self) -> bool {
         self.iterations.is_some()
             || self.near.is_some()
@@ -302,6 +314,8 @@ pub enum Method {
     },
     /// Single-frame BMFR (frame index 0: no grid shift between runs).
     Bmfr(Box<BmfrRunner>),
+    /// FLNR with its weights.
+    Flnr(Box<FlnrRunner>),
     /// Single-frame WALR (frame index 0).
     Walr(Box<WalrRunner>),
     /// A temporal pipeline (BMFR's or WALR's): every `run` is the next frame of a sequence.
@@ -330,6 +344,26 @@ impl Method {
             "flr" => {
                 let cfg = a.config(inputs)?;
                 Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg) })
+            }
+            "flnr" => {
+                if a.has_flr_flags() || a.has_walr_flags() {
+                    return Err("flnr takes only --weights (σ, ε, ϵ come with the weights; the guides are normal, depth, ao)".into());
+                }
+                if let Some(m) = inputs.missing(&lrdenoise::flnr::INPUT_GUIDES) {
+                    return Err(format!("flnr needs '{m}' but the frame has no '{m}' layer"));
+                }
+                let (blob, name) = match &a.weights {
+                    Some(p) => (std::fs::read(p).map_err(|e| format!("--weights {}: {e}", p.display()))?, p.display().to_string()),
+                    None => (BUNDLED_WEIGHTS.to_vec(), "train/flnr.bin".to_string()),
+                };
+                let runner = FlnrRunner::new(blob, w, h).map_err(|e| format!("flnr ({name}): {e}"))?;
+                let net = runner.flnr.network();
+                let label = format!("flnr {:?}", net.widths()).replace(' ', "");
+                let flags = match &a.weights {
+                    Some(p) => format!("--method flnr --weights {}", p.display()),
+                    None => "--method flnr".to_string(),
+                };
+                Ok(Built { method: Method::Flnr(Box::new(runner)), label, flags })
             }
             "walr" | "walr-temporal" => {
                 let cfg = walr_config(a, inputs)?;
@@ -366,6 +400,7 @@ impl Method {
             Method::Flr { runner, low } => runner.run(inputs, low.as_deref(), out).map(|_| ()),
             Method::Bmfr(r) => r.run(inputs, 0, out).map(|_| ()),
             Method::Walr(r) => r.run(inputs, 0, out).map(|_| ()),
+            Method::Flnr(r) => r.run(inputs, out),
             Method::Temporal(r) => r.run(inputs, out),
         }
     }
@@ -385,7 +420,10 @@ impl Method {
 }
 
 /// Known method names for `--methods` / `--method`.
-pub const METHODS: &[&str] = &["flr", "bmfr", "bmfr-temporal", "walr", "walr-temporal"];
+pub const METHODS: &[&str] = &["flr", "flnr", "bmfr", "bmfr-temporal", "walr", "walr-temporal"];
+
+/// The network trained by `train/flnr.py` (see train/README.md).
+pub const BUNDLED_WEIGHTS: &[u8] = include_bytes!("../../train/flnr.bin");
 
 pub fn check_method(m: &str) -> Result<(), String> {
     if METHODS.contains(&m) {

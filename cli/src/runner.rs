@@ -350,6 +350,30 @@ impl BmfrRunner {
     }
 }
 
+/// FLNR for one size: the weights (kept for the process's life), the plan and
+/// both scratch buffers. One thread (the network and FLR run on the caller).
+pub struct FlnrRunner {
+    pub flnr: lrdenoise::flnr::Flnr<'static>,
+    scratch: Vec<f32>,
+    flr_scratch: Vec<f64>,
+}
+
+impl FlnrRunner {
+    pub fn new(weights: Vec<u8>, w: usize, h: usize) -> Result<Self, String> {
+        // leaked on purpose: a runner lives as long as the command
+        let blob: &'static [u8] = Box::leak(weights.into_boxed_slice());
+        let flnr = lrdenoise::flnr::Flnr::new(blob, w, h).map_err(|e| e.to_string())?;
+        Ok(FlnrRunner { scratch: vec![0f32; flnr.scratch_len()], flr_scratch: vec![0f64; flnr.flr_scratch_len()], flnr })
+    }
+    pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<(), String> {
+        let set = lrdenoise::flnr::INPUT_GUIDES;
+        let noisy = ImageView::interleaved(&inputs.noisy, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
+        let mut ov = ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        self.flnr.denoise(&frame, &mut self.scratch, &mut self.flr_scratch, &mut ov).map(|_| ()).map_err(|e| format!("flnr: {e}"))
+    }
+}
+
 /// Single-frame WALR for one size: plan, scratch, and each stage's rows
 /// spread over threads in bands (bit-identical to one thread).
 pub struct WalrRunner {

@@ -272,7 +272,9 @@ impl Flr {
         let map = frame.guides.channel_views(set, self.width, self.height, Arg::Guide)?;
         let fit = match (self.cfg.upsample, &frame.guides_low) {
             (1, None) => map,
-            (1, Some(_)) => return Err(Error::Unsupported("guides_low given but upsample is 1")),
+            // same resolution: moments from `guides_low`, the model applied to
+            // `guides` (FLNR's X'_model and X'_map)
+            (1, Some(low)) => low.channel_views(set, self.width, self.height, Arg::GuideLow)?,
             (_, Some(low)) => low.channel_views(set, self.in_w, self.in_h, Arg::GuideLow)?,
             (_, None) if self.q == 0 => map,
             (_, None) => return Err(Error::Unsupported("upsampling needs guides_low at the noisy resolution")),

@@ -23,9 +23,6 @@ impl ConvDesc<'_> {
         let b = &self.params[2 * i..2 * i + 2];
         f16::from_le_bytes([b[0], b[1]]).to_f32()
     }
-    fn weight(&self, o: usize, i: usize, ky: usize, kx: usize) -> f32 {
-        self.param(((o * self.cin + i) * self.k + ky) * self.k + kx)
-    }
     fn bias(&self, o: usize) -> f32 {
         self.param(self.cout * self.cin * self.k * self.k + o)
     }
@@ -48,60 +45,67 @@ pub enum Act {
 
 const LEAKY_SLOPE: f32 = 0.01;
 
+/// Largest `cin · k · k` of a layer (512 input channels of a concat × 9).
+const MAX_TAPS: usize = 512 * 9;
+
 /// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `out` at
-/// least `cout` planes of the output size.
+/// least `cout` planes of the output size. Output rows are accumulated one at
+/// a time (they stay in L1) over every input channel and tap.
 pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32], act: Act) -> Result<(), Error> {
     let (ow, oh) = d.out_size(w, h);
-    if input.len() < d.cin * w * h || out.len() < d.cout * ow * oh || d.params.len() != 2 * (d.cout * d.cin * d.k * d.k + d.cout) {
+    let taps = d.cin * d.k * d.k;
+    if input.len() < d.cin * w * h || out.len() < d.cout * ow * oh || d.params.len() != 2 * (d.cout * taps + d.cout) || taps > MAX_TAPS {
         return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: d.cout * ow * oh, len: out.len() });
     }
+    let mut wts = [0f32; MAX_TAPS];
     for o in 0..d.cout {
+        for (t, v) in wts[..taps].iter_mut().enumerate() {
+            *v = d.param(o * taps + t);
+        }
+        let bias = d.bias(o);
         let plane = &mut out[o * ow * oh..(o + 1) * ow * oh];
-        plane.fill(d.bias(o));
-        for i in 0..d.cin {
-            let src = &input[i * w * h..(i + 1) * w * h];
-            match (d.k, d.stride) {
-                (1, _) => {
-                    let wt = d.weight(o, i, 0, 0);
-                    for (p, s) in plane.iter_mut().zip(src) {
-                        *p += wt * s;
+        for y in 0..oh {
+            let prow = &mut plane[y * ow..(y + 1) * ow];
+            prow.fill(bias);
+            for i in 0..d.cin {
+                let src = &input[i * w * h..(i + 1) * w * h];
+                match (d.k, d.stride) {
+                    (1, _) => {
+                        let wt = wts[i];
+                        for (p, v) in prow.iter_mut().zip(&src[y * w..(y + 1) * w]) {
+                            *p += wt * v;
+                        }
                     }
-                }
-                (_, 1) => {
-                    for ky in 0..3 {
-                        for kx in 0..3 {
-                            let wt = d.weight(o, i, ky, kx);
-                            for y in 0..oh {
-                                let sy = y as isize + ky as isize - 1;
-                                if sy < 0 || sy >= h as isize {
-                                    continue;
-                                }
-                                let srow = &src[sy as usize * w..(sy as usize + 1) * w];
-                                let prow = &mut plane[y * ow..(y + 1) * ow];
+                    (_, 1) if w >= 18 => {} // the interior is done in lanes below
+                    (_, 1) => {
+                        for ky in 0..3 {
+                            let sy = y as isize + ky as isize - 1;
+                            if sy < 0 || sy >= h as isize {
+                                continue;
+                            }
+                            let srow = &src[sy as usize * w..(sy as usize + 1) * w];
+                            for kx in 0..3 {
+                                let wt = wts[(i * 3 + ky) * 3 + kx];
                                 // x + kx − 1 inside the row
                                 let (x0, x1) = (if kx == 0 { 1 } else { 0 }, if kx == 2 { w - 1 } else { w });
                                 if x0 >= x1 {
                                     continue;
                                 }
-                                let s = &srow[x0 + kx - 1..x1 + kx - 1];
-                                for (p, v) in prow[x0..x1].iter_mut().zip(s) {
+                                for (p, v) in prow[x0..x1].iter_mut().zip(&srow[x0 + kx - 1..x1 + kx - 1]) {
                                     *p += wt * v;
                                 }
                             }
                         }
                     }
-                }
-                _ => {
-                    for ky in 0..3 {
-                        for kx in 0..3 {
-                            let wt = d.weight(o, i, ky, kx);
-                            for y in 0..oh {
-                                let sy = 2 * y as isize + ky as isize - 1;
-                                if sy < 0 || sy >= h as isize {
-                                    continue;
-                                }
-                                let srow = &src[sy as usize * w..(sy as usize + 1) * w];
-                                let prow = &mut plane[y * ow..(y + 1) * ow];
+                    _ => {
+                        for ky in 0..3 {
+                            let sy = 2 * y as isize + ky as isize - 1;
+                            if sy < 0 || sy >= h as isize {
+                                continue;
+                            }
+                            let srow = &src[sy as usize * w..(sy as usize + 1) * w];
+                            for kx in 0..3 {
+                                let wt = wts[(i * 3 + ky) * 3 + kx];
                                 for (x, p) in prow.iter_mut().enumerate() {
                                     let sx = 2 * x as isize + kx as isize - 1;
                                     if sx >= 0 && (sx as usize) < w {
@@ -113,23 +117,74 @@ pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32],
                     }
                 }
             }
-        }
-        match act {
-            Act::Leaky => {
-                for p in plane.iter_mut() {
-                    if *p < 0.0 {
-                        *p *= LEAKY_SLOPE;
+            if d.k == 3 && d.stride == 1 && w >= 18 {
+                conv3_row_lanes(&wts[..taps], d.cin, input, w, h, y, prow);
+            }
+            match act {
+                Act::Leaky => {
+                    for p in prow.iter_mut() {
+                        if *p < 0.0 {
+                            *p *= LEAKY_SLOPE;
+                        }
                     }
                 }
-            }
-            Act::Sigmoid => {
-                for p in plane.iter_mut() {
-                    *p = 1.0 / (1.0 + libm::expf(-*p));
+                Act::Sigmoid => {
+                    for p in prow.iter_mut() {
+                        *p = 1.0 / (1.0 + libm::expf(-*p));
+                    }
                 }
             }
         }
     }
     Ok(())
+}
+
+/// One output row of a 3×3 stride-1 convolution (`prow` holds the bias):
+/// 8-pixel groups accumulate every input channel and tap in registers (one
+/// load and one multiply-add per 8 products); the first and last pixels of
+/// the row, which touch the zero padding, per pixel.
+fn conv3_row_lanes(wts: &[f32], cin: usize, input: &[f32], w: usize, h: usize, y: usize, prow: &mut [f32]) {
+    use wide::f32x8;
+    let rows: [Option<usize>; 3] = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    let load = |s: &[f32], x: usize| -> f32x8 {
+        let c: &[f32; 8] = s[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
+        f32x8::from(*c)
+    };
+    // groups [x, x + 8) with 1 ≤ x and x + 9 ≤ w: every tap inside the row
+    let mut x = 1;
+    while x + 9 <= w {
+        let mut acc = f32x8::from(<[f32; 8]>::try_from(&prow[x..x + 8]).unwrap_or([0.0; 8]));
+        for i in 0..cin {
+            let src = &input[i * w * h..(i + 1) * w * h];
+            for (ky, r) in rows.iter().enumerate() {
+                let Some(sy) = *r else { continue };
+                let srow = &src[sy * w..(sy + 1) * w];
+                let t = (i * 3 + ky) * 3;
+                acc += f32x8::splat(wts[t]) * load(srow, x - 1);
+                acc += f32x8::splat(wts[t + 1]) * load(srow, x);
+                acc += f32x8::splat(wts[t + 2]) * load(srow, x + 1);
+            }
+        }
+        prow[x..x + 8].copy_from_slice(&acc.to_array());
+        x += 8;
+    }
+    // the rest, per pixel (x = 0, and the tail)
+    for px in core::iter::once(0).chain(x..w) {
+        let mut a = prow[px];
+        for i in 0..cin {
+            let src = &input[i * w * h..(i + 1) * w * h];
+            for (ky, r) in rows.iter().enumerate() {
+                let Some(sy) = *r else { continue };
+                for kx in 0..3 {
+                    let sx = px as isize + kx as isize - 1;
+                    if sx >= 0 && (sx as usize) < w {
+                        a += wts[(i * 3 + ky) * 3 + kx] * src[sy * w + sx as usize];
+                    }
+                }
+            }
+        }
+        prow[px] = a;
+    }
 }
 
 /// `out = concat(upsample×2(low) cropped to sw × sh, skip)` along channels.

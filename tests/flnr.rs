@@ -1,0 +1,98 @@
+//! FLNR end to end: FLR fitted on one guide set and applied to another (the
+//! mechanism FLNR uses), the pipeline on random weights (finite, typed errors),
+//! and the bundled weights on a synthetic frame.
+
+mod common;
+use common::*;
+use lrdenoise::flnr::{Flnr, INPUT_GUIDES};
+use lrdenoise::*;
+
+#[test]
+fn flr_with_the_same_fit_and_map_guides_is_plain_flr() {
+    let f = Owned::synthetic(45, 31, 3, 0.6);
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let (a, _) = run(cfg(set, 8), &f);
+    let mut fr = f.frame(set);
+    fr.guides_low = Some(f.guides(set));
+    let (b, _) = run_frame(cfg(set, 8), f.w, f.h, &fr);
+    assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
+    // fitted on the guides, applied to other values: the model follows the map guides
+    let mut shifted = f.clone();
+    for v in shifted.ao.iter_mut() {
+        *v = (*v * 0.5).min(1.0);
+    }
+    let mut fr = shifted.frame(set);
+    fr.guides_low = Some(f.guides(set));
+    let (c, _) = run_frame(cfg(set, 8), f.w, f.h, &fr);
+    assert!(a.iter().zip(&c).any(|(x, y)| (x - y).abs() > 1e-3));
+}
+
+/// A blob with random weights: 8 inputs, 2·q outputs, the given widths.
+fn random_blob(q: usize, widths: &[usize]) -> Vec<u8> {
+    let mut b = b"LRDN".to_vec();
+    for v in [1, 8, 2 * q, widths.len() - 1] {
+        b.extend_from_slice(&(v as u32).to_le_bytes());
+    }
+    for &c in widths {
+        b.extend_from_slice(&(c as u32).to_le_bytes());
+    }
+    for v in [10f32, 1e-3, 1e-2] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    let c = widths;
+    let l = c.len() - 1;
+    let mut n = 8 * c[0] * 9 + c[0] + c[0] * c[0] + c[0];
+    for i in 1..=l {
+        n += c[i - 1] * c[i] * 9 + c[i] + c[i] * c[i] * 9 + c[i];
+        n += (c[i] + c[i - 1]) * c[i - 1] * 9 + c[i - 1] + c[i - 1] * c[i - 1] * 9 + c[i - 1];
+    }
+    n += c[0] * c[0] * 9 + c[0] + c[0] * 2 * q + 2 * q;
+    b.extend_from_slice(&(n as u32).to_le_bytes());
+    let mut rng = Rng(7);
+    for _ in 0..n {
+        b.extend_from_slice(&half::f16::from_f32(rng.f32() - 0.5).to_le_bytes());
+    }
+    b
+}
+
+fn run_flnr(blob: &[u8], f: &Owned) -> Result<(Vec<f32>, Report), Error> {
+    let fl = Flnr::new(blob, f.w, f.h)?;
+    let mut scratch = vec![0f32; fl.scratch_len()];
+    let mut fs = vec![0f64; fl.flr_scratch_len()];
+    let mut out = vec![f32::NAN; 3 * f.w * f.h];
+    let rep = fl.denoise(&f.frame(INPUT_GUIDES), &mut scratch, &mut fs, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap())?;
+    Ok((out, rep))
+}
+
+#[test]
+fn random_weights_run_finite_and_errors_are_typed() {
+    for &(w, h) in &[(1, 1), (7, 3), (40, 33), (257, 9)] {
+        for q in [1, 4] {
+            let blob = random_blob(q, &[4, 6]);
+            let mut f = Owned::synthetic(w, h, 2, 0.5);
+            f.noisy[0] = f32::NAN;
+            f.depth[(w * h) / 2] = f32::INFINITY;
+            let (out, rep) = run_flnr(&blob, &f).unwrap();
+            assert!(out.iter().all(|v| v.is_finite()), "{w}x{h} q={q}");
+            assert_eq!(rep.nonfinite_noisy, 1);
+        }
+    }
+    let f = Owned::synthetic(16, 16, 2, 0.5);
+    // 5 outputs (odd), 10 outputs (Q' = 5 > 4)
+    assert!(matches!(run_flnr(&random_blob(1, &[4])[..], &f).map(|_| ()), Ok(())));
+    let mut odd = random_blob(2, &[4]);
+    odd[12] = 3;
+    assert!(matches!(run_flnr(&odd, &f), Err(Error::InvalidConfig(_))));
+    assert!(matches!(Flnr::new(&random_blob(5, &[4]), 16, 16), Err(Error::InvalidConfig(_))));
+    // missing AO
+    let blob = random_blob(2, &[4]);
+    let fl = Flnr::new(&blob, 16, 16).unwrap();
+    let mut scratch = vec![0f32; fl.scratch_len()];
+    let mut fs = vec![0f64; fl.flr_scratch_len()];
+    let mut out = vec![0f32; 3 * 256];
+    let r =
+        fl.denoise(&f.frame(GuideSet::NORMAL_DEPTH), &mut scratch, &mut fs, &mut ImageViewMut::interleaved(&mut out, 16, 16, 3).unwrap());
+    assert!(matches!(r, Err(Error::GuideMismatch)));
+    let r = fl.denoise(&f.frame(INPUT_GUIDES), &mut scratch[..10], &mut fs, &mut ImageViewMut::interleaved(&mut out, 16, 16, 3).unwrap());
+    assert!(matches!(r, Err(Error::ScratchTooSmall { .. })));
+}
