@@ -1,8 +1,15 @@
 //! FLNR — Fast Local Neural Regression (Salmi, Csefalvay & Imber, §3.3;
-//! `../shared/ALGORITHMS.md` §2): a small U-Net ([`crate::nn::UNet`]) rewrites
-//! the guides into `Q'` model guides `X'_model` (the moments are built from
-//! them) and `Q'` map guides `X'_map` (the per-block models are applied to
-//! them); then FLR runs as usual, with the σ, ε, ϵ trained with the network.
+//! `../shared/ALGORITHMS.md` §2): a small U-Net ([`crate::nn::UNet`]) writes
+//! `Q'` model guides `X'_model` (the moments are built from them) and `Q'` map
+//! guides `X'_map` (the per-block models are applied to them); then FLR runs
+//! as usual, with the σ, ε, ϵ trained with the network.
+//!
+//! One deliberate difference: FLR is fitted on `[normal, depth, AO, X'_model]`
+//! and applied to `[normal, depth, AO, X'_map]` — the network *adds* guides
+//! instead of replacing them. FLNR then starts out as FLR (near-constant
+//! learned guides are regularised away) and even a short CPU training can only
+//! improve on it; the paper's replacement needs far longer training to catch up
+//! with the plain guides (measured: −1.1 dB after the same training).
 //!
 //! Network input (8 planes, as `train/flnr.py` builds it): the normal (3),
 //! depth divided by the frame's mean depth (1), AO (1), and
@@ -13,7 +20,7 @@
 use crate::config::{Blur, FlrConfig, Regularization};
 use crate::error::{Arg, Error};
 use crate::flr::{Flr, Report};
-use crate::guides::{Frame, GuideSet, Guides, MAX_USER_GUIDES};
+use crate::guides::{Frame, GuideSet, MAX_USER_GUIDES};
 use crate::image::{ImageView, ImageViewMut, Layout};
 use crate::nn::UNet;
 
@@ -42,7 +49,7 @@ impl<'w> Flnr<'w> {
         }
         let [sigma, eps_mul, eps_add] = net.flr_params();
         let cfg = FlrConfig {
-            guides: GuideSet { user: q as u8, ..GuideSet::NONE },
+            guides: GuideSet { user: q as u8, ..INPUT_GUIDES },
             block: 8,
             blur: Blur::Gaussian { sigma, radius: None },
             regularization: Regularization::Normalized { eps_mul: eps_mul as f64, eps_add: eps_add as f64 },
@@ -148,8 +155,8 @@ impl<'w> Flnr<'w> {
         self.net.forward(x, w, h, net_scratch, g)?;
         let g = &*g;
         let plane = |k: usize| ImageView::f32(&g[k * np..(k + 1) * np], w, h, 1, Layout::planar(w, h));
-        let mut model = Guides::default();
-        let mut map = Guides::default();
+        let mut model = frame.guides;
+        let mut map = frame.guides;
         for k in 0..q {
             model.user[k] = Some(plane(k)?);
             map.user[k] = Some(plane(q + k)?);

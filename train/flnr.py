@@ -7,7 +7,9 @@ e.g. `--scenes box:3,clutter:3,room:2,colonnade:2,box:4,clutter:4 --ref-spp 512`
 never the test split nor `data/`. Network input (must match `src/flnr.rs`): the guides
 normal (3), depth / frame-mean depth (1), AO (1), and log1p(max(noisy, 0) / s) (3),
 s = the frame's mean noisy value; output: 2·Q' sigmoid channels, X'_model then X'_map
-(Q' = 4). FLR (B = 8, Gaussian σ, normalized ε, ϵ — all three learned) is rebuilt here
+(Q' = 4). FLR is fitted on [normal, depth, AO, X'_model] and applied to [normal,
+depth, AO, X'_map]: the network *adds* guides rather than replacing them (the paper
+replaces them), so FLNR starts out as FLR and a short CPU training can only improve on it. FLR (B = 8, Gaussian σ, normalized ε, ϵ — all three learned) is rebuilt here
 op for op like the library's: block moments, separable blur of the block grid, the
 normalized-correlation regularized inverse (appendix eqs. 12–23) per cell, bilinear
 interpolation of the per-cell affine models. Loss: SMAPE against the reference.
@@ -125,7 +127,10 @@ class Flnr(torch.nn.Module):
 
     def forward(self, x, y):
         g = self.net(x)
-        return flr(y, g[:, :QP], g[:, QP:], self.log_sigma.exp(), self.log_eps_mul.exp(), self.log_eps_add.exp())
+        base = x[:, :5]  # normal, depth, AO: FLR's own guides stay in both sets
+        gm = torch.cat([base, g[:, :QP]], 1)
+        gmap = torch.cat([base, g[:, QP:]], 1)
+        return flr(y, gm, gmap, self.log_sigma.exp(), self.log_eps_mul.exp(), self.log_eps_add.exp())
 
 
 def crops(frames, size, batch):

@@ -231,6 +231,7 @@ fn report_variants() -> Vec<Variant> {
         Variant::method("walr", FlrArgs { storage: Some("f16".into()), ..Default::default() }),
         Variant::method("walr", FlrArgs { iterations: Some(3), ..Default::default() }),
         Variant::method("walr-temporal", FlrArgs::default()),
+        Variant::method("flnr", FlrArgs::default()),
     ]
 }
 

@@ -249,3 +249,18 @@ fn walr_single_frame_temporal_flags_and_errors() {
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--storage", "f8"], &["f16 or f32"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--near", "0.5", "--far", "0.1"], &["near/far"]);
 }
+
+#[test]
+fn flnr_runs_with_bundled_and_given_weights() {
+    let room = data("room_7.exr");
+    let (ok, so, e) = lrd(&["eval", &room, "--methods", "flr,flnr", "--runs", "5", "--threads", "1"]);
+    assert!(ok, "{e}");
+    assert!(so.contains("flnr["), "{so}");
+    let x = tmp("f.exr");
+    let x = x.to_str().unwrap();
+    fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--sigma", "3"], &["only --weights"]);
+    let bad = tmp("bad.bin");
+    std::fs::write(&bad, b"not a network").unwrap();
+    fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--weights", bad.to_str().unwrap()], &["bad magic"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--weights", "/nonexistent.bin"], &["--weights"]);
+}

@@ -5,10 +5,10 @@
 //! offset  field
 //! 0       magic  "LRDN"
 //! 4       u32    version (1)
-//! 8       u32    input channels   (1..=64)
-//! 12      u32    output channels  (1..=64)
+//! 8       u32    input channels   (1..=128)
+//! 12      u32    output channels  (1..=128)
 //! 16      u32    levels L         (0..=4)
-//! 20      u32    widths c_0..c_L  (L + 1 values, 1..=256 each)
+//! 20      u32    widths c_0..c_L  (L + 1 values, 1..=128 each)
 //! ..      f32    FLR parameters learned with the network: σ (pixels), ε, ϵ
 //! ..      u32    payload length in f16 values
 //! ..      f16    payload: for every layer in the order of [`crate::nn`], the
@@ -74,14 +74,14 @@ impl<'b> UNet<'b> {
         let in_ch = r.u32()? as usize;
         let out_ch = r.u32()? as usize;
         let levels = r.u32()? as usize;
-        if !(1..=64).contains(&in_ch) || !(1..=64).contains(&out_ch) || levels > MAX_LEVELS {
-            return Err(Error::InvalidConfig("weights: channels (1..=64) or levels (0..=4) out of range"));
+        if !(1..=128).contains(&in_ch) || !(1..=128).contains(&out_ch) || levels > MAX_LEVELS {
+            return Err(Error::InvalidConfig("weights: channels (1..=128) or levels (0..=4) out of range"));
         }
         let mut widths = [0usize; MAX_LEVELS + 1];
         for w in widths.iter_mut().take(levels + 1) {
             *w = r.u32()? as usize;
-            if !(1..=256).contains(w) {
-                return Err(Error::InvalidConfig("weights: layer width out of range (1..=256)"));
+            if !(1..=128).contains(w) {
+                return Err(Error::InvalidConfig("weights: layer width out of range (1..=128)"));
             }
         }
         let flr = [r.f32()?, r.f32()?, r.f32()?];

@@ -45,8 +45,10 @@ pub enum Act {
 
 const LEAKY_SLOPE: f32 = 0.01;
 
-/// Largest `cin · k · k` of a layer (512 input channels of a concat × 9).
-const MAX_TAPS: usize = 512 * 9;
+/// Largest `cin · k · k` of a layer (a concat of two 128-wide levels × 9).
+pub const MAX_TAPS: usize = 256 * 9;
+/// Output channels computed together (their accumulators share every load).
+const OB: usize = 4;
 
 /// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `out` at
 /// least `cout` planes of the output size. Output rows are accumulated one at
@@ -58,7 +60,38 @@ pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32],
         return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: d.cout * ow * oh, len: out.len() });
     }
     let mut wts = [0f32; MAX_TAPS];
-    for o in 0..d.cout {
+    let mut o_start = 0;
+    if d.k == 3 && d.stride == 1 && w >= 18 {
+        // blocks of OB output channels in lanes
+        let mut w4 = [[0f32; MAX_TAPS]; OB];
+        while o_start + OB <= d.cout {
+            let mut bias = [0f32; OB];
+            for b in 0..OB {
+                for (t, v) in w4[b][..taps].iter_mut().enumerate() {
+                    *v = d.param((o_start + b) * taps + t);
+                }
+                bias[b] = d.bias(o_start + b);
+            }
+            let block = &mut out[o_start * ow * oh..(o_start + OB) * ow * oh];
+            let (p0, rest) = block.split_at_mut(ow * oh);
+            let (p1, rest) = rest.split_at_mut(ow * oh);
+            let (p2, p3) = rest.split_at_mut(ow * oh);
+            let mut planes = [p0, p1, p2, p3];
+            for y in 0..oh {
+                let mut rows: [&mut [f32]; OB] = Default::default();
+                for (b, (r, p)) in rows.iter_mut().zip(planes.iter_mut()).enumerate() {
+                    *r = &mut p[y * ow..(y + 1) * ow];
+                    r.fill(bias[b]);
+                }
+                conv3_rows_block(&w4, taps, d.cin, input, w, h, y, &mut rows);
+                for r in rows.iter_mut() {
+                    activate(r, act);
+                }
+            }
+            o_start += OB;
+        }
+    }
+    for o in o_start..d.cout {
         for (t, v) in wts[..taps].iter_mut().enumerate() {
             *v = d.param(o * taps + t);
         }
@@ -120,23 +153,91 @@ pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32],
             if d.k == 3 && d.stride == 1 && w >= 18 {
                 conv3_row_lanes(&wts[..taps], d.cin, input, w, h, y, prow);
             }
-            match act {
-                Act::Leaky => {
-                    for p in prow.iter_mut() {
-                        if *p < 0.0 {
-                            *p *= LEAKY_SLOPE;
-                        }
-                    }
-                }
-                Act::Sigmoid => {
-                    for p in prow.iter_mut() {
-                        *p = 1.0 / (1.0 + libm::expf(-*p));
-                    }
-                }
-            }
+            activate(prow, act);
         }
     }
     Ok(())
+}
+
+fn activate(row: &mut [f32], act: Act) {
+    match act {
+        Act::Leaky => {
+            for p in row.iter_mut() {
+                if *p < 0.0 {
+                    *p *= LEAKY_SLOPE;
+                }
+            }
+        }
+        Act::Sigmoid => {
+            for p in row.iter_mut() {
+                *p = 1.0 / (1.0 + libm::expf(-*p));
+            }
+        }
+    }
+}
+
+/// [`conv3_row_lanes`] for `OB` output channels at once: each 8-pixel load
+/// feeds `OB` accumulators.
+#[allow(clippy::too_many_arguments)]
+fn conv3_rows_block(
+    wts: &[[f32; MAX_TAPS]; OB],
+    taps: usize,
+    cin: usize,
+    input: &[f32],
+    w: usize,
+    h: usize,
+    y: usize,
+    rows: &mut [&mut [f32]; OB],
+) {
+    use wide::f32x8;
+    let src_rows: [Option<usize>; 3] = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    let load = |s: &[f32], x: usize| -> f32x8 {
+        let c: &[f32; 8] = s[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
+        f32x8::from(*c)
+    };
+    let mut x = 1;
+    while x + 9 <= w {
+        let mut acc = [f32x8::ZERO; OB];
+        for (a, r) in acc.iter_mut().zip(rows.iter()) {
+            *a = load(r, x);
+        }
+        for i in 0..cin {
+            let src = &input[i * w * h..(i + 1) * w * h];
+            for (ky, r) in src_rows.iter().enumerate() {
+                let Some(sy) = *r else { continue };
+                let srow = &src[sy * w..(sy + 1) * w];
+                let t = (i * 3 + ky) * 3;
+                let (v0, v1, v2) = (load(srow, x - 1), load(srow, x), load(srow, x + 1));
+                for b in 0..OB {
+                    let wb = &wts[b][t..t + 3];
+                    acc[b] += f32x8::splat(wb[0]) * v0 + f32x8::splat(wb[1]) * v1 + f32x8::splat(wb[2]) * v2;
+                }
+            }
+        }
+        for (a, r) in acc.iter().zip(rows.iter_mut()) {
+            r[x..x + 8].copy_from_slice(&a.to_array());
+        }
+        x += 8;
+    }
+    for px in core::iter::once(0).chain(x..w) {
+        for b in 0..OB {
+            let mut a = rows[b][px];
+            for i in 0..cin {
+                let src = &input[i * w * h..(i + 1) * w * h];
+                for (ky, r) in src_rows.iter().enumerate() {
+                    let Some(sy) = *r else { continue };
+                    for kx in 0..3 {
+                        let sx = px as isize + kx as isize - 1;
+                        if sx >= 0 && (sx as usize) < w {
+                            a += wts[b][(i * 3 + ky) * 3 + kx] * src[sy * w + sx as usize];
+                        }
+                    }
+                }
+            }
+            rows[b][px] = a;
+        }
+    }
+    let _ = taps;
 }
 
 /// One output row of a 3×3 stride-1 convolution (`prow` holds the bias):
