@@ -277,9 +277,11 @@ typedef struct LrdGuides {
 } LrdGuides;
 
 /**
- * One frame: noisy RGB (3 channels) and its guides. `guides_low` is used only
- * for joint denoise + upsample (config.upsample > 1): the guides at the noisy
- * image's resolution; leave all its `data` NULL otherwise.
+ * One frame: noisy RGB (3 channels) and its guides. `guides_low`, if any of
+ * its `data` is set, holds the guides the regression is fitted on, at the
+ * noisy image's resolution: for joint denoise + upsample (config.upsample > 1)
+ * the low-resolution guides; at upsample 1 a second guide set (the model is
+ * then applied to `guides`). Leave all its `data` NULL for plain FLR.
  */
 typedef struct LrdFrame {
   struct LrdImage noisy;
