@@ -22,3 +22,25 @@ pub fn ycocg(c: [f32; 3]) -> [f32; 3] {
 pub fn rgb(c: [f32; 3]) -> [f32; 3] {
     [0.25 * (c[0] + c[1] - c[2]), 0.25 * (c[0] + c[2]), 0.25 * (c[0] - c[1] - c[2])]
 }
+
+/// The bilinear reprojection of a 3-plane history (`planes`: 3 planes of
+/// `w × h`, plane stride `np`) at `(px, py)`: the weighted mean of the taps
+/// whose bit is set in `mask` (bit k = tap k of [`bilinear_taps`]), that lie
+/// in the image and hold finite values; `None` if no tap qualifies.
+pub fn reproject3(planes: &[f32], np: usize, (w, h): (usize, usize), (px, py): (f32, f32), mask: u32) -> Option<[f32; 3]> {
+    let (mut tw, mut sum) = (0f32, [0f32; 3]);
+    for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
+        if mask & (1 << k) == 0 || tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
+            continue;
+        }
+        let j = ty as usize * w + tx as usize;
+        let v = [planes[j], planes[np + j], planes[2 * np + j]];
+        if v.iter().all(|v| v.is_finite()) {
+            tw += wt;
+            for c in 0..3 {
+                sum[c] += wt * v[c];
+            }
+        }
+    }
+    (tw > 0.0).then(|| sum.map(|v| v / tw))
+}

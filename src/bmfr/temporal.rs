@@ -17,7 +17,7 @@ use super::{Bmfr, Report};
 use crate::error::{Arg, Error};
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut, Layout, SamplesMut};
-use crate::reproject::{bilinear_taps, rgb, ycocg};
+use crate::reproject::{bilinear_taps, reproject3, rgb, ycocg};
 
 /// Settings of the temporal pipeline.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -315,25 +315,11 @@ impl Bmfr {
                 continue;
             }
             let (px, py) = (planes[S_PREV * np + i], planes[(S_PREV + 1) * np + i]);
-            let (mut tw, mut prev) = (0f32, [0f32; 3]);
-            for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
-                if accept & (1 << k) == 0 {
-                    continue;
-                }
-                let j = ty as usize * w + tx as usize;
-                let pc = [hd[H_FILT * np + j], hd[(H_FILT + 1) * np + j], hd[(H_FILT + 2) * np + j]];
-                if pc.iter().all(|v| v.is_finite()) {
-                    tw += wt;
-                    for ch in 0..3 {
-                        prev[ch] += wt * pc[ch];
-                    }
-                }
-            }
-            if tw > 0.0 {
+            if let Some(prev) = reproject3(&hd[H_FILT * np..], np, (w, self.height), (px, py), accept) {
                 let a = (1.0 / planes[S_COUNT * np + i]).max(alpha);
                 for ch in 0..3 {
                     let f = &mut planes[(S_FIT + ch) * np + i];
-                    *f = a * *f + (1.0 - a) * prev[ch] / tw;
+                    *f = a * *f + (1.0 - a) * prev[ch];
                 }
             }
         }
@@ -375,21 +361,8 @@ impl Bmfr {
                             }
                         }
                     }
-                    let (mut tw, mut prev) = (0f32, [0f32; 3]);
-                    for (tx, ty, wt) in bilinear_taps(px, py) {
-                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 {
-                            continue;
-                        }
-                        let pc = at(&hd[H_TAA * np..(H_TAA + 3) * np], ty as usize * w + tx as usize);
-                        if pc.iter().all(|v| v.is_finite()) {
-                            tw += wt;
-                            for c in 0..3 {
-                                prev[c] += wt * pc[c];
-                            }
-                        }
-                    }
-                    if tw > 0.0 {
-                        let p = ycocg(prev.map(|v| v / tw));
+                    if let Some(prev) = reproject3(&hd[H_TAA * np..], np, (w, h), (px, py), 0xF) {
+                        let p = ycocg(prev);
                         let clamped = [0, 1, 2].map(|c| p[c].clamp(0.5 * (bmin[c] + cmin[c]), 0.5 * (bmax[c] + cmax[c])));
                         let prev = rgb(clamped);
                         res = [0, 1, 2].map(|c| alpha * cur[c] + (1.0 - alpha) * prev[c]);

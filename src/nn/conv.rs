@@ -83,7 +83,7 @@ pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32],
                     *r = &mut p[y * ow..(y + 1) * ow];
                     r.fill(bias[b]);
                 }
-                conv3_rows_block(&w4, taps, d.cin, input, w, h, y, &mut rows);
+                conv3_rows_block(&w4, d.cin, input, w, h, y, &mut rows);
                 for r in rows.iter_mut() {
                     activate(r, act);
                 }
@@ -179,16 +179,7 @@ fn activate(row: &mut [f32], act: Act) {
 /// [`conv3_row_lanes`] for `OB` output channels at once: each 8-pixel load
 /// feeds `OB` accumulators.
 #[allow(clippy::too_many_arguments)]
-fn conv3_rows_block(
-    wts: &[[f32; MAX_TAPS]; OB],
-    taps: usize,
-    cin: usize,
-    input: &[f32],
-    w: usize,
-    h: usize,
-    y: usize,
-    rows: &mut [&mut [f32]; OB],
-) {
+fn conv3_rows_block(wts: &[[f32; MAX_TAPS]; OB], cin: usize, input: &[f32], w: usize, h: usize, y: usize, rows: &mut [&mut [f32]; OB]) {
     use wide::f32x8;
     let src_rows: [Option<usize>; 3] = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
     let load = |s: &[f32], x: usize| -> f32x8 {
@@ -237,7 +228,6 @@ fn conv3_rows_block(
             rows[b][px] = a;
         }
     }
-    let _ = taps;
 }
 
 /// One output row of a 3×3 stride-1 convolution (`prow` holds the bias):

@@ -39,7 +39,6 @@ struct Ctx<'a, S> {
     h: usize,
     gp: usize,
     ps: usize,
-    kp: usize,
     zl: usize,
     geo: &'a [f32],
     sdf: &'a [f32],
@@ -255,7 +254,6 @@ impl Walr {
             h: self.height,
             gp: self.geo_planes(),
             ps: self.plane_stride(),
-            kp: self.planes(),
             zl: self.z_row_values(),
             geo,
             sdf: sdf_in,
@@ -282,7 +280,6 @@ impl Walr {
             7 => (group8::<S, 49>, pixel::<S, 49>),
             _ => (group8::<S, 60>, pixel::<S, 60>),
         };
-        debug_assert_eq!(ctx.kp, self.planes());
         for r in 0..rows {
             let y = y0 + r;
             let zo = &mut z_out[r * ctx.zl..(r + 1) * ctx.zl];

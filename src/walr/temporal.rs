@@ -23,7 +23,7 @@ use super::{Report, Walr};
 use crate::error::{Arg, Error};
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut, Layout, SamplesMut};
-use crate::reproject::{bilinear_taps, rgb, ycocg};
+use crate::reproject::{bilinear_taps, reproject3, rgb, ycocg};
 
 /// Settings of the WALR pipeline.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -271,21 +271,7 @@ impl Walr {
                 let mut res = cur;
                 let (px, py) = (head[S_PREV * np + i], head[(S_PREV + 1) * np + i]);
                 if history.frames > 0 {
-                    let (mut tw, mut prev) = (0f32, [0f32; 3]);
-                    for (tx, ty, wt) in bilinear_taps(px, py) {
-                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || !(wt > 0.0) {
-                            continue;
-                        }
-                        let j = ty as usize * w + tx as usize;
-                        let pc = [hd[H_POST * np + j], hd[(H_POST + 1) * np + j], hd[(H_POST + 2) * np + j]];
-                        if pc.iter().all(|v| v.is_finite()) {
-                            tw += wt;
-                            for c in 0..3 {
-                                prev[c] += wt * pc[c];
-                            }
-                        }
-                    }
-                    if tw > 0.0 {
+                    if let Some(prev) = reproject3(&hd[H_POST * np..], np, (w, h), (px, py), 0xF) {
                         let (mut s1, mut s2, mut n) = ([0f32; 3], [0f32; 3], 0f32);
                         for sy in y.saturating_sub(1)..(y + 2).min(h) {
                             for sx in x.saturating_sub(1)..(x + 2).min(w) {
@@ -297,7 +283,7 @@ impl Walr {
                                 n += 1.0;
                             }
                         }
-                        let p = ycocg(prev.map(|v| v / tw));
+                        let p = ycocg(prev);
                         let clipped = [0, 1, 2].map(|c| {
                             let mu = s1[c] / n;
                             let sd = libm::sqrtf((s2[c] / n - mu * mu).max(0.0));
