@@ -181,6 +181,22 @@ impl<'a> ImageView<'a> {
         Some(())
     }
 
+    /// Channel `c` of row `y`, pixels `x0..x0 + len`, borrowed without a copy
+    /// when the samples are f32 with pixel stride 1 (planar); `None` otherwise
+    /// or when out of range (then use [`ImageView::read_row`]).
+    #[inline]
+    pub fn row_f32(&self, y: usize, c: usize, x0: usize, len: usize) -> Option<&'a [f32]> {
+        if y >= self.height || c >= self.channels || x0.checked_add(len)? > self.width || self.layout.pixel_stride != 1 {
+            return None;
+        }
+        let l = &self.layout;
+        let start = l.offset + y * l.row_stride + c * l.channel_stride + x0;
+        match self.samples {
+            Samples::F32(s) => s.get(start..start + len),
+            Samples::F16(_) => None,
+        }
+    }
+
     /// Reads channels `0..N` of row `y`, pixels `x0..x0 + len`, into `N` planes in one
     /// pass over the row (interleaved data is touched once, not once per channel).
     #[inline]
@@ -194,6 +210,21 @@ impl<'a> ImageView<'a> {
         let (ps, cs) = (l.pixel_stride, l.channel_stride);
         let mut dst = dst;
         match self.samples {
+            Samples::F32(s) if cs == 1 && (ps == 3 || ps == 4) && N == 3 => {
+                // Interleaved RGB / RGBA: constant strides, so the compiler vectorises
+                // the de-interleave (a generic stride cannot be).
+                let src = &s[start..start + (len - 1) * ps + N];
+                let [d0, d1, d2] = &mut dst[..] else { return None };
+                if ps == 3 {
+                    for (((px, a), b), c) in src.chunks_exact(3).zip(d0.iter_mut()).zip(d1.iter_mut()).zip(d2.iter_mut()) {
+                        (*a, *b, *c) = (px[0], px[1], px[2]);
+                    }
+                } else {
+                    for (i, px) in src.chunks(4).enumerate().take(len) {
+                        (d0[i], d1[i], d2[i]) = (px[0], px[1], px[2]);
+                    }
+                }
+            }
             Samples::F32(s) => {
                 for i in 0..len {
                     for (c, d) in dst.iter_mut().enumerate() {
@@ -308,6 +339,14 @@ impl<'a> ImageViewMut<'a> {
         let start = l.offset + y * l.row_stride + x0 * l.pixel_stride;
         let (ps, cs) = (l.pixel_stride, l.channel_stride);
         match &mut self.samples {
+            SamplesMut::F32(s) if cs == 1 && ps == 3 && N == 3 => {
+                // Interleaved RGB: constant strides, vectorised interleave.
+                let dst = &mut s[start..start + 3 * len];
+                let [p0, p1, p2] = &src[..] else { return None };
+                for (((px, a), b), c) in dst.chunks_exact_mut(3).zip(p0.iter()).zip(p1.iter()).zip(p2.iter()) {
+                    px.copy_from_slice(&[*a, *b, *c]);
+                }
+            }
             SamplesMut::F32(s) => {
                 for i in 0..len {
                     for (c, p) in src.iter().enumerate() {

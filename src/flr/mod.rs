@@ -9,8 +9,8 @@
 //! |---|---|---|
 //! | [`Flr::prepare`] (once) | a few guide samples | `Stats` reference |
 //! | [`Flr::moments_tile`] | frame rows of the band | `cells` band |
-//! | [`Flr::finish_stats`] (once) | all `cells` | `Stats` mean/scale |
 //! | [`Flr::blur_rows_tile`] | `cells` band | `tmp` band |
+//! | [`Flr::finish_stats`] (once) | all `cells` | `Stats` mean/scale |
 //! | [`Flr::blur_cols_tile`] | all `tmp` | `cells` band |
 //! | [`Flr::solve_tile`] | `cells` band | `models` band |
 //! | [`Flr::apply_tile`] | all `models`, frame rows | output rows |
@@ -22,7 +22,7 @@ use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
 use crate::kernels::blur::{blur_cols_band, blur_row, Taps};
 use crate::kernels::moments::{moments_band, BandPlanes, BlockScratch};
-use crate::kernels::solve::{solve_cell, SolveParams};
+use crate::kernels::solve::{solve_cell, solve_cells4, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
 
 /// Cell rows per tile. Small enough for parallelism at 720p, large enough to
@@ -65,6 +65,24 @@ fn mask_finite(v: &[f32], mask: &mut [f32]) {
     for (m, x) in mask.iter_mut().zip(v) {
         let keep = (x.abs() <= f32::MAX) as u32 as f32;
         *m *= keep;
+    }
+}
+
+/// `dst = src − m` and `mask = 0` where `src` is not finite (one pass).
+#[inline]
+fn centre_and_mask(src: &[f32], m: f32, dst: &mut [f32], mask: &mut [f32]) {
+    for ((d, k), &v) in dst.iter_mut().zip(mask.iter_mut()).zip(src) {
+        *k *= (v.abs() <= f32::MAX) as u32 as f32;
+        *d = v - m;
+    }
+}
+
+/// [`centre_and_mask`] for values already in `dst`.
+#[inline]
+fn centre_and_mask_in_place(m: f32, dst: &mut [f32], mask: &mut [f32]) {
+    for (d, k) in dst.iter_mut().zip(mask.iter_mut()) {
+        *k *= (d.abs() <= f32::MAX) as u32 as f32;
+        *d -= m;
     }
 }
 
@@ -232,7 +250,7 @@ impl Flr {
     pub fn worker_len(&self) -> usize {
         let pw = self.cells_x * self.bin;
         let moments = BandPlanes::len(self.q, self.bin, pw);
-        let apply = (self.q + 1) * self.width + self.cells_x * self.ml + 3 * self.width;
+        let apply = self.q * self.width + self.cells_x * self.ml + 3 * self.width;
         moments.max(apply)
     }
     /// Scratch length in f64 elements for `workers` concurrent workers.
@@ -380,12 +398,14 @@ impl Flr {
             for q in 0..self.q {
                 let v = frame.fit[q].ok_or(Error::GuideMismatch)?;
                 let dst = &mut rest[(3 + q) * plane + o..(3 + q) * plane + o + vw];
-                v.read_row(y, 0, x0, dst).ok_or(bad)?;
                 let m = stats.reference[q];
-                for d in dst.iter_mut() {
-                    *d -= m;
+                // One pass: d = g − m, weight 0 where g is not finite.
+                if let Some(src) = v.row_f32(y, 0, x0, vw) {
+                    centre_and_mask(src, m, dst, wrow);
+                } else {
+                    v.read_row(y, 0, x0, dst).ok_or(bad)?;
+                    centre_and_mask_in_place(m, dst, wrow);
                 }
-                mask_finite(dst, wrow);
             }
             if count_zero(wrow) > 0 {
                 // rare: count what was not finite and zero those pixels everywhere
@@ -404,7 +424,7 @@ impl Flr {
         }
         let band = BandPlanes { data: buf, rows: self.bin, width: pw };
         let simd = self.kernel_simd();
-        let empty = dispatch_q!(self.q, moments_band(band, self.bin, simd, cells, block_scratch));
+        let empty = dispatch_q!(self.q, moments_band(band, self.bin, simd, 0, cells, block_scratch));
         rep.empty_blocks += empty as u64;
         Ok(rep)
     }
@@ -485,10 +505,20 @@ impl Flr {
         }
         let p = self.solve_params(stats);
         let mut rep = Report::default();
-        for (cell, model) in cells_tile.chunks_exact(self.lay.k).zip(models_tile.chunks_exact_mut(self.ml)) {
-            let o = dispatch_q!(self.q, solve_cell(cell, &p, model));
+        let (k, ml) = (self.lay.k, self.ml);
+        let mut count = |o: CellOutcome| {
             rep.empty_cells += o.empty as u64;
             rep.dropped_pivots += o.dropped as u64;
+        };
+        // Four cells per f64x4 (bit-identical to one at a time), then the rest.
+        let quads = if self.kernel_simd() { cells_tile.len() / (4 * k) } else { 0 };
+        let (cq, cr) = cells_tile.split_at(4 * k * quads);
+        let (mq, mr) = models_tile.split_at_mut(4 * ml * quads);
+        for (cells, models) in cq.chunks_exact(4 * k).zip(mq.chunks_exact_mut(4 * ml)) {
+            dispatch_q!(self.q, solve_cells4(cells, &p, models)).into_iter().for_each(&mut count);
+        }
+        for (cell, model) in cr.chunks_exact(k).zip(mr.chunks_exact_mut(ml)) {
+            count(dispatch_q!(self.q, solve_cell(cell, &p, model)));
         }
         Ok(rep)
     }
@@ -516,41 +546,35 @@ impl Flr {
             });
         }
         let w = self.width;
-        let (gbuf, rest) = worker.split_at_mut((self.q + 1) * w);
+        let (gbuf, rest) = worker.split_at_mut(self.q * w);
         let (row_models, rest) = rest.split_at_mut(self.cells_x * self.ml);
         let outbuf = &mut rest[..3 * w];
         let mut rep = Report::default();
         let simd = self.kernel_simd();
+        let bad = Error::InvalidTile { index: t, count: 0 };
         for y in y0..y1 {
-            let (gplanes, valid) = gbuf.split_at_mut(self.q * w);
-            valid.fill(1.0);
-            for q in 0..self.q {
-                let v = frame.map[q].ok_or(Error::GuideMismatch)?;
-                let dst = &mut gplanes[q * w..(q + 1) * w];
-                v.read_row(y, 0, 0, dst).ok_or(Error::InvalidTile { index: t, count: 0 })?;
-                let m = stats.reference[q];
-                for d in dst.iter_mut() {
-                    *d -= m;
-                }
-                mask_finite(dst, valid);
-            }
-            if count_zero(valid) > 0 {
-                for x in 0..w {
-                    if valid[x] == 0.0 {
-                        rep.fallback_pixels += 1;
-                        for q in 0..self.q {
-                            gplanes[q * w + x] = 0.0;
-                        }
+            // Guide rows: borrowed from planar f32 images, else gathered.
+            let mut rows: [&[f32]; MAX_GUIDES] = [&[]; MAX_GUIDES];
+            let mut gathered = gbuf.chunks_exact_mut(w);
+            for (row, view) in rows.iter_mut().zip(&frame.map).take(self.q) {
+                let v = view.ok_or(Error::GuideMismatch)?;
+                let dst = gathered.next().ok_or(bad)?;
+                *row = match v.row_f32(y, 0, 0, w) {
+                    Some(r) => r,
+                    None => {
+                        v.read_row(y, 0, 0, dst).ok_or(bad)?;
+                        dst
                     }
-                }
+                };
             }
             lerp_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y, row_models);
-            let guides = RowGuides { data: gbuf, width: w };
+            let guides = RowGuides { rows, reference: stats.reference, width: w };
             let clamp = self.cfg.clamp_negative;
-            dispatch_q!(self.q, apply_row(row_models, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
+            let fallback = dispatch_q!(self.q, apply_row(row_models, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
+            rep.fallback_pixels += fallback as u64;
             let (r, gb) = outbuf.split_at(w);
             let (g, b) = gb.split_at(w);
-            out_band.write_row_n(y - y0, 0, [r, g, &b[..w]]).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+            out_band.write_row_n(y - y0, 0, [r, g, &b[..w]]).ok_or(bad)?;
         }
         Ok(rep)
     }
@@ -568,12 +592,11 @@ impl Flr {
         let mut rep = Report::default();
         let tiles = self.tile_count();
         for t in 0..tiles {
+            // The horizontal blur reads only its own band: run it while the band is in cache.
             rep += self.moments_tile(&f, &stats, t, &mut parts.cells[self.cells_tile_range(t)?], parts.workers)?;
-        }
-        self.finish_stats(parts.cells, &mut stats)?;
-        for t in 0..tiles {
             self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
         }
+        self.finish_stats(parts.cells, &mut stats)?;
         for t in 0..tiles {
             let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
             self.blur_cols_tile(t, parts.tmp, &mut parts.cells[c.clone()])?;

@@ -40,15 +40,18 @@ pub fn lerp_rows(models: &[f32], cells_x: usize, cells_y: usize, ml: usize, bloc
     }
 }
 
-/// Guide planes of one output row: `Q` planes of `d = g − m`, then a validity
-/// plane (1 = all guides finite, 0 = not; `d` is 0 there).
+/// Guide rows of one output row: `Q` slices of `width` raw guide values (from
+/// the caller's image when it is planar f32, else gathered), and the frame
+/// reference `m` each is measured from (`d = g − m`).
 #[derive(Clone, Copy, Debug)]
 pub struct RowGuides<'a> {
-    pub data: &'a [f32],
+    pub rows: [&'a [f32]; MAX_GUIDES],
+    pub reference: [f32; MAX_GUIDES],
     pub width: usize,
 }
 
-/// Evaluates one output row into `out` (3 planes of `width`).
+/// Evaluates one output row into `out` (3 planes of `width`). A pixel with a
+/// non-finite guide gets the local mean; returns how many did.
 pub fn apply_row<const Q: usize>(
     row_models: &[f32],
     cells_x: usize,
@@ -57,25 +60,23 @@ pub fn apply_row<const Q: usize>(
     clamp: bool,
     simd: bool,
     out: &mut [f32],
-) {
+) -> usize {
     let w = guides.width;
     let ml = super::model_len(Q);
-    let plane = |p: usize| &guides.data[p * w..(p + 1) * w];
-    let mut d: [&[f32]; MAX_GUIDES] = [&[]; MAX_GUIDES];
-    for (q, dq) in d.iter_mut().enumerate().take(Q) {
-        *dq = plane(q);
+    if guides.rows[..Q].iter().any(|r| r.len() < w) || out.len() < 3 * w || row_models.len() < cells_x * ml {
+        return 0; // unreachable from the FLR driver, which sizes every buffer
     }
-    let valid = plane(Q);
     let (o0, rest) = out.split_at_mut(w);
     let (o1, o2) = rest.split_at_mut(w);
     let mut outs = [o0, o1, &mut o2[..w]];
+    let mut fallback = 0;
 
     let mut x = 0;
     if simd && block % 8 == 0 && cells_x > 1 {
         // Left edge: pixels before the first centre use cell 0 alone (scalar below).
         let half = block / 2;
         while x < half.min(w) {
-            scalar_px::<Q>(row_models, cells_x, block, ml, &d, valid, clamp, x, &mut outs);
+            fallback += scalar_px::<Q>(row_models, cells_x, block, ml, &guides, clamp, x, &mut outs);
             x += 1;
         }
         let inv_b = 1.0 / block as f32;
@@ -83,6 +84,13 @@ pub fn apply_row<const Q: usize>(
             let start = i * block + half;
             let a = &row_models[i * ml..(i + 1) * ml];
             let b = &row_models[(i + 1) * ml..(i + 2) * ml];
+            // The span's model as `a + fx·(b − a)`, splatted once for its groups.
+            let mut base = [f32x8::ZERO; MAX_ML];
+            let mut slope = [f32x8::ZERO; MAX_ML];
+            for j in 0..ml {
+                base[j] = f32x8::splat(a[j]);
+                slope[j] = f32x8::splat(b[j] - a[j]);
+            }
             for g in 0..block / 8 {
                 let x0 = start + 8 * g;
                 if x0 + 8 > w {
@@ -90,7 +98,7 @@ pub fn apply_row<const Q: usize>(
                 }
                 let fx = f32x8::from([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]) + f32x8::splat((8 * g) as f32);
                 let fx = fx * f32x8::splat(inv_b);
-                simd_group::<Q>(a, b, fx, &d, valid, clamp, x0, &mut outs);
+                fallback += simd_group::<Q>(&base, &slope, fx, &guides, clamp, x0, &mut outs);
                 x = x0 + 8;
             }
             if x < start + block {
@@ -99,20 +107,14 @@ pub fn apply_row<const Q: usize>(
         }
     }
     while x < w {
-        scalar_px::<Q>(row_models, cells_x, block, ml, &d, valid, clamp, x, &mut outs);
+        fallback += scalar_px::<Q>(row_models, cells_x, block, ml, &guides, clamp, x, &mut outs);
         x += 1;
     }
+    fallback
 }
 
-#[inline(always)]
-fn finish(y: f32, muy: f32, valid: bool, clamp: bool) -> f32 {
-    let y = if valid && y.is_finite() { y } else { muy };
-    if clamp {
-        y.max(0.0)
-    } else {
-        y
-    }
-}
+/// Largest model length (Q = 12).
+const MAX_ML: usize = super::model_len(MAX_GUIDES);
 
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -121,58 +123,67 @@ fn scalar_px<const Q: usize>(
     cells_x: usize,
     block: usize,
     ml: usize,
-    d: &[&[f32]; MAX_GUIDES],
-    valid: &[f32],
+    g: &RowGuides<'_>,
     clamp: bool,
     x: usize,
     outs: &mut [&mut [f32]; 3],
-) {
+) -> usize {
     let (i, fx) = cell_pos(x, block, cells_x);
     let a = &row_models[i * ml..(i + 1) * ml];
     let b = if fx == 0.0 { a } else { &row_models[(i + 1) * ml..(i + 2) * ml] };
     let lerp = |j: usize| a[j] + (b[j] - a[j]) * fx;
+    let mut d = [0f32; MAX_GUIDES];
+    let mut valid = true;
+    for q in 0..Q {
+        let v = g.rows[q][x];
+        valid &= v.is_finite();
+        d[q] = v - g.reference[q];
+    }
     for c in 0..3 {
         let mut y = lerp(c);
         for q in 0..Q {
-            y += lerp(3 + 3 * q + c) * d[q][x];
+            y += lerp(3 + 3 * q + c) * d[q];
         }
         let muy = lerp(3 + 3 * Q + c);
-        outs[c][x] = finish(y, muy, valid[x] != 0.0, clamp);
+        let y = if valid && y.is_finite() { y } else { muy };
+        outs[c][x] = if clamp { y.max(0.0) } else { y };
     }
+    !valid as usize
 }
 
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn simd_group<const Q: usize>(
-    a: &[f32],
-    b: &[f32],
+    base: &[f32x8; MAX_ML],
+    slope: &[f32x8; MAX_ML],
     fx: f32x8,
-    d: &[&[f32]; MAX_GUIDES],
-    valid: &[f32],
+    g: &RowGuides<'_>,
     clamp: bool,
     x0: usize,
     outs: &mut [&mut [f32]; 3],
-) {
+) -> usize {
     let load = |s: &[f32]| -> f32x8 {
         debug_assert!(x0 + 8 <= s.len());
-        // SAFETY: `apply_row` only calls this for groups with `x0 + 8 <= width`, and
-        // every plane (`d[q]`, `valid`) is exactly `width` long.
+        // SAFETY: `apply_row` only calls this for groups with `x0 + 8 <= width` and
+        // checked that every guide row holds at least `width` values.
         unsafe { core::ptr::read_unaligned(s.as_ptr().add(x0) as *const f32x8) }
     };
-    let lerp = |j: usize| f32x8::splat(b[j] - a[j]).mul_add(fx, f32x8::splat(a[j]));
+    let lerp = |j: usize| slope[j].mul_add(fx, base[j]);
+    let max = f32x8::splat(f32::MAX);
     let mut dv = [f32x8::ZERO; MAX_GUIDES];
+    // finite: |v| <= MAX (false for NaN and ±Inf)
+    let mut ok = f32x8::splat(f32::from_bits(u32::MAX));
     for q in 0..Q {
-        dv[q] = load(d[q]);
+        let v = load(g.rows[q]);
+        ok &= v.abs().simd_le(max);
+        dv[q] = v - f32x8::splat(g.reference[q]);
     }
-    let ok = load(valid).simd_ge(f32x8::splat(0.5));
     for c in 0..3 {
         let mut y = lerp(c);
         for q in 0..Q {
             y = lerp(3 + 3 * q + c).mul_add(dv[q], y);
         }
         let muy = lerp(3 + 3 * Q + c);
-        // finite: |y| <= MAX (false for NaN and ±Inf)
-        let finite = y.abs().simd_le(f32x8::splat(f32::MAX));
+        let finite = y.abs().simd_le(max);
         let mut r = (ok & finite).select(y, muy);
         if clamp {
             r = r.fast_max(f32x8::ZERO);
@@ -180,4 +191,5 @@ fn simd_group<const Q: usize>(
         let arr: [f32; 8] = r.into();
         outs[c][x0..x0 + 8].copy_from_slice(&arr);
     }
+    8 - ok.to_bitmask().count_ones() as usize
 }

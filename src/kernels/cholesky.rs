@@ -70,42 +70,125 @@ pub fn solve(l: &[f64], n: usize, ld: usize, b: &mut [f64], nrhs: usize) {
     }
 }
 
-/// [`factor`] for a compile-time size: fully unrollable, no zeroed scratch.
-/// Returns the dropped-pivot mask; `inv_diag[j]` = 1 / L_jj (0 for dropped pivots),
-/// so the substitutions multiply instead of dividing (divisions are long-latency
-/// and sit on the dependency chain).
-#[inline(always)]
-pub fn factor_n<const N: usize>(a: &mut [[f64; N]; N], rel_floor: f64, inv_diag: &mut [f64; N]) -> u32 {
-    let mut dropped = 0u32;
-    let mut maxdiag = 0f64;
-    for (i, row) in a.iter().enumerate() {
-        maxdiag = maxdiag.max(row[i].abs());
+/// f64 arithmetic of FLR's per-cell solve: `f64` (one cell) or [`wide::f64x4`]
+/// (four cells, one per lane). Every operation is the IEEE one per lane, so a
+/// lane's result is bit-identical to the scalar path's.
+pub trait F64Lanes:
+    Copy + core::ops::Add<Output = Self> + core::ops::Sub<Output = Self> + core::ops::Mul<Output = Self> + core::ops::Div<Output = Self>
+{
+    const LANES: usize;
+    fn splat(v: f64) -> Self;
+    fn abs_(self) -> Self;
+    /// `self` where `self > o`, else `o` (NaN → `o`).
+    fn max_(self, o: Self) -> Self;
+    fn sqrt_(self) -> Self;
+    /// Bit `l` set where lane `l` is not (`self > floor` and finite).
+    fn not_above(self, floor: Self) -> u32;
+    /// Lanes whose bit is set in `mask` become `v`.
+    fn set_where(self, mask: u32, v: f64) -> Self;
+}
+
+impl F64Lanes for f64 {
+    const LANES: usize = 1;
+    #[inline(always)]
+    fn splat(v: f64) -> Self {
+        v
     }
-    let floor = (maxdiag * rel_floor).max(f64::MIN_POSITIVE);
+    #[inline(always)]
+    fn abs_(self) -> Self {
+        self.abs()
+    }
+    #[inline(always)]
+    fn max_(self, o: Self) -> Self {
+        if self > o {
+            self
+        } else {
+            o
+        }
+    }
+    #[inline(always)]
+    fn sqrt_(self) -> Self {
+        super::sqrt(self)
+    }
+    #[inline(always)]
+    fn not_above(self, floor: Self) -> u32 {
+        (!(self > floor) || !self.is_finite()) as u32
+    }
+    #[inline(always)]
+    fn set_where(self, mask: u32, v: f64) -> Self {
+        if mask & 1 != 0 {
+            v
+        } else {
+            self
+        }
+    }
+}
+
+impl F64Lanes for wide::f64x4 {
+    const LANES: usize = 4;
+    #[inline(always)]
+    fn splat(v: f64) -> Self {
+        wide::f64x4::splat(v)
+    }
+    #[inline(always)]
+    fn abs_(self) -> Self {
+        self.abs()
+    }
+    #[inline(always)]
+    fn max_(self, o: Self) -> Self {
+        self.simd_gt(o).bitselect(self, o)
+    }
+    #[inline(always)]
+    fn sqrt_(self) -> Self {
+        self.sqrt()
+    }
+    #[inline(always)]
+    fn not_above(self, floor: Self) -> u32 {
+        let ok = self.simd_gt(floor) & self.abs().simd_le(wide::f64x4::splat(f64::MAX));
+        (!ok.to_bitmask()) & 0xF
+    }
+    #[inline(always)]
+    fn set_where(self, mask: u32, v: f64) -> Self {
+        if mask == 0 {
+            return self;
+        }
+        let m: [f64; 4] = core::array::from_fn(|l| if mask >> l & 1 != 0 { f64::from_bits(u64::MAX) } else { 0.0 });
+        wide::f64x4::from(m).bitselect(wide::f64x4::splat(v), self)
+    }
+}
+
+/// [`factor`] for a compile-time size, on one cell (`f64`) or four (`f64x4`):
+/// fully unrollable, no zeroed scratch. `inv_diag[j]` = 1 / L_jj (0 for dropped
+/// pivots), so the substitutions multiply instead of dividing (divisions are
+/// long-latency and sit on the dependency chain). Returns the number of dropped
+/// pivots of each lane.
+#[inline(always)]
+pub fn factor_n<T: F64Lanes, const N: usize>(a: &mut [[T; N]; N], rel_floor: f64, inv_diag: &mut [T; N]) -> [u32; 4] {
+    let mut dropped = [0u32; 4];
+    let mut maxdiag = T::splat(0.0);
+    for (i, row) in a.iter().enumerate() {
+        maxdiag = row[i].abs_().max_(maxdiag);
+    }
+    let floor = (maxdiag * T::splat(rel_floor)).max_(T::splat(f64::MIN_POSITIVE));
     for j in 0..N {
         let mut d = a[j][j];
         for p in 0..j {
-            d -= a[j][p] * a[j][p];
+            d = d - a[j][p] * a[j][p];
         }
-        if !(d > floor) || !d.is_finite() {
-            dropped |= 1 << j;
-            a[j][j] = 0.0;
-            inv_diag[j] = 0.0;
-            for row in a.iter_mut().skip(j + 1) {
-                row[j] = 0.0;
-            }
-            continue;
+        let drop = d.not_above(floor);
+        for (l, c) in dropped.iter_mut().enumerate().take(T::LANES) {
+            *c += drop >> l & 1;
         }
-        let l = super::sqrt(d);
-        let inv = 1.0 / l;
-        a[j][j] = l;
+        let l = d.set_where(drop, 1.0).sqrt_();
+        let inv = (T::splat(1.0) / l).set_where(drop, 0.0);
+        a[j][j] = l.set_where(drop, 0.0);
         inv_diag[j] = inv;
         for i in j + 1..N {
             let mut s = a[i][j];
             for p in 0..j {
-                s -= a[i][p] * a[j][p];
+                s = s - a[i][p] * a[j][p];
             }
-            a[i][j] = s * inv;
+            a[i][j] = (s * inv).set_where(drop, 0.0);
         }
     }
     dropped
@@ -114,12 +197,12 @@ pub fn factor_n<const N: usize>(a: &mut [[f64; N]; N], rel_floor: f64, inv_diag:
 /// [`solve`] for a compile-time size and 3 right-hand sides, with the
 /// reciprocal diagonal from [`factor_n`] (0 for dropped variables → 0).
 #[inline(always)]
-pub fn solve_n<const N: usize>(l: &[[f64; N]; N], inv_diag: &[f64; N], b: &mut [[f64; 3]; N]) {
+pub fn solve_n<T: F64Lanes, const N: usize>(l: &[[T; N]; N], inv_diag: &[T; N], b: &mut [[T; 3]; N]) {
     for i in 0..N {
         let mut s = b[i];
         for p in 0..i {
             for c in 0..3 {
-                s[c] -= l[i][p] * b[p][c];
+                s[c] = s[c] - l[i][p] * b[p][c];
             }
         }
         for c in 0..3 {
@@ -130,7 +213,7 @@ pub fn solve_n<const N: usize>(l: &[[f64; N]; N], inv_diag: &[f64; N], b: &mut [
         let mut s = b[i];
         for p in i + 1..N {
             for c in 0..3 {
-                s[c] -= l[p][i] * b[p][c];
+                s[c] = s[c] - l[p][i] * b[p][c];
             }
         }
         for c in 0..3 {

@@ -48,19 +48,20 @@ impl Default for BlockScratch {
     }
 }
 
-/// Accumulates the moments of every block of the band into `cells`
-/// (`cells.len() == (width / block) * k`). Returns the number of empty cells.
+/// Accumulates the moments of blocks `first..first + cells.len() / k` of the
+/// band into `cells`. Returns the number of empty cells.
 pub fn moments_band<const Q: usize>(
     band: BandPlanes<'_>,
     block: usize,
     simd: bool,
+    first: usize,
     cells: &mut [f64],
     scratch: &mut BlockScratch,
 ) -> usize {
     let lay = CellLayout::new(Q);
     let k = lay.k;
     // The SIMD path reads planes unchecked: establish its preconditions here.
-    if band.data.len() < BandPlanes::len(Q, band.rows, band.width) || cells.len() / k.max(1) * block > band.width || block == 0 {
+    if band.data.len() < BandPlanes::len(Q, band.rows, band.width) || (first + cells.len() / k.max(1)) * block > band.width || block == 0 {
         cells.fill(0.0);
         return cells.len() / k.max(1);
     }
@@ -73,7 +74,7 @@ pub fn moments_band<const Q: usize>(
     let mut acc = [0f32; MAX_K];
     let mut empty = 0;
     for (cx, cell) in cells.chunks_exact_mut(k).enumerate() {
-        let x0 = cx * block;
+        let x0 = (first + cx) * block;
         // Block reference: the first valid pixel (exact sample; a constant guide stays exactly constant).
         let mut r = [0f32; MAX_GUIDES];
         let mut found = false;
@@ -203,43 +204,57 @@ fn block_simd<const Q: usize>(
         }
     }
     let groups = &v[..ng];
-    acc[0] = wsum.reduce_add();
+    // Block sums as vectors (8 column partial sums each), in the cell layout,
+    // then reduced eight at a time.
+    let mut sums = [f32x8::ZERO; MAX_K];
+    sums[0] = wsum;
     // s and t: plain sums of the vectors.
-    let mut sums = [f32x8::ZERO; VW];
+    let mut plain = [f32x8::ZERO; VW];
     for vg in groups {
         for j in 0..Q + 3 {
-            sums[j] += vg[j];
+            plain[j] += vg[j];
         }
     }
     for a in 0..Q {
-        acc[lay.s + a] = sums[a].reduce_add();
+        sums[lay.s + a] = plain[a];
     }
     for c in 0..3 {
-        acc[lay.t + c] = sums[Q + c].reduce_add();
+        sums[lay.t + c] = plain[Q + c];
     }
-    // S (upper triangle) and P: each product pair summed over the groups in
-    // two registers, then reduced (keeping a whole row in registers does not
-    // fit, and a row in memory serialises on store-to-load forwarding).
+    // S (upper triangle) and P: for each guide `a`, the products with every
+    // `b ≥ a` (guides then colours) accumulate in registers, up to `ROW` at a
+    // time, loading `v_a` once per group.
+    const ROW: usize = 8;
     let mut p = lay.ss;
     for a in 0..Q {
-        for b in a..Q + 3 {
-            let (mut s0, mut s1) = (f32x8::ZERO, f32x8::ZERO);
-            let mut pairs = groups.chunks_exact(2);
-            for gg in &mut pairs {
-                s0 = gg[0][a].mul_add(gg[0][b], s0);
-                s1 = gg[1][a].mul_add(gg[1][b], s1);
+        let mut b0 = a;
+        while b0 < Q + 3 {
+            let nb = (Q + 3 - b0).min(ROW);
+            let mut r = [f32x8::ZERO; ROW];
+            for vg in groups {
+                let va = vg[a];
+                for j in 0..nb {
+                    r[j] = va.mul_add(vg[b0 + j], r[j]);
+                }
             }
-            if let [g] = pairs.remainder() {
-                s0 = g[a].mul_add(g[b], s0);
+            for j in 0..nb {
+                let b = b0 + j;
+                if b < Q {
+                    sums[p] = r[j];
+                    p += 1;
+                } else {
+                    sums[lay.p + 3 * a + (b - Q)] = r[j];
+                }
             }
-            let sum = (s0 + s1).reduce_add();
-            if b < Q {
-                acc[p] = sum;
-                p += 1;
-            } else {
-                acc[lay.p + 3 * a + (b - Q)] = sum;
-            }
+            b0 += nb;
         }
+    }
+    for (dst, src) in acc[..lay.k].chunks_mut(8).zip(sums[..lay.k].chunks(8)) {
+        let mut eight = [f32x8::ZERO; 8];
+        eight[..src.len()].copy_from_slice(src);
+        let t = f32x8::transpose(eight);
+        let total: [f32; 8] = ((t[0] + t[1]) + (t[2] + t[3]) + ((t[4] + t[5]) + (t[6] + t[7]))).into();
+        dst.copy_from_slice(&total[..dst.len()]);
     }
 }
 

@@ -8,9 +8,11 @@
 //! `c[q][3]` applied to `d = g − m` (guide minus frame reference), and the
 //! local mean `μ_y[3]` (used where a pixel's guides are not finite).
 
-use super::{cholesky, CellLayout};
+use super::cholesky::{self, F64Lanes};
+use super::CellLayout;
 use crate::config::Regularization;
 use crate::guides::MAX_GUIDES;
+use wide::f64x4;
 
 const N1: usize = MAX_GUIDES + 1;
 
@@ -42,119 +44,186 @@ pub struct CellOutcome {
 pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f32]) -> CellOutcome {
     let lay = CellLayout::new(Q);
     let n = cell[0];
-    if !(n > p.min_weight) || !n.is_finite() {
+    if is_empty(n, p) {
         model.fill(0.0);
         return CellOutcome { empty: true, dropped: 0 };
     }
-    let inv_n = 1.0 / n;
-    let muy = [cell[lay.t] * inv_n, cell[lay.t + 1] * inv_n, cell[lay.t + 2] * inv_n];
-    let mut c0 = muy;
-    let mut coef = [[0f64; 3]; MAX_GUIDES];
-    let dropped = match p.regularization {
+    let (c0, coef, muy, dropped) = match p.regularization {
         Regularization::Normalized { eps_mul, eps_add } => {
-            let mut mu = [0f64; Q];
-            let mut muz = [0f64; Q];
-            let mut inv_scale = [0f64; Q];
-            for a in 0..Q {
-                inv_scale[a] = 1.0 / p.scale[a];
-            }
-            for a in 0..Q {
-                mu[a] = cell[lay.s + a] * inv_n;
-                muz[a] = (mu[a] - p.mean[a]) * inv_scale[a];
-            }
-            // Ŵ (eq. 18) on standardised guides; W = S/n − μμᵀ in f64.
-            let mut wh = [[0f64; Q]; Q];
-            let mut idx = lay.ss;
-            for a in 0..Q {
-                for b in a..Q {
-                    let w = (cell[idx] * inv_n - mu[a] * mu[b]) * (inv_scale[a] * inv_scale[b]);
-                    let mut v = w + eps_mul * muz[a] * muz[b];
-                    if a == b {
-                        v += eps_mul * muz[a] * muz[a] + eps_add;
-                    }
-                    wh[a][b] = v;
-                    wh[b][a] = v;
-                    idx += 1;
-                }
-            }
-            // σ̂ (eq. 19), Ĉ + ϵI (eqs. 20, 22), B̂ (eq. 21).
-            let mut isig = [0f64; Q];
-            for a in 0..Q {
-                isig[a] = 1.0 / super::sqrt(wh[a][a].max(1e-300));
-            }
-            let mut bh = [[0f64; 3]; Q];
-            for a in 0..Q {
-                for b in 0..Q {
-                    wh[a][b] *= isig[a] * isig[b];
-                }
-                wh[a][a] += eps_add;
-                for c in 0..3 {
-                    let cxy = cell[lay.p + 3 * a + c] * inv_n - mu[a] * muy[c];
-                    bh[a][c] = cxy * isig[a] * inv_scale[a];
-                }
-            }
-            let mut inv_diag = [0f64; Q];
-            let dropped = cholesky::factor_n(&mut wh, 1e-12, &mut inv_diag);
-            cholesky::solve_n(&wh, &inv_diag, &mut bh);
-            // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
-            for a in 0..Q {
-                for c in 0..3 {
-                    let beta = bh[a][c] * isig[a] * inv_scale[a];
-                    coef[a][c] = beta;
-                    c0[c] -= beta * mu[a];
-                }
-            }
-            dropped
+            let (c0, c, muy, dropped) = normalized::<f64, Q>(|m| cell[m], p, eps_mul, eps_add);
+            let mut coef = [[0f64; 3]; MAX_GUIDES];
+            coef[..Q].copy_from_slice(&c);
+            (c0, coef, muy, dropped[0])
         }
-        Regularization::Tikhonov { eps } => {
-            let wn = p.weight_norm;
-            let m = &p.reference;
-            let mut xx = [0f64; N1 * N1];
-            let mut xy = [0f64; N1 * 3];
-            xx[0] = n * wn + eps;
-            let mut idx = lay.ss;
-            for a in 0..Q {
-                let s_a = cell[lay.s + a];
-                let s_raw = s_a + n * m[a];
-                xx[a + 1] = s_raw * wn;
-                xx[(a + 1) * N1] = s_raw * wn;
-                for b in a..Q {
-                    let s_b = cell[lay.s + b];
-                    let raw = cell[idx] + m[a] * s_b + s_a * m[b] + n * m[a] * m[b];
-                    let mut v = raw * wn;
-                    if a == b {
-                        v += eps;
-                    }
-                    xx[(a + 1) * N1 + b + 1] = v;
-                    xx[(b + 1) * N1 + a + 1] = v;
-                    idx += 1;
-                }
-            }
-            for c in 0..3 {
-                let t = cell[lay.t + c];
-                xy[c] = t * wn;
-                for a in 0..Q {
-                    xy[(a + 1) * 3 + c] = (cell[lay.p + 3 * a + c] + m[a] * t) * wn;
-                }
-            }
-            let dropped = cholesky::factor(&mut xx, Q + 1, N1, 1e-15);
-            cholesky::solve(&xx, Q + 1, N1, &mut xy, 3);
-            for c in 0..3 {
-                c0[c] = xy[c];
-                for a in 0..Q {
-                    let v = xy[(a + 1) * 3 + c];
-                    coef[a][c] = v;
-                    c0[c] += v * m[a];
-                }
-            }
-            dropped
-        }
+        Regularization::Tikhonov { eps } => tikhonov::<Q>(cell, &lay, p, eps),
     };
-    write_model::<Q>(&c0, &coef, &muy, model);
-    CellOutcome { empty: false, dropped: dropped.count_ones() }
+    write_model::<Q>(&c0, &coef[..Q], &muy, model);
+    CellOutcome { empty: false, dropped }
 }
 
-fn write_model<const Q: usize>(c0: &[f64; 3], coef: &[[f64; 3]; MAX_GUIDES], muy: &[f64; 3], model: &mut [f32]) {
+/// Solves four consecutive cells (`cells` holds 4·k values, `models` 4·`model_len(Q)`)
+/// with one cell per f64x4 lane: bit-identical to four [`solve_cell`] calls.
+pub fn solve_cells4<const Q: usize>(cells: &[f64], p: &SolveParams, models: &mut [f32]) -> [CellOutcome; 4] {
+    let lay = CellLayout::new(Q);
+    let (k, ml) = (lay.k, super::model_len(Q));
+    let Regularization::Normalized { eps_mul, eps_add } = p.regularization else {
+        return core::array::from_fn(|l| solve_cell::<Q>(&cells[l * k..(l + 1) * k], p, &mut models[l * ml..(l + 1) * ml]));
+    };
+    let get = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let (c0, coef, muy, dropped) = normalized::<f64x4, Q>(get, p, eps_mul, eps_add);
+    let lane = |v: f64x4, l: usize| v.to_array()[l];
+    core::array::from_fn(|l| {
+        let model = &mut models[l * ml..(l + 1) * ml];
+        if is_empty(cells[l * k], p) {
+            model.fill(0.0);
+            return CellOutcome { empty: true, dropped: 0 };
+        }
+        let c0l = c0.map(|v| lane(v, l));
+        let muyl = muy.map(|v| lane(v, l));
+        let mut coefl = [[0f64; 3]; MAX_GUIDES];
+        for a in 0..Q {
+            coefl[a] = coef[a].map(|v| lane(v, l));
+        }
+        write_model::<Q>(&c0l, &coefl[..Q], &muyl, model);
+        CellOutcome { empty: false, dropped: dropped[l] }
+    })
+}
+
+#[inline(always)]
+fn is_empty(n: f64, p: &SolveParams) -> bool {
+    !(n > p.min_weight) || !n.is_finite()
+}
+
+/// The normalized-correlation regularized solve (appendix eqs. 12–23) of one
+/// cell (`f64`) or four (`f64x4`); `get(m)` reads moment `m`. Returns the
+/// intercept, coefficients on `d = g − m`, the local mean of y and the number
+/// of dropped pivots per lane.
+#[allow(clippy::type_complexity)]
+#[inline(always)]
+fn normalized<T: F64Lanes, const Q: usize>(
+    get: impl Fn(usize) -> T,
+    p: &SolveParams,
+    eps_mul: f64,
+    eps_add: f64,
+) -> ([T; 3], [[T; 3]; Q], [T; 3], [u32; 4]) {
+    let lay = CellLayout::new(Q);
+    let s = T::splat;
+    let inv_n = s(1.0) / get(0);
+    let muy = [get(lay.t) * inv_n, get(lay.t + 1) * inv_n, get(lay.t + 2) * inv_n];
+    let mut c0 = muy;
+    let mut coef = [[s(0.0); 3]; Q];
+    let mut mu = [s(0.0); Q];
+    let mut muz = [s(0.0); Q];
+    let mut inv_scale = [0f64; Q];
+    for a in 0..Q {
+        inv_scale[a] = 1.0 / p.scale[a];
+    }
+    for a in 0..Q {
+        mu[a] = get(lay.s + a) * inv_n;
+        muz[a] = (mu[a] - s(p.mean[a])) * s(inv_scale[a]);
+    }
+    // Ŵ (eq. 18) on standardised guides; W = S/n − μμᵀ in f64.
+    let mut wh = [[s(0.0); Q]; Q];
+    let mut idx = lay.ss;
+    for a in 0..Q {
+        for b in a..Q {
+            let w = (get(idx) * inv_n - mu[a] * mu[b]) * s(inv_scale[a] * inv_scale[b]);
+            let mut v = w + s(eps_mul) * muz[a] * muz[b];
+            if a == b {
+                v = v + s(eps_mul) * muz[a] * muz[a] + s(eps_add);
+            }
+            wh[a][b] = v;
+            wh[b][a] = v;
+            idx += 1;
+        }
+    }
+    // σ̂ (eq. 19), Ĉ + ϵI (eqs. 20, 22), B̂ (eq. 21).
+    let mut isig = [s(0.0); Q];
+    for a in 0..Q {
+        isig[a] = s(1.0) / wh[a][a].max_(s(1e-300)).sqrt_();
+    }
+    let mut bh = [[s(0.0); 3]; Q];
+    for a in 0..Q {
+        for b in 0..Q {
+            wh[a][b] = wh[a][b] * isig[a] * isig[b];
+        }
+        wh[a][a] = wh[a][a] + s(eps_add);
+        for c in 0..3 {
+            let cxy = get(lay.p + 3 * a + c) * inv_n - mu[a] * muy[c];
+            bh[a][c] = cxy * isig[a] * s(inv_scale[a]);
+        }
+    }
+    let mut inv_diag = [s(0.0); Q];
+    let dropped = cholesky::factor_n(&mut wh, 1e-12, &mut inv_diag);
+    cholesky::solve_n(&wh, &inv_diag, &mut bh);
+    // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
+    for a in 0..Q {
+        for c in 0..3 {
+            let beta = bh[a][c] * isig[a] * s(inv_scale[a]);
+            coef[a][c] = beta;
+            c0[c] = c0[c] - beta * mu[a];
+        }
+    }
+    (c0, coef, muy, dropped)
+}
+
+/// Textbook Tikhonov (eq. 11) on the guides exactly as given.
+#[allow(clippy::type_complexity)]
+fn tikhonov<const Q: usize>(
+    cell: &[f64],
+    lay: &CellLayout,
+    p: &SolveParams,
+    eps: f64,
+) -> ([f64; 3], [[f64; 3]; MAX_GUIDES], [f64; 3], u32) {
+    let n = cell[0];
+    let inv_n = 1.0 / n;
+    let muy = [cell[lay.t] * inv_n, cell[lay.t + 1] * inv_n, cell[lay.t + 2] * inv_n];
+    let mut c0 = [0f64; 3];
+    let mut coef = [[0f64; 3]; MAX_GUIDES];
+    let wn = p.weight_norm;
+    let m = &p.reference;
+    let mut xx = [0f64; N1 * N1];
+    let mut xy = [0f64; N1 * 3];
+    xx[0] = n * wn + eps;
+    let mut idx = lay.ss;
+    for a in 0..Q {
+        let s_a = cell[lay.s + a];
+        let s_raw = s_a + n * m[a];
+        xx[a + 1] = s_raw * wn;
+        xx[(a + 1) * N1] = s_raw * wn;
+        for b in a..Q {
+            let s_b = cell[lay.s + b];
+            let raw = cell[idx] + m[a] * s_b + s_a * m[b] + n * m[a] * m[b];
+            let mut v = raw * wn;
+            if a == b {
+                v += eps;
+            }
+            xx[(a + 1) * N1 + b + 1] = v;
+            xx[(b + 1) * N1 + a + 1] = v;
+            idx += 1;
+        }
+    }
+    for c in 0..3 {
+        let t = cell[lay.t + c];
+        xy[c] = t * wn;
+        for a in 0..Q {
+            xy[(a + 1) * 3 + c] = (cell[lay.p + 3 * a + c] + m[a] * t) * wn;
+        }
+    }
+    let dropped = cholesky::factor(&mut xx, Q + 1, N1, 1e-15);
+    cholesky::solve(&xx, Q + 1, N1, &mut xy, 3);
+    for c in 0..3 {
+        c0[c] = xy[c];
+        for a in 0..Q {
+            let v = xy[(a + 1) * 3 + c];
+            coef[a][c] = v;
+            c0[c] += v * m[a];
+        }
+    }
+    (c0, coef, muy, dropped.count_ones())
+}
+
+fn write_model<const Q: usize>(c0: &[f64; 3], coef: &[[f64; 3]], muy: &[f64; 3], model: &mut [f32]) {
     let finite = |v: f64| v.is_finite() && v.abs() < f32::MAX as f64;
     let ok = c0.iter().chain(coef[..Q].iter().flatten()).chain(muy).all(|&v| finite(v));
     let muy_f = if muy.iter().all(|&v| finite(v)) { [muy[0] as f32, muy[1] as f32, muy[2] as f32] } else { [0.0; 3] };

@@ -1,0 +1,153 @@
+//! Fast paths against their plain versions: the four-cell (f64x4) solve against
+//! the one-cell solve (bit-identical, degenerate cells included), and the
+//! interleaved / planar row accessors of the image views against element reads.
+
+use lrdenoise::kernels::solve::{solve_cell, solve_cells4, SolveParams};
+use lrdenoise::kernels::{model_len, moment_count, CellLayout};
+use lrdenoise::*;
+use proptest::prelude::*;
+
+/// Moments of `n` random samples (guides with an offset and scale, one guide a
+/// duplicate of another when `dup`, one constant when `constant`), in the cell layout.
+fn cell<const Q: usize>(seed: u64, n: usize, offset: f64, scale: f64, dup: bool, constant: bool) -> Vec<f64> {
+    let lay = CellLayout::new(Q);
+    let mut c = vec![0f64; lay.k];
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut rnd = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..n {
+        let mut g = [0f64; Q];
+        for v in g.iter_mut() {
+            *v = offset + scale * rnd();
+        }
+        if dup && Q > 1 {
+            g[1] = g[0];
+        }
+        if constant && Q > 2 {
+            g[2] = offset;
+        }
+        let y = [rnd() * 2.0, rnd(), 0.5 + g.first().copied().unwrap_or(0.0) * 1e-3];
+        c[0] += 1.0;
+        let mut p = lay.ss;
+        for a in 0..Q {
+            c[lay.s + a] += g[a];
+            for b in a..Q {
+                c[p] += g[a] * g[b];
+                p += 1;
+            }
+            for ch in 0..3 {
+                c[lay.p + 3 * a + ch] += g[a] * y[ch];
+            }
+        }
+        for ch in 0..3 {
+            c[lay.t + ch] += y[ch];
+        }
+    }
+    c
+}
+
+fn params(regularization: Regularization) -> SolveParams {
+    SolveParams {
+        reference: [0.0; MAX_GUIDES],
+        mean: [0.3; MAX_GUIDES],
+        scale: [0.7; MAX_GUIDES],
+        regularization,
+        weight_norm: 1.0 / 64.0,
+        min_weight: 1e-9,
+    }
+}
+
+fn check_lanes<const Q: usize>(cells: &[f64], p: &SolveParams) {
+    let (k, ml) = (moment_count(Q), model_len(Q));
+    let mut one = vec![0f32; 4 * ml];
+    let mut four = vec![7f32; 4 * ml];
+    let o4 = solve_cells4::<Q>(cells, p, &mut four);
+    for l in 0..4 {
+        let o1 = solve_cell::<Q>(&cells[l * k..(l + 1) * k], p, &mut one[l * ml..(l + 1) * ml]);
+        assert_eq!(o1, o4[l], "lane {l}");
+    }
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&one), bits(&four));
+    assert!(four.iter().all(|v| v.is_finite()));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    #[test]
+    fn four_cell_solve_is_bit_identical(seed in 0u64..1 << 40, offset in -1e4f64..1e4, scale_exp in -3f64..3.0, kinds in 0u32..256) {
+        let scale = 10f64.powf(scale_exp);
+        let mut cells = Vec::new();
+        for l in 0..4 {
+            let kind = kinds >> (2 * l) & 3;
+            let mut c = cell::<5>(seed + l as u64, 40, offset, scale, kind == 1, kind == 2);
+            if kind == 3 {
+                // empty, or a NaN moment
+                if seed % 2 == 0 { c.fill(0.0) } else { c[7] = f64::NAN }
+            }
+            cells.extend(c);
+        }
+        for reg in [Regularization::Normalized { eps_mul: 1e-3, eps_add: 1e-2 }, Regularization::Normalized { eps_mul: 0.0, eps_add: 0.0 }, Regularization::Tikhonov { eps: 1e-4 }] {
+            check_lanes::<5>(&cells, &params(reg));
+        }
+    }
+}
+
+#[test]
+fn four_cell_solve_every_guide_count() {
+    fn run<const Q: usize>() {
+        let mut cells = Vec::new();
+        for l in 0..4 {
+            cells.extend(cell::<Q>(l, 30 + l as usize, 1.0, 0.1, l == 1, l == 2));
+        }
+        check_lanes::<Q>(&cells, &params(Regularization::Normalized { eps_mul: 1e-3, eps_add: 1e-2 }));
+    }
+    run::<0>();
+    run::<1>();
+    run::<3>();
+    run::<5>();
+    run::<8>();
+    run::<12>();
+}
+
+#[test]
+fn row_access_matches_element_reads() {
+    let (w, h) = (37, 5);
+    for (ps, cs, extra) in [(3, 1, 0), (4, 1, 0), (5, 1, 2), (1, w * h, 0)] {
+        let layout = Layout { offset: extra, pixel_stride: ps, row_stride: if ps == 1 { w } else { w * ps + 3 }, channel_stride: cs };
+        let len = extra + (h - 1) * layout.row_stride + (w - 1) * ps + 2 * cs + 1;
+        let data: Vec<f32> = (0..len).map(|i| i as f32 * 0.5 - 3.0).collect();
+        let v = ImageView::f32(&data, w, h, 3, layout).unwrap();
+        for (y, x0, n) in [(0, 0, w), (4, 3, 30), (2, 36, 1)] {
+            let (mut a, mut b, mut c) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+            v.read_row_n(y, x0, [&mut a, &mut b, &mut c]).unwrap();
+            for i in 0..n {
+                let e = |ch| v.get(x0 + i, y, ch).unwrap();
+                assert_eq!((a[i], b[i], c[i]), (e(0), e(1), e(2)), "layout {layout:?} y {y} x {}", x0 + i);
+            }
+            match v.row_f32(y, 1, x0, n) {
+                Some(r) => {
+                    assert_eq!(ps, 1);
+                    assert_eq!(r, &b[..]);
+                }
+                None => assert_ne!(ps, 1),
+            }
+            // write the planes back (shuffled) and read them again
+            let mut out = vec![0f32; len];
+            let mut o = ImageViewMut::new(SamplesMut::F32(&mut out), w, h, 3, layout).unwrap();
+            o.write_row_n(y, x0, [&c, &a, &b]).unwrap();
+            let o = ImageView::f32(&out, w, h, 3, layout).unwrap();
+            for i in 0..n {
+                assert_eq!(o.get(x0 + i, y, 0).unwrap(), c[i]);
+                assert_eq!(o.get(x0 + i, y, 1).unwrap(), a[i]);
+                assert_eq!(o.get(x0 + i, y, 2).unwrap(), b[i]);
+            }
+            // nothing else written
+            let written = out.iter().filter(|v| **v != 0.0).count();
+            assert!(written <= 3 * n);
+        }
+    }
+}
