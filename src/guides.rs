@@ -75,7 +75,7 @@ impl<'a> Guides<'a> {
 
     /// Checks the images against `set` and the size, and returns one
     /// single-channel view per guide channel, in kernel order.
-    pub(crate) fn channel_views(
+    pub fn channel_views(
         &self,
         set: &GuideSet,
         width: usize,

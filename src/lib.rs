@@ -42,6 +42,8 @@ pub mod error;
 pub mod flnr;
 #[cfg(feature = "flr")]
 pub mod flr;
+#[cfg(feature = "flr")]
+pub mod gpu;
 pub mod guides;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod hash;

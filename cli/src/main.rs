@@ -107,6 +107,16 @@ enum Cmd {
         flr: FlrArgs,
         frame: Option<PathBuf>,
     },
+    /// Write FLR's GPU compute shaders (WGSL, SPIR-V, MSL, HLSL) and their dispatch description to DIR
+    Shaders {
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Frame size the dispatch description is written for
+        #[arg(long, default_value = "1920x1080")]
+        size: String,
+        #[command(flatten)]
+        flr: FlrArgs,
+    },
     /// Denoise the bundled sample frames with every method and write the report to ./lrd-demo/
     Demo {
         #[arg(short, long, default_value = "lrd-demo")]
@@ -342,13 +352,72 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
     Ok(())
 }
 
-fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, frame: Option<&Path>) -> Result<(), String> {
-    check_method(method)?;
-    let (w, h) = size
-        .split_once('x')
+fn parse_size(size: &str) -> Result<(usize, usize), String> {
+    size.split_once('x')
         .and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?)))
         .filter(|(a, b)| *a > 0 && *b > 0)
-        .ok_or_else(|| format!("--size: '{size}' is not WIDTHxHEIGHT"))?;
+        .ok_or_else(|| format!("--size: '{size}' is not WIDTHxHEIGHT"))
+}
+
+/// `lrd shaders`: the shader module in four languages plus `dispatch.md`, the
+/// buffers, bindings, passes and parameter block for one frame size.
+fn shaders(out: &Path, size: &str, flr: &FlrArgs) -> Result<(), String> {
+    use lrdenoise::gpu::{GpuLayouts, GpuPlan};
+    let (w, h) = parse_size(size)?;
+    // a frame with every guide, so the guide set is --guides (default normal,depth,ao)
+    let probe = Inputs {
+        w: 1,
+        h: 1,
+        noisy: vec![0.0; 3],
+        normal: Some(vec![0.0; 3]),
+        depth: Some(vec![0.0]),
+        position: Some(vec![0.0; 3]),
+        ao: Some(vec![0.0]),
+        albedo: None,
+        reference: None,
+        motion: None,
+    };
+    let cfg = flr.config(&probe)?;
+    let plan = GpuPlan::new(cfg, w, h).map_err(|e| format!("shaders: {e}"))?;
+    let s = lrdenoise_gpu::shaders().map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let write = |name: &str, bytes: &[u8]| std::fs::write(out.join(name), bytes).map_err(|e| format!("{}: {e}", out.join(name).display()));
+    write("flr.wgsl", s.wgsl.as_bytes())?;
+    write("flr.spv", &le_bytes(&s.spirv))?;
+    write("flr.metal", s.msl.as_bytes())?;
+    write("flr.hlsl", s.hlsl.as_bytes())?;
+    let layouts = GpuLayouts::planar(w, h);
+    let params = plan.params(&layouts).map_err(|e| e.to_string())?;
+    let mut md = format!(
+        "# FLR dispatch for {w}x{h}, {} ({} guide channels)\n\n\
+         One bind group for every pass; binding i = the i-th buffer below. Inputs planar f32 \
+         (GpuLayouts::planar); other layouts: set the offsets and strides of the parameter block \
+         (lrdenoise::gpu::GpuPlan::params).\n\n| binding | buffer | access | bytes |\n|---:|---|---|---:|\n",
+        methods::flag_line(&cfg),
+        plan.guide_channels()
+    );
+    for b in plan.buffers(&layouts).map_err(|e| e.to_string())? {
+        md += &format!("| {} | {:?} | {:?} | {} |\n", b.binding, b.buffer, b.access, b.bytes);
+    }
+    md += "\nPasses, in order (a storage barrier between consecutive passes):\n\n| entry point | workgroups |\n|---|---|\n";
+    for p in plan.passes() {
+        md += &format!("| `{}` | {} x {} x {} |\n", p.entry, p.workgroups[0], p.workgroups[1], p.workgroups[2]);
+    }
+    md += "\nThe parameter block (binding 0, 512 bytes) for these layouts is `params.bin`.\n";
+    write("dispatch.md", md.as_bytes())?;
+    write("params.bin", params.as_bytes())?;
+    println!("wrote flr.wgsl, flr.spv, flr.metal, flr.hlsl, dispatch.md and params.bin to {}", out.display());
+    Ok(())
+}
+
+/// 32-bit words as little-endian bytes (SPIR-V files are little-endian words).
+fn le_bytes(words: &[u32]) -> Vec<u8> {
+    words.iter().flat_map(|w| w.to_le_bytes()).collect()
+}
+
+fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, frame: Option<&Path>) -> Result<(), String> {
+    check_method(method)?;
+    let (w, h) = parse_size(size)?;
     let inputs = match frame {
         Some(p) => {
             let exr = ExrFrame::read(p)?;
@@ -357,6 +426,10 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
         None => synthetic(w, h),
     };
     let mut b = Method::build(method, flr, &inputs, threads)?;
+    if let Method::FlrGpu(g) = &b.method {
+        // lavapipe (a CPU rasteriser) is for correctness; its times mean nothing
+        println!("GPU adapter: {}; times include upload and readback", g.adapter_name());
+    }
     let mut out = vec![0f32; w * h * 3];
     let (med, all) = time_method(&mut b.method, &inputs, &mut out, runs.max(5))?;
     let min = all.iter().copied().fold(f64::MAX, f64::min);
@@ -484,6 +557,7 @@ fn run(cli: Cli) -> Result<(), String> {
             advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads))?
         }
         Cmd::Bench { method, size, threads, runs, flr, frame } => bench(&method, &size, threads, runs, &flr, frame.as_deref())?,
+        Cmd::Shaders { out, size, flr } => shaders(&out, &size, &flr)?,
         Cmd::Demo { output, threads } => {
             let d = data_dir()?;
             let mut frames = list_frames(std::slice::from_ref(&d))?;

@@ -65,9 +65,20 @@ pub struct FlrArgs {
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
+    /// FLR: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
+    #[arg(long)]
+    pub device: Option<String>,
 }
 
 impl FlrArgs {
+    /// `--device`: false for cpu (default), true for gpu.
+    pub fn gpu(&self) -> Result<bool, String> {
+        match self.device.as_deref() {
+            None | Some("cpu") => Ok(false),
+            Some("gpu") => Ok(true),
+            Some(d) => Err(format!("--device: '{d}' is not cpu or gpu")),
+        }
+    }
     fn has_flr_flags(&self) -> bool {
         self.guides.is_some()
             || self.block.is_some()
@@ -320,6 +331,8 @@ pub enum Method {
     Walr(Box<WalrRunner>),
     /// A temporal pipeline (BMFR's or WALR's): every `run` is the next frame of a sequence.
     Temporal(Box<TemporalRunner>),
+    /// FLR's compute shaders on the GPU (`--device gpu`).
+    FlrGpu(Box<lrdenoise_gpu::GpuFlr>),
 }
 
 /// A method built for one frame: the runner, its table label and the flags
@@ -341,10 +354,17 @@ impl Method {
         check_method(name)?;
         let (w, h) = (inputs.w, inputs.h);
         match name {
+            "flr" if a.gpu()? => {
+                let cfg = a.config(inputs)?;
+                let gpu = lrdenoise_gpu::GpuFlr::new(cfg, w, h).map_err(|e| format!("flr --device gpu: {e}"))?;
+                let label = format!("{} gpu", label(&cfg));
+                Ok(Built { method: Method::FlrGpu(Box::new(gpu)), label, flags: format!("{} --device gpu", flag_line(&cfg)) })
+            }
             "flr" => {
                 let cfg = a.config(inputs)?;
                 Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg) })
             }
+            _ if a.gpu()? => Err(format!("--device gpu: only flr runs on the GPU, not {name}")),
             "flnr" => {
                 if a.has_flr_flags() || a.has_walr_flags() {
                     return Err("flnr takes only --weights (σ, ε, ϵ come with the weights; the guides are normal, depth, ao)".into());
@@ -402,6 +422,14 @@ impl Method {
             Method::Walr(r) => r.run(inputs, 0, out).map(|_| ()),
             Method::Flnr(r) => r.run(inputs, out),
             Method::Temporal(r) => r.run(inputs, out),
+            Method::FlrGpu(g) => {
+                let (w, h) = (inputs.w, inputs.h);
+                let set = g.plan().config().guides;
+                let noisy = lrdenoise::ImageView::interleaved(&inputs.noisy, w, h, 3).map_err(|e| e.to_string())?;
+                let frame = lrdenoise::Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
+                let mut ov = lrdenoise::ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
+                g.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
+            }
         }
     }
 

@@ -264,3 +264,44 @@ fn flnr_runs_with_bundled_and_given_weights() {
     fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--weights", bad.to_str().unwrap()], &["bad magic"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--weights", "/nonexistent.bin"], &["--weights"]);
 }
+
+#[test]
+fn gpu_device_matches_cpu_and_writes_shaders() {
+    use lrdenoise_cli::exrio::ExrFrame;
+    fails_with(&["denoise", &data("room_7.exr"), "-o", "x.exr", "--device", "tpu"], &["--device", "tpu"]);
+    fails_with(&["denoise", &data("room_7.exr"), "-o", "x.exr", "--device", "gpu", "--method", "bmfr"], &["only flr runs on the GPU"]);
+    // shaders and dispatch description (no adapter needed)
+    let dir = tmp("shaders");
+    let (ok, _, e) = lrd(&["shaders", "--out", dir.to_str().unwrap(), "--size", "640x360", "--guides", "normal,depth"]);
+    assert!(ok, "{e}");
+    let spv = std::fs::read(dir.join("flr.spv")).unwrap();
+    assert_eq!(&spv[..4], &0x0723_0203u32.to_le_bytes());
+    assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), 512);
+    let md = std::fs::read_to_string(dir.join("dispatch.md")).unwrap();
+    assert!(md.contains("640x360") && md.contains("| `moments` | 80 x 45 x 1 |") && md.contains("(4 guide channels)"), "{md}");
+    for f in ["flr.wgsl", "flr.metal", "flr.hlsl"] {
+        assert!(std::fs::read_to_string(dir.join(f)).unwrap().contains("apply"), "{f}");
+    }
+    // every bundled frame: the GPU's output equals the CPU's within f32 rounding
+    let denoised = |p: &Path| -> Vec<f32> {
+        let f = ExrFrame::read(p).unwrap();
+        f.layers["denoised"].planes.concat()
+    };
+    for name in ["room_7.exr", "poles_7.exr", "colonnade_7.exr", "farclutter_7.exr"] {
+        let (cpu, gpu) = (tmp(&format!("cpu_{name}")), tmp(&format!("gpu_{name}")));
+        let (ok, _, e) = lrd(&["denoise", &data(name), "-o", cpu.to_str().unwrap(), "--only-output"]);
+        assert!(ok, "{e}");
+        let (ok, so, e) = lrd(&["denoise", &data(name), "-o", gpu.to_str().unwrap(), "--only-output", "--device", "gpu"]);
+        if !ok && e.contains("no GPU adapter") && std::env::var("LRD_REQUIRE_GPU").is_err() {
+            eprintln!("SKIPPED: no GPU adapter ({e})");
+            return;
+        }
+        assert!(ok && so.contains("gpu"), "{e}");
+        let (a, b) = (denoised(&cpu), denoised(&gpu));
+        let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
+        let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
+        assert!(mean < 1e-4, "{name}: mean relative difference {mean:.2e}");
+    }
+    let (ok, so, e) = lrd(&["bench", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
+    assert!(ok && so.contains("GPU adapter") && so.contains("median"), "{so}{e}");
+}

@@ -194,6 +194,14 @@ int main(int argc, char **argv) {
     printf("FLR %dx%d: whole frame %.3f ms (best of 5, 1 thread), tiled %u tiles on 2 pthreads %.3f ms; identical\n",
            W, H, best, tiles, tiled_ms);
 
+    /* The GPU path: what an engine needs to run the compute shaders itself. */
+    LrdGpuDispatch gpu;
+    CHECK(lrd_gpu_dispatch(&cfg, W, H, &gpu));
+    printf("GPU: %zu bytes of WGSL; passes:", strlen(lrd_gpu_wgsl()));
+    for (int i = 0; i < 7; i++)
+        printf(" %s %ux%u", gpu.passes[i].entry, gpu.passes[i].workgroups[0], gpu.passes[i].workgroups[1]);
+    printf("; output buffer %llu bytes\n", (unsigned long long)gpu.buffer_bytes[7]);
+
     if (argc > 1) {
         FILE *f = fopen(argv[1], "wb");
         if (!f || fwrite(whole, sizeof(float), 3 * W * H, f) != 3 * W * H) return 5;

@@ -314,6 +314,39 @@ typedef struct LrdReport {
   uint64_t dropped_pivots;
 } LrdReport;
 
+/**
+ * One compute dispatch of the GPU path: the WGSL entry point and its workgroup counts.
+ */
+typedef struct LrdGpuPass {
+  /**
+   * Static, NUL-terminated entry point name.
+   */
+  const char *entry;
+  uint32_t workgroups[3];
+} LrdGpuPass;
+
+/**
+ * How to run FLR's compute shaders (`lrd_gpu_wgsl`, or the SPIR-V/MSL/HLSL of
+ * `lrd shaders`) for one frame size with planar f32 buffers: noisy R, G, B
+ * planes; guide channels one plane each (normal x, y, z, depth, position x,
+ * y, z, AO, user, those configured); output R, G, B planes. Every pass uses
+ * one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
+ * noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
+ * output (read-write storage). Run the seven passes in order with a storage
+ * barrier between them.
+ */
+typedef struct LrdGpuDispatch {
+  struct LrdGpuPass passes[7];
+  /**
+   * Minimum size of each buffer in bytes, in binding order.
+   */
+  uint64_t buffer_bytes[8];
+  /**
+   * Contents of the uniform parameter block (binding 0).
+   */
+  uint8_t params[512];
+} LrdGpuDispatch;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -388,6 +421,20 @@ LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
                            uint32_t tile,
                            uint32_t worker,
                            struct LrdReport *report);
+
+/**
+ * Fills `out` with the GPU dispatch description of `config` for
+ * `width`×`height` frames (at most 8 guide channels, no upsampling).
+ */
+LrdStatus lrd_gpu_dispatch(const struct LrdFlrConfig *config,
+                           uint32_t width,
+                           uint32_t height,
+                           struct LrdGpuDispatch *out);
+
+/**
+ * FLR's WGSL shader module (static, NUL-terminated).
+ */
+const char *lrd_gpu_wgsl(void);
 
 /**
  * The library version, e.g. "0.1.0" (static, NUL-terminated).

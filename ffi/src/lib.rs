@@ -646,6 +646,73 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
     })
 }
 
+/// One compute dispatch of the GPU path: the WGSL entry point and its workgroup counts.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdGpuPass {
+    /// Static, NUL-terminated entry point name.
+    pub entry: *const c_char,
+    pub workgroups: [u32; 3],
+}
+
+/// How to run FLR's compute shaders (`lrd_gpu_wgsl`, or the SPIR-V/MSL/HLSL of
+/// `lrd shaders`) for one frame size with planar f32 buffers: noisy R, G, B
+/// planes; guide channels one plane each (normal x, y, z, depth, position x,
+/// y, z, AO, user, those configured); output R, G, B planes. Every pass uses
+/// one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
+/// noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
+/// output (read-write storage). Run the seven passes in order with a storage
+/// barrier between them.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdGpuDispatch {
+    pub passes: [LrdGpuPass; 7],
+    /// Minimum size of each buffer in bytes, in binding order.
+    pub buffer_bytes: [u64; 8],
+    /// Contents of the uniform parameter block (binding 0).
+    pub params: [u8; 512],
+}
+
+/// Fills `out` with the GPU dispatch description of `config` for
+/// `width`×`height` frames (at most 8 guide channels, no upsampling).
+#[cfg(feature = "flr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_gpu_dispatch(config: *const LrdFlrConfig, width: u32, height: u32, out: *mut LrdGpuDispatch) -> LrdStatus {
+    use lrdenoise_core::gpu::{GpuLayouts, GpuPlan};
+    guard(|| {
+        // SAFETY: checked for NULL; the caller passes a valid config pointer.
+        let c = unsafe { config.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+        let (w, h) = (width as usize, height as usize);
+        let plan = GpuPlan::new(self::config(c)?, w, h).map_err(status_of)?;
+        let layouts = GpuLayouts::planar(w, h);
+        let params = plan.params(&layouts).map_err(status_of)?;
+        let buffers = plan.buffers(&layouts).map_err(status_of)?;
+        let names = [c"reference", c"moments", c"finish_stats", c"blur_rows", c"blur_cols", c"solve", c"apply"];
+        let mut d = LrdGpuDispatch {
+            passes: [LrdGpuPass { entry: core::ptr::null(), workgroups: [0; 3] }; 7],
+            buffer_bytes: [0; 8],
+            params: [0; 512],
+        };
+        for ((dst, p), name) in d.passes.iter_mut().zip(plan.passes()).zip(names) {
+            debug_assert_eq!(name.to_bytes(), p.entry.as_bytes());
+            *dst = LrdGpuPass { entry: name.as_ptr(), workgroups: p.workgroups };
+        }
+        for (dst, b) in d.buffer_bytes.iter_mut().zip(&buffers) {
+            *dst = b.bytes;
+        }
+        d.params.copy_from_slice(params.as_bytes());
+        // SAFETY: checked for NULL; caller passes a valid pointer.
+        *unsafe { out.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = d;
+        Ok(())
+    })
+}
+
+/// FLR's WGSL shader module (static, NUL-terminated).
+#[no_mangle]
+pub extern "C" fn lrd_gpu_wgsl() -> *const c_char {
+    concat!(include_str!("../../src/gpu/flr.wgsl"), "\0").as_ptr() as *const c_char
+}
+
 /// The library version, e.g. "0.1.0" (static, NUL-terminated).
 #[no_mangle]
 pub extern "C" fn lrd_version() -> *const c_char {

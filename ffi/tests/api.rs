@@ -120,3 +120,36 @@ fn entry_points_validate_everything() {
     assert_eq!(unsafe { CStr::from_ptr(lrd_version()) }.to_str().unwrap(), env!("CARGO_PKG_VERSION"));
     assert_eq!(lrd_features() & LRD_FEATURE_FLR, LRD_FEATURE_FLR);
 }
+
+#[test]
+fn gpu_dispatch_description() {
+    use lrdenoise_core::gpu::{GpuLayouts, GpuPlan};
+    let cfg = lrd_flr_config_default();
+    let mut d = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, d.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let d = unsafe { d.assume_init() };
+    let plan = GpuPlan::new(lrdenoise_core::FlrConfig::default(), 100, 70).unwrap();
+    let layouts = GpuLayouts::planar(100, 70);
+    for (c, r) in d.passes.iter().zip(plan.passes()) {
+        assert_eq!(unsafe { CStr::from_ptr(c.entry) }.to_str().unwrap(), r.entry);
+        assert_eq!(c.workgroups, r.workgroups);
+    }
+    for (c, r) in d.buffer_bytes.iter().zip(plan.buffers(&layouts).unwrap()) {
+        assert_eq!(*c, r.bytes);
+    }
+    assert_eq!(&d.params[..], plan.params(&layouts).unwrap().as_bytes());
+    let wgsl = unsafe { CStr::from_ptr(lrd_gpu_wgsl()) }.to_str().unwrap();
+    assert_eq!(wgsl, lrdenoise_core::gpu::FLR_WGSL);
+    // errors
+    let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_dispatch(null(), 100, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_NULL_POINTER);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, null_mut()) }, LrdStatus::LRD_STATUS_NULL_POINTER);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 0, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+    let mut up = cfg;
+    up.upsample = 2;
+    assert_eq!(unsafe { lrd_gpu_dispatch(&up, 100, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_UNSUPPORTED);
+    let mut many = cfg;
+    many.guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION | LRD_GUIDE_AO;
+    many.user_guides = 2;
+    assert_eq!(unsafe { lrd_gpu_dispatch(&many, 100, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_CONFIG);
+}

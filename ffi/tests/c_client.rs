@@ -101,6 +101,7 @@ fn c_client_matches_rust() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "client failed ({:?}): {stdout}{}", out.status, String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("identical"), "{stdout}");
+    assert!(stdout.contains("passes: reference 1x1 moments") && stdout.contains("apply"), "{stdout}");
     println!("{stdout}");
 
     let bytes = std::fs::read(&raw).unwrap();

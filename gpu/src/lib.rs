@@ -1,0 +1,333 @@
+//! # lrdenoise-gpu
+//!
+//! Runs FLR's WGSL compute shaders ([`lrdenoise::gpu`]) on a `wgpu` device:
+//! the dispatch description of [`GpuPlan`] executed as written, so this crate
+//! is also the reference for engines that run the shaders with their own API.
+//! [`shaders`] converts the module to SPIR-V, MSL and HLSL with naga.
+//!
+//! ```no_run
+//! use lrdenoise::{FlrConfig, Frame, Guides, GuideSet, ImageView, ImageViewMut};
+//! let (w, h) = (64, 48);
+//! let noisy = vec![0.5f32; w * h * 3];
+//! let normal = vec![0.0f32; w * h * 3];
+//! let depth = vec![1.0f32; w * h];
+//! let mut flr = lrdenoise_gpu::GpuFlr::new(FlrConfig::with_guides(GuideSet::NORMAL_DEPTH), w, h)?;
+//! println!("running on {}", flr.adapter_name());
+//! let guides = Guides {
+//!     normal: Some(ImageView::interleaved(&normal, w, h, 3)?),
+//!     depth: Some(ImageView::interleaved(&depth, w, h, 1)?),
+//!     ..Default::default()
+//! };
+//! let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3)?, guides);
+//! let mut out = vec![0f32; w * h * 3];
+//! let report = flr.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3)?)?;
+//! # Ok::<(), lrdenoise_gpu::GpuError>(())
+//! ```
+
+use lrdenoise::gpu::{Access, GpuLayouts, GpuPlan, FLR_WGSL};
+use lrdenoise::{Arg, Error, FlrConfig, Frame, ImageViewMut, Report};
+use std::fmt;
+
+pub use lrdenoise::gpu;
+
+/// What can go wrong on the GPU path.
+#[derive(Debug)]
+pub enum GpuError {
+    /// A size, layout or configuration error (as on the CPU path).
+    Config(Error),
+    /// No adapter (GPU or software rasteriser) is available.
+    NoAdapter(String),
+    /// The device refused the request, or a validation or runtime error occurred.
+    Device(String),
+    /// A shader could not be translated (`shaders`).
+    Shader(String),
+}
+
+impl fmt::Display for GpuError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            GpuError::Config(e) => write!(f, "{e}"),
+            GpuError::NoAdapter(why) => write!(f, "no GPU adapter: {why}"),
+            GpuError::Device(why) => write!(f, "GPU device error: {why}"),
+            GpuError::Shader(why) => write!(f, "shader translation failed: {why}"),
+        }
+    }
+}
+
+impl std::error::Error for GpuError {}
+
+impl From<Error> for GpuError {
+    fn from(e: Error) -> Self {
+        GpuError::Config(e)
+    }
+}
+
+/// FLR for one frame size and configuration on a wgpu device. Buffers and
+/// pipelines are created once and reused for every frame.
+#[derive(Debug)]
+pub struct GpuFlr {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    adapter: String,
+    plan: GpuPlan,
+    pipelines: Vec<(wgpu::ComputePipeline, [u32; 3])>,
+    bind_group: wgpu::BindGroup,
+    /// Binding order: params, noisy, guides, stats, cells, tmp, models, output.
+    buffers: Vec<wgpu::Buffer>,
+    readback: wgpu::Buffer,
+    /// Host staging of the planar inputs (reused).
+    noisy: Vec<f32>,
+    guides: Vec<f32>,
+}
+
+/// Requests the default adapter and a device with default limits.
+pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError> {
+    let instance = wgpu::Instance::default();
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+    let info = adapter.get_info();
+    let name = format!("{} ({:?}, {:?})", info.name, info.device_type, info.backend);
+    let (device, queue) =
+        pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).map_err(|e| GpuError::Device(e.to_string()))?;
+    Ok((device, queue, name))
+}
+
+impl GpuFlr {
+    /// Plans FLR and creates its pipelines and buffers on the default adapter.
+    pub fn new(cfg: FlrConfig, width: usize, height: usize) -> Result<Self, GpuError> {
+        let (device, queue, name) = default_device()?;
+        Self::with_device(device, queue, name, cfg, width, height)
+    }
+
+    /// As [`GpuFlr::new`] on the caller's device (`adapter` is only a label).
+    pub fn with_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        adapter: String,
+        cfg: FlrConfig,
+        width: usize,
+        height: usize,
+    ) -> Result<Self, GpuError> {
+        let plan = GpuPlan::new(cfg, width, height)?;
+        let layouts = GpuLayouts::planar(width, height);
+        let params = plan.params(&layouts)?;
+        let descs = plan.buffers(&layouts)?;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("lrdenoise flr"),
+            source: wgpu::ShaderSource::Wgsl(FLR_WGSL.into()),
+        });
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = descs
+            .iter()
+            .map(|d| wgpu::BindGroupLayoutEntry {
+                binding: d.binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match d.access {
+                        Access::Uniform => wgpu::BufferBindingType::Uniform,
+                        Access::ReadOnlyStorage => wgpu::BufferBindingType::Storage { read_only: true },
+                        Access::ReadWriteStorage => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("lrdenoise flr"), entries: &entries });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("lrdenoise flr"),
+            bind_group_layouts: &[Some(&bgl)],
+            immediate_size: 0,
+        });
+        let pipelines = plan
+            .passes()
+            .iter()
+            .map(|p| {
+                let pipe = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(p.entry),
+                    layout: Some(&layout),
+                    module: &module,
+                    entry_point: Some(p.entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                });
+                (pipe, p.workgroups)
+            })
+            .collect();
+        let buffers: Vec<wgpu::Buffer> = descs
+            .iter()
+            .map(|d| {
+                let usage = match d.access {
+                    Access::Uniform => wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                    _ => wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                };
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: None,
+                    size: d.bytes.next_multiple_of(4),
+                    usage,
+                    mapped_at_creation: false,
+                })
+            })
+            .collect();
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("lrdenoise flr"),
+            layout: &bgl,
+            entries: &buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect::<Vec<_>>(),
+        });
+        let out_bytes = descs[7].bytes.next_multiple_of(4);
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("lrdenoise readback"),
+            size: out_bytes + lrdenoise::gpu::STATS_BYTES,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Device(e.to_string()));
+        }
+        queue.write_buffer(&buffers[0], 0, bytemuck::bytes_of(&params));
+        let q = plan.guide_channels();
+        Ok(GpuFlr {
+            device,
+            queue,
+            adapter,
+            plan,
+            pipelines,
+            bind_group,
+            buffers,
+            readback,
+            noisy: vec![0.0; 3 * width * height],
+            guides: vec![0.0; q.max(1) * width * height],
+        })
+    }
+
+    /// The adapter's name, type and backend.
+    pub fn adapter_name(&self) -> &str {
+        &self.adapter
+    }
+
+    /// The dispatch description this executor runs.
+    pub fn plan(&self) -> &GpuPlan {
+        &self.plan
+    }
+
+    /// Records the seven passes (on this executor's buffers) into `encoder`:
+    /// for callers that fill the input buffers themselves ([`GpuFlr::buffer`]).
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
+        for (pipe, [x, y, z]) in &self.pipelines {
+            // one compute pass per stage: passes are ordered and their storage
+            // writes visible to the next
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            pass.set_pipeline(pipe);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(*x, *y, *z);
+        }
+    }
+
+    /// The buffer bound at `binding` (see [`GpuPlan::buffers`]); inputs are
+    /// planar f32 ([`GpuLayouts::planar`]).
+    pub fn buffer(&self, binding: usize) -> Option<&wgpu::Buffer> {
+        self.buffers.get(binding)
+    }
+
+    /// Denoises one frame: uploads it (any layout, f32 or f16, converted to
+    /// planar f32), runs the passes, waits and writes the result into `out`.
+    pub fn denoise(&mut self, frame: &Frame<'_>, out: &mut ImageViewMut<'_>) -> Result<Report, GpuError> {
+        let (w, h) = self.plan.size();
+        let n = &frame.noisy;
+        if (n.width(), n.height()) != (w, h) {
+            return Err(Error::SizeMismatch { arg: Arg::Noisy, expected: (w, h), got: (n.width(), n.height()) }.into());
+        }
+        if n.channel_count() < 3 {
+            return Err(Error::ChannelCount { arg: Arg::Noisy, expected: 3, got: n.channel_count() }.into());
+        }
+        if out.width() != w || out.height() != h || out.channel_count() < 3 {
+            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (w, h), got: (out.width(), out.height()) }.into());
+        }
+        if frame.guides_low.is_some() {
+            return Err(Error::Unsupported("the GPU path takes one guide set (no guides_low)").into());
+        }
+        let views = frame.guides.channel_views(&self.plan.config().guides, w, h, Arg::Guide)?;
+        let plane = w * h;
+        for y in 0..h {
+            let (r, rest) = self.noisy.split_at_mut(plane);
+            let (g, b) = rest.split_at_mut(plane);
+            let row = y * w..(y + 1) * w;
+            n.read_row_n(y, 0, [&mut r[row.clone()], &mut g[row.clone()], &mut b[row.clone()]]).ok_or(Error::GuideMismatch)?;
+            for (q, v) in views.iter().take(self.plan.guide_channels()).enumerate() {
+                let v = v.ok_or(Error::GuideMismatch)?;
+                v.read_row(y, 0, 0, &mut self.guides[q * plane + y * w..q * plane + (y + 1) * w]).ok_or(Error::GuideMismatch)?;
+            }
+        }
+        self.queue.write_buffer(&self.buffers[1], 0, bytemuck::cast_slice(&self.noisy));
+        let q = self.plan.guide_channels();
+        if q > 0 {
+            self.queue.write_buffer(&self.buffers[2], 0, bytemuck::cast_slice(&self.guides[..q * plane]));
+        }
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise flr") });
+        self.encode(&mut enc);
+        let out_bytes = self.buffers[7].size();
+        enc.copy_buffer_to_buffer(&self.buffers[7], 0, &self.readback, 0, out_bytes);
+        enc.copy_buffer_to_buffer(&self.buffers[3], 0, &self.readback, out_bytes, lrdenoise::gpu::STATS_BYTES);
+        self.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.readback.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Device(e.to_string()));
+        }
+        rx.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
+        let report = {
+            let data = self.readback.get_mapped_range(..).map_err(|e| GpuError::Device(e.to_string()))?;
+            let vals: &[f32] = bytemuck::cast_slice(&data[..3 * plane * 4]);
+            for y in 0..h {
+                let row = y * w..(y + 1) * w;
+                out.write_row_n(
+                    y,
+                    0,
+                    [&vals[row.clone()], &vals[plane + y * w..plane + (y + 1) * w], &vals[2 * plane + y * w..2 * plane + (y + 1) * w]],
+                )
+                .ok_or(Error::InvalidTile { index: y, count: h })?;
+            }
+            self.plan.report(&data[out_bytes as usize..])
+        };
+        self.readback.unmap();
+        Ok(report)
+    }
+}
+
+/// The FLR shader module in other languages, translated by naga.
+#[derive(Debug)]
+pub struct Shaders {
+    pub wgsl: &'static str,
+    /// SPIR-V words (Vulkan 1.1), one module with every entry point.
+    pub spirv: Vec<u32>,
+    /// Metal Shading Language source.
+    pub msl: String,
+    /// HLSL (shader model 5.1) source.
+    pub hlsl: String,
+}
+
+/// Translates [`FLR_WGSL`] to SPIR-V, MSL and HLSL.
+pub fn shaders() -> Result<Shaders, GpuError> {
+    let err = |e: &dyn fmt::Display| GpuError::Shader(e.to_string());
+    let module = naga::front::wgsl::parse_str(FLR_WGSL).map_err(|e| GpuError::Shader(e.emit_to_string(FLR_WGSL)))?;
+    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+        .validate(&module)
+        .map_err(|e| GpuError::Shader(e.emit_to_string(FLR_WGSL)))?;
+    let spirv = naga::back::spv::write_vec(&module, &info, &naga::back::spv::Options::default(), None).map_err(|e| err(&e))?;
+    let (msl, _) =
+        naga::back::msl::write_string(&module, &info, &naga::back::msl::Options::default(), &naga::back::msl::PipelineOptions::default())
+            .map_err(|e| err(&e))?;
+    let mut hlsl = String::new();
+    let opts = naga::back::hlsl::Options::default();
+    naga::back::hlsl::Writer::new(&mut hlsl, &opts, &Default::default()).write(&module, &info, None).map_err(|e| err(&e))?;
+    Ok(Shaders { wgsl: FLR_WGSL, spirv, msl, hlsl })
+}

@@ -1,0 +1,161 @@
+//! The GPU path against the CPU path on the same frames: several synthetic
+//! scenes, sizes not divisible by the block, every guide-set size, both
+//! regularizations, the box blur, and the degenerate cases of the FLR tests
+//! (constant, all-zero, duplicated, linearly dependent guides; NaN/Inf).
+//!
+//! Needs a wgpu adapter: in CI, Mesa's lavapipe (`mesa-vulkan-drivers`). Where
+//! none exists each test prints `SKIPPED: no GPU adapter` and returns, unless
+//! `LRD_REQUIRE_GPU=1` (set by `.ci/run`), which makes a missing adapter fail.
+
+#[path = "../../tests/common/mod.rs"]
+mod common;
+use common::*;
+use lrdenoise::*;
+use lrdenoise_gpu::{GpuError, GpuFlr};
+
+/// Tolerance: the mean |GPU − CPU| over the mean |CPU| (f32 against f64 moments;
+/// measured on lavapipe: at most 1.1e-6, the worst pixel 1.2e-5).
+const MEAN_TOL: f64 = 1e-4;
+/// Worst single value, relative to the mean |CPU| (a pixel near a hard edge).
+const MAX_TOL: f64 = 1e-3;
+
+fn gpu(cfg: FlrConfig, w: usize, h: usize) -> Option<GpuFlr> {
+    match GpuFlr::new(cfg, w, h) {
+        Ok(g) => Some(g),
+        Err(GpuError::NoAdapter(why)) => {
+            assert!(std::env::var("LRD_REQUIRE_GPU").is_err(), "LRD_REQUIRE_GPU is set but there is no adapter: {why}");
+            eprintln!("SKIPPED: no GPU adapter ({why})");
+            None
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// Runs both paths; returns (mean, max) relative differences and both reports.
+fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(f64, f64, Report, Report)> {
+    let mut g = gpu(cfg, f.w, f.h)?;
+    let frame = f.frame(set);
+    let (cpu, rep_cpu) = run_frame(cfg, f.w, f.h, &frame);
+    let mut out = vec![0f32; 3 * f.w * f.h];
+    let rep_gpu = g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap()).unwrap();
+    assert!(out.iter().all(|v| v.is_finite()), "GPU output not finite");
+    let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64 + 1e-6;
+    let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
+    let max = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).fold(0.0, f64::max) / scale;
+    Some((mean, max, rep_cpu, rep_gpu))
+}
+
+fn check(name: &str, cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(Report, Report)> {
+    let (mean, max, rc, rg) = compare(cfg, f, set)?;
+    eprintln!("{name}: {}x{} mean {mean:.2e} max {max:.2e}", f.w, f.h);
+    assert!(mean < MEAN_TOL && max < MAX_TOL, "{name} {}x{}: mean {mean:.2e} max {max:.2e}", f.w, f.h);
+    assert_eq!(
+        (rc.nonfinite_noisy, rc.nonfinite_guides, rc.fallback_pixels),
+        (rg.nonfinite_noisy, rg.nonfinite_guides, rg.fallback_pixels),
+        "{name}"
+    );
+    assert_eq!((rc.empty_blocks, rc.empty_cells), (rg.empty_blocks, rg.empty_cells), "{name}");
+    Some((rc, rg))
+}
+
+#[test]
+fn frames_sizes_and_guide_sets() {
+    let sets = [
+        GuideSet::NORMAL_DEPTH_AO,
+        GuideSet::NONE,
+        GuideSet { normal: true, ..GuideSet::NONE },
+        GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 },
+    ];
+    for (w, h, seed) in [(64, 48, 1), (75, 61, 2), (257, 40, 3), (7, 3, 4), (1, 1, 5), (33, 70, 6)] {
+        let f = Owned::synthetic(w, h, seed, 0.5);
+        for set in sets {
+            for block in [8, 4, 16] {
+                let c = cfg(set, block);
+                if check(&format!("set {set:?} B{block}"), c, &f, set).is_none() {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn regularizations_and_box_blur() {
+    let f = Owned::synthetic(96, 64, 7, 0.6);
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let configs = [
+        ("tikhonov", FlrConfig { regularization: Regularization::Tikhonov { eps: 1e-3 }, ..cfg(set, 8) }),
+        ("box", FlrConfig { blur: Blur::Box { radius: 24.0 }, ..cfg(set, 8) }),
+        ("no clamp", FlrConfig { clamp_negative: false, ..cfg(set, 8) }),
+        ("B1", cfg(set, 1)),
+    ];
+    for (name, c) in configs {
+        if check(name, c, &f, set).is_none() {
+            return;
+        }
+    }
+}
+
+#[test]
+fn degenerate_guides_and_nonfinite_inputs() {
+    let base = Owned::synthetic(64, 48, 2, 0.6);
+    let n = base.w * base.h;
+    let set = GuideSet { user: 1, ..GuideSet::NORMAL_DEPTH_AO };
+    let cases: Vec<(&str, Vec<f32>)> = vec![
+        ("constant", vec![3.25; n]),
+        ("all-zero", vec![0.0; n]),
+        ("duplicate of depth", base.depth.clone()),
+        ("linear combination", (0..n).map(|i| 2.0 * base.depth[i] - 0.5 * base.ao[i] + 1.0).collect()),
+    ];
+    for (name, u) in cases {
+        let mut f = base.clone();
+        f.user = vec![u];
+        if check(name, cfg(set, 8), &f, set).is_none() {
+            return;
+        }
+    }
+    // NaN and Inf in the noisy image and in guides: excluded and counted alike
+    let mut f = base.clone();
+    f.noisy[3 * 7] = f32::NAN;
+    f.noisy[3 * 500 + 1] = f32::INFINITY;
+    f.depth[900] = f32::NAN;
+    f.normal[3 * 1200 + 2] = f32::NEG_INFINITY;
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    if let Some((rc, _)) = check("nan/inf", cfg(set, 8), &f, set) {
+        assert_eq!((rc.nonfinite_noisy, rc.nonfinite_guides, rc.fallback_pixels), (2, 2, 2));
+    }
+}
+
+#[test]
+fn shaders_translate() {
+    let s = lrdenoise_gpu::shaders().unwrap();
+    assert_eq!(s.spirv[0], 0x0723_0203, "SPIR-V magic");
+    for entry in ["reference", "moments", "finish_stats", "blur_rows", "blur_cols", "solve", "apply"] {
+        assert!(s.msl.contains(entry) && s.hlsl.contains(entry) && s.wgsl.contains(entry), "{entry}");
+    }
+}
+
+#[test]
+fn plan_errors() {
+    let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 2 };
+    assert!(matches!(gpu::GpuPlan::new(cfg(set, 8), 64, 64), Err(Error::TooManyGuides { got: 10 })));
+    let up = FlrConfig { upsample: 2, ..cfg(GuideSet::NORMAL_DEPTH, 8) };
+    assert!(matches!(gpu::GpuPlan::new(up, 64, 64), Err(Error::Unsupported(_))));
+    assert!(matches!(gpu::GpuPlan::new(cfg(GuideSet::NORMAL_DEPTH, 8), 0, 64), Err(Error::InvalidSize { .. })));
+    assert!(gpu::GpuPlan::new(cfg(GuideSet::NORMAL_DEPTH, 1), 65536, 8).is_err());
+}
+
+/// Guides far from zero: the frame reference removes a common offset exactly,
+/// so world positions at 1e4 and depth at 1e3 cost no accuracy.
+#[test]
+fn large_offsets() {
+    let mut f = Owned::synthetic(80, 64, 9, 0.5);
+    for v in f.position.iter_mut() {
+        *v += 1e4;
+    }
+    for v in f.depth.iter_mut() {
+        *v = *v * 10.0 + 1e3;
+    }
+    let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
+    check("offsets", cfg(set, 8), &f, set);
+}

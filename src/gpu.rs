@@ -1,0 +1,326 @@
+//! FLR on GPUs: the WGSL compute shaders ([`FLR_WGSL`]) and a description of
+//! how to run them — buffers, bindings, entry points, workgroup counts and the
+//! parameter block — for engines that drive their own graphics API (as NVIDIA's
+//! NRD hands out shaders plus dispatch descriptions). `no_std`, no allocation.
+//! The `lrdenoise-gpu` crate executes the same description with `wgpu`, and
+//! `lrd shaders --out DIR` writes the shaders as WGSL, SPIR-V, MSL and HLSL.
+//!
+//! Running one frame with your own API:
+//! 1. Compile [`FLR_WGSL`] (or the SPIR-V/MSL/HLSL from `lrd shaders`) once.
+//! 2. Create the buffers of [`GpuPlan::buffers`] once; every entry point uses
+//!    the same bind group: binding `i` = buffer `i` of that list.
+//! 3. Each frame: upload the [`GpuParams`] of [`GpuPlan::params`] (only when a
+//!    layout changes), the noisy image and the guides; dispatch the seven
+//!    [`GpuPlan::passes`] in order, with a storage barrier between them.
+//! 4. Read the output buffer; optionally the stats buffer for the [`Report`]
+//!    ([`GpuPlan::report`]).
+//!
+//! The shaders compute in f32 (WGSL has no f64): moments are shifted to the
+//! frame reference and blurred in f32, where the CPU path uses f64. Results
+//! match the CPU path within the tolerance `tests/` of `lrdenoise-gpu` state;
+//! accuracy drops, as for any f32 implementation, for guides whose offset
+//! from the frame's reference sample dwarfs their local variation.
+
+use crate::config::{Blur, FlrConfig, Regularization};
+use crate::error::Error;
+use crate::flr::Report;
+use crate::image::Layout;
+use crate::kernels::blur::Taps;
+use crate::kernels::{model_len, moment_count};
+
+/// The FLR shader module: entry points `reference`, `moments`, `finish_stats`,
+/// `blur_rows`, `blur_cols`, `solve`, `apply`.
+pub const FLR_WGSL: &str = include_str!("gpu/flr.wgsl");
+
+/// Most guide channels the shaders take (their arrays are sized for it).
+pub const GPU_MAX_GUIDES: usize = 8;
+/// Blur taps the parameter block holds (radius ≤ 67 cells).
+const TAPS: usize = 68;
+/// Largest workgroup count per dimension every WebGPU device accepts.
+const MAX_GROUPS: usize = 65535;
+/// Bytes of the stats buffer: reference, mean, scale (8 f32 each) + 6 counters.
+pub const STATS_BYTES: u64 = 128;
+
+/// The uniform parameter block (binding 0), laid out as the WGSL `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuParams {
+    pub width: u32,
+    pub height: u32,
+    pub cells_x: u32,
+    pub cells_y: u32,
+    pub block: u32,
+    pub q: u32,
+    pub k: u32,
+    pub ml: u32,
+    pub radius: u32,
+    pub clamp_negative: u32,
+    pub tikhonov: u32,
+    pub _pad0: u32,
+    pub eps_mul: f32,
+    pub eps_add: f32,
+    pub eps_tikhonov: f32,
+    pub weight_norm: f32,
+    pub min_weight: f32,
+    pub _pad1: [f32; 3],
+    /// offset, pixel stride, row stride, channel stride (elements).
+    pub noisy: [u32; 4],
+    pub output: [u32; 4],
+    /// Per guide channel: offset, pixel stride, row stride, 0.
+    pub guide: [[u32; 4]; GPU_MAX_GUIDES],
+    pub taps: [f32; TAPS],
+}
+
+// SAFETY: `repr(C)`, only u32/f32 fields and arrays of them, 4-byte aligned
+// throughout with no padding (512 bytes: checked below); any bit pattern is valid.
+unsafe impl bytemuck::Zeroable for GpuParams {}
+// SAFETY: as above.
+unsafe impl bytemuck::Pod for GpuParams {}
+const _: () = assert!(core::mem::size_of::<GpuParams>() == 512);
+
+impl GpuParams {
+    /// The block's bytes, as the uniform buffer holds them.
+    pub fn as_bytes(&self) -> &[u8] {
+        bytemuck::bytes_of(self)
+    }
+}
+
+/// The buffers of the bind group, in binding order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GpuBuffer {
+    /// [`GpuParams`], uniform.
+    Params,
+    /// Noisy RGB, f32, read-only storage.
+    Noisy,
+    /// Every guide channel, f32, read-only storage.
+    Guides,
+    /// Frame reference, mean, scale and report counters.
+    Stats,
+    /// Moment grid, then the blurred grid.
+    Cells,
+    /// Horizontally blurred grid.
+    Tmp,
+    /// Per-cell models.
+    Models,
+    /// Denoised RGB, f32, written by `apply`.
+    Output,
+}
+
+/// How a buffer is bound.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Access {
+    Uniform,
+    ReadOnlyStorage,
+    ReadWriteStorage,
+}
+
+/// One buffer of the bind group.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BufferDesc {
+    pub buffer: GpuBuffer,
+    pub binding: u32,
+    pub access: Access,
+    /// Minimum size in bytes (for inputs and output: for the layouts given).
+    pub bytes: u64,
+}
+
+/// One dispatch: the entry point and its workgroup counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Pass {
+    pub entry: &'static str,
+    pub workgroups: [u32; 3],
+}
+
+/// Where the inputs and the output live in their buffers (element layouts, as
+/// [`Layout`] for the CPU views). `guides[q]` is guide channel `q`'s layout
+/// (its `channel_stride` unused), in kernel order: normal x, y, z, depth,
+/// position x, y, z, AO, user channels — those of the configured guide set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GpuLayouts {
+    pub noisy: Layout,
+    pub guides: [Layout; GPU_MAX_GUIDES],
+    pub output: Layout,
+}
+
+impl GpuLayouts {
+    /// Tightly packed planes: noisy R, G, B; guide channels one after another;
+    /// output R, G, B (what `lrdenoise-gpu` uploads).
+    pub fn planar(width: usize, height: usize) -> Self {
+        let pl = Layout::planar(width, height);
+        let n = width * height;
+        GpuLayouts { noisy: pl, guides: core::array::from_fn(|q| Layout { offset: q * n, ..pl }), output: pl }
+    }
+}
+
+/// FLR's GPU dispatch description for one frame size and configuration.
+#[derive(Clone, Copy, Debug)]
+pub struct GpuPlan {
+    cfg: FlrConfig,
+    width: usize,
+    height: usize,
+    cells_x: usize,
+    cells_y: usize,
+    q: usize,
+    taps: Taps,
+}
+
+/// Elements a layout addresses for `channels` channels (one past the last), if it fits u32.
+fn extent(l: &Layout, width: usize, height: usize, channels: usize) -> Option<u64> {
+    let last = l
+        .offset
+        .checked_add((height - 1).checked_mul(l.row_stride)?)?
+        .checked_add((width - 1).checked_mul(l.pixel_stride)?)?
+        .checked_add((channels - 1).checked_mul(l.channel_stride)?)?;
+    (last < u32::MAX as usize).then_some(last as u64 + 1)
+}
+
+impl GpuPlan {
+    /// Plans FLR for `width`×`height` frames. The GPU path takes at most
+    /// [`GPU_MAX_GUIDES`] guide channels and no upsampling (`upsample == 1`).
+    pub fn new(cfg: FlrConfig, width: usize, height: usize) -> Result<Self, Error> {
+        // The CPU plan validates the configuration and the size.
+        let flr = crate::flr::Flr::new(cfg, width, height)?;
+        let q = flr.guide_channels();
+        if q > GPU_MAX_GUIDES {
+            return Err(Error::TooManyGuides { got: q });
+        }
+        if cfg.upsample != 1 {
+            return Err(Error::Unsupported("the GPU path does not upsample (upsample must be 1)"));
+        }
+        let r = cfg.radius_cells();
+        if r >= TAPS {
+            return Err(Error::Unsupported("the GPU path blurs at most 67 cells wide"));
+        }
+        let taps = match cfg.blur {
+            Blur::Gaussian { sigma, .. } => Taps::gaussian(sigma as f64 / cfg.block as f64, r),
+            Blur::Box { .. } => Taps::boxed(r),
+        };
+        let (cells_x, cells_y) = flr.cells();
+        let plan = GpuPlan { cfg, width, height, cells_x, cells_y, q, taps };
+        let too_many = plan.passes().iter().any(|p| p.workgroups.iter().any(|&g| g as usize > MAX_GROUPS));
+        if too_many || width * height * 3 >= u32::MAX as usize || cells_x * cells_y * moment_count(q) >= u32::MAX as usize {
+            return Err(Error::Unsupported("frame too large for one GPU dispatch"));
+        }
+        Ok(plan)
+    }
+
+    /// Output (= input) size.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+    /// Guide channel count Q.
+    pub fn guide_channels(&self) -> usize {
+        self.q
+    }
+    pub fn config(&self) -> &FlrConfig {
+        &self.cfg
+    }
+
+    /// The seven dispatches of one frame, in order.
+    pub fn passes(&self) -> [Pass; 7] {
+        let k = moment_count(self.q);
+        let g = |n: usize, d: usize| n.div_ceil(d) as u32;
+        let (cx, cy) = (self.cells_x as u32, self.cells_y as u32);
+        [
+            Pass { entry: "reference", workgroups: [1, 1, 1] },
+            Pass { entry: "moments", workgroups: [cx, cy, 1] },
+            Pass { entry: "finish_stats", workgroups: [1, 1, 1] },
+            Pass { entry: "blur_rows", workgroups: [g(self.cells_x * k, 64), cy, 1] },
+            Pass { entry: "blur_cols", workgroups: [g(self.cells_x * k, 64), cy, 1] },
+            Pass { entry: "solve", workgroups: [g(self.cells_x, 64), cy, 1] },
+            Pass { entry: "apply", workgroups: [g(self.width, 8), g(self.height, 8), 1] },
+        ]
+    }
+
+    /// The parameter block for these layouts; checks that every index fits u32.
+    pub fn params(&self, layouts: &GpuLayouts) -> Result<GpuParams, Error> {
+        let (w, h) = (self.width, self.height);
+        let bad = Error::Unsupported("a layout addresses more than 2^32 elements");
+        extent(&layouts.noisy, w, h, 3).ok_or(bad)?;
+        extent(&layouts.output, w, h, 3).ok_or(bad)?;
+        for l in &layouts.guides[..self.q] {
+            extent(l, w, h, 1).ok_or(bad)?;
+        }
+        let v = |l: &Layout| [l.offset as u32, l.pixel_stride as u32, l.row_stride as u32, l.channel_stride as u32];
+        let (tikhonov, eps_mul, eps_add, eps_t) = match self.cfg.regularization {
+            Regularization::Normalized { eps_mul, eps_add } => (0, eps_mul, eps_add, 0.0),
+            Regularization::Tikhonov { eps } => (1, 0.0, 0.0, eps),
+        };
+        let b = self.cfg.block;
+        let total = (b * b) as f64 * self.taps.sum() * self.taps.sum();
+        let mut taps = [0f32; TAPS];
+        for (t, w) in taps.iter_mut().zip(&self.taps.w[..=self.taps.radius]) {
+            *t = *w as f32;
+        }
+        let mut guide = [[0u32; 4]; GPU_MAX_GUIDES];
+        for (g, l) in guide.iter_mut().zip(&layouts.guides).take(self.q) {
+            *g = [l.offset as u32, l.pixel_stride as u32, l.row_stride as u32, 0];
+        }
+        Ok(GpuParams {
+            width: w as u32,
+            height: h as u32,
+            cells_x: self.cells_x as u32,
+            cells_y: self.cells_y as u32,
+            block: b as u32,
+            q: self.q as u32,
+            k: moment_count(self.q) as u32,
+            ml: model_len(self.q) as u32,
+            radius: self.taps.radius as u32,
+            clamp_negative: self.cfg.clamp_negative as u32,
+            tikhonov,
+            _pad0: 0,
+            eps_mul: eps_mul as f32,
+            eps_add: eps_add as f32,
+            eps_tikhonov: eps_t as f32,
+            weight_norm: (1.0 / total) as f32,
+            min_weight: (1e-12 * total) as f32,
+            _pad1: [0.0; 3],
+            noisy: v(&layouts.noisy),
+            output: v(&layouts.output),
+            guide,
+            taps,
+        })
+    }
+
+    /// The eight buffers of the bind group, in binding order, sized for `layouts`.
+    pub fn buffers(&self, layouts: &GpuLayouts) -> Result<[BufferDesc; 8], Error> {
+        let (w, h) = (self.width, self.height);
+        let bad = Error::Unsupported("a layout addresses more than 2^32 elements");
+        let noisy = extent(&layouts.noisy, w, h, 3).ok_or(bad)?;
+        let output = extent(&layouts.output, w, h, 3).ok_or(bad)?;
+        let mut guides = 1; // a zero-sized binding is not allowed: at least one element
+        for l in &layouts.guides[..self.q] {
+            guides = guides.max(extent(l, w, h, 1).ok_or(bad)?);
+        }
+        let cells = (self.cells_x * self.cells_y) as u64;
+        let grid = cells * moment_count(self.q) as u64 * 4;
+        let d = |buffer, binding, access, bytes| BufferDesc { buffer, binding, access, bytes };
+        use Access::*;
+        Ok([
+            d(GpuBuffer::Params, 0, Uniform, core::mem::size_of::<GpuParams>() as u64),
+            d(GpuBuffer::Noisy, 1, ReadOnlyStorage, noisy * 4),
+            d(GpuBuffer::Guides, 2, ReadOnlyStorage, guides * 4),
+            d(GpuBuffer::Stats, 3, ReadWriteStorage, STATS_BYTES),
+            d(GpuBuffer::Cells, 4, ReadWriteStorage, grid),
+            d(GpuBuffer::Tmp, 5, ReadWriteStorage, grid),
+            d(GpuBuffer::Models, 6, ReadWriteStorage, cells * model_len(self.q) as u64 * 4),
+            d(GpuBuffer::Output, 7, ReadWriteStorage, output * 4),
+        ])
+    }
+
+    /// The frame's [`Report`] from the stats buffer's bytes (after `apply`).
+    pub fn report(&self, stats: &[u8]) -> Report {
+        let counter = |i: usize| -> u64 {
+            let o = 96 + 4 * i;
+            stats.get(o..o + 4).map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as u64)
+        };
+        Report {
+            nonfinite_noisy: counter(0),
+            nonfinite_guides: counter(1),
+            fallback_pixels: counter(2),
+            empty_blocks: counter(3),
+            empty_cells: counter(4),
+            dropped_pivots: counter(5),
+        }
+    }
+}

@@ -1,0 +1,661 @@
+// FLR (Fast Local Regression) as WGSL compute shaders: the stages of the CPU
+// path (src/flr, src/kernels) in f32. One module, one bind group (bindings 0–7)
+// shared by every entry point; run the entry points in this order, each once
+// per frame, with the workgroup counts of `lrdenoise::gpu::GpuPlan::passes`:
+//
+//   reference → moments → finish_stats → blur_rows → blur_cols → solve → apply
+//
+// Equation numbers are those of the FLR paper's appendix (eqs. 12–23).
+// Differences from the CPU path, all from f32 (WGSL has no f64): moments are
+// shifted to the frame reference and blurred in f32; the pivot floors are
+// scaled for f32's resolution (FLOOR_*). Guide and noisy samples are f32
+// storage buffers addressed with the same layouts as the CPU's image views.
+
+const MAX_Q: u32 = 8u;
+const MAX_K: u32 = 72u; // moment count at Q = 8: 1 + 8 + 36 + 3 + 24
+const MAX_ML: u32 = 30u; // model length at Q = 8: 3 + 24 + 3
+const WG: u32 = 64u;
+const NONE: u32 = 0xffffffffu;
+// Relative pivot floors (the CPU's 1e-12 and 1e-15 are below f32 resolution).
+const FLOOR_NORMALIZED: f32 = 1e-6;
+const FLOOR_TIKHONOV: f32 = 1e-6;
+
+struct Params {
+    width: u32,
+    height: u32,
+    cells_x: u32,
+    cells_y: u32,
+    block: u32,
+    q: u32,
+    k: u32,
+    ml: u32,
+    radius: u32,
+    clamp_negative: u32,
+    tikhonov: u32,
+    _pad0: u32,
+    eps_mul: f32,
+    eps_add: f32,
+    eps_tikhonov: f32,
+    weight_norm: f32,
+    min_weight: f32,
+    _pad1: f32,
+    _pad2: f32,
+    _pad3: f32,
+    // offset, pixel stride, row stride, channel stride (elements)
+    noisy: vec4<u32>,
+    output: vec4<u32>,
+    // one per guide channel: offset, pixel stride, row stride, unused
+    guide: array<vec4<u32>, 8>,
+    // blur taps w[0..=radius], four per vector
+    taps: array<vec4<f32>, 17>,
+}
+
+struct Stats {
+    reference: array<f32, 8>,
+    mean: array<f32, 8>,
+    scale: array<f32, 8>,
+    nonfinite_noisy: atomic<u32>,
+    nonfinite_guides: atomic<u32>,
+    fallback_pixels: atomic<u32>,
+    empty_blocks: atomic<u32>,
+    empty_cells: atomic<u32>,
+    dropped_pivots: atomic<u32>,
+}
+
+@group(0) @binding(0) var<uniform> P: Params;
+@group(0) @binding(1) var<storage, read> noisy: array<f32>;
+@group(0) @binding(2) var<storage, read> guides: array<f32>;
+@group(0) @binding(3) var<storage, read_write> stats: Stats;
+@group(0) @binding(4) var<storage, read_write> cells: array<f32>;
+@group(0) @binding(5) var<storage, read_write> tmp: array<f32>;
+@group(0) @binding(6) var<storage, read_write> models: array<f32>;
+@group(0) @binding(7) var<storage, read_write> output: array<f32>;
+
+// Finite test on the bits: immune to compilers that assume no NaN.
+fn finite(v: f32) -> bool {
+    return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn guide_at(q: u32, x: u32, y: u32) -> f32 {
+    let l = P.guide[q];
+    return guides[l.x + y * l.z + x * l.y];
+}
+
+fn noisy_at(c: u32, x: u32, y: u32) -> f32 {
+    let l = P.noisy;
+    return noisy[l.x + y * l.z + x * l.y + c * l.w];
+}
+
+fn tap(o: u32) -> f32 {
+    return P.taps[o / 4u][o % 4u];
+}
+
+// Cell layout offsets (src/kernels/mod.rs): n, s[Q], S (packed upper), t[3], P[Q][3].
+fn off_s() -> u32 { return 1u; }
+fn off_ss() -> u32 { return 1u + P.q; }
+fn off_t() -> u32 { return 1u + P.q + P.q * (P.q + 1u) / 2u; }
+fn off_p() -> u32 { return off_t() + 3u; }
+
+// ---------------------------------------------------------------------------
+// Stage 0: the per-guide frame reference (first finite value among 16 fixed
+// sample positions, as `Flr::prepare`), and the report counters reset.
+@compute @workgroup_size(1)
+fn reference() {
+    for (var q = 0u; q < P.q; q++) {
+        var r = 0.0;
+        var found = false;
+        for (var sy = 0u; sy < 4u && !found; sy++) {
+            for (var sx = 0u; sx < 4u && !found; sx++) {
+                let v = guide_at(q, (2u * sx + 1u) * P.width / 8u, (2u * sy + 1u) * P.height / 8u);
+                if finite(v) {
+                    r = v;
+                    found = true;
+                }
+            }
+        }
+        stats.reference[q] = r;
+        stats.mean[q] = 0.0;
+        stats.scale[q] = 1.0;
+    }
+    atomicStore(&stats.nonfinite_noisy, 0u);
+    atomicStore(&stats.nonfinite_guides, 0u);
+    atomicStore(&stats.fallback_pixels, 0u);
+    atomicStore(&stats.empty_blocks, 0u);
+    atomicStore(&stats.empty_cells, 0u);
+    atomicStore(&stats.dropped_pivots, 0u);
+}
+
+// ---------------------------------------------------------------------------
+// Stage 1: moments of one B×B block per workgroup (eq. 12), accumulated
+// relative to the block's first valid pixel, reduced in workgroup memory and
+// shifted to the frame reference. Pixels with a non-finite sample are left
+// out and counted.
+var<workgroup> first_valid: atomic<u32>;
+var<workgroup> first_plain: u32;
+var<workgroup> red: array<f32, 64>;
+var<workgroup> sums: array<f32, 72>;
+
+fn pixel_valid(x: u32, y: u32) -> vec2<bool> {
+    var ok_noisy = true;
+    for (var c = 0u; c < 3u; c++) {
+        ok_noisy = ok_noisy && finite(noisy_at(c, x, y));
+    }
+    var ok_guides = true;
+    for (var q = 0u; q < P.q; q++) {
+        ok_guides = ok_guides && finite(guide_at(q, x, y));
+    }
+    return vec2<bool>(ok_noisy, ok_guides);
+}
+
+@compute @workgroup_size(64)
+fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let b = P.block;
+    let x0 = wg.x * b;
+    let y0 = wg.y * b;
+    let k = P.k;
+    if lid == 0u {
+        atomicStore(&first_valid, NONE);
+    }
+    workgroupBarrier();
+    for (var i = lid; i < b * b; i += WG) {
+        let x = x0 + i % b;
+        let y = y0 + i / b;
+        if x < P.width && y < P.height {
+            let ok = pixel_valid(x, y);
+            if ok.x && ok.y {
+                atomicMin(&first_valid, i);
+            } else {
+                if !ok.x {
+                    atomicAdd(&stats.nonfinite_noisy, 1u);
+                }
+                if !ok.y {
+                    atomicAdd(&stats.nonfinite_guides, 1u);
+                }
+            }
+        }
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        first_plain = atomicLoad(&first_valid);
+    }
+    let first = workgroupUniformLoad(&first_plain);
+    let cell = (wg.y * P.cells_x + wg.x) * k;
+    if first == NONE {
+        for (var m = lid; m < k; m += WG) {
+            cells[cell + m] = 0.0;
+        }
+        if lid == 0u {
+            atomicAdd(&stats.empty_blocks, 1u);
+        }
+        return;
+    }
+    // block reference r (relative to the frame reference m)
+    var r: array<f32, 8>;
+    for (var q = 0u; q < P.q; q++) {
+        r[q] = guide_at(q, x0 + first % b, y0 + first / b) - stats.reference[q];
+    }
+    var acc: array<f32, 72>;
+    let s = off_s();
+    let ss = off_ss();
+    let t = off_t();
+    let p = off_p();
+    for (var i = lid; i < b * b; i += WG) {
+        let x = x0 + i % b;
+        let y = y0 + i / b;
+        if x >= P.width || y >= P.height {
+            continue;
+        }
+        let ok = pixel_valid(x, y);
+        if !(ok.x && ok.y) {
+            continue;
+        }
+        var e: array<f32, 8>;
+        for (var q = 0u; q < P.q; q++) {
+            e[q] = (guide_at(q, x, y) - stats.reference[q]) - r[q];
+        }
+        let yv = vec3<f32>(noisy_at(0u, x, y), noisy_at(1u, x, y), noisy_at(2u, x, y));
+        acc[0] += 1.0;
+        var idx = ss;
+        for (var a = 0u; a < P.q; a++) {
+            acc[s + a] += e[a];
+            for (var bb = a; bb < P.q; bb++) {
+                acc[idx] += e[a] * e[bb];
+                idx++;
+            }
+            for (var c = 0u; c < 3u; c++) {
+                acc[p + 3u * a + c] += e[a] * yv[c];
+            }
+        }
+        for (var c = 0u; c < 3u; c++) {
+            acc[t + c] += yv[c];
+        }
+    }
+    // workgroup sum of every moment
+    for (var m = 0u; m < k; m++) {
+        red[lid] = acc[m];
+        workgroupBarrier();
+        for (var stride = 32u; stride > 0u; stride /= 2u) {
+            if lid < stride {
+                red[lid] += red[lid + stride];
+            }
+            workgroupBarrier();
+        }
+        if lid == 0u {
+            sums[m] = red[0];
+        }
+        workgroupBarrier();
+    }
+    // moments about r → about the frame reference (store_shifted)
+    if lid == 0u {
+        let n = sums[0];
+        cells[cell] = n;
+        var idx = ss;
+        for (var a = 0u; a < P.q; a++) {
+            cells[cell + s + a] = sums[s + a] + n * r[a];
+            for (var bb = a; bb < P.q; bb++) {
+                cells[cell + idx] = sums[idx] + r[a] * sums[s + bb] + sums[s + a] * r[bb] + n * r[a] * r[bb];
+                idx++;
+            }
+        }
+        for (var c = 0u; c < 3u; c++) {
+            cells[cell + t + c] = sums[t + c];
+        }
+        for (var a = 0u; a < P.q; a++) {
+            for (var c = 0u; c < 3u; c++) {
+                let j = p + 3u * a + c;
+                cells[cell + j] = sums[j] + r[a] * sums[t + c];
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Stage 2: frame mean and standard deviation of each guide (standardisation
+// of the normalized solve), from every cell (`Flr::finish_stats`).
+var<workgroup> part: array<f32, 1088>; // 64 threads × (1 + 2·MAX_Q)
+
+@compute @workgroup_size(64)
+fn finish_stats(@builtin(local_invocation_index) lid: u32) {
+    let q = P.q;
+    let nv = 1u + 2u * q;
+    var acc: array<f32, 17>;
+    let ncell = P.cells_x * P.cells_y;
+    for (var c = lid; c < ncell; c += WG) {
+        let base = c * P.k;
+        acc[0] += cells[base];
+        var idx = off_ss();
+        for (var a = 0u; a < q; a++) {
+            acc[1u + a] += cells[base + off_s() + a];
+            acc[1u + q + a] += cells[base + idx];
+            idx += q - a;
+        }
+    }
+    for (var v = 0u; v < nv; v++) {
+        part[v * WG + lid] = acc[v];
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        var tot: array<f32, 17>;
+        for (var v = 0u; v < nv; v++) {
+            for (var i = 0u; i < WG; i++) {
+                tot[v] += part[v * WG + i];
+            }
+        }
+        let n = tot[0];
+        for (var a = 0u; a < q; a++) {
+            var mean = 0.0;
+            var variance = 0.0;
+            if n > 0.0 {
+                mean = tot[1u + a] / n;
+                variance = tot[1u + q + a] / n - mean * mean;
+            }
+            let floor = 1e-6 * abs(stats.reference[a] + mean);
+            let sd = max(sqrt(max(variance, 0.0)), floor);
+            if finite(mean) {
+                stats.mean[a] = mean;
+            } else {
+                stats.mean[a] = 0.0;
+            }
+            if finite(sd) && sd > 0.0 {
+                stats.scale[a] = sd;
+            } else {
+                stats.scale[a] = 1.0;
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Stages 3–4: separable blur of the moment grid (zero outside the grid).
+// One invocation per (cell, moment): x = cell column × k + moment, y = cell row.
+@compute @workgroup_size(64)
+fn blur_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = P.k;
+    let cx = gid.x / k;
+    let m = gid.x % k;
+    let cy = gid.y;
+    if cx >= P.cells_x || cy >= P.cells_y {
+        return;
+    }
+    let row = cy * P.cells_x;
+    var acc = tap(0u) * cells[(row + cx) * k + m];
+    for (var o = 1u; o <= P.radius; o++) {
+        if cx >= o {
+            acc += tap(o) * cells[(row + cx - o) * k + m];
+        }
+        if cx + o < P.cells_x {
+            acc += tap(o) * cells[(row + cx + o) * k + m];
+        }
+    }
+    tmp[(row + cx) * k + m] = acc;
+}
+
+@compute @workgroup_size(64)
+fn blur_cols(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = P.k;
+    let cx = gid.x / k;
+    let m = gid.x % k;
+    let cy = gid.y;
+    if cx >= P.cells_x || cy >= P.cells_y {
+        return;
+    }
+    var acc = tap(0u) * tmp[(cy * P.cells_x + cx) * k + m];
+    for (var o = 1u; o <= P.radius; o++) {
+        if cy >= o {
+            acc += tap(o) * tmp[((cy - o) * P.cells_x + cx) * k + m];
+        }
+        if cy + o < P.cells_y {
+            acc += tap(o) * tmp[((cy + o) * P.cells_x + cx) * k + m];
+        }
+    }
+    cells[(cy * P.cells_x + cx) * k + m] = acc;
+}
+
+// ---------------------------------------------------------------------------
+// Stage 5: one cell per invocation → its affine model (src/kernels/solve.rs).
+// Model: intercept c0[3], coefficients c[q][3] on d = g − m, local mean μ_y[3].
+
+// Cholesky with a relative pivot floor; dropped pivots get a zero inverse.
+// Returns the number of dropped pivots. `a` is (n × n) in a 9 × 9 array.
+fn cholesky(a: ptr<function, array<array<f32, 9>, 9>>, inv: ptr<function, array<f32, 9>>, n: u32, rel_floor: f32) -> u32 {
+    var maxdiag = 0.0;
+    for (var i = 0u; i < n; i++) {
+        maxdiag = max(maxdiag, abs((*a)[i][i]));
+    }
+    let floor = max(maxdiag * rel_floor, 1.17549435e-38);
+    var dropped = 0u;
+    for (var j = 0u; j < n; j++) {
+        var d = (*a)[j][j];
+        for (var p = 0u; p < j; p++) {
+            d -= (*a)[j][p] * (*a)[j][p];
+        }
+        if !(d > floor) || !finite(d) {
+            dropped++;
+            (*a)[j][j] = 0.0;
+            (*inv)[j] = 0.0;
+            for (var i = j + 1u; i < n; i++) {
+                (*a)[i][j] = 0.0;
+            }
+            continue;
+        }
+        let l = sqrt(d);
+        let il = 1.0 / l;
+        (*a)[j][j] = l;
+        (*inv)[j] = il;
+        for (var i = j + 1u; i < n; i++) {
+            var s = (*a)[i][j];
+            for (var p = 0u; p < j; p++) {
+                s -= (*a)[i][p] * (*a)[j][p];
+            }
+            (*a)[i][j] = s * il;
+        }
+    }
+    return dropped;
+}
+
+// L Lᵀ x = b for 3 right-hand sides (rows of `b`), in place.
+fn substitute(l: ptr<function, array<array<f32, 9>, 9>>, inv: ptr<function, array<f32, 9>>, b: ptr<function, array<vec3<f32>, 9>>, n: u32) {
+    for (var i = 0u; i < n; i++) {
+        var s = (*b)[i];
+        for (var p = 0u; p < i; p++) {
+            s -= (*l)[i][p] * (*b)[p];
+        }
+        (*b)[i] = s * (*inv)[i];
+    }
+    for (var ii = 0u; ii < n; ii++) {
+        let i = n - 1u - ii;
+        var s = (*b)[i];
+        for (var p = i + 1u; p < n; p++) {
+            s -= (*l)[p][i] * (*b)[p];
+        }
+        (*b)[i] = s * (*inv)[i];
+    }
+}
+
+fn vec_finite(v: vec3<f32>) -> bool {
+    return finite(v.x) && finite(v.y) && finite(v.z);
+}
+
+@compute @workgroup_size(64)
+fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let cx = gid.x;
+    let cy = gid.y;
+    if cx >= P.cells_x || cy >= P.cells_y {
+        return;
+    }
+    let q = P.q;
+    let cell = (cy * P.cells_x + cx) * P.k;
+    let model = (cy * P.cells_x + cx) * P.ml;
+    let n = cells[cell];
+    if !(n > P.min_weight) || !finite(n) {
+        for (var j = 0u; j < P.ml; j++) {
+            models[model + j] = 0.0;
+        }
+        atomicAdd(&stats.empty_cells, 1u);
+        return;
+    }
+    let s = off_s();
+    let ss = off_ss();
+    let t = off_t();
+    let p = off_p();
+    let inv_n = 1.0 / n;
+    let muy = vec3<f32>(cells[cell + t], cells[cell + t + 1u], cells[cell + t + 2u]) * inv_n;
+    var c0 = muy;
+    var coef: array<vec3<f32>, 9>;
+    var a: array<array<f32, 9>, 9>;
+    var inv: array<f32, 9>;
+    var dropped = 0u;
+    if P.tikhonov == 0u {
+        // Normalized-correlation regularized inverse (eqs. 12–23) on standardised guides.
+        var mu: array<f32, 8>;
+        var muz: array<f32, 8>;
+        var inv_scale: array<f32, 8>;
+        for (var i = 0u; i < q; i++) {
+            inv_scale[i] = 1.0 / stats.scale[i];
+            mu[i] = cells[cell + s + i] * inv_n;
+            muz[i] = (mu[i] - stats.mean[i]) * inv_scale[i];
+        }
+        var idx = ss;
+        for (var i = 0u; i < q; i++) {
+            for (var j = i; j < q; j++) {
+                let w = (cells[cell + idx] * inv_n - mu[i] * mu[j]) * (inv_scale[i] * inv_scale[j]);
+                var v = w + P.eps_mul * muz[i] * muz[j];
+                if i == j {
+                    v += P.eps_mul * muz[i] * muz[i] + P.eps_add; // eq. 18
+                }
+                a[i][j] = v;
+                a[j][i] = v;
+                idx++;
+            }
+        }
+        var isig: array<f32, 8>;
+        for (var i = 0u; i < q; i++) {
+            isig[i] = 1.0 / sqrt(max(a[i][i], 1e-30)); // eq. 19
+        }
+        var bh: array<vec3<f32>, 9>;
+        for (var i = 0u; i < q; i++) {
+            for (var j = 0u; j < q; j++) {
+                a[i][j] *= isig[i] * isig[j]; // eq. 20
+            }
+            a[i][i] += P.eps_add; // eq. 22
+            let pv = vec3<f32>(cells[cell + p + 3u * i], cells[cell + p + 3u * i + 1u], cells[cell + p + 3u * i + 2u]);
+            bh[i] = (pv * inv_n - mu[i] * muy) * (isig[i] * inv_scale[i]); // eq. 21
+        }
+        dropped = cholesky(&a, &inv, q, FLOOR_NORMALIZED);
+        substitute(&a, &inv, &bh, q);
+        for (var i = 0u; i < q; i++) {
+            let beta = bh[i] * (isig[i] * inv_scale[i]); // eq. 23
+            coef[i] = beta;
+            c0 -= beta * mu[i];
+        }
+    } else {
+        // Tikhonov (eq. 11) on the raw guides: variables [1, g_0 .. g_Q).
+        let wn = P.weight_norm;
+        var b: array<vec3<f32>, 9>;
+        a[0][0] = n * wn + P.eps_tikhonov;
+        var idx = ss;
+        for (var i = 0u; i < q; i++) {
+            let mi = stats.reference[i];
+            let s_i = cells[cell + s + i];
+            let raw_s = (s_i + n * mi) * wn;
+            a[0][i + 1u] = raw_s;
+            a[i + 1u][0] = raw_s;
+            for (var j = i; j < q; j++) {
+                let mj = stats.reference[j];
+                let raw = cells[cell + idx] + mi * cells[cell + s + j] + s_i * mj + n * mi * mj;
+                var v = raw * wn;
+                if i == j {
+                    v += P.eps_tikhonov;
+                }
+                a[i + 1u][j + 1u] = v;
+                a[j + 1u][i + 1u] = v;
+                idx++;
+            }
+        }
+        let tv = vec3<f32>(cells[cell + t], cells[cell + t + 1u], cells[cell + t + 2u]);
+        b[0] = tv * wn;
+        for (var i = 0u; i < q; i++) {
+            let pv = vec3<f32>(cells[cell + p + 3u * i], cells[cell + p + 3u * i + 1u], cells[cell + p + 3u * i + 2u]);
+            b[i + 1u] = (pv + stats.reference[i] * tv) * wn;
+        }
+        dropped = cholesky(&a, &inv, q + 1u, FLOOR_TIKHONOV);
+        substitute(&a, &inv, &b, q + 1u);
+        c0 = b[0];
+        for (var i = 0u; i < q; i++) {
+            coef[i] = b[i + 1u];
+            c0 += b[i + 1u] * stats.reference[i];
+        }
+    }
+    if dropped > 0u {
+        atomicAdd(&stats.dropped_pivots, dropped);
+    }
+    // write_model: the local mean where the fit is not finite
+    var ok = vec_finite(c0);
+    for (var i = 0u; i < q; i++) {
+        ok = ok && vec_finite(coef[i]);
+    }
+    var m = muy;
+    if !vec_finite(muy) {
+        m = vec3<f32>(0.0);
+    }
+    for (var j = 0u; j < P.ml; j++) {
+        models[model + j] = 0.0;
+    }
+    if ok {
+        for (var c = 0u; c < 3u; c++) {
+            models[model + c] = c0[c];
+        }
+        for (var i = 0u; i < q; i++) {
+            for (var c = 0u; c < 3u; c++) {
+                models[model + 3u + 3u * i + c] = coef[i][c];
+            }
+        }
+    } else {
+        for (var c = 0u; c < 3u; c++) {
+            models[model + c] = m[c];
+        }
+    }
+    for (var c = 0u; c < 3u; c++) {
+        models[model + 3u + 3u * q + c] = m[c];
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Stage 6: bilinear interpolation of the models between cell centres and
+// application to each pixel's guides (src/kernels/apply.rs).
+
+// Left cell and weight of pixel coordinate `x` (cell_pos).
+fn cell_pos(x: u32, cells: u32) -> vec2<f32> {
+    let c = (f32(x) + 0.5) / f32(P.block) - 0.5;
+    if c <= 0.0 {
+        return vec2<f32>(0.0, 0.0);
+    }
+    let i = u32(c);
+    if i + 1u >= cells {
+        return vec2<f32>(f32(cells - 1u), 0.0);
+    }
+    return vec2<f32>(f32(i), c - f32(i));
+}
+
+fn model_at(cx: u32, cy: u32, j: u32) -> f32 {
+    return models[(cy * P.cells_x + cx) * P.ml + j];
+}
+
+@compute @workgroup_size(8, 8)
+fn apply(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let x = gid.x;
+    let y = gid.y;
+    if x >= P.width || y >= P.height {
+        return;
+    }
+    let q = P.q;
+    let px = cell_pos(x, P.cells_x);
+    let py = cell_pos(y, P.cells_y);
+    let i = u32(px.x);
+    let j = u32(py.x);
+    let i1 = min(i + 1u, P.cells_x - 1u);
+    let j1 = min(j + 1u, P.cells_y - 1u);
+    // vertical then horizontal, as lerp_rows then apply_row
+    var lm: array<f32, 30>;
+    for (var m = 0u; m < P.ml; m++) {
+        let a0 = model_at(i, j, m);
+        let b0 = model_at(i, j1, m);
+        let a1 = model_at(i1, j, m);
+        let b1 = model_at(i1, j1, m);
+        var left = a0;
+        var right = a1;
+        if py.y != 0.0 {
+            left = a0 + (b0 - a0) * py.y;
+            right = a1 + (b1 - a1) * py.y;
+        }
+        if px.y != 0.0 {
+            lm[m] = left + (right - left) * px.y;
+        } else {
+            lm[m] = left;
+        }
+    }
+    var valid = true;
+    var d: array<f32, 8>;
+    for (var g = 0u; g < q; g++) {
+        let v = guide_at(g, x, y);
+        valid = valid && finite(v);
+        d[g] = v - stats.reference[g];
+    }
+    if !valid {
+        atomicAdd(&stats.fallback_pixels, 1u);
+    }
+    let l = P.output;
+    for (var c = 0u; c < 3u; c++) {
+        var yv = lm[c];
+        for (var g = 0u; g < q; g++) {
+            yv += lm[3u + 3u * g + c] * d[g];
+        }
+        if !valid || !finite(yv) {
+            yv = lm[3u + 3u * q + c];
+        }
+        if P.clamp_negative != 0u {
+            yv = max(yv, 0.0);
+        }
+        output[l.x + y * l.z + x * l.y + c * l.w] = yv;
+    }
+}
