@@ -56,7 +56,8 @@ pub struct GpuParams {
     pub radius: u32,
     pub clamp_negative: u32,
     pub tikhonov: u32,
-    pub _pad0: u32,
+    /// 1 when noisy and guides are f16.
+    pub input_f16: u32,
     pub eps_mul: f32,
     pub eps_add: f32,
     pub eps_tikhonov: f32,
@@ -90,9 +91,9 @@ impl GpuParams {
 pub enum GpuBuffer {
     /// [`GpuParams`], uniform.
     Params,
-    /// Noisy RGB, f32, read-only storage.
+    /// Noisy RGB, f32 or f16 ([`InputFormat`]), read-only storage.
     Noisy,
-    /// Every guide channel, f32, read-only storage.
+    /// Every guide channel, f32 or f16, read-only storage.
     Guides,
     /// Frame reference, mean, scale and report counters.
     Stats,
@@ -131,12 +132,33 @@ pub struct Pass {
     pub workgroups: [u32; 3],
 }
 
+/// Sample format of the noisy and guide buffers (the output is always f32).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum InputFormat {
+    #[default]
+    F32,
+    /// IEEE half floats, read with `unpack2x16float` (core WGSL: no device
+    /// feature needed); halves the input bytes.
+    F16,
+}
+
+impl InputFormat {
+    fn bytes(self) -> u64 {
+        match self {
+            InputFormat::F32 => 4,
+            InputFormat::F16 => 2,
+        }
+    }
+}
+
 /// Where the inputs and the output live in their buffers (element layouts, as
 /// [`Layout`] for the CPU views). `guides[q]` is guide channel `q`'s layout
 /// (its `channel_stride` unused), in kernel order: normal x, y, z, depth,
 /// position x, y, z, AO, user channels — those of the configured guide set.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct GpuLayouts {
+    /// Sample format of `noisy` and `guides`.
+    pub input: InputFormat,
     pub noisy: Layout,
     pub guides: [Layout; GPU_MAX_GUIDES],
     pub output: Layout,
@@ -144,11 +166,11 @@ pub struct GpuLayouts {
 
 impl GpuLayouts {
     /// Tightly packed planes: noisy R, G, B; guide channels one after another;
-    /// output R, G, B (what `lrdenoise-gpu` uploads).
-    pub fn planar(width: usize, height: usize) -> Self {
+    /// output R, G, B (what `lrdenoise-gpu` uploads); inputs in `input` format.
+    pub fn planar(width: usize, height: usize, input: InputFormat) -> Self {
         let pl = Layout::planar(width, height);
         let n = width * height;
-        GpuLayouts { noisy: pl, guides: core::array::from_fn(|q| Layout { offset: q * n, ..pl }), output: pl }
+        GpuLayouts { input, noisy: pl, guides: core::array::from_fn(|q| Layout { offset: q * n, ..pl }), output: pl }
     }
 }
 
@@ -268,7 +290,7 @@ impl GpuPlan {
             radius: self.taps.radius as u32,
             clamp_negative: self.cfg.clamp_negative as u32,
             tikhonov,
-            _pad0: 0,
+            input_f16: (layouts.input == InputFormat::F16) as u32,
             eps_mul: eps_mul as f32,
             eps_add: eps_add as f32,
             eps_tikhonov: eps_t as f32,
@@ -288,18 +310,20 @@ impl GpuPlan {
         let bad = Error::Unsupported("a layout addresses more than 2^32 elements");
         let noisy = extent(&layouts.noisy, w, h, 3).ok_or(bad)?;
         let output = extent(&layouts.output, w, h, 3).ok_or(bad)?;
-        let mut guides = 1; // a zero-sized binding is not allowed: at least one element
+        let mut guides = 2; // a zero-sized binding is not allowed: at least one word
         for l in &layouts.guides[..self.q] {
             guides = guides.max(extent(l, w, h, 1).ok_or(bad)?);
         }
+        // input bytes, rounded up to whole 32-bit words
+        let input = |elements: u64| (elements * layouts.input.bytes()).next_multiple_of(4);
         let cells = (self.cells_x * self.cells_y) as u64;
         let grid = cells * moment_count(self.q) as u64 * 4;
         let d = |buffer, binding, access, bytes| BufferDesc { buffer, binding, access, bytes };
         use Access::*;
         Ok([
             d(GpuBuffer::Params, 0, Uniform, core::mem::size_of::<GpuParams>() as u64),
-            d(GpuBuffer::Noisy, 1, ReadOnlyStorage, noisy * 4),
-            d(GpuBuffer::Guides, 2, ReadOnlyStorage, guides * 4),
+            d(GpuBuffer::Noisy, 1, ReadOnlyStorage, input(noisy)),
+            d(GpuBuffer::Guides, 2, ReadOnlyStorage, input(guides)),
             d(GpuBuffer::Stats, 3, ReadWriteStorage, STATS_BYTES),
             d(GpuBuffer::Cells, 4, ReadWriteStorage, grid),
             d(GpuBuffer::Tmp, 5, ReadWriteStorage, grid),

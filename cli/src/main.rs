@@ -114,6 +114,9 @@ enum Cmd {
         /// Frame size the dispatch description is written for
         #[arg(long, default_value = "1920x1080")]
         size: String,
+        /// Describe f16 noisy and guide buffers (default f32)
+        #[arg(long)]
+        f16_inputs: bool,
         #[command(flatten)]
         flr: FlrArgs,
     },
@@ -361,8 +364,8 @@ fn parse_size(size: &str) -> Result<(usize, usize), String> {
 
 /// `lrd shaders`: the shader module in four languages plus `dispatch.md`, the
 /// buffers, bindings, passes and parameter block for one frame size.
-fn shaders(out: &Path, size: &str, flr: &FlrArgs) -> Result<(), String> {
-    use lrdenoise::gpu::{GpuLayouts, GpuPlan};
+fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Result<(), String> {
+    use lrdenoise::gpu::{GpuLayouts, GpuPlan, InputFormat};
     let (w, h) = parse_size(size)?;
     // a frame with every guide, so the guide set is --guides (default normal,depth,ao)
     let probe = Inputs {
@@ -386,12 +389,13 @@ fn shaders(out: &Path, size: &str, flr: &FlrArgs) -> Result<(), String> {
     write("flr.spv", &le_bytes(&s.spirv))?;
     write("flr.metal", s.msl.as_bytes())?;
     write("flr.hlsl", s.hlsl.as_bytes())?;
-    let layouts = GpuLayouts::planar(w, h);
+    let input = if f16_inputs { InputFormat::F16 } else { InputFormat::F32 };
+    let layouts = GpuLayouts::planar(w, h, input);
     let params = plan.params(&layouts).map_err(|e| e.to_string())?;
     let mut md = format!(
         "# FLR dispatch for {w}x{h}, {} ({} guide channels)\n\n\
          One bind group for every pass; binding i = the i-th buffer below. Inputs planar f32 \
-         (GpuLayouts::planar); other layouts: set the offsets and strides of the parameter block \
+         ({input:?} inputs, GpuLayouts::planar); other layouts: set the offsets and strides of the parameter block \
          (lrdenoise::gpu::GpuPlan::params).\n\n| binding | buffer | access | bytes |\n|---:|---|---|---:|\n",
         methods::flag_line(&cfg),
         plan.guide_channels()
@@ -557,7 +561,7 @@ fn run(cli: Cli) -> Result<(), String> {
             advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads))?
         }
         Cmd::Bench { method, size, threads, runs, flr, frame } => bench(&method, &size, threads, runs, &flr, frame.as_deref())?,
-        Cmd::Shaders { out, size, flr } => shaders(&out, &size, &flr)?,
+        Cmd::Shaders { out, size, f16_inputs, flr } => shaders(&out, &size, f16_inputs, &flr)?,
         Cmd::Demo { output, threads } => {
             let d = data_dir()?;
             let mut frames = list_frames(std::slice::from_ref(&d))?;

@@ -279,6 +279,10 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
     assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), 512);
     let md = std::fs::read_to_string(dir.join("dispatch.md")).unwrap();
     assert!(md.contains("640x360") && md.contains("| `moments` | 80 x 45 x 1 |") && md.contains("(4 guide channels)"), "{md}");
+    let dir16 = tmp("shaders16");
+    let (ok, _, e) = lrd(&["shaders", "--out", dir16.to_str().unwrap(), "--f16-inputs"]);
+    assert!(ok, "{e}");
+    assert!(std::fs::read_to_string(dir16.join("dispatch.md")).unwrap().contains("F16 inputs"));
     for f in ["flr.wgsl", "flr.metal", "flr.hlsl"] {
         assert!(std::fs::read_to_string(dir.join(f)).unwrap().contains("apply"), "{f}");
     }

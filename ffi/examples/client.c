@@ -196,7 +196,7 @@ int main(int argc, char **argv) {
 
     /* The GPU path: what an engine needs to run the compute shaders itself. */
     LrdGpuDispatch gpu;
-    CHECK(lrd_gpu_dispatch(&cfg, W, H, &gpu));
+    CHECK(lrd_gpu_dispatch(&cfg, W, H, LRD_FORMAT_F32, &gpu));
     printf("GPU: %zu bytes of WGSL; passes:", strlen(lrd_gpu_wgsl()));
     for (int i = 0; i < 7; i++)
         printf(" %s %ux%u", gpu.passes[i].entry, gpu.passes[i].workgroups[0], gpu.passes[i].workgroups[1]);

@@ -327,9 +327,9 @@ typedef struct LrdGpuPass {
 
 /**
  * How to run FLR's compute shaders (`lrd_gpu_wgsl`, or the SPIR-V/MSL/HLSL of
- * `lrd shaders`) for one frame size with planar f32 buffers: noisy R, G, B
+ * `lrd shaders`) for one frame size with planar buffers: noisy R, G, B
  * planes; guide channels one plane each (normal x, y, z, depth, position x,
- * y, z, AO, user, those configured); output R, G, B planes. Every pass uses
+ * y, z, AO, user, those configured), f32 or f16; output R, G, B f32 planes. Every pass uses
  * one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
  * noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
  * output (read-write storage). Run the seven passes in order with a storage
@@ -424,11 +424,13 @@ LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
 
 /**
  * Fills `out` with the GPU dispatch description of `config` for
- * `width`×`height` frames (at most 8 guide channels, no upsampling).
+ * `width`×`height` frames (at most 8 guide channels, no upsampling), with
+ * noisy and guide buffers in `input_format` (LRD_FORMAT_F32 or LRD_FORMAT_F16).
  */
 LrdStatus lrd_gpu_dispatch(const struct LrdFlrConfig *config,
                            uint32_t width,
                            uint32_t height,
+                           uint32_t input_format,
                            struct LrdGpuDispatch *out);
 
 /**

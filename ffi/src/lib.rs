@@ -656,9 +656,9 @@ pub struct LrdGpuPass {
 }
 
 /// How to run FLR's compute shaders (`lrd_gpu_wgsl`, or the SPIR-V/MSL/HLSL of
-/// `lrd shaders`) for one frame size with planar f32 buffers: noisy R, G, B
+/// `lrd shaders`) for one frame size with planar buffers: noisy R, G, B
 /// planes; guide channels one plane each (normal x, y, z, depth, position x,
-/// y, z, AO, user, those configured); output R, G, B planes. Every pass uses
+/// y, z, AO, user, those configured), f32 or f16; output R, G, B f32 planes. Every pass uses
 /// one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
 /// noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
 /// output (read-write storage). Run the seven passes in order with a storage
@@ -674,17 +674,29 @@ pub struct LrdGpuDispatch {
 }
 
 /// Fills `out` with the GPU dispatch description of `config` for
-/// `width`×`height` frames (at most 8 guide channels, no upsampling).
+/// `width`×`height` frames (at most 8 guide channels, no upsampling), with
+/// noisy and guide buffers in `input_format` (LRD_FORMAT_F32 or LRD_FORMAT_F16).
 #[cfg(feature = "flr")]
 #[no_mangle]
-pub unsafe extern "C" fn lrd_gpu_dispatch(config: *const LrdFlrConfig, width: u32, height: u32, out: *mut LrdGpuDispatch) -> LrdStatus {
-    use lrdenoise_core::gpu::{GpuLayouts, GpuPlan};
+pub unsafe extern "C" fn lrd_gpu_dispatch(
+    config: *const LrdFlrConfig,
+    width: u32,
+    height: u32,
+    input_format: u32,
+    out: *mut LrdGpuDispatch,
+) -> LrdStatus {
+    use lrdenoise_core::gpu::{GpuLayouts, GpuPlan, InputFormat};
     guard(|| {
+        let input = match input_format {
+            0 => InputFormat::F32,
+            1 => InputFormat::F16,
+            _ => return Err(LRD_STATUS_INVALID_ARGUMENT),
+        };
         // SAFETY: checked for NULL; the caller passes a valid config pointer.
         let c = unsafe { config.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
         let (w, h) = (width as usize, height as usize);
         let plan = GpuPlan::new(self::config(c)?, w, h).map_err(status_of)?;
-        let layouts = GpuLayouts::planar(w, h);
+        let layouts = GpuLayouts::planar(w, h, input);
         let params = plan.params(&layouts).map_err(status_of)?;
         let buffers = plan.buffers(&layouts).map_err(status_of)?;
         let names = [c"reference", c"moments", c"finish_stats", c"blur_rows", c"blur_cols", c"solve", c"apply"];

@@ -126,10 +126,10 @@ fn gpu_dispatch_description() {
     use lrdenoise_core::gpu::{GpuLayouts, GpuPlan};
     let cfg = lrd_flr_config_default();
     let mut d = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
-    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, d.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, 0, d.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
     let d = unsafe { d.assume_init() };
     let plan = GpuPlan::new(lrdenoise_core::FlrConfig::default(), 100, 70).unwrap();
-    let layouts = GpuLayouts::planar(100, 70);
+    let layouts = GpuLayouts::planar(100, 70, lrdenoise_core::gpu::InputFormat::F32);
     for (c, r) in d.passes.iter().zip(plan.passes()) {
         assert_eq!(unsafe { CStr::from_ptr(c.entry) }.to_str().unwrap(), r.entry);
         assert_eq!(c.workgroups, r.workgroups);
@@ -142,14 +142,19 @@ fn gpu_dispatch_description() {
     assert_eq!(wgsl, lrdenoise_core::gpu::FLR_WGSL);
     // errors
     let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
-    assert_eq!(unsafe { lrd_gpu_dispatch(null(), 100, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_NULL_POINTER);
-    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, null_mut()) }, LrdStatus::LRD_STATUS_NULL_POINTER);
-    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 0, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+    assert_eq!(unsafe { lrd_gpu_dispatch(null(), 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_NULL_POINTER);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, 0, null_mut()) }, LrdStatus::LRD_STATUS_NULL_POINTER);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 0, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, 7, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+    let mut f16 = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, 1, f16.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let f16 = unsafe { f16.assume_init() };
+    assert_eq!(f16.buffer_bytes[1] * 2, d.buffer_bytes[1], "f16 noisy buffer is half the f32 one");
     let mut up = cfg;
     up.upsample = 2;
-    assert_eq!(unsafe { lrd_gpu_dispatch(&up, 100, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_UNSUPPORTED);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&up, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_UNSUPPORTED);
     let mut many = cfg;
     many.guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION | LRD_GUIDE_AO;
     many.user_guides = 2;
-    assert_eq!(unsafe { lrd_gpu_dispatch(&many, 100, 70, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_CONFIG);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&many, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_CONFIG);
 }

@@ -24,7 +24,7 @@
 //! # Ok::<(), lrdenoise_gpu::GpuError>(())
 //! ```
 
-use lrdenoise::gpu::{Access, GpuLayouts, GpuPlan, FLR_WGSL};
+use lrdenoise::gpu::{Access, GpuLayouts, GpuPlan, InputFormat, FLR_WGSL};
 use lrdenoise::{Arg, Error, FlrConfig, Frame, ImageViewMut, Report};
 use std::fmt;
 
@@ -75,9 +75,12 @@ pub struct GpuFlr {
     /// Binding order: params, noisy, guides, stats, cells, tmp, models, output.
     buffers: Vec<wgpu::Buffer>,
     readback: wgpu::Buffer,
-    /// Host staging of the planar inputs (reused).
+    /// Sample format of the uploaded inputs.
+    input: InputFormat,
+    /// Host staging of the planar inputs (reused); converted to f16 when `input` is.
     noisy: Vec<f32>,
     guides: Vec<f32>,
+    half: Vec<half::f16>,
 }
 
 /// Requests the default adapter and a device with default limits.
@@ -93,13 +96,19 @@ pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError>
 }
 
 impl GpuFlr {
-    /// Plans FLR and creates its pipelines and buffers on the default adapter.
+    /// Plans FLR and creates its pipelines and buffers on the default adapter
+    /// (inputs uploaded as f32).
     pub fn new(cfg: FlrConfig, width: usize, height: usize) -> Result<Self, GpuError> {
-        let (device, queue, name) = default_device()?;
-        Self::with_device(device, queue, name, cfg, width, height)
+        Self::with_input(cfg, width, height, InputFormat::F32)
     }
 
-    /// As [`GpuFlr::new`] on the caller's device (`adapter` is only a label).
+    /// As [`GpuFlr::new`], uploading the inputs in `input` format (f16: half the bytes).
+    pub fn with_input(cfg: FlrConfig, width: usize, height: usize, input: InputFormat) -> Result<Self, GpuError> {
+        let (device, queue, name) = default_device()?;
+        Self::with_device(device, queue, name, cfg, width, height, input)
+    }
+
+    /// As [`GpuFlr::with_input`] on the caller's device (`adapter` is only a label).
     pub fn with_device(
         device: wgpu::Device,
         queue: wgpu::Queue,
@@ -107,9 +116,10 @@ impl GpuFlr {
         cfg: FlrConfig,
         width: usize,
         height: usize,
+        input: InputFormat,
     ) -> Result<Self, GpuError> {
         let plan = GpuPlan::new(cfg, width, height)?;
-        let layouts = GpuLayouts::planar(width, height);
+        let layouts = GpuLayouts::planar(width, height, input);
         let params = plan.params(&layouts)?;
         let descs = plan.buffers(&layouts)?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -200,8 +210,10 @@ impl GpuFlr {
             bind_group,
             buffers,
             readback,
+            input,
             noisy: vec![0.0; 3 * width * height],
             guides: vec![0.0; q.max(1) * width * height],
+            half: Vec::new(),
         })
     }
 
@@ -229,7 +241,7 @@ impl GpuFlr {
     }
 
     /// The buffer bound at `binding` (see [`GpuPlan::buffers`]); inputs are
-    /// planar f32 ([`GpuLayouts::planar`]).
+    /// planar ([`GpuLayouts::planar`]) in this executor's [`InputFormat`].
     pub fn buffer(&self, binding: usize) -> Option<&wgpu::Buffer> {
         self.buffers.get(binding)
     }
@@ -263,10 +275,23 @@ impl GpuFlr {
                 v.read_row(y, 0, 0, &mut self.guides[q * plane + y * w..q * plane + (y + 1) * w]).ok_or(Error::GuideMismatch)?;
             }
         }
-        self.queue.write_buffer(&self.buffers[1], 0, bytemuck::cast_slice(&self.noisy));
         let q = self.plan.guide_channels();
-        if q > 0 {
-            self.queue.write_buffer(&self.buffers[2], 0, bytemuck::cast_slice(&self.guides[..q * plane]));
+        let (noisy, guides) = (&self.noisy[..], &self.guides[..q * plane]);
+        for (binding, values) in [(1, noisy), (2, guides)] {
+            if values.is_empty() {
+                continue;
+            }
+            match self.input {
+                InputFormat::F32 => self.queue.write_buffer(&self.buffers[binding], 0, bytemuck::cast_slice(values)),
+                InputFormat::F16 => {
+                    self.half.clear();
+                    self.half.extend(values.iter().map(|v| half::f16::from_f32(*v)));
+                    if self.half.len() % 2 == 1 {
+                        self.half.push(half::f16::ZERO); // whole 32-bit words
+                    }
+                    self.queue.write_buffer(&self.buffers[binding], 0, bytemuck::cast_slice(&self.half));
+                }
+            }
         }
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise flr") });

@@ -159,3 +159,39 @@ fn large_offsets() {
     let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
     check("offsets", cfg(set, 8), &f, set);
 }
+
+/// f16 input buffers: the GPU reads the halves the CPU reads from f16 views.
+#[test]
+fn f16_inputs() {
+    use half::f16;
+    let f = Owned::synthetic(75, 61, 11, 0.5);
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let c = cfg(set, 8);
+    let Some(mut g) = (match GpuFlr::with_input(c, f.w, f.h, gpu::InputFormat::F16) {
+        Err(GpuError::NoAdapter(_)) if std::env::var("LRD_REQUIRE_GPU").is_err() => None,
+        r => Some(r.unwrap()),
+    }) else {
+        eprintln!("SKIPPED: no GPU adapter");
+        return;
+    };
+    let h16 = |v: &[f32]| v.iter().map(|x| f16::from_f32(*x)).collect::<Vec<_>>();
+    let (noisy, normal, depth, ao) = (h16(&f.noisy), h16(&f.normal), h16(&f.depth), h16(&f.ao));
+    let (w, h) = (f.w, f.h);
+    fn view(d: &[f16], w: usize, h: usize, ch: usize) -> ImageView<'_> {
+        ImageView::f16(d, w, h, ch, Layout::interleaved(w, ch)).unwrap()
+    }
+    let guides = Guides {
+        normal: Some(view(&normal, w, h, 3)),
+        depth: Some(view(&depth, w, h, 1)),
+        ao: Some(view(&ao, w, h, 1)),
+        ..Default::default()
+    };
+    let frame = Frame::new(view(&noisy, w, h, 3), guides);
+    let (cpu, _) = run_frame(c, w, h, &frame);
+    let mut out = vec![0f32; 3 * w * h];
+    g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+    let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64;
+    let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
+    eprintln!("f16 inputs: mean {mean:.2e}");
+    assert!(mean < MEAN_TOL, "f16 inputs: {mean:.2e}");
+}

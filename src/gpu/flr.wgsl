@@ -8,8 +8,9 @@
 // Equation numbers are those of the FLR paper's appendix (eqs. 12–23).
 // Differences from the CPU path, all from f32 (WGSL has no f64): moments are
 // shifted to the frame reference and blurred in f32; the pivot floors are
-// scaled for f32's resolution (FLOOR_*). Guide and noisy samples are f32
-// storage buffers addressed with the same layouts as the CPU's image views.
+// scaled for f32's resolution (FLOOR_*). Guide and noisy samples are f32 or
+// f16 storage buffers addressed with the same layouts as the CPU's image
+// views (element units); the output is f32.
 
 const MAX_Q: u32 = 8u;
 const MAX_K: u32 = 72u; // moment count at Q = 8: 1 + 8 + 36 + 3 + 24
@@ -32,7 +33,8 @@ struct Params {
     radius: u32,
     clamp_negative: u32,
     tikhonov: u32,
-    _pad0: u32,
+    // 1: noisy and guides are f16 (two per u32, unpack2x16float); 0: f32
+    input_f16: u32,
     eps_mul: f32,
     eps_add: f32,
     eps_tikhonov: f32,
@@ -63,8 +65,9 @@ struct Stats {
 }
 
 @group(0) @binding(0) var<uniform> P: Params;
-@group(0) @binding(1) var<storage, read> noisy: array<f32>;
-@group(0) @binding(2) var<storage, read> guides: array<f32>;
+// f32 samples (bit patterns) or f16 pairs, per `input_f16`
+@group(0) @binding(1) var<storage, read> noisy: array<u32>;
+@group(0) @binding(2) var<storage, read> guides: array<u32>;
 @group(0) @binding(3) var<storage, read_write> stats: Stats;
 @group(0) @binding(4) var<storage, read_write> cells: array<f32>;
 @group(0) @binding(5) var<storage, read_write> tmp: array<f32>;
@@ -76,14 +79,29 @@ fn finite(v: f32) -> bool {
     return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
 }
 
+// Element `i` of a sample buffer word `w`: f32 bits, or half `i & 1` of an f16 pair.
+fn sample(w: u32, i: u32) -> f32 {
+    if P.input_f16 != 0u {
+        let v = unpack2x16float(w);
+        return select(v.x, v.y, (i & 1u) == 1u);
+    }
+    return bitcast<f32>(w);
+}
+
+fn word(i: u32) -> u32 {
+    return select(i, i >> 1u, P.input_f16 != 0u);
+}
+
 fn guide_at(q: u32, x: u32, y: u32) -> f32 {
     let l = P.guide[q];
-    return guides[l.x + y * l.z + x * l.y];
+    let i = l.x + y * l.z + x * l.y;
+    return sample(guides[word(i)], i);
 }
 
 fn noisy_at(c: u32, x: u32, y: u32) -> f32 {
     let l = P.noisy;
-    return noisy[l.x + y * l.z + x * l.y + c * l.w];
+    let i = l.x + y * l.z + x * l.y + c * l.w;
+    return sample(noisy[word(i)], i);
 }
 
 fn tap(o: u32) -> f32 {
