@@ -145,12 +145,16 @@ fn reference() {
 
 // ---------------------------------------------------------------------------
 // Stage 1: moments of one B×B block per workgroup (eq. 12), accumulated
-// relative to the block's first valid pixel, reduced in workgroup memory and
-// shifted to the frame reference. Pixels with a non-finite sample are left
-// out and counted.
+// relative to the block's first valid pixel and shifted to the frame
+// reference. The block's pixels are staged in workgroup memory 64 at a time
+// as [w, e_0..e_Q, y_0..y_2] (w = 1 valid, 0 excluded; e = g − m − r); then
+// invocation j sums moment j (and j + 64) over them: no reduction tree, two
+// barriers per 64 pixels. Pixels with a non-finite sample are left out and
+// counted.
+const PIX: u32 = 12u; // values staged per pixel: w, e[MAX_Q], y[3]
 var<workgroup> first_valid: atomic<u32>;
 var<workgroup> first_plain: u32;
-var<workgroup> red: array<f32, 64>;
+var<workgroup> pix: array<f32, 768>; // 64 pixels × PIX
 var<workgroup> sums: array<f32, 72>;
 
 fn pixel_valid(x: u32, y: u32) -> vec2<bool> {
@@ -165,12 +169,38 @@ fn pixel_valid(x: u32, y: u32) -> vec2<bool> {
     return vec2<bool>(ok_noisy, ok_guides);
 }
 
+// The two staged values whose product, summed, is moment `m` (cell layout).
+fn factors(m: u32) -> vec2<u32> {
+    let q = P.q;
+    if m == 0u || m >= P.k {
+        return vec2<u32>(0u, 0u); // n = Σ w·w
+    }
+    if m < off_ss() {
+        return vec2<u32>(0u, m); // s_a = Σ w·e_a
+    }
+    if m < off_t() {
+        var idx = off_ss();
+        for (var a = 0u; a < q; a++) {
+            if m < idx + q - a {
+                return vec2<u32>(1u + a, 1u + a + (m - idx)); // S_ab
+            }
+            idx += q - a;
+        }
+    }
+    if m < off_p() {
+        return vec2<u32>(0u, 1u + q + (m - off_t())); // t_c = Σ w·y_c
+    }
+    let j = m - off_p();
+    return vec2<u32>(1u + j / 3u, 1u + q + j % 3u); // P_ac
+}
+
 @compute @workgroup_size(64)
 fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let b = P.block;
     let x0 = wg.x * b;
     let y0 = wg.y * b;
     let k = P.k;
+    let q = P.q;
     if lid == 0u {
         atomicStore(&first_valid, NONE);
     }
@@ -207,83 +237,71 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
         }
         return;
     }
-    // block reference r (relative to the frame reference m)
+    // block reference r (relative to the frame reference)
     var r: array<f32, 8>;
-    for (var q = 0u; q < P.q; q++) {
-        r[q] = guide_at(q, x0 + first % b, y0 + first / b) - stats.reference[q];
+    for (var a = 0u; a < q; a++) {
+        r[a] = guide_at(a, x0 + first % b, y0 + first / b) - stats.reference[a];
     }
-    var acc: array<f32, 72>;
-    let s = off_s();
-    let ss = off_ss();
-    let t = off_t();
-    let p = off_p();
-    for (var i = lid; i < b * b; i += WG) {
+    let f0 = factors(lid);
+    let f1 = factors(lid + WG);
+    var acc0 = 0.0;
+    var acc1 = 0.0;
+    for (var base = 0u; base < b * b; base += WG) {
+        // stage 64 pixels
+        let i = base + lid;
         let x = x0 + i % b;
         let y = y0 + i / b;
-        if x >= P.width || y >= P.height {
-            continue;
+        let o = lid * PIX;
+        for (var v = 0u; v < PIX; v++) {
+            pix[o + v] = 0.0;
         }
-        let ok = pixel_valid(x, y);
-        if !(ok.x && ok.y) {
-            continue;
-        }
-        var e: array<f32, 8>;
-        for (var q = 0u; q < P.q; q++) {
-            e[q] = (guide_at(q, x, y) - stats.reference[q]) - r[q];
-        }
-        let yv = vec3<f32>(noisy_at(0u, x, y), noisy_at(1u, x, y), noisy_at(2u, x, y));
-        acc[0] += 1.0;
-        var idx = ss;
-        for (var a = 0u; a < P.q; a++) {
-            acc[s + a] += e[a];
-            for (var bb = a; bb < P.q; bb++) {
-                acc[idx] += e[a] * e[bb];
-                idx++;
-            }
-            for (var c = 0u; c < 3u; c++) {
-                acc[p + 3u * a + c] += e[a] * yv[c];
+        if i < b * b && x < P.width && y < P.height {
+            let ok = pixel_valid(x, y);
+            if ok.x && ok.y {
+                pix[o] = 1.0;
+                for (var a = 0u; a < q; a++) {
+                    pix[o + 1u + a] = (guide_at(a, x, y) - stats.reference[a]) - r[a];
+                }
+                for (var c = 0u; c < 3u; c++) {
+                    pix[o + 1u + q + c] = noisy_at(c, x, y);
+                }
             }
         }
-        for (var c = 0u; c < 3u; c++) {
-            acc[t + c] += yv[c];
-        }
-    }
-    // workgroup sum of every moment
-    for (var m = 0u; m < k; m++) {
-        red[lid] = acc[m];
         workgroupBarrier();
-        for (var stride = 32u; stride > 0u; stride /= 2u) {
-            if lid < stride {
-                red[lid] += red[lid + stride];
-            }
-            workgroupBarrier();
-        }
-        if lid == 0u {
-            sums[m] = red[0];
+        // moment lid (and lid + 64) over the staged pixels
+        for (var p = 0u; p < WG; p++) {
+            let pp = p * PIX;
+            acc0 += pix[pp + f0.x] * pix[pp + f0.y];
+            acc1 += pix[pp + f1.x] * pix[pp + f1.y];
         }
         workgroupBarrier();
     }
-    // moments about r → about the frame reference (store_shifted)
-    if lid == 0u {
-        let n = sums[0];
-        cells[cell] = n;
-        var idx = ss;
-        for (var a = 0u; a < P.q; a++) {
-            cells[cell + s + a] = sums[s + a] + n * r[a];
-            for (var bb = a; bb < P.q; bb++) {
-                cells[cell + idx] = sums[idx] + r[a] * sums[s + bb] + sums[s + a] * r[bb] + n * r[a] * r[bb];
-                idx++;
-            }
+    if lid < k {
+        sums[lid] = acc0;
+    }
+    if lid + WG < k {
+        sums[lid + WG] = acc1;
+    }
+    workgroupBarrier();
+    // moments about r → about the frame reference (store_shifted), one per invocation
+    let n = sums[0];
+    for (var m = lid; m < k; m += WG) {
+        let f = factors(m);
+        var v = sums[m];
+        if m == 0u || m >= off_t() && m < off_p() {
+            // n and t do not depend on the reference
+        } else if m < off_ss() {
+            v = sums[m] + n * r[m - 1u];
+        } else if m < off_t() {
+            let a = f.x - 1u;
+            let bb = f.y - 1u;
+            v = sums[m] + r[a] * sums[off_s() + bb] + sums[off_s() + a] * r[bb] + n * r[a] * r[bb];
+        } else {
+            let a = f.x - 1u;
+            let c = f.y - 1u - q;
+            v = sums[m] + r[a] * sums[off_t() + c];
         }
-        for (var c = 0u; c < 3u; c++) {
-            cells[cell + t + c] = sums[t + c];
-        }
-        for (var a = 0u; a < P.q; a++) {
-            for (var c = 0u; c < 3u; c++) {
-                let j = p + 3u * a + c;
-                cells[cell + j] = sums[j] + r[a] * sums[t + c];
-            }
-        }
+        cells[cell + m] = v;
     }
 }
 
