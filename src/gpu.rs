@@ -63,21 +63,26 @@ pub struct GpuParams {
     pub eps_tikhonov: f32,
     pub weight_norm: f32,
     pub min_weight: f32,
-    pub _pad1: [f32; 3],
+    /// Noisy and fit-guide resolution, and the block size there.
+    pub in_width: u32,
+    pub in_height: u32,
+    pub fit_block: u32,
     /// offset, pixel stride, row stride, channel stride (elements).
     pub noisy: [u32; 4],
     pub output: [u32; 4],
-    /// Per guide channel: offset, pixel stride, row stride, 0.
+    /// Per guide channel: offset, pixel stride, row stride, 0 (output resolution).
     pub guide: [[u32; 4]; GPU_MAX_GUIDES],
+    /// The same for the guides the moments are taken from (noisy resolution).
+    pub guide_fit: [[u32; 4]; GPU_MAX_GUIDES],
     pub taps: [f32; TAPS],
 }
 
 // SAFETY: `repr(C)`, only u32/f32 fields and arrays of them, 4-byte aligned
-// throughout with no padding (512 bytes: checked below); any bit pattern is valid.
+// throughout with no padding (640 bytes: checked below); any bit pattern is valid.
 unsafe impl bytemuck::Zeroable for GpuParams {}
 // SAFETY: as above.
 unsafe impl bytemuck::Pod for GpuParams {}
-const _: () = assert!(core::mem::size_of::<GpuParams>() == 512);
+const _: () = assert!(core::mem::size_of::<GpuParams>() == 640);
 
 impl GpuParams {
     /// The block's bytes, as the uniform buffer holds them.
@@ -155,22 +160,47 @@ impl InputFormat {
 /// [`Layout`] for the CPU views). `guides[q]` is guide channel `q`'s layout
 /// (its `channel_stride` unused), in kernel order: normal x, y, z, depth,
 /// position x, y, z, AO, user channels — those of the configured guide set.
+/// `guides` are at the output resolution (the model is applied to them);
+/// `guides_fit` (in the same buffer) are those the moments are taken from, at
+/// the noisy image's resolution: the same as `guides` unless upsampling or
+/// fitting on a separate guide set (the CPU's `Frame::guides_low`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct GpuLayouts {
     /// Sample format of `noisy` and `guides`.
     pub input: InputFormat,
+    /// At the noisy resolution (output size / upsample).
     pub noisy: Layout,
     pub guides: [Layout; GPU_MAX_GUIDES],
+    pub guides_fit: [Layout; GPU_MAX_GUIDES],
     pub output: Layout,
 }
 
 impl GpuLayouts {
     /// Tightly packed planes: noisy R, G, B; guide channels one after another;
     /// output R, G, B (what `lrdenoise-gpu` uploads); inputs in `input` format.
+    /// The guides are also the fit guides.
     pub fn planar(width: usize, height: usize, input: InputFormat) -> Self {
         let pl = Layout::planar(width, height);
         let n = width * height;
-        GpuLayouts { input, noisy: pl, guides: core::array::from_fn(|q| Layout { offset: q * n, ..pl }), output: pl }
+        let guides = core::array::from_fn(|q| Layout { offset: q * n, ..pl });
+        GpuLayouts { input, noisy: pl, guides, guides_fit: guides, output: pl }
+    }
+
+    /// As [`GpuLayouts::planar`] with a separate set of `q` fit guides at the
+    /// noisy resolution `in_width`×`in_height` (upsampling, or FLNR's two sets),
+    /// stored after the `q` output-resolution guide planes; noisy at the noisy
+    /// resolution.
+    pub fn planar_with_fit(width: usize, height: usize, in_width: usize, in_height: usize, q: usize, input: InputFormat) -> Self {
+        let pl = Layout::planar(width, height);
+        let low = Layout::planar(in_width, in_height);
+        let (n, nl) = (width * height, in_width * in_height);
+        GpuLayouts {
+            input,
+            noisy: low,
+            guides: core::array::from_fn(|c| Layout { offset: c * n, ..pl }),
+            guides_fit: core::array::from_fn(|c| Layout { offset: q * n + c * nl, ..low }),
+            output: pl,
+        }
     }
 }
 
@@ -180,6 +210,8 @@ pub struct GpuPlan {
     cfg: FlrConfig,
     width: usize,
     height: usize,
+    in_width: usize,
+    in_height: usize,
     cells_x: usize,
     cells_y: usize,
     q: usize,
@@ -197,17 +229,15 @@ fn extent(l: &Layout, width: usize, height: usize, channels: usize) -> Option<u6
 }
 
 impl GpuPlan {
-    /// Plans FLR for `width`×`height` frames. The GPU path takes at most
-    /// [`GPU_MAX_GUIDES`] guide channels and no upsampling (`upsample == 1`).
+    /// Plans FLR for `width`×`height` output frames (noisy input at
+    /// 1/`upsample` of that). The GPU path takes at most [`GPU_MAX_GUIDES`]
+    /// guide channels.
     pub fn new(cfg: FlrConfig, width: usize, height: usize) -> Result<Self, Error> {
         // The CPU plan validates the configuration and the size.
         let flr = crate::flr::Flr::new(cfg, width, height)?;
         let q = flr.guide_channels();
         if q > GPU_MAX_GUIDES {
             return Err(Error::TooManyGuides { got: q });
-        }
-        if cfg.upsample != 1 {
-            return Err(Error::Unsupported("the GPU path does not upsample (upsample must be 1)"));
         }
         let r = cfg.radius_cells();
         if r >= TAPS {
@@ -218,7 +248,8 @@ impl GpuPlan {
             Blur::Box { .. } => Taps::boxed(r),
         };
         let (cells_x, cells_y) = flr.cells();
-        let plan = GpuPlan { cfg, width, height, cells_x, cells_y, q, taps };
+        let (in_width, in_height) = flr.input_size();
+        let plan = GpuPlan { cfg, width, height, in_width, in_height, cells_x, cells_y, q, taps };
         let too_many = plan.passes().iter().any(|p| p.workgroups.iter().any(|&g| g as usize > MAX_GROUPS));
         if too_many || width * height * 3 >= u32::MAX as usize || cells_x * cells_y * moment_count(q) >= u32::MAX as usize {
             return Err(Error::Unsupported("frame too large for one GPU dispatch"));
@@ -226,9 +257,13 @@ impl GpuPlan {
         Ok(plan)
     }
 
-    /// Output (= input) size.
+    /// Output size.
     pub fn size(&self) -> (usize, usize) {
         (self.width, self.height)
+    }
+    /// Size of the noisy input and of the fit guides (output size / upsample, rounded up).
+    pub fn input_size(&self) -> (usize, usize) {
+        (self.in_width, self.in_height)
     }
     /// Guide channel count Q.
     pub fn guide_channels(&self) -> usize {
@@ -257,27 +292,26 @@ impl GpuPlan {
     /// The parameter block for these layouts; checks that every index fits u32.
     pub fn params(&self, layouts: &GpuLayouts) -> Result<GpuParams, Error> {
         let (w, h) = (self.width, self.height);
-        let bad = Error::Unsupported("a layout addresses more than 2^32 elements");
-        extent(&layouts.noisy, w, h, 3).ok_or(bad)?;
-        extent(&layouts.output, w, h, 3).ok_or(bad)?;
-        for l in &layouts.guides[..self.q] {
-            extent(l, w, h, 1).ok_or(bad)?;
-        }
+        self.buffers(layouts)?; // every layout fits u32
         let v = |l: &Layout| [l.offset as u32, l.pixel_stride as u32, l.row_stride as u32, l.channel_stride as u32];
         let (tikhonov, eps_mul, eps_add, eps_t) = match self.cfg.regularization {
             Regularization::Normalized { eps_mul, eps_add } => (0, eps_mul, eps_add, 0.0),
             Regularization::Tikhonov { eps } => (1, 0.0, 0.0, eps),
         };
         let b = self.cfg.block;
-        let total = (b * b) as f64 * self.taps.sum() * self.taps.sum();
+        let bin = b / self.cfg.upsample;
+        let total = (bin * bin) as f64 * self.taps.sum() * self.taps.sum();
         let mut taps = [0f32; TAPS];
         for (t, w) in taps.iter_mut().zip(&self.taps.w[..=self.taps.radius]) {
             *t = *w as f32;
         }
-        let mut guide = [[0u32; 4]; GPU_MAX_GUIDES];
-        for (g, l) in guide.iter_mut().zip(&layouts.guides).take(self.q) {
-            *g = [l.offset as u32, l.pixel_stride as u32, l.row_stride as u32, 0];
-        }
+        let guide_words = |ls: &[Layout; GPU_MAX_GUIDES]| {
+            let mut g = [[0u32; 4]; GPU_MAX_GUIDES];
+            for (g, l) in g.iter_mut().zip(ls).take(self.q) {
+                *g = [l.offset as u32, l.pixel_stride as u32, l.row_stride as u32, 0];
+            }
+            g
+        };
         Ok(GpuParams {
             width: w as u32,
             height: h as u32,
@@ -296,10 +330,13 @@ impl GpuPlan {
             eps_tikhonov: eps_t as f32,
             weight_norm: (1.0 / total) as f32,
             min_weight: (1e-12 * total) as f32,
-            _pad1: [0.0; 3],
+            in_width: self.in_width as u32,
+            in_height: self.in_height as u32,
+            fit_block: bin as u32,
             noisy: v(&layouts.noisy),
             output: v(&layouts.output),
-            guide,
+            guide: guide_words(&layouts.guides),
+            guide_fit: guide_words(&layouts.guides_fit),
             taps,
         })
     }
@@ -308,11 +345,12 @@ impl GpuPlan {
     pub fn buffers(&self, layouts: &GpuLayouts) -> Result<[BufferDesc; 8], Error> {
         let (w, h) = (self.width, self.height);
         let bad = Error::Unsupported("a layout addresses more than 2^32 elements");
-        let noisy = extent(&layouts.noisy, w, h, 3).ok_or(bad)?;
+        let (iw, ih) = (self.in_width, self.in_height);
+        let noisy = extent(&layouts.noisy, iw, ih, 3).ok_or(bad)?;
         let output = extent(&layouts.output, w, h, 3).ok_or(bad)?;
         let mut guides = 2; // a zero-sized binding is not allowed: at least one word
-        for l in &layouts.guides[..self.q] {
-            guides = guides.max(extent(l, w, h, 1).ok_or(bad)?);
+        for (map, fit) in layouts.guides.iter().zip(&layouts.guides_fit).take(self.q) {
+            guides = guides.max(extent(map, w, h, 1).ok_or(bad)?).max(extent(fit, iw, ih, 1).ok_or(bad)?);
         }
         // input bytes, rounded up to whole 32-bit words
         let input = |elements: u64| (elements * layouts.input.bytes()).next_multiple_of(4);

@@ -407,7 +407,7 @@ fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Result<()
     for p in plan.passes() {
         md += &format!("| `{}` | {} x {} x {} |\n", p.entry, p.workgroups[0], p.workgroups[1], p.workgroups[2]);
     }
-    md += "\nThe parameter block (binding 0, 512 bytes) for these layouts is `params.bin`.\n";
+    md += "\nThe parameter block (binding 0, 640 bytes) for these layouts is `params.bin`.\n";
     write("dispatch.md", md.as_bytes())?;
     write("params.bin", params.as_bytes())?;
     println!("wrote flr.wgsl, flr.spv, flr.metal, flr.hlsl, dispatch.md and params.bin to {}", out.display());
@@ -430,9 +430,9 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
         None => synthetic(w, h),
     };
     let mut b = Method::build(method, flr, &inputs, threads)?;
-    if let Method::FlrGpu(g) = &b.method {
+    if let Method::FlrGpu { gpu, .. } = &b.method {
         // lavapipe (a CPU rasteriser) is for correctness; its times mean nothing
-        println!("GPU adapter: {}; times include upload and readback", g.adapter_name());
+        println!("GPU adapter: {}; times include upload and readback", gpu.adapter_name());
     }
     let mut out = vec![0f32; w * h * 3];
     let (med, all) = time_method(&mut b.method, &inputs, &mut out, runs.max(5))?;

@@ -332,7 +332,10 @@ pub enum Method {
     /// A temporal pipeline (BMFR's or WALR's): every `run` is the next frame of a sequence.
     Temporal(Box<TemporalRunner>),
     /// FLR's compute shaders on the GPU (`--device gpu`).
-    FlrGpu(Box<lrdenoise_gpu::GpuFlr>),
+    FlrGpu {
+        gpu: Box<lrdenoise_gpu::GpuFlr>,
+        low: Option<Box<Inputs>>,
+    },
 }
 
 /// A method built for one frame: the runner, its table label and the flags
@@ -357,8 +360,10 @@ impl Method {
             "flr" if a.gpu()? => {
                 let cfg = a.config(inputs)?;
                 let gpu = lrdenoise_gpu::GpuFlr::new(cfg, w, h).map_err(|e| format!("flr --device gpu: {e}"))?;
+                let low = (cfg.upsample > 1).then(|| Box::new(inputs.subsample(cfg.upsample)));
                 let label = format!("{} gpu", label(&cfg));
-                Ok(Built { method: Method::FlrGpu(Box::new(gpu)), label, flags: format!("{} --device gpu", flag_line(&cfg)) })
+                let method = Method::FlrGpu { gpu: Box::new(gpu), low };
+                Ok(Built { method, label, flags: format!("{} --device gpu", flag_line(&cfg)) })
             }
             "flr" => {
                 let cfg = a.config(inputs)?;
@@ -422,13 +427,18 @@ impl Method {
             Method::Walr(r) => r.run(inputs, 0, out).map(|_| ()),
             Method::Flnr(r) => r.run(inputs, out),
             Method::Temporal(r) => r.run(inputs, out),
-            Method::FlrGpu(g) => {
-                let (w, h) = (inputs.w, inputs.h);
-                let set = g.plan().config().guides;
-                let noisy = lrdenoise::ImageView::interleaved(&inputs.noisy, w, h, 3).map_err(|e| e.to_string())?;
-                let frame = lrdenoise::Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
-                let mut ov = lrdenoise::ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
-                g.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
+            Method::FlrGpu { gpu, low } => {
+                let set = gpu.plan().config().guides;
+                let err = |e: lrdenoise::Error| e.to_string();
+                // as FlrRunner: with upsampling, noisy and fit guides come from the subsampled frame
+                let (src, guides_low) = match low.as_deref() {
+                    Some(l) => (l, Some(l.guides(&set).map_err(err)?)),
+                    None => (inputs, None),
+                };
+                let noisy = lrdenoise::ImageView::interleaved(&src.noisy, src.w, src.h, 3).map_err(err)?;
+                let frame = lrdenoise::Frame { noisy, guides: inputs.guides(&set).map_err(err)?, guides_low };
+                let mut ov = lrdenoise::ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(err)?;
+                gpu.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
             }
         }
     }

@@ -276,7 +276,7 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
     assert!(ok, "{e}");
     let spv = std::fs::read(dir.join("flr.spv")).unwrap();
     assert_eq!(&spv[..4], &0x0723_0203u32.to_le_bytes());
-    assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), 512);
+    assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), 640);
     let md = std::fs::read_to_string(dir.join("dispatch.md")).unwrap();
     assert!(md.contains("640x360") && md.contains("| `moments` | 80 x 45 x 1 |") && md.contains("(4 guide channels)"), "{md}");
     let dir16 = tmp("shaders16");
@@ -306,6 +306,15 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
         let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
         assert!(mean < 1e-4, "{name}: mean relative difference {mean:.2e}");
     }
+    // joint upsampling on the GPU: the same as on the CPU
+    let (cpu, gpu) = (tmp("cpu_up.exr"), tmp("gpu_up.exr"));
+    let room = data("room_7.exr");
+    assert!(lrd(&["denoise", &room, "-o", cpu.to_str().unwrap(), "--only-output", "--upsample", "2"]).0);
+    assert!(lrd(&["denoise", &room, "-o", gpu.to_str().unwrap(), "--only-output", "--upsample", "2", "--device", "gpu"]).0);
+    let (a, b) = (denoised(&cpu), denoised(&gpu));
+    let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
+    let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
+    assert!(mean < 1e-4, "upsample 2: mean relative difference {mean:.2e}");
     let (ok, so, e) = lrd(&["bench", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
     assert!(ok && so.contains("GPU adapter") && so.contains("median"), "{so}{e}");
 }

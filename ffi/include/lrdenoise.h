@@ -329,7 +329,10 @@ typedef struct LrdGpuPass {
  * How to run FLR's compute shaders (`lrd_gpu_wgsl`, or the SPIR-V/MSL/HLSL of
  * `lrd shaders`) for one frame size with planar buffers: noisy R, G, B
  * planes; guide channels one plane each (normal x, y, z, depth, position x,
- * y, z, AO, user, those configured), f32 or f16; output R, G, B f32 planes. Every pass uses
+ * y, z, AO, user, those configured), f32 or f16; output R, G, B f32 planes.
+ * With `upsample` > 1 the noisy planes are at the low resolution and the
+ * guide buffer holds, after the full-resolution guide planes, the same
+ * channels at the low resolution (what the moments are taken from). Every pass uses
  * one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
  * noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
  * output (read-write storage). Run the seven passes in order with a storage
@@ -344,7 +347,7 @@ typedef struct LrdGpuDispatch {
   /**
    * Contents of the uniform parameter block (binding 0).
    */
-  uint8_t params[512];
+  uint8_t params[640];
 } LrdGpuDispatch;
 
 #ifdef __cplusplus
@@ -424,7 +427,7 @@ LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
 
 /**
  * Fills `out` with the GPU dispatch description of `config` for
- * `width`×`height` frames (at most 8 guide channels, no upsampling), with
+ * `width`×`height` output frames (at most 8 guide channels), with
  * noisy and guide buffers in `input_format` (LRD_FORMAT_F32 or LRD_FORMAT_F16).
  */
 LrdStatus lrd_gpu_dispatch(const struct LrdFlrConfig *config,

@@ -658,7 +658,10 @@ pub struct LrdGpuPass {
 /// How to run FLR's compute shaders (`lrd_gpu_wgsl`, or the SPIR-V/MSL/HLSL of
 /// `lrd shaders`) for one frame size with planar buffers: noisy R, G, B
 /// planes; guide channels one plane each (normal x, y, z, depth, position x,
-/// y, z, AO, user, those configured), f32 or f16; output R, G, B f32 planes. Every pass uses
+/// y, z, AO, user, those configured), f32 or f16; output R, G, B f32 planes.
+/// With `upsample` > 1 the noisy planes are at the low resolution and the
+/// guide buffer holds, after the full-resolution guide planes, the same
+/// channels at the low resolution (what the moments are taken from). Every pass uses
 /// one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
 /// noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
 /// output (read-write storage). Run the seven passes in order with a storage
@@ -670,11 +673,11 @@ pub struct LrdGpuDispatch {
     /// Minimum size of each buffer in bytes, in binding order.
     pub buffer_bytes: [u64; 8],
     /// Contents of the uniform parameter block (binding 0).
-    pub params: [u8; 512],
+    pub params: [u8; 640],
 }
 
 /// Fills `out` with the GPU dispatch description of `config` for
-/// `width`×`height` frames (at most 8 guide channels, no upsampling), with
+/// `width`×`height` output frames (at most 8 guide channels), with
 /// noisy and guide buffers in `input_format` (LRD_FORMAT_F32 or LRD_FORMAT_F16).
 #[cfg(feature = "flr")]
 #[no_mangle]
@@ -696,14 +699,19 @@ pub unsafe extern "C" fn lrd_gpu_dispatch(
         let c = unsafe { config.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
         let (w, h) = (width as usize, height as usize);
         let plan = GpuPlan::new(self::config(c)?, w, h).map_err(status_of)?;
-        let layouts = GpuLayouts::planar(w, h, input);
+        let layouts = if c.upsample > 1 {
+            let (iw, ih) = plan.input_size();
+            GpuLayouts::planar_with_fit(w, h, iw, ih, plan.guide_channels(), input)
+        } else {
+            GpuLayouts::planar(w, h, input)
+        };
         let params = plan.params(&layouts).map_err(status_of)?;
         let buffers = plan.buffers(&layouts).map_err(status_of)?;
         let names = [c"reference", c"moments", c"finish_stats", c"blur_rows", c"blur_cols", c"solve", c"apply"];
         let mut d = LrdGpuDispatch {
             passes: [LrdGpuPass { entry: core::ptr::null(), workgroups: [0; 3] }; 7],
             buffer_bytes: [0; 8],
-            params: [0; 512],
+            params: [0; 640],
         };
         for ((dst, p), name) in d.passes.iter_mut().zip(plan.passes()).zip(names) {
             debug_assert_eq!(name.to_bytes(), p.entry.as_bytes());

@@ -150,9 +150,14 @@ fn gpu_dispatch_description() {
     assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, 1, f16.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
     let f16 = unsafe { f16.assume_init() };
     assert_eq!(f16.buffer_bytes[1] * 2, d.buffer_bytes[1], "f16 noisy buffer is half the f32 one");
+    // upsampling: noisy at half resolution, the low-resolution guides after the full ones
     let mut up = cfg;
     up.upsample = 2;
-    assert_eq!(unsafe { lrd_gpu_dispatch(&up, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_UNSUPPORTED);
+    assert_eq!(unsafe { lrd_gpu_dispatch(&up, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let up = unsafe { out.assume_init() };
+    assert_eq!(up.buffer_bytes[1], 50 * 35 * 3 * 4);
+    assert_eq!(up.buffer_bytes[2], 5 * (100 * 70 + 50 * 35) * 4);
+    let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
     let mut many = cfg;
     many.guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION | LRD_GUIDE_AO;
     many.user_guides = 2;

@@ -77,6 +77,10 @@ pub struct GpuFlr {
     readback: wgpu::Buffer,
     /// Sample format of the uploaded inputs.
     input: InputFormat,
+    /// Parameter blocks: [fit guides = output guides (upsample 1 only), separate fit guides].
+    params: [Option<lrdenoise::gpu::GpuParams>; 2],
+    /// Which of `params` the uniform buffer holds.
+    current: Option<usize>,
     /// Host staging of the planar inputs (reused); converted to f16 when `input` is.
     noisy: Vec<f32>,
     guides: Vec<f32>,
@@ -119,9 +123,13 @@ impl GpuFlr {
         input: InputFormat,
     ) -> Result<Self, GpuError> {
         let plan = GpuPlan::new(cfg, width, height)?;
-        let layouts = GpuLayouts::planar(width, height, input);
-        let params = plan.params(&layouts)?;
-        let descs = plan.buffers(&layouts)?;
+        let (iw, ih) = plan.input_size();
+        let q = plan.guide_channels();
+        // Buffers sized for a separate fit guide set (after the output-resolution
+        // guides); frames without one use the `planar` parameters instead.
+        let separate = GpuLayouts::planar_with_fit(width, height, iw, ih, q, input);
+        let params = [plan.params(&GpuLayouts::planar(width, height, input)).ok(), Some(plan.params(&separate)?)];
+        let descs = plan.buffers(&separate)?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("lrdenoise flr"),
@@ -199,8 +207,10 @@ impl GpuFlr {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Device(e.to_string()));
         }
-        queue.write_buffer(&buffers[0], 0, bytemuck::bytes_of(&params));
-        let q = plan.guide_channels();
+        let current = if params[0].is_some() { 0 } else { 1 };
+        if let Some(p) = params[current] {
+            queue.write_buffer(&buffers[0], 0, p.as_bytes());
+        }
         Ok(GpuFlr {
             device,
             queue,
@@ -211,8 +221,10 @@ impl GpuFlr {
             buffers,
             readback,
             input,
-            noisy: vec![0.0; 3 * width * height],
-            guides: vec![0.0; q.max(1) * width * height],
+            params,
+            current: Some(current),
+            noisy: vec![0.0; 3 * iw * ih],
+            guides: vec![0.0; q * (width * height + iw * ih)],
             half: Vec::new(),
         })
     }
@@ -241,18 +253,25 @@ impl GpuFlr {
     }
 
     /// The buffer bound at `binding` (see [`GpuPlan::buffers`]); inputs are
-    /// planar ([`GpuLayouts::planar`]) in this executor's [`InputFormat`].
+    /// planar in this executor's [`InputFormat`]: [`GpuLayouts::planar`] at
+    /// upsample 1 (until a frame with `guides_low` is denoised), else
+    /// [`GpuLayouts::planar_with_fit`].
     pub fn buffer(&self, binding: usize) -> Option<&wgpu::Buffer> {
         self.buffers.get(binding)
     }
 
     /// Denoises one frame: uploads it (any layout, f32 or f16, converted to
-    /// planar f32), runs the passes, waits and writes the result into `out`.
+    /// planar in this executor's input format), runs the passes, waits and
+    /// writes the result into `out`. As on the CPU, `frame.guides_low` is the
+    /// guide set the moments are taken from: at the noisy resolution when
+    /// upsampling (required then, unless no guides are configured), or a
+    /// second full-resolution set at upsample 1 (FLNR).
     pub fn denoise(&mut self, frame: &Frame<'_>, out: &mut ImageViewMut<'_>) -> Result<Report, GpuError> {
         let (w, h) = self.plan.size();
+        let (iw, ih) = self.plan.input_size();
         let n = &frame.noisy;
-        if (n.width(), n.height()) != (w, h) {
-            return Err(Error::SizeMismatch { arg: Arg::Noisy, expected: (w, h), got: (n.width(), n.height()) }.into());
+        if (n.width(), n.height()) != (iw, ih) {
+            return Err(Error::SizeMismatch { arg: Arg::Noisy, expected: (iw, ih), got: (n.width(), n.height()) }.into());
         }
         if n.channel_count() < 3 {
             return Err(Error::ChannelCount { arg: Arg::Noisy, expected: 3, got: n.channel_count() }.into());
@@ -260,23 +279,48 @@ impl GpuFlr {
         if out.width() != w || out.height() != h || out.channel_count() < 3 {
             return Err(Error::SizeMismatch { arg: Arg::Output, expected: (w, h), got: (out.width(), out.height()) }.into());
         }
-        if frame.guides_low.is_some() {
-            return Err(Error::Unsupported("the GPU path takes one guide set (no guides_low)").into());
+        let set = self.plan.config().guides;
+        let q = self.plan.guide_channels();
+        let map = frame.guides.channel_views(&set, w, h, Arg::Guide)?;
+        let fit = match (self.plan.config().upsample, &frame.guides_low) {
+            (1, None) => None,
+            (1, Some(low)) => Some(low.channel_views(&set, w, h, Arg::GuideLow)?),
+            (_, Some(low)) => Some(low.channel_views(&set, iw, ih, Arg::GuideLow)?),
+            (_, None) if q == 0 => None,
+            (_, None) => return Err(Error::Unsupported("upsampling needs guides_low at the noisy resolution").into()),
+        };
+        let mode = fit.is_some() as usize;
+        if self.current != Some(mode) {
+            let p = self.params[mode].ok_or(Error::Unsupported("upsampling needs guides_low at the noisy resolution"))?;
+            self.queue.write_buffer(&self.buffers[0], 0, p.as_bytes());
+            self.current = Some(mode);
         }
-        let views = frame.guides.channel_views(&self.plan.config().guides, w, h, Arg::Guide)?;
-        let plane = w * h;
-        for y in 0..h {
-            let (r, rest) = self.noisy.split_at_mut(plane);
-            let (g, b) = rest.split_at_mut(plane);
-            let row = y * w..(y + 1) * w;
-            n.read_row_n(y, 0, [&mut r[row.clone()], &mut g[row.clone()], &mut b[row.clone()]]).ok_or(Error::GuideMismatch)?;
-            for (q, v) in views.iter().take(self.plan.guide_channels()).enumerate() {
-                let v = v.ok_or(Error::GuideMismatch)?;
-                v.read_row(y, 0, 0, &mut self.guides[q * plane + y * w..q * plane + (y + 1) * w]).ok_or(Error::GuideMismatch)?;
+        let bad = Error::GuideMismatch;
+        let (plane, low) = (w * h, iw * ih);
+        let (noisy, guides) = (&mut self.noisy, &mut self.guides);
+        for y in 0..ih {
+            let (r, rest) = noisy.split_at_mut(low);
+            let (g, b) = rest.split_at_mut(low);
+            let row = y * iw..(y + 1) * iw;
+            n.read_row_n(y, 0, [&mut r[row.clone()], &mut g[row.clone()], &mut b[row.clone()]]).ok_or(bad)?;
+        }
+        let (map_planes, fit_planes) = guides.split_at_mut(q * plane);
+        for (c, v) in map.iter().take(q).enumerate() {
+            let v = v.ok_or(bad)?;
+            for y in 0..h {
+                v.read_row(y, 0, 0, &mut map_planes[c * plane + y * w..c * plane + (y + 1) * w]).ok_or(bad)?;
             }
         }
-        let q = self.plan.guide_channels();
-        let (noisy, guides) = (&self.noisy[..], &self.guides[..q * plane]);
+        if let Some(fit) = &fit {
+            for (c, v) in fit.iter().take(q).enumerate() {
+                let v = v.ok_or(bad)?;
+                for y in 0..ih {
+                    v.read_row(y, 0, 0, &mut fit_planes[c * low + y * iw..c * low + (y + 1) * iw]).ok_or(bad)?;
+                }
+            }
+        }
+        let used = if fit.is_some() { q * (plane + low) } else { q * plane };
+        let (noisy, guides) = (&self.noisy[..], &self.guides[..used]);
         for (binding, values) in [(1, noisy), (2, guides)] {
             if values.is_empty() {
                 continue;

@@ -139,8 +139,6 @@ fn shaders_translate() {
 fn plan_errors() {
     let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 2 };
     assert!(matches!(gpu::GpuPlan::new(cfg(set, 8), 64, 64), Err(Error::TooManyGuides { got: 10 })));
-    let up = FlrConfig { upsample: 2, ..cfg(GuideSet::NORMAL_DEPTH, 8) };
-    assert!(matches!(gpu::GpuPlan::new(up, 64, 64), Err(Error::Unsupported(_))));
     assert!(matches!(gpu::GpuPlan::new(cfg(GuideSet::NORMAL_DEPTH, 8), 0, 64), Err(Error::InvalidSize { .. })));
     assert!(gpu::GpuPlan::new(cfg(GuideSet::NORMAL_DEPTH, 1), 65536, 8).is_err());
 }
@@ -194,4 +192,64 @@ fn f16_inputs() {
     let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
     eprintln!("f16 inputs: mean {mean:.2e}");
     assert!(mean < MEAN_TOL, "f16 inputs: {mean:.2e}");
+}
+
+/// Joint denoise + upsample (noisy and fit guides at 1/2 and 1/4 resolution)
+/// and a separate full-resolution fit set (FLNR's X'_model): the GPU takes the
+/// moments from the same guides as the CPU.
+#[test]
+fn upsampling_and_separate_fit_guides() {
+    let f = Owned::synthetic(101, 67, 12, 0.5);
+    let (w, h) = (f.w, f.h);
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let every = |v: &[f32], c: usize, u: usize| -> Vec<f32> {
+        let (lw, lh) = (w.div_ceil(u), h.div_ceil(u));
+        (0..lw * lh * c).map(|i| v[((i / c / lw * u) * w + (i / c % lw) * u) * c + i % c]).collect()
+    };
+    fn iv(d: &[f32], w: usize, h: usize, c: usize) -> ImageView<'_> {
+        ImageView::interleaved(d, w, h, c).unwrap()
+    }
+    for u in [1, 2, 4] {
+        let (lw, lh) = (w.div_ceil(u), h.div_ceil(u));
+        // at u = 1: a second, different guide set to fit on
+        let shift = if u == 1 { 0.05 } else { 0.0 };
+        let noisy = every(&f.noisy, 3, u);
+        let normal = every(&f.normal, 3, u);
+        let depth: Vec<f32> = every(&f.depth, 1, u).iter().map(|d| d + shift).collect();
+        let ao = every(&f.ao, 1, u);
+        let low = Guides {
+            normal: Some(iv(&normal, lw, lh, 3)),
+            depth: Some(iv(&depth, lw, lh, 1)),
+            ao: Some(iv(&ao, lw, lh, 1)),
+            ..Default::default()
+        };
+        let frame = Frame { noisy: iv(&noisy, lw, lh, 3), guides: f.guides(set), guides_low: Some(low) };
+        let c = FlrConfig { upsample: u, ..cfg(set, 8) };
+        let (cpu, _) = run_frame(c, w, h, &frame);
+        let Some(mut g) = gpu(c, w, h) else { return };
+        let mut out = vec![0f32; 3 * w * h];
+        g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+        let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64;
+        let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
+        eprintln!("upsample {u}: mean {mean:.2e}");
+        assert!(mean < MEAN_TOL, "upsample {u}: {mean:.2e}");
+        // and the same executor still runs frames without a separate set at upsample 1
+        if u == 1 {
+            let plain = f.frame(set);
+            let (cpu, _) = run_frame(c, w, h, &plain);
+            g.denoise(&plain, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+            let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
+            assert!(mean < MEAN_TOL, "back to one guide set: {mean:.2e}");
+        }
+    }
+    // upsampling without low-resolution guides is refused, as on the CPU
+    let c = FlrConfig { upsample: 2, ..cfg(set, 8) };
+    let Some(mut g) = gpu(c, w, h) else { return };
+    let noisy = every(&f.noisy, 3, 2);
+    let frame = Frame::new(iv(&noisy, w.div_ceil(2), h.div_ceil(2), 3), f.guides(set));
+    let mut out = vec![0f32; 3 * w * h];
+    assert!(matches!(
+        g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()),
+        Err(GpuError::Config(Error::Unsupported(_)))
+    ));
 }

@@ -40,14 +40,20 @@ struct Params {
     eps_tikhonov: f32,
     weight_norm: f32,
     min_weight: f32,
-    _pad1: f32,
-    _pad2: f32,
-    _pad3: f32,
+    // noisy and fit-guide resolution (= width, height unless upsampling) and
+    // the block size there (block / upsample)
+    in_width: u32,
+    in_height: u32,
+    fit_block: u32,
     // offset, pixel stride, row stride, channel stride (elements)
     noisy: vec4<u32>,
     output: vec4<u32>,
-    // one per guide channel: offset, pixel stride, row stride, unused
+    // one per guide channel: offset, pixel stride, row stride, unused; `guide`
+    // at the output resolution (the model is applied to it), `guide_fit` at
+    // the noisy resolution (the moments are taken from it; = `guide` unless
+    // upsampling or a separate fit set)
     guide: array<vec4<u32>, 8>,
+    guide_fit: array<vec4<u32>, 8>,
     // blur taps w[0..=radius], four per vector
     taps: array<vec4<f32>, 17>,
 }
@@ -98,6 +104,12 @@ fn guide_at(q: u32, x: u32, y: u32) -> f32 {
     return sample(guides[word(i)], i);
 }
 
+fn fit_at(q: u32, x: u32, y: u32) -> f32 {
+    let l = P.guide_fit[q];
+    let i = l.x + y * l.z + x * l.y;
+    return sample(guides[word(i)], i);
+}
+
 fn noisy_at(c: u32, x: u32, y: u32) -> f32 {
     let l = P.noisy;
     let i = l.x + y * l.z + x * l.y + c * l.w;
@@ -124,7 +136,7 @@ fn reference() {
         var found = false;
         for (var sy = 0u; sy < 4u && !found; sy++) {
             for (var sx = 0u; sx < 4u && !found; sx++) {
-                let v = guide_at(q, (2u * sx + 1u) * P.width / 8u, (2u * sy + 1u) * P.height / 8u);
+                let v = fit_at(q, (2u * sx + 1u) * P.in_width / 8u, (2u * sy + 1u) * P.in_height / 8u);
                 if finite(v) {
                     r = v;
                     found = true;
@@ -164,7 +176,7 @@ fn pixel_valid(x: u32, y: u32) -> vec2<bool> {
     }
     var ok_guides = true;
     for (var q = 0u; q < P.q; q++) {
-        ok_guides = ok_guides && finite(guide_at(q, x, y));
+        ok_guides = ok_guides && finite(fit_at(q, x, y));
     }
     return vec2<bool>(ok_noisy, ok_guides);
 }
@@ -196,7 +208,7 @@ fn factors(m: u32) -> vec2<u32> {
 
 @compute @workgroup_size(64)
 fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let b = P.block;
+    let b = P.fit_block;
     let x0 = wg.x * b;
     let y0 = wg.y * b;
     let k = P.k;
@@ -208,7 +220,7 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
     for (var i = lid; i < b * b; i += WG) {
         let x = x0 + i % b;
         let y = y0 + i / b;
-        if x < P.width && y < P.height {
+        if x < P.in_width && y < P.in_height {
             let ok = pixel_valid(x, y);
             if ok.x && ok.y {
                 atomicMin(&first_valid, i);
@@ -240,7 +252,7 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
     // block reference r (relative to the frame reference)
     var r: array<f32, 8>;
     for (var a = 0u; a < q; a++) {
-        r[a] = guide_at(a, x0 + first % b, y0 + first / b) - stats.reference[a];
+        r[a] = fit_at(a, x0 + first % b, y0 + first / b) - stats.reference[a];
     }
     let f0 = factors(lid);
     let f1 = factors(lid + WG);
@@ -255,12 +267,12 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
         for (var v = 0u; v < PIX; v++) {
             pix[o + v] = 0.0;
         }
-        if i < b * b && x < P.width && y < P.height {
+        if i < b * b && x < P.in_width && y < P.in_height {
             let ok = pixel_valid(x, y);
             if ok.x && ok.y {
                 pix[o] = 1.0;
                 for (var a = 0u; a < q; a++) {
-                    pix[o + 1u + a] = (guide_at(a, x, y) - stats.reference[a]) - r[a];
+                    pix[o + 1u + a] = (fit_at(a, x, y) - stats.reference[a]) - r[a];
                 }
                 for (var c = 0u; c < 3u; c++) {
                     pix[o + 1u + q + c] = noisy_at(c, x, y);
