@@ -155,7 +155,7 @@ fn reference(b: &[u8], input: &[f32], w: usize, h: usize) -> Vec<f64> {
 
 #[test]
 fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
-    for (k, &(w, h)) in [(1, 1), (7, 3), (3, 7), (16, 16), (33, 17), (257, 2)].iter().enumerate() {
+    for (k, &(w, h)) in [(1, 1), (7, 3), (3, 7), (16, 16), (33, 17), (257, 2), (48, 20), (19, 9)].iter().enumerate() {
         for widths in [vec![3], vec![3, 5], vec![2, 4, 6], vec![4, 4, 4, 4, 4]] {
             let b = blob(5, 3, &widths, k as u64 + 1);
             let net = UNet::parse(&b).unwrap();

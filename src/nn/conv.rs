@@ -52,8 +52,11 @@ const OB: usize = 4;
 
 /// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `out` at
 /// least `cout` planes of the output size. Output rows are accumulated one at
-/// a time (they stay in L1) over every input channel and tap.
-pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32], act: Act) -> Result<(), Error> {
+/// a time (they stay in L1) over every input channel and tap. `split`: for a
+/// stride-2 layer, room for `cin · w · h` values where the input's rows are
+/// rearranged as [even columns | odd columns], so the taps become contiguous
+/// 8-pixel loads (without it, or for narrow rows, stride 2 runs per pixel).
+pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32], act: Act, split: &mut [f32]) -> Result<(), Error> {
     let (ow, oh) = d.out_size(w, h);
     let taps = d.cin * d.k * d.k;
     if input.len() < d.cin * w * h || out.len() < d.cout * ow * oh || d.params.len() != 2 * (d.cout * taps + d.cout) || taps > MAX_TAPS {
@@ -61,7 +64,25 @@ pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32],
     }
     let mut wts = [0f32; MAX_TAPS];
     let mut o_start = 0;
-    if d.k == 3 && d.stride == 1 && w >= 18 {
+    // Stride 2: the blocked lanes below run on the even/odd split rows.
+    let s2 = d.k == 3 && d.stride == 2 && w / 2 >= 9 && split.len() >= d.cin * w * h;
+    let (lanes_input, stride): (&[f32], usize) = if s2 {
+        let ew = w.div_ceil(2);
+        for (src, dst) in input[..d.cin * w * h].chunks_exact(w).zip(split.chunks_exact_mut(w)) {
+            let (even, odd) = dst.split_at_mut(ew);
+            for (x, v) in src.iter().enumerate() {
+                if x % 2 == 0 {
+                    even[x / 2] = *v;
+                } else {
+                    odd[x / 2] = *v;
+                }
+            }
+        }
+        (&split[..d.cin * w * h], 2)
+    } else {
+        (input, 1)
+    };
+    if d.k == 3 && ((d.stride == 1 && w >= 18) || s2) {
         // blocks of OB output channels in lanes
         let mut w4 = [[0f32; MAX_TAPS]; OB];
         while o_start + OB <= d.cout {
@@ -83,7 +104,7 @@ pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32],
                     *r = &mut p[y * ow..(y + 1) * ow];
                     r.fill(bias[b]);
                 }
-                conv3_rows_block(&w4, d.cin, input, w, h, y, &mut rows);
+                conv3_rows_block(&w4, d.cin, lanes_input, input, w, h, y, stride, bias, &mut rows);
                 for r in rows.iter_mut() {
                     activate(r, act);
                 }
@@ -177,40 +198,68 @@ fn activate(row: &mut [f32], act: Act) {
 }
 
 /// [`conv3_row_lanes`] for `OB` output channels at once: each 8-pixel load
-/// feeds `OB` accumulators.
+/// feeds `OB` accumulators. Stride 1 reads `input`; stride 2 reads `lanes`,
+/// the input with each row split into [even | odd] columns, where the taps of
+/// output pixel x are odd[x − 1], even[x], odd[x]. Pixels the lanes do not
+/// cover (the padded borders) are computed per pixel from `input`.
 #[allow(clippy::too_many_arguments)]
-fn conv3_rows_block(wts: &[[f32; MAX_TAPS]; OB], cin: usize, input: &[f32], w: usize, h: usize, y: usize, rows: &mut [&mut [f32]; OB]) {
+fn conv3_rows_block(
+    wts: &[[f32; MAX_TAPS]; OB],
+    cin: usize,
+    lanes: &[f32],
+    input: &[f32],
+    w: usize,
+    h: usize,
+    y: usize,
+    stride: usize,
+    bias: [f32; OB],
+    rows: &mut [&mut [f32]; OB],
+) {
     use wide::f32x8;
-    let src_rows: [Option<usize>; 3] = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
+    let sy = |ky: usize| (stride * y + ky).checked_sub(1).filter(|&r| r < h);
+    let src_rows: [Option<usize>; 3] = [sy(0), sy(1), sy(2)];
     let load = |s: &[f32], x: usize| -> f32x8 {
         let c: &[f32; 8] = s[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
         f32x8::from(*c)
     };
+    let ow = rows[0].len();
+    let ew = w.div_ceil(2);
+    // lanes cover x in 1..end: stride 1 needs x + 9 <= w, stride 2 odd[x + 7] (x + 8 <= w / 2)
+    let end = if stride == 1 { w - 1 } else { w / 2 };
     let mut x = 1;
-    while x + 9 <= w {
-        let mut acc = [f32x8::ZERO; OB];
-        for (a, r) in acc.iter_mut().zip(rows.iter()) {
-            *a = load(r, x);
-        }
+    let mut done = 1; // lanes have filled 1..done
+    while done < end && end >= 9 {
+        // the last group is shifted left to end at `end` (it recomputes a few
+        // pixels, bit-identically: every group starts from the bias)
+        x = x.min(end - 8);
+        let mut acc = bias.map(f32x8::splat);
         for i in 0..cin {
-            let src = &input[i * w * h..(i + 1) * w * h];
+            let src = &lanes[i * w * h..(i + 1) * w * h];
             for (ky, r) in src_rows.iter().enumerate() {
                 let Some(sy) = *r else { continue };
                 let srow = &src[sy * w..(sy + 1) * w];
                 let t = (i * 3 + ky) * 3;
-                let (v0, v1, v2) = (load(srow, x - 1), load(srow, x), load(srow, x + 1));
+                let (v0, v1, v2) = if stride == 1 {
+                    (load(srow, x - 1), load(srow, x), load(srow, x + 1))
+                } else {
+                    let (even, odd) = srow.split_at(ew);
+                    (load(odd, x - 1), load(even, x), load(odd, x))
+                };
                 for b in 0..OB {
                     let wb = &wts[b][t..t + 3];
-                    acc[b] += f32x8::splat(wb[0]) * v0 + f32x8::splat(wb[1]) * v1 + f32x8::splat(wb[2]) * v2;
+                    acc[b] = f32x8::splat(wb[0]).mul_add(v0, acc[b]);
+                    acc[b] = f32x8::splat(wb[1]).mul_add(v1, acc[b]);
+                    acc[b] = f32x8::splat(wb[2]).mul_add(v2, acc[b]);
                 }
             }
         }
         for (a, r) in acc.iter().zip(rows.iter_mut()) {
             r[x..x + 8].copy_from_slice(&a.to_array());
         }
+        done = x + 8;
         x += 8;
     }
-    for px in core::iter::once(0).chain(x..w) {
+    for px in core::iter::once(0).chain(done..ow) {
         for b in 0..OB {
             let mut a = rows[b][px];
             for i in 0..cin {
@@ -218,7 +267,7 @@ fn conv3_rows_block(wts: &[[f32; MAX_TAPS]; OB], cin: usize, input: &[f32], w: u
                 for (ky, r) in src_rows.iter().enumerate() {
                     let Some(sy) = *r else { continue };
                     for kx in 0..3 {
-                        let sx = px as isize + kx as isize - 1;
+                        let sx = (stride * px + kx) as isize - 1;
                         if sx >= 0 && (sx as usize) < w {
                             a += wts[b][(i * 3 + ky) * 3 + kx] * src[sy * w + sx as usize];
                         }

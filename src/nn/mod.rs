@@ -90,17 +90,18 @@ impl UNet<'_> {
         let (wa, wb) = rest.split_at_mut(rest.len() / 2);
         let mut layer = 0;
         // input block → s_0
-        conv(self.conv(layer)?, input, w, h, wa, Act::Leaky)?;
+        conv(self.conv(layer)?, input, w, h, wa, Act::Leaky, &mut [])?;
         layer += 1;
-        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, skip_store[0], Act::Leaky)?;
+        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, skip_store[0], Act::Leaky, &mut [])?;
         layer += 1;
         // encoder
         for l in 1..=levels {
             let (pw, ph) = level_size(w, h, l - 1);
             let (prev, cur) = skip_store.split_at_mut(l);
-            conv(self.conv(layer)?, prev[l - 1], pw, ph, wa, Act::Leaky)?;
+            conv(self.conv(layer)?, prev[l - 1], pw, ph, wa, Act::Leaky, &mut [])?;
             layer += 1;
-            conv(self.conv(layer)?, &wa[..c[l] * pw * ph], pw, ph, cur[0], Act::Leaky)?;
+            // stride 2: `wb` (free until the decoder) holds the even/odd split rows
+            conv(self.conv(layer)?, &wa[..c[l] * pw * ph], pw, ph, cur[0], Act::Leaky, wb)?;
             layer += 1;
         }
         // decoder: the current tensor lives in `wb` (or s_L at first)
@@ -112,18 +113,18 @@ impl UNet<'_> {
                 let low: &[f32] = if l == levels { &*skip_store[l] } else { &wb[..cur_c * lw * lh] };
                 concat_upsampled(low, cur_c, lw, lh, skip_store[l - 1], c[l - 1], sw, sh, wa)?;
             }
-            conv(self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sw * sh], sw, sh, wb, Act::Leaky)?;
+            conv(self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sw * sh], sw, sh, wb, Act::Leaky, &mut [])?;
             layer += 1;
             // second conv: wb → wa, then move back to wb for the next level
-            conv(self.conv(layer)?, &wb[..c[l - 1] * sw * sh], sw, sh, wa, Act::Leaky)?;
+            conv(self.conv(layer)?, &wb[..c[l - 1] * sw * sh], sw, sh, wa, Act::Leaky, &mut [])?;
             layer += 1;
             let k = c[l - 1] * sw * sh;
             wb[..k].copy_from_slice(&wa[..k]);
         }
         let cur: &[f32] = if levels == 0 { &*skip_store[0] } else { &wb[..c[0] * n] };
-        conv(self.conv(layer)?, cur, w, h, wa, Act::Leaky)?;
+        conv(self.conv(layer)?, cur, w, h, wa, Act::Leaky, &mut [])?;
         layer += 1;
-        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, out, Act::Sigmoid)?;
+        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, out, Act::Sigmoid, &mut [])?;
         Ok(())
     }
 }
