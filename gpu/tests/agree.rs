@@ -31,6 +31,13 @@ fn gpu(cfg: FlrConfig, w: usize, h: usize) -> Option<GpuFlr> {
     }
 }
 
+/// Mean and largest |gpu − cpu|, relative to the mean |cpu|.
+fn rel_diff(gpu: &[f32], cpu: &[f32]) -> (f64, f64) {
+    let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64 + 1e-6;
+    let d = || gpu.iter().zip(cpu).map(|(a, b)| (a - b).abs() as f64);
+    (d().sum::<f64>() / cpu.len() as f64 / scale, d().fold(0.0, f64::max) / scale)
+}
+
 /// Runs both paths; returns (mean, max) relative differences and both reports.
 fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(f64, f64, Report, Report)> {
     let mut g = gpu(cfg, f.w, f.h)?;
@@ -39,9 +46,7 @@ fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(f64, f64, Report
     let mut out = vec![0f32; 3 * f.w * f.h];
     let rep_gpu = g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap()).unwrap();
     assert!(out.iter().all(|v| v.is_finite()), "GPU output not finite");
-    let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64 + 1e-6;
-    let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
-    let max = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).fold(0.0, f64::max) / scale;
+    let (mean, max) = rel_diff(&out, &cpu);
     Some((mean, max, rep_cpu, rep_gpu))
 }
 
@@ -188,8 +193,7 @@ fn f16_inputs() {
     let (cpu, _) = run_frame(c, w, h, &frame);
     let mut out = vec![0f32; 3 * w * h];
     g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
-    let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64;
-    let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
+    let (mean, _) = rel_diff(&out, &cpu);
     eprintln!("f16 inputs: mean {mean:.2e}");
     assert!(mean < MEAN_TOL, "f16 inputs: {mean:.2e}");
 }
@@ -229,8 +233,7 @@ fn upsampling_and_separate_fit_guides() {
         let Some(mut g) = gpu(c, w, h) else { return };
         let mut out = vec![0f32; 3 * w * h];
         g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
-        let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64;
-        let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
+        let (mean, _) = rel_diff(&out, &cpu);
         eprintln!("upsample {u}: mean {mean:.2e}");
         assert!(mean < MEAN_TOL, "upsample {u}: {mean:.2e}");
         // and the same executor still runs frames without a separate set at upsample 1
@@ -238,7 +241,7 @@ fn upsampling_and_separate_fit_guides() {
             let plain = f.frame(set);
             let (cpu, _) = run_frame(c, w, h, &plain);
             g.denoise(&plain, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
-            let mean = out.iter().zip(&cpu).map(|(a, b)| (a - b).abs() as f64).sum::<f64>() / cpu.len() as f64 / scale;
+            let (mean, _) = rel_diff(&out, &cpu);
             assert!(mean < MEAN_TOL, "back to one guide set: {mean:.2e}");
         }
     }
