@@ -436,6 +436,9 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
     }
     let mut out = vec![0f32; w * h * 3];
     let (med, all) = time_method(&mut b.method, &inputs, &mut out, runs.max(5))?;
+    if let Method::FlrGpu { .. } = &b.method {
+        gpu_pass_times(&mut b.method, &inputs, &mut out, runs.max(5))?;
+    }
     let min = all.iter().copied().fold(f64::MAX, f64::min);
     let max = all.iter().copied().fold(0.0, f64::max);
     println!(
@@ -445,6 +448,27 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
         all.len(),
         (w * h) as f64 / med / 1e3
     );
+    Ok(())
+}
+
+/// Prints the shader time alone (timestamp queries: median per pass over `runs` frames).
+fn gpu_pass_times(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize) -> Result<(), String> {
+    let mut per_pass: Vec<Vec<f64>> = vec![Vec::new(); 7];
+    for _ in 0..runs {
+        m.run(inputs, out)?;
+        let Method::FlrGpu { gpu, .. } = &*m else { return Ok(()) };
+        let Some(t) = gpu.pass_times_ms() else {
+            println!("GPU time: the adapter has no timestamp queries");
+            return Ok(());
+        };
+        for (v, t) in per_pass.iter_mut().zip(t) {
+            v.push(t);
+        }
+    }
+    let med: Vec<f64> = per_pass.iter_mut().map(|v| evaluate::median(v)).collect();
+    let names = ["reference", "moments", "finish_stats", "blur_rows", "blur_cols", "solve", "apply"];
+    let parts: Vec<String> = names.iter().zip(&med).map(|(n, t)| format!("{n} {t:.3}")).collect();
+    println!("GPU time (timestamps, median of {runs}): {:.3} ms = {} ms", med.iter().sum::<f64>(), parts.join(" + "));
     Ok(())
 }
 

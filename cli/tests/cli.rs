@@ -316,5 +316,5 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
     let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
     assert!(mean < 1e-4, "upsample 2: mean relative difference {mean:.2e}");
     let (ok, so, e) = lrd(&["bench", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
-    assert!(ok && so.contains("GPU adapter") && so.contains("median"), "{so}{e}");
+    assert!(ok && so.contains("GPU adapter") && so.contains("median") && so.contains("GPU time"), "{so}{e}");
 }

@@ -81,11 +81,18 @@ pub struct GpuFlr {
     params: [Option<lrdenoise::gpu::GpuParams>; 2],
     /// Which of `params` the uniform buffer holds.
     current: Option<usize>,
+    /// Timestamp queries (two per pass) and their resolve buffer, when the device has them.
+    timer: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    /// GPU milliseconds of each pass of the last `denoise`.
+    pass_ms: Option<[f64; 7]>,
     /// Host staging of the planar inputs (reused); converted to f16 when `input` is.
     noisy: Vec<f32>,
     guides: Vec<f32>,
     half: Vec<half::f16>,
 }
+
+/// Timestamps written per frame: the beginning and end of each pass.
+const TIMESTAMPS: u32 = 14;
 
 /// Requests the default adapter and a device with default limits.
 pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError> {
@@ -94,8 +101,9 @@ pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError>
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
     let info = adapter.get_info();
     let name = format!("{} ({:?}, {:?})", info.name, info.device_type, info.backend);
-    let (device, queue) =
-        pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).map_err(|e| GpuError::Device(e.to_string()))?;
+    // timestamps where the adapter has them: per-pass GPU times (`GpuFlr::pass_times_ms`)
+    let desc = wgpu::DeviceDescriptor { required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY, ..Default::default() };
+    let (device, queue) = pollster::block_on(adapter.request_device(&desc)).map_err(|e| GpuError::Device(e.to_string()))?;
     Ok((device, queue, name))
 }
 
@@ -198,9 +206,23 @@ impl GpuFlr {
                 .collect::<Vec<_>>(),
         });
         let out_bytes = descs[7].bytes.next_multiple_of(4);
+        let timer = device.features().contains(wgpu::Features::TIMESTAMP_QUERY).then(|| {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("lrdenoise passes"),
+                ty: wgpu::QueryType::Timestamp,
+                count: TIMESTAMPS,
+            });
+            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("lrdenoise timestamps"),
+                size: TIMESTAMPS as u64 * 8,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            (set, resolve)
+        });
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("lrdenoise readback"),
-            size: out_bytes + lrdenoise::gpu::STATS_BYTES,
+            size: out_bytes + lrdenoise::gpu::STATS_BYTES + TIMESTAMPS as u64 * 8,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -223,10 +245,19 @@ impl GpuFlr {
             input,
             params,
             current: Some(current),
+            timer,
+            pass_ms: None,
             noisy: vec![0.0; 3 * iw * ih],
             guides: vec![0.0; q * (width * height + iw * ih)],
             half: Vec::new(),
         })
+    }
+
+    /// GPU time of each of the seven passes of the last [`GpuFlr::denoise`], in
+    /// milliseconds (timestamp queries; `None` where the device has none). Their
+    /// sum is the shader time alone, without upload, readback or submission.
+    pub fn pass_times_ms(&self) -> Option<[f64; 7]> {
+        self.pass_ms
     }
 
     /// The adapter's name, type and backend.
@@ -242,10 +273,15 @@ impl GpuFlr {
     /// Records the seven passes (on this executor's buffers) into `encoder`:
     /// for callers that fill the input buffers themselves ([`GpuFlr::buffer`]).
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
-        for (pipe, [x, y, z]) in &self.pipelines {
+        for (i, (pipe, [x, y, z])) in self.pipelines.iter().enumerate() {
             // one compute pass per stage: passes are ordered and their storage
             // writes visible to the next
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            let timestamp_writes = self.timer.as_ref().map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                query_set: set,
+                beginning_of_pass_write_index: Some(2 * i as u32),
+                end_of_pass_write_index: Some(2 * i as u32 + 1),
+            });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
             pass.set_pipeline(pipe);
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(*x, *y, *z);
@@ -343,6 +379,11 @@ impl GpuFlr {
         let out_bytes = self.buffers[7].size();
         enc.copy_buffer_to_buffer(&self.buffers[7], 0, &self.readback, 0, out_bytes);
         enc.copy_buffer_to_buffer(&self.buffers[3], 0, &self.readback, out_bytes, lrdenoise::gpu::STATS_BYTES);
+        let ts_at = out_bytes + lrdenoise::gpu::STATS_BYTES;
+        if let Some((set, resolve)) = &self.timer {
+            enc.resolve_query_set(set, 0..TIMESTAMPS, resolve, 0);
+            enc.copy_buffer_to_buffer(resolve, 0, &self.readback, ts_at, TIMESTAMPS as u64 * 8);
+        }
         self.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
         self.readback.map_async(wgpu::MapMode::Read, .., move |r| {
@@ -364,6 +405,12 @@ impl GpuFlr {
                     [&vals[row.clone()], &vals[plane + y * w..plane + (y + 1) * w], &vals[2 * plane + y * w..2 * plane + (y + 1) * w]],
                 )
                 .ok_or(Error::InvalidTile { index: y, count: h })?;
+            }
+            if self.timer.is_some() {
+                let ticks: &[u8] = &data[ts_at as usize..ts_at as usize + TIMESTAMPS as usize * 8];
+                let tick = |j: usize| u64::from_le_bytes(ticks[8 * j..8 * j + 8].try_into().unwrap_or([0; 8]));
+                let period = self.queue.get_timestamp_period() as f64; // ns per tick
+                self.pass_ms = Some(core::array::from_fn(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period * 1e-6));
             }
             self.plan.report(&data[out_bytes as usize..])
         };

@@ -45,6 +45,9 @@ fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(f64, f64, Report
     let (cpu, rep_cpu) = run_frame(cfg, f.w, f.h, &frame);
     let mut out = vec![0f32; 3 * f.w * f.h];
     let rep_gpu = g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap()).unwrap();
+    if let Some(t) = g.pass_times_ms() {
+        assert!(t.iter().all(|v| v.is_finite() && *v >= 0.0) && t.iter().sum::<f64>() > 0.0, "pass times {t:?}");
+    }
     assert!(out.iter().all(|v| v.is_finite()), "GPU output not finite");
     let (mean, max) = rel_diff(&out, &cpu);
     Some((mean, max, rep_cpu, rep_gpu))
