@@ -245,6 +245,27 @@ impl<'a> ImageView<'a> {
         Some(())
     }
 
+    /// The three single-channel views `a`, `b`, `c` as one 3-channel view, when
+    /// they are consecutive channels of the same samples (a normal or position
+    /// layer split by [`crate::Guides::channel_views`]), so that
+    /// [`ImageView::read_row_n`] can read them in one pass; `None` otherwise.
+    pub fn join3(a: &Self, b: &Self, c: &Self) -> Option<Self> {
+        let same = |v: &Self| match (a.samples, v.samples) {
+            (Samples::F32(x), Samples::F32(y)) => core::ptr::eq(x, y),
+            (Samples::F16(x), Samples::F16(y)) => core::ptr::eq(x, y),
+            _ => false,
+        };
+        let (la, lb, lc) = (a.layout, b.layout, c.layout);
+        let cs = la.channel_stride;
+        let ok = [b, c].iter().all(|v| same(v) && v.width == a.width && v.height == a.height && v.channels == 1)
+            && a.channels == 1
+            && [lb, lc].iter().all(|l| l.pixel_stride == la.pixel_stride && l.row_stride == la.row_stride && l.channel_stride == cs)
+            && Some(lb.offset) == la.offset.checked_add(cs)
+            && Some(lc.offset) == lb.offset.checked_add(cs);
+        // Channel 1 and 2 of the joined view are exactly `b` and `c`, both validated.
+        ok.then_some(ImageView { channels: 3, ..*a })
+    }
+
     /// One element, bounds-checked (slow path, for tests and tools).
     pub fn get(&self, x: usize, y: usize, c: usize) -> Option<f32> {
         let mut v = [0.0f32];

@@ -108,7 +108,7 @@ fn oracle(b: &Bmfr, f: &Owned, index: u32) -> Vec<f64> {
 #[test]
 fn matches_f64_oracle_without_noise() {
     let set = GuideSet { depth: true, user: 2, ..GuideSet::NONE };
-    for (w, h, block, index) in [(70, 50, 32, 0u32), (64, 64, 16, 5), (40, 33, 8, 11)] {
+    for (w, h, block, index) in [(70, 50, 32, 0u32), (64, 64, 16, 5), (40, 33, 8, 11), (45, 31, 12, 2), (30, 29, 9, 7)] {
         let f = random_guides(w, h, w as u64);
         let cfg = BmfrConfig { noise: 0.0, block, ..BmfrConfig::with_guides(set) };
         let b = Bmfr::new(cfg, w, h).unwrap();
@@ -400,4 +400,35 @@ proptest! {
         let e = rel_err(&scaled, &base);
         prop_assert!(e < tol, "scale {} offset {} light {}: {}", s, offset, l, e);
     }
+}
+
+/// Interleaved guides (read three channels at a time), planar guides and RGBA
+/// noisy input with a row padding give bit-identical output, mirrored borders
+/// included.
+#[test]
+fn input_layouts_give_identical_output() {
+    let f = Owned::synthetic(70, 45, 12, 0.5);
+    let (w, h, n) = (f.w, f.h, f.w * f.h);
+    let (want, _) = run(BmfrConfig::with_guides(NP), &f, 5);
+    let planar = |src: &[f32]| -> Vec<f32> { (0..3).flat_map(|c| (0..n).map(move |i| src[3 * i + c])).collect() };
+    let (pn, pp) = (planar(&f.normal), planar(&f.position));
+    // RGBA noisy with 3 padding floats at the end of each row
+    let rs = 4 * w + 3;
+    let mut rgba = vec![f32::NAN; rs * h];
+    for y in 0..h {
+        for x in 0..w {
+            rgba[y * rs + 4 * x..y * rs + 4 * x + 3].copy_from_slice(&f.noisy[3 * (y * w + x)..3 * (y * w + x) + 3]);
+        }
+    }
+    let noisy = ImageView::f32(&rgba, w, h, 3, Layout { offset: 0, pixel_stride: 4, row_stride: rs, channel_stride: 1 }).unwrap();
+    let guides = Guides {
+        normal: Some(ImageView::f32(&pn, w, h, 3, Layout::planar(w, h)).unwrap()),
+        position: Some(ImageView::f32(&pp, w, h, 3, Layout::planar(w, h)).unwrap()),
+        ..Default::default()
+    };
+    let b = Bmfr::new(BmfrConfig::with_guides(NP), w, h).unwrap();
+    let mut out = vec![0f32; 3 * n];
+    let mut scratch = vec![0f32; b.scratch_len()];
+    b.denoise(&Frame::new(noisy, guides), 5, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+    assert_eq!(out, want);
 }

@@ -2,7 +2,7 @@
 
 mod common;
 use common::Rng;
-use lrdenoise::kernels::qr::lstsq;
+use lrdenoise::kernels::qr::{lstsq, lstsq_ld, padded_ld};
 use proptest::prelude::*;
 
 /// Column-major rows × (m + k) matrix.
@@ -145,6 +145,28 @@ fn rank_deficient_blocks() {
     let (x, _) = p.solve(true);
     assert!(x.iter().all(|v| v.is_finite()));
     assert!(lstsq(&mut [0.0; 4], 2, 17, 1, 1e-4, true, &mut [0.0; 17]).is_none());
+}
+
+/// Columns `ld > rows` apart (padded off multiples of 4 KiB, as BMFR stores
+/// its blocks) give bit-identical results; the padding is never read.
+#[test]
+fn leading_dimension_does_not_change_the_result() {
+    for (rows, m, k) in [(1024, 10, 3), (81, 5, 3), (7, 3, 1), (1, 1, 1)] {
+        let p = Problem::random(rows, m, k, 9);
+        let ld = padded_ld(rows) + 3;
+        assert!(ld > rows && (ld * 4) % 4096 != 0);
+        for simd in [true, false] {
+            let mut padded = vec![f32::NAN; ld * (m + k)];
+            for c in 0..m + k {
+                padded[c * ld..c * ld + rows].copy_from_slice(p.col(c));
+            }
+            let mut x = vec![0f32; m * k];
+            let fit = lstsq_ld(&mut padded, ld, rows, m, k, 1e-4, simd, &mut x).unwrap();
+            let (want, dropped) = p.solve(simd);
+            assert_eq!((x, fit.dropped), (want, dropped), "{rows}x{m}x{k} simd {simd}");
+        }
+    }
+    assert!(lstsq_ld(&mut [0.0; 8], 3, 4, 1, 1, 1e-4, true, &mut [0.0]).is_none(), "ld < rows");
 }
 
 proptest! {

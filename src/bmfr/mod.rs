@@ -28,8 +28,8 @@ use crate::config::Kernel;
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
-use crate::kernels::qr::{lstsq, MAX_FEATURES};
-use features::{gather_block, Band, FeatureSet};
+use crate::kernels::qr::{lstsq_ld, MAX_FEATURES};
+use features::{apply_block, gather_block, Band, FeatureSet};
 
 pub use temporal::History;
 
@@ -229,12 +229,18 @@ impl Bmfr {
         Ok((a, b))
     }
 
-    /// f32 values of one worker's private buffer: one block's matrices, the
-    /// tile's input rows (3 + Q planes) and output rows (3 planes).
+    /// Blocks whose input pixels are read together (a chunk of about 256
+    /// pixels of a tile's rows: long enough row segments for the hardware
+    /// prefetchers, small enough, ≈ 300 KB for B = 32, to stay in L2 until
+    /// its blocks are fitted and applied).
+    fn chunk_blocks(&self) -> usize {
+        (256 / self.cfg.block).max(1)
+    }
+    /// f32 values of one worker's private buffer: one block's QR and model,
+    /// and a chunk's input pixels (3 + Q planes).
     pub fn worker_len(&self) -> usize {
         let b = self.cfg.block;
-        let stride = (self.width + b).div_ceil(b) * b;
-        features::worker_len(b * b, self.fs.count()) + Band::len(3 + self.fs.q, b, stride) + 3 * b * self.width
+        features::worker_len(b, self.fs.count()) + Band::len(3 + self.fs.q, b, b * self.chunk_blocks())
     }
     /// Scratch length (f32) for [`Bmfr::denoise`].
     pub fn scratch_len(&self) -> usize {
@@ -286,62 +292,60 @@ impl Bmfr {
         }
         let (x0, y0) = self.grid_origin(index);
         let b = self.cfg.block;
-        let (n, m, w) = (b * b, self.fs.count(), self.width);
+        let m = self.fs.count();
         let (bx_n, _) = self.block_grid(index);
-        let stride = bx_n * b;
-        let (blk, rest) = worker.split_at_mut(features::worker_len(n, m));
-        let (band, outp) = rest.split_at_mut(Band::len(3 + self.fs.q, b, stride));
-        let mut wb = features::Worker::split(blk, n, m).ok_or(Error::ScratchTooSmall { needed: self.worker_len(), got: 0 })?;
-        let mut band = Band { data: band, rows: b, stride };
+        let chunk = self.chunk_blocks();
+        let (blk, rest) = worker.split_at_mut(features::worker_len(b, m));
+        let mut wb = features::Worker::split(blk, b, m).ok_or(Error::ScratchTooSmall { needed: self.worker_len(), got: 0 })?;
         let ty0 = y0 + (t * b) as i64;
-        band.fill(frame, self.fs.q, (x0, ty0), self.height)?;
         let mut rep = Report::default();
-        let nrows = rows.1 - rows.0;
-        let outp = &mut outp[..3 * b * w];
-        for bx in 0..bx_n {
-            let origin = (x0 + (bx * b) as i64, ty0);
-            let block_id = (t * bx_n + bx) as u32;
-            rep += self.fit_block(&band, bx, index, block_id, origin, &mut wb, outp)?;
-        }
-        for r in 0..nrows {
-            let (pr, gb) = outp.split_at(b * w);
-            let (pg, pb) = gb.split_at(b * w);
-            let src = [&pr[r * w..(r + 1) * w], &pg[r * w..(r + 1) * w], &pb[r * w..(r + 1) * w]];
-            out_band.write_row_n(r, 0, src).ok_or(Error::InvalidTile { index: t, count: 0 })?;
+        for c0 in (0..bx_n).step_by(chunk) {
+            let blocks = chunk.min(bx_n - c0);
+            let mut band = Band { data: &mut rest[..Band::len(3 + self.fs.q, b, b * blocks)], rows: b, stride: b * blocks };
+            band.fill(frame, self.fs.q, (x0 + (c0 * b) as i64, ty0), self.height)?;
+            for k in 0..blocks {
+                let bx = c0 + k;
+                let origin = (x0 + (bx * b) as i64, ty0);
+                let block_id = (t * bx_n + bx) as u32;
+                rep += self.fit_block(&band, k, index, block_id, origin, &mut wb, rows.0, out_band)?;
+            }
         }
         Ok(rep)
     }
 
-    /// Fits block `bx` of the band and writes its pixels inside the image
-    /// into the tile's output planes (`3 × B × width`, rows from the tile's first
-    /// row inside the image).
+    /// Fits block `k` of the chunk in `band` (top-left pixel `origin`) and
+    /// writes its pixels inside the image into `out` (whose row 0 is image
+    /// row `row0`).
     #[allow(clippy::too_many_arguments)]
     fn fit_block(
         &self,
         band: &Band<'_>,
-        bx: usize,
+        k: usize,
         index: u32,
         block_id: u32,
         origin: (i64, i64),
         wb: &mut features::Worker<'_>,
-        outp: &mut [f32],
+        row0: usize,
+        out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
         let b = self.cfg.block;
-        let (n, m, w) = (b * b, self.fs.count(), self.width);
+        let (m, w) = (self.fs.count(), self.width);
         let simd = self.cfg.kernel == Kernel::Simd;
         let mut rep = Report::default();
-        let g = gather_block(&self.fs, band, bx, (w, self.height), origin, wb)?;
+        let g = gather_block(&self.fs, band, k, (w, self.height), origin, wb)?;
         rep.nonfinite_noisy += g.nonfinite_noisy;
         rep.nonfinite_guides += g.nonfinite_guides;
-        features::regularize(&self.fs, wb, n, self.cfg.noise, features::seed(index, block_id));
         let mut coef = [0f32; MAX_FEATURES * 3];
         if g.valid > 0 {
-            let fit = lstsq(wb.a, n, m, 3, self.cfg.pivot_tol, simd, &mut coef[..m * 3]).ok_or(Error::Unsupported("QR sizes"))?;
+            features::fit_matrix(&self.fs, band, k, &g, self.cfg.noise, features::seed(index, block_id), wb);
+            let fit =
+                lstsq_ld(wb.a, wb.ld, b * b, m, 3, self.cfg.pivot_tol, simd, &mut coef[..m * 3]).ok_or(Error::Unsupported("QR sizes"))?;
             rep.dropped_features += fit.dropped.count_ones() as u64;
         } else {
             rep.empty_blocks += 1;
         }
-        // Apply to the block's pixels inside the image.
+        let ld = wb.ld;
+        apply_block(&self.fs, band, k, &coef[..m * 3], &g, wb.guide_ok, self.cfg.clamp_negative, wb.model, ld);
         let xa = origin.0.max(0) as usize;
         let xb = ((origin.0 + b as i64).max(0) as usize).min(w);
         let ya = origin.1.max(0) as usize;
@@ -349,36 +353,15 @@ impl Bmfr {
         if xa >= xb {
             return Ok(rep);
         }
-        let len = xb - xa;
         let dx = (xa as i64 - origin.0) as usize;
-        // The model over the whole block (long vectorised loops), into the
-        // now free QR matrix; then the rows inside the image are copied out.
-        let (model, _) = wb.a.split_at_mut(3 * n);
-        for c in 0..3 {
-            let o = &mut model[c * n..(c + 1) * n];
-            o.fill(coef[c]);
-            for f in 1..m {
-                let wf = coef[f * 3 + c];
-                for (o, v) in o.iter_mut().zip(&wb.clean[f * n..(f + 1) * n]) {
-                    *o += wf * v;
-                }
-            }
-            let mean = g.mean[c];
-            let clamp = self.cfg.clamp_negative;
-            for (o, &ok) in o.iter_mut().zip(wb.guide_ok.iter()) {
-                let v = if ok != 0.0 { *o } else { mean };
-                let v = if clamp { v.max(0.0) } else { v };
-                *o = if v.abs() <= f32::MAX { v } else { 0.0 };
-            }
-        }
-        let row0 = ya; // first image row of this tile
+        let bad = Error::InvalidTile { index: block_id as usize, count: 0 };
+        let (p0, rest) = wb.model.split_at(ld);
+        let (p1, p2) = rest.split_at(ld);
         for y in ya..yb {
             let r0 = (y as i64 - origin.1) as usize * b + dx;
-            for c in 0..3 {
-                let o = c * b * w + (y - row0) * w;
-                outp[o + xa..o + xb].copy_from_slice(&model[c * n + r0..c * n + r0 + len]);
-            }
-            rep.fallback_pixels += wb.guide_ok[r0..r0 + len].iter().filter(|&&ok| ok == 0.0).count() as u64;
+            let r1 = r0 + (xb - xa);
+            out.write_row_n(y - row0, xa, [&p0[r0..r1], &p1[r0..r1], &p2[r0..r1]]).ok_or(bad)?;
+            rep.fallback_pixels += wb.guide_ok[r0..r1].iter().filter(|&&ok| ok == 0.0).count() as u64;
         }
         Ok(rep)
     }
