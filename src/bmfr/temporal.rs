@@ -17,7 +17,7 @@ use super::{Bmfr, Report};
 use crate::error::{Arg, Error};
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut, Layout, SamplesMut};
-use crate::reproject::{bilinear_taps, reproject3, rgb, ycocg};
+use crate::reproject::{bilinear_taps, clamp_box_row, floor, reproject3, rgb, ycocg};
 
 /// Settings of the temporal pipeline.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -103,7 +103,7 @@ impl Bmfr {
     }
     /// f32 values of the scratch for [`Bmfr::denoise_temporal`].
     pub fn temporal_scratch_len(&self) -> usize {
-        S_PLANES * self.plane() + 12 * self.width + self.worker_len()
+        S_PLANES * self.plane() + 15 * self.width + self.worker_len()
     }
 
     /// One frame of the temporal pipeline. `motion` (2 channels: previous −
@@ -135,7 +135,7 @@ impl Bmfr {
         }
         let (w, h, np) = (self.width, self.height, self.plane());
         let (planes, rest) = scratch.split_at_mut(S_PLANES * np);
-        let (rows, worker) = rest.split_at_mut(12 * w);
+        let (rows, worker) = rest.split_at_mut(15 * w);
         let index = history.frames;
         let mut rep = self.accumulate_noisy(&f, motion, history, planes, rows)?;
 
@@ -151,7 +151,7 @@ impl Bmfr {
             rep += Report { nonfinite_noisy: 0, ..r };
         }
         self.accumulate_filtered(history, planes);
-        self.taa(history, planes);
+        self.taa(history, planes, rows);
 
         // 5. commit the new state and write the output
         let hd = &mut *history.data;
@@ -326,44 +326,51 @@ impl Bmfr {
     }
 
     /// Stage 4: TAA with neighbourhood clamping in YCoCg → the TAA planes.
-    fn taa(&self, history: &History<'_>, planes: &mut [f32]) {
+    /// `rows`: 15 rows of scratch (three rows of YCoCg, rolling, and the
+    /// clamp box of the current row).
+    fn taa(&self, history: &History<'_>, planes: &mut [f32], rows: &mut [f32]) {
         let (w, h, np) = (self.width, self.height, self.plane());
         let hd = &*history.data;
         let alpha = self.cfg.temporal.taa_alpha;
         let (head, taa) = planes.split_at_mut(S_TAA * np);
         let filt = &head[S_FIT * np..(S_FIT + 3) * np];
         let at = |p: &[f32], i: usize| [p[i], p[np + i], p[2 * np + i]];
+        let (yc, boxes) = rows.split_at_mut(9 * w);
+        let (lo, hi) = boxes.split_at_mut(3 * w);
+        let to_ycocg = |y: usize, dst: &mut [f32]| {
+            for x in 0..w {
+                let v = ycocg(at(filt, y * w + x));
+                for c in 0..3 {
+                    dst[c * w + x] = v[c];
+                }
+            }
+        };
+        let clamping = history.frames > 0;
+        if clamping {
+            to_ycocg(0, &mut yc[3 * w..6 * w]);
+        }
         for y in 0..h {
+            if clamping {
+                // slot (y + k) % 3 holds row y − 1 + k … here: rows y − 1, y, y + 1
+                if y + 1 < h {
+                    to_ycocg(y + 1, &mut yc[((y + 2) % 3) * 3 * w..((y + 2) % 3 + 1) * 3 * w]);
+                }
+                let slot = |r: usize| &yc[(r % 3) * 3 * w..(r % 3 + 1) * 3 * w];
+                let above = (y > 0).then(|| slot(y));
+                let below = (y + 1 < h).then(|| slot(y + 2));
+                clamp_box_row(above, slot(y + 1), below, w, &mut lo[..3 * w], &mut hi[..3 * w]);
+            }
             for x in 0..w {
                 let i = y * w + x;
                 let cur = at(filt, i);
                 let (px, py) = (head[S_PREV * np + i], head[(S_PREV + 1) * np + i]);
-                let (fx, fy) = (libm::floorf(px), libm::floorf(py));
+                let (fx, fy) = (floor(px), floor(py));
                 let outside = !(fx >= -1.0 && fy >= -1.0 && fx < w as f32 && fy < h as f32);
                 let mut res = cur;
-                if history.frames > 0 && !outside {
-                    let (mut bmin, mut bmax) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-                    let (mut cmin, mut cmax) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-                    for dy in -1i64..=1 {
-                        for dx in -1i64..=1 {
-                            let (sx, sy) = (x as i64 + dx, y as i64 + dy);
-                            if sx < 0 || sy < 0 || sx >= w as i64 || sy >= h as i64 {
-                                continue;
-                            }
-                            let s = ycocg(at(filt, sy as usize * w + sx as usize));
-                            for c in 0..3 {
-                                bmin[c] = bmin[c].min(s[c]);
-                                bmax[c] = bmax[c].max(s[c]);
-                                if dx == 0 || dy == 0 {
-                                    cmin[c] = cmin[c].min(s[c]);
-                                    cmax[c] = cmax[c].max(s[c]);
-                                }
-                            }
-                        }
-                    }
+                if clamping && !outside {
                     if let Some(prev) = reproject3(&hd[H_TAA * np..], np, (w, h), (px, py), 0xF) {
                         let p = ycocg(prev);
-                        let clamped = [0, 1, 2].map(|c| p[c].clamp(0.5 * (bmin[c] + cmin[c]), 0.5 * (bmax[c] + cmax[c])));
+                        let clamped = [0, 1, 2].map(|c| p[c].max(lo[c * w + x]).min(hi[c * w + x]));
                         let prev = rgb(clamped);
                         res = [0, 1, 2].map(|c| alpha * cur[c] + (1.0 - alpha) * prev[c]);
                     }
