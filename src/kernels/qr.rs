@@ -292,7 +292,8 @@ fn triangularize_fused(a: &mut [f32], ld: usize, rows: usize, cols: usize, m: us
 /// the top `m` rows of the last `k` columns (the rest is workspace).
 /// (Tried and not kept, for 1024-row blocks on AMD EPYC: a TSQR over 256-row
 /// panels, 30 % slower; streaming 128-row panels through an L1-resident
-/// triangle, 12 % slower for the whole BMFR frame.) Pivots below
+/// triangle, 12 % slower for the whole BMFR frame; two reflections per pass
+/// in compact-WY form, halving the stores, no faster.) Pivots below
 /// `rel_tol × max|R_jj|` drop their feature.
 /// Returns `None` for inconsistent sizes (`rows < 1`, `m > 16`, `k > 3`, short slices).
 pub fn lstsq(a: &mut [f32], rows: usize, m: usize, k: usize, rel_tol: f32, simd: bool, x: &mut [f32]) -> Option<Fit> {
