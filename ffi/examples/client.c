@@ -194,6 +194,34 @@ int main(int argc, char **argv) {
     printf("FLR %dx%d: whole frame %.3f ms (best of 5, 1 thread), tiled %u tiles on 2 pthreads %.3f ms; identical\n",
            W, H, best, tiles, tiled_ms);
 
+    /* BMFR's temporal pipeline: caller-owned scratch and history, static camera
+       (motion NULL); the client's frame has normals and depth, no positions. */
+    {
+        LrdBmfrConfig bcfg = lrd_bmfr_config_default();
+        bcfg.guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH; /* features 1, n, d, d^2 */
+        LrdFrame bframe = frame;
+        memset(&bframe.guides.ao, 0, sizeof bframe.guides.ao);
+        size_t sbytes = 0, hbytes = 0;
+        CHECK(lrd_bmfr_temporal_sizes(&bcfg, W, H, &sbytes, &hbytes));
+        void *bscratch = malloc(sbytes), *hdata = malloc(hbytes);
+        float *bout = malloc(sizeof(float) * 3 * W * H);
+        if (!bscratch || !hdata || !bout) return 2;
+        LrdBmfrHistory hist = {hdata, hbytes, 0};
+        LrdImageMut bo = out;
+        bo.data = bout;
+        LrdReport brep;
+        memset(&brep, 0, sizeof brep);
+        for (int k = 0; k < 3; k++)
+            CHECK(lrd_bmfr_denoise_temporal(&bcfg, &bframe, NULL, &hist, &bo, bscratch, sbytes, &brep));
+        for (size_t i = 0; i < 3 * (size_t)W * H; i++)
+            if (!(bout[i] >= 0.0f && bout[i] < 1e30f)) return 6;
+        if (hist.frames != 3) return 6;
+        if (lrd_bmfr_denoise_temporal(&bcfg, &frame, NULL, &hist, &bo, bscratch, sbytes, NULL) != LRD_STATUS_GUIDE_MISMATCH) return 3;
+        printf("BMFR temporal: 3 frames, %zu + %zu bytes of scratch + history, %llu features dropped\n", sbytes, hbytes,
+               (unsigned long long)brep.dropped_pivots);
+        free(bscratch); free(hdata); free(bout);
+    }
+
     /* The GPU path: what an engine needs to run the compute shaders itself. */
     LrdGpuDispatch gpu;
     CHECK(lrd_gpu_dispatch(&cfg, W, H, LRD_FORMAT_F32, &gpu));

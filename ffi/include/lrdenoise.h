@@ -34,6 +34,8 @@
  */
 #define LRD_FEATURE_FLR 1
 
+#define LRD_FEATURE_BMFR 2
+
 /**
  * Result of every call. Values are stable across versions.
  */
@@ -311,8 +313,100 @@ typedef struct LrdReport {
   uint64_t fallback_pixels;
   uint64_t empty_blocks;
   uint64_t empty_cells;
+  /**
+   * FLR: pivots floored in the solve; BMFR: features dropped by the QR.
+   */
   uint64_t dropped_pivots;
+  /**
+   * BMFR temporal: pixels without usable history (first frame, disocclusion).
+   */
+  uint64_t history_rejected;
 } LrdReport;
+
+/**
+ * BMFR configuration (Koskela et al. 2019: blockwise multi-order feature
+ * regression, Householder QR per block, and its temporal pipeline). Start
+ * from `lrd_bmfr_config_default()`.
+ */
+typedef struct LrdBmfrConfig {
+  /**
+   * Bit set of LRD_GUIDE_* the frames carry (default normal + position).
+   * Features: 1, every guide channel, the squares of the position channels
+   * (of depth without positions).
+   */
+  uint32_t guides;
+  /**
+   * User guide channels (0..=4).
+   */
+  uint32_t user_guides;
+  /**
+   * Block edge B, 8..=64 (default 32).
+   */
+  uint32_t block;
+  /**
+   * Add the squared features (default true).
+   */
+  bool quadratic;
+  /**
+   * Stochastic regularisation: uniform noise in [-noise, noise] on every
+   * non-constant feature, for the fit only (default 0.01; 0 = off).
+   */
+  float noise;
+  /**
+   * Drop a feature whose QR pivot is below pivot_tol x the largest (1e-4).
+   */
+  float pivot_tol;
+  /**
+   * Shift the block grid every frame (default true).
+   */
+  bool shift;
+  /**
+   * Clamp negative output to 0 (default true).
+   */
+  bool clamp_negative;
+  /**
+   * Use the scalar reference kernels (slow; for testing).
+   */
+  bool scalar_kernels;
+  /**
+   * Temporal pipeline: lowest blend weight of a new noisy sample (0.2).
+   */
+  float noisy_alpha;
+  /**
+   * Lowest blend weight of a new filtered frame (0.1).
+   */
+  float filtered_alpha;
+  /**
+   * TAA blend weight of the new frame (0.2; 1 = TAA off).
+   */
+  float taa_alpha;
+  /**
+   * Largest squared distance of previous and current unit normals (1.0).
+   */
+  float normal_limit;
+  /**
+   * Largest world-position distance, as a fraction of the camera distance
+   * when the frame has depth, in world units otherwise (0.05).
+   */
+  float position_limit;
+  /**
+   * Without positions: largest relative depth difference (0.05).
+   */
+  float depth_limit;
+} LrdBmfrConfig;
+
+/**
+ * The caller-owned state of the BMFR temporal pipeline: `data` (4-byte
+ * aligned, at least the history size from `lrd_bmfr_temporal_sizes`) and the
+ * number of frames accumulated. Set `frames = 0` to start (or after a camera
+ * cut); `lrd_bmfr_denoise_temporal` advances it. The contents of `data` are
+ * ignored while `frames == 0`.
+ */
+typedef struct LrdBmfrHistory {
+  void *data;
+  size_t bytes;
+  uint32_t frames;
+} LrdBmfrHistory;
 
 /**
  * One compute dispatch of the GPU path: the WGSL entry point and its workgroup counts.
@@ -424,6 +518,61 @@ LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
                            uint32_t tile,
                            uint32_t worker,
                            struct LrdReport *report);
+
+/**
+ * The paper's BMFR configuration: normal + position guides (M = 10
+ * features), 32x32 blocks, noise 0.01, and the pipeline's blend weights.
+ */
+struct LrdBmfrConfig lrd_bmfr_config_default(void);
+
+/**
+ * Scratch bytes `lrd_bmfr_denoise` (single frame) needs for `width`x`height` frames.
+ */
+LrdStatus lrd_bmfr_scratch_size(const struct LrdBmfrConfig *config,
+                                uint32_t width,
+                                uint32_t height,
+                                size_t *bytes);
+
+/**
+ * Scratch and history bytes of the temporal pipeline (`lrd_bmfr_denoise_temporal`).
+ */
+LrdStatus lrd_bmfr_temporal_sizes(const struct LrdBmfrConfig *config,
+                                  uint32_t width,
+                                  uint32_t height,
+                                  size_t *scratch_bytes,
+                                  size_t *history_bytes);
+
+/**
+ * Single-frame BMFR on the calling thread. `index` picks the block-grid
+ * offset and the regularisation noise (use the frame number). `out` (3
+ * channels) has the frame's size; `frame.guides_low` must be absent.
+ * `scratch`: 4-byte aligned, at least `lrd_bmfr_scratch_size` bytes.
+ * `report` may be NULL; otherwise the run's counts are added to it.
+ */
+LrdStatus lrd_bmfr_denoise(const struct LrdBmfrConfig *config,
+                           const struct LrdFrame *frame,
+                           uint32_t index,
+                           const struct LrdImageMut *out,
+                           void *scratch,
+                           size_t scratch_bytes,
+                           struct LrdReport *report);
+
+/**
+ * One frame of BMFR's temporal pipeline (reprojection and rejection, noisy
+ * accumulation, the fit, filtered accumulation, TAA) on the calling thread.
+ * `motion` (2 channels: previous minus current pixel position) may be NULL,
+ * or have `data == NULL`, for a static camera. `history` is read and
+ * advanced; `scratch` (4-byte aligned) and `history->data` must be at least
+ * the sizes from `lrd_bmfr_temporal_sizes`. `report` may be NULL.
+ */
+LrdStatus lrd_bmfr_denoise_temporal(const struct LrdBmfrConfig *config,
+                                    const struct LrdFrame *frame,
+                                    const struct LrdImage *motion,
+                                    struct LrdBmfrHistory *history,
+                                    const struct LrdImageMut *out,
+                                    void *scratch,
+                                    size_t scratch_bytes,
+                                    struct LrdReport *report);
 
 /**
  * Fills `out` with the GPU dispatch description of `config` for

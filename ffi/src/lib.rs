@@ -168,7 +168,10 @@ pub struct LrdReport {
     pub fallback_pixels: u64,
     pub empty_blocks: u64,
     pub empty_cells: u64,
+    /// FLR: pivots floored in the solve; BMFR: features dropped by the QR.
     pub dropped_pivots: u64,
+    /// BMFR temporal: pixels without usable history (first frame, disocclusion).
+    pub history_rejected: u64,
 }
 
 /// Stages of a tiled FLR run, in order.
@@ -191,6 +194,7 @@ pub enum LrdStage {
 
 /// Feature bits returned by `lrd_features()`.
 pub const LRD_FEATURE_FLR: u32 = 1;
+pub const LRD_FEATURE_BMFR: u32 = 2;
 
 fn status_of(e: Error) -> LrdStatus {
     match e {
@@ -319,17 +323,21 @@ fn all_null(g: &LrdGuides) -> bool {
     [&g.normal, &g.depth, &g.position, &g.ao].iter().all(|i| i.data.is_null()) && g.user.iter().all(|i| i.data.is_null())
 }
 
-fn config(c: &LrdFlrConfig) -> Result<FlrConfig, LrdStatus> {
-    if c.guides & !15 != 0 || c.user_guides > 4 {
+fn guide_set(bits: u32, user: u32) -> Result<GuideSet, LrdStatus> {
+    if bits & !15 != 0 || user > 4 {
         return Err(LRD_STATUS_INVALID_CONFIG);
     }
-    let guides = GuideSet {
-        normal: c.guides & LRD_GUIDE_NORMAL != 0,
-        depth: c.guides & LRD_GUIDE_DEPTH != 0,
-        position: c.guides & LRD_GUIDE_POSITION != 0,
-        ao: c.guides & LRD_GUIDE_AO != 0,
-        user: c.user_guides as u8,
-    };
+    Ok(GuideSet {
+        normal: bits & LRD_GUIDE_NORMAL != 0,
+        depth: bits & LRD_GUIDE_DEPTH != 0,
+        position: bits & LRD_GUIDE_POSITION != 0,
+        ao: bits & LRD_GUIDE_AO != 0,
+        user: user as u8,
+    })
+}
+
+fn config(c: &LrdFlrConfig) -> Result<FlrConfig, LrdStatus> {
+    let guides = guide_set(c.guides, c.user_guides)?;
     let blur = match c.blur {
         0 => Blur::Gaussian { sigma: c.sigma, radius: (c.radius >= 0.0).then_some(c.radius) },
         1 => Blur::Box { radius: c.radius },
@@ -376,6 +384,25 @@ fn write_report(report: *mut LrdReport, r: Report) {
         out.empty_blocks += r.empty_blocks;
         out.empty_cells += r.empty_cells;
         out.dropped_pivots += r.dropped_pivots;
+    }
+}
+
+/// A frame's images as library views (`guides_low` must be absent unless `low_ok`).
+///
+/// # Safety
+/// Every non-NULL image of `frame` must satisfy the contract of [`view`] for `'a`.
+unsafe fn frame_views<'a>(frame: &LrdFrame, low_ok: bool) -> Result<Frame<'a>, LrdStatus> {
+    // SAFETY: forwarded contract.
+    unsafe {
+        let low = all_null(&frame.guides_low);
+        if !low && !low_ok {
+            return Err(LRD_STATUS_UNSUPPORTED);
+        }
+        Ok(Frame {
+            noisy: view(&frame.noisy, 3)?.ok_or(LRD_STATUS_NULL_POINTER)?,
+            guides: guides(&frame.guides)?,
+            guides_low: if low { None } else { Some(guides(&frame.guides_low)?) },
+        })
     }
 }
 
@@ -521,11 +548,7 @@ pub unsafe extern "C" fn lrd_flr_denoise(
         // SAFETY: the caller's frame images satisfy the LrdImage contract; the
         // scratch is aligned and at least `needed` bytes; `out` is exclusively ours.
         let r = unsafe {
-            let f = Frame {
-                noisy: view(&frame.noisy, 3)?.ok_or(LRD_STATUS_NULL_POINTER)?,
-                guides: guides(&frame.guides)?,
-                guides_low: if all_null(&frame.guides_low) { None } else { Some(guides(&frame.guides_low)?) },
-            };
+            let f = frame_views(frame, true)?;
             let s = core::slice::from_raw_parts_mut((scratch as *mut u8).add(HEADER) as *mut f64, (needed - HEADER) / 8);
             let mut o = view_mut(out, 0, out.height as usize)?;
             flr.denoise(&f, s, &mut o).map_err(status_of)?
@@ -590,11 +613,7 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
         // output rows) are not accessed by any concurrent call, and the shared
         // slices are only read during this stage.
         let rep = unsafe {
-            let f = Frame {
-                noisy: view(&frame.noisy, 3)?.ok_or(LRD_STATUS_NULL_POINTER)?,
-                guides: guides(&frame.guides)?,
-                guides_low: if all_null(&frame.guides_low) { None } else { Some(guides(&frame.guides_low)?) },
-            };
+            let f = frame_views(frame, true)?;
             let cf = flr.check_frame(&f).map_err(status_of)?;
             let wl = flr.worker_len();
             let worker_buf = || core::slice::from_raw_parts_mut(raw.workers.add(worker * wl), wl);
@@ -642,6 +661,277 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
             }
         };
         write_report(report, rep);
+        Ok(())
+    })
+}
+
+// ---------------------------------------------------------------- BMFR
+
+/// BMFR configuration (Koskela et al. 2019: blockwise multi-order feature
+/// regression, Householder QR per block, and its temporal pipeline). Start
+/// from `lrd_bmfr_config_default()`.
+#[cfg(feature = "bmfr")]
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdBmfrConfig {
+    /// Bit set of LRD_GUIDE_* the frames carry (default normal + position).
+    /// Features: 1, every guide channel, the squares of the position channels
+    /// (of depth without positions).
+    pub guides: u32,
+    /// User guide channels (0..=4).
+    pub user_guides: u32,
+    /// Block edge B, 8..=64 (default 32).
+    pub block: u32,
+    /// Add the squared features (default true).
+    pub quadratic: bool,
+    /// Stochastic regularisation: uniform noise in [-noise, noise] on every
+    /// non-constant feature, for the fit only (default 0.01; 0 = off).
+    pub noise: f32,
+    /// Drop a feature whose QR pivot is below pivot_tol x the largest (1e-4).
+    pub pivot_tol: f32,
+    /// Shift the block grid every frame (default true).
+    pub shift: bool,
+    /// Clamp negative output to 0 (default true).
+    pub clamp_negative: bool,
+    /// Use the scalar reference kernels (slow; for testing).
+    pub scalar_kernels: bool,
+    /// Temporal pipeline: lowest blend weight of a new noisy sample (0.2).
+    pub noisy_alpha: f32,
+    /// Lowest blend weight of a new filtered frame (0.1).
+    pub filtered_alpha: f32,
+    /// TAA blend weight of the new frame (0.2; 1 = TAA off).
+    pub taa_alpha: f32,
+    /// Largest squared distance of previous and current unit normals (1.0).
+    pub normal_limit: f32,
+    /// Largest world-position distance, as a fraction of the camera distance
+    /// when the frame has depth, in world units otherwise (0.05).
+    pub position_limit: f32,
+    /// Without positions: largest relative depth difference (0.05).
+    pub depth_limit: f32,
+}
+
+/// The caller-owned state of the BMFR temporal pipeline: `data` (4-byte
+/// aligned, at least the history size from `lrd_bmfr_temporal_sizes`) and the
+/// number of frames accumulated. Set `frames = 0` to start (or after a camera
+/// cut); `lrd_bmfr_denoise_temporal` advances it. The contents of `data` are
+/// ignored while `frames == 0`.
+#[cfg(feature = "bmfr")]
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdBmfrHistory {
+    pub data: *mut c_void,
+    pub bytes: usize,
+    pub frames: u32,
+}
+
+#[cfg(feature = "bmfr")]
+fn bmfr_config(c: &LrdBmfrConfig) -> Result<lrdenoise_core::BmfrConfig, LrdStatus> {
+    use lrdenoise_core::bmfr::temporal::TemporalConfig;
+    let cfg = lrdenoise_core::BmfrConfig {
+        guides: guide_set(c.guides, c.user_guides)?,
+        block: c.block as usize,
+        quadratic: c.quadratic,
+        noise: c.noise,
+        pivot_tol: c.pivot_tol,
+        shift: c.shift,
+        clamp_negative: c.clamp_negative,
+        kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
+        temporal: TemporalConfig {
+            noisy_alpha: c.noisy_alpha,
+            filtered_alpha: c.filtered_alpha,
+            taa_alpha: c.taa_alpha,
+            normal_limit: c.normal_limit,
+            position_limit: c.position_limit,
+            depth_limit: c.depth_limit,
+        },
+    };
+    cfg.validate().map_err(status_of)?;
+    Ok(cfg)
+}
+
+#[cfg(feature = "bmfr")]
+fn bmfr_plan(c: *const LrdBmfrConfig, width: u32, height: u32) -> Result<lrdenoise_core::Bmfr, LrdStatus> {
+    // SAFETY: checked for NULL; the caller passes a valid config pointer.
+    let c = unsafe { c.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    lrdenoise_core::Bmfr::new(bmfr_config(c)?, width as usize, height as usize).map_err(status_of)
+}
+
+#[cfg(feature = "bmfr")]
+fn f32_bytes(len: usize) -> Result<usize, LrdStatus> {
+    len.checked_mul(4).ok_or(LRD_STATUS_INVALID_ARGUMENT)
+}
+
+/// `bytes` bytes at `ptr` as f32 (4-byte aligned, at least `needed` bytes).
+///
+/// # Safety
+/// `ptr` must point to `bytes` writable bytes, exclusively ours for `'a`.
+#[cfg(feature = "bmfr")]
+unsafe fn f32_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Result<&'a mut [f32], LrdStatus> {
+    if ptr.is_null() {
+        return Err(LRD_STATUS_NULL_POINTER);
+    }
+    if (ptr as usize) % 4 != 0 {
+        return Err(LRD_STATUS_INVALID_ARGUMENT);
+    }
+    if bytes < needed {
+        return Err(LRD_STATUS_BUFFER_TOO_SMALL);
+    }
+    // SAFETY: non-null, aligned, at least `needed` bytes (caller's contract).
+    Ok(unsafe { core::slice::from_raw_parts_mut(ptr as *mut f32, needed / 4) })
+}
+
+#[cfg(feature = "bmfr")]
+fn write_bmfr_report(report: *mut LrdReport, r: lrdenoise_core::bmfr::Report) {
+    // SAFETY: NULL is allowed; otherwise the caller passes a valid, exclusive pointer.
+    if let Some(out) = unsafe { report.as_mut() } {
+        out.nonfinite_noisy += r.nonfinite_noisy;
+        out.nonfinite_guides += r.nonfinite_guides;
+        out.fallback_pixels += r.fallback_pixels;
+        out.empty_blocks += r.empty_blocks;
+        out.dropped_pivots += r.dropped_features;
+        out.history_rejected += r.history_rejected;
+    }
+}
+
+/// The paper's BMFR configuration: normal + position guides (M = 10
+/// features), 32x32 blocks, noise 0.01, and the pipeline's blend weights.
+#[cfg(feature = "bmfr")]
+#[no_mangle]
+pub extern "C" fn lrd_bmfr_config_default() -> LrdBmfrConfig {
+    let d = lrdenoise_core::BmfrConfig::default();
+    let t = d.temporal;
+    LrdBmfrConfig {
+        guides: LRD_GUIDE_NORMAL | LRD_GUIDE_POSITION,
+        user_guides: 0,
+        block: d.block as u32,
+        quadratic: d.quadratic,
+        noise: d.noise,
+        pivot_tol: d.pivot_tol,
+        shift: d.shift,
+        clamp_negative: d.clamp_negative,
+        scalar_kernels: false,
+        noisy_alpha: t.noisy_alpha,
+        filtered_alpha: t.filtered_alpha,
+        taa_alpha: t.taa_alpha,
+        normal_limit: t.normal_limit,
+        position_limit: t.position_limit,
+        depth_limit: t.depth_limit,
+    }
+}
+
+/// Scratch bytes `lrd_bmfr_denoise` (single frame) needs for `width`x`height` frames.
+#[cfg(feature = "bmfr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_bmfr_scratch_size(config: *const LrdBmfrConfig, width: u32, height: u32, bytes: *mut usize) -> LrdStatus {
+    guard(|| {
+        let b = f32_bytes(bmfr_plan(config, width, height)?.scratch_len())?;
+        // SAFETY: checked for NULL; caller passes a valid pointer.
+        *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
+        Ok(())
+    })
+}
+
+/// Scratch and history bytes of the temporal pipeline (`lrd_bmfr_denoise_temporal`).
+#[cfg(feature = "bmfr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_bmfr_temporal_sizes(
+    config: *const LrdBmfrConfig,
+    width: u32,
+    height: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| {
+        let b = bmfr_plan(config, width, height)?;
+        let (s, h) = (f32_bytes(b.temporal_scratch_len())?, f32_bytes(b.history_len())?);
+        // SAFETY: checked for NULL; caller passes valid pointers.
+        unsafe {
+            *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
+            *history_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = h;
+        }
+        Ok(())
+    })
+}
+
+/// Single-frame BMFR on the calling thread. `index` picks the block-grid
+/// offset and the regularisation noise (use the frame number). `out` (3
+/// channels) has the frame's size; `frame.guides_low` must be absent.
+/// `scratch`: 4-byte aligned, at least `lrd_bmfr_scratch_size` bytes.
+/// `report` may be NULL; otherwise the run's counts are added to it.
+#[cfg(feature = "bmfr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_bmfr_denoise(
+    config: *const LrdBmfrConfig,
+    frame: *const LrdFrame,
+    index: u32,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    guard(|| {
+        // SAFETY: NULL-checked; the caller passes valid pointers.
+        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        let b = bmfr_plan(config, out.width, out.height)?;
+        // SAFETY: the caller's images satisfy the LrdImage contract; the scratch
+        // is checked (NULL, alignment, size) and `out` is exclusively ours.
+        let r = unsafe {
+            let f = frame_views(frame, false)?;
+            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(b.scratch_len())?)?;
+            let mut o = view_mut(out, 0, out.height as usize)?;
+            b.denoise(&f, index, s, &mut o).map_err(status_of)?
+        };
+        write_bmfr_report(report, r);
+        Ok(())
+    })
+}
+
+/// One frame of BMFR's temporal pipeline (reprojection and rejection, noisy
+/// accumulation, the fit, filtered accumulation, TAA) on the calling thread.
+/// `motion` (2 channels: previous minus current pixel position) may be NULL,
+/// or have `data == NULL`, for a static camera. `history` is read and
+/// advanced; `scratch` (4-byte aligned) and `history->data` must be at least
+/// the sizes from `lrd_bmfr_temporal_sizes`. `report` may be NULL.
+#[cfg(feature = "bmfr")]
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_bmfr_denoise_temporal(
+    config: *const LrdBmfrConfig,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdBmfrHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    guard(|| {
+        // SAFETY: NULL-checked; the caller passes valid pointers.
+        let (frame, out, hist) = unsafe {
+            (
+                frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
+                out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
+                history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?,
+            )
+        };
+        let b = bmfr_plan(config, out.width, out.height)?;
+        // SAFETY: as in lrd_bmfr_denoise; the history buffer is checked the same
+        // way and must not overlap the scratch or the images (caller's contract).
+        let r = unsafe {
+            let f = frame_views(frame, false)?;
+            let mv = match motion.as_ref() {
+                Some(m) => view(m, 2)?,
+                None => None,
+            };
+            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(b.temporal_scratch_len())?)?;
+            let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(b.history_len())?)?;
+            let mut h = lrdenoise_core::History::resume(hd, hist.frames);
+            let mut o = view_mut(out, 0, out.height as usize)?;
+            let r = b.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
+            hist.frames = h.frames();
+            r
+        };
+        write_bmfr_report(report, r);
         Ok(())
     })
 }
@@ -745,6 +1035,9 @@ pub extern "C" fn lrd_features() -> u32 {
     let mut f = 0;
     if cfg!(feature = "flr") {
         f |= LRD_FEATURE_FLR;
+    }
+    if cfg!(feature = "bmfr") {
+        f |= LRD_FEATURE_BMFR;
     }
     f
 }

@@ -163,3 +163,115 @@ fn gpu_dispatch_description() {
     many.user_guides = 2;
     assert_eq!(unsafe { lrd_gpu_dispatch(&many, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_CONFIG);
 }
+
+/// BMFR through the C ABI gives exactly the Rust API's output, single frame and
+/// temporal (history advanced by the call), and validates its arguments.
+#[test]
+fn bmfr_matches_the_rust_api() {
+    use lrdenoise_core::{Bmfr, BmfrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut};
+    let (w, h) = (70u32, 45u32);
+    let n = (w * h) as usize;
+    let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 1000) as f32 / 500.0).collect();
+    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == (i / 3 / 300) % 3 { 1.0 } else { 0.0 }).collect();
+    let position: Vec<f32> =
+        (0..3 * n).map(|i| ((i / 3) % w as usize) as f32 * 0.1 + (i % 3) as f32 + ((i / 3) / w as usize) as f32 * 0.05).collect();
+    let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { 0.5 } else { -0.25 }).collect();
+    let cfg = lrd_bmfr_config_default();
+    assert_eq!(cfg.guides, LRD_GUIDE_NORMAL | LRD_GUIDE_POSITION);
+    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
+    frame.guides.normal = img(normal.as_ptr(), w, h, 3);
+    frame.guides.position = img(position.as_ptr(), w, h, 3);
+    let mv = img(motion.as_ptr(), w, h, 2);
+
+    // the Rust API
+    let b = Bmfr::new(BmfrConfig::default(), w as usize, h as usize).unwrap();
+    let rguides = Guides {
+        normal: Some(ImageView::interleaved(&normal, w as usize, h as usize, 3).unwrap()),
+        position: Some(ImageView::interleaved(&position, w as usize, h as usize, 3).unwrap()),
+        ..Default::default()
+    };
+    let rframe = Frame::new(ImageView::interleaved(&noisy, w as usize, h as usize, 3).unwrap(), rguides);
+    let rmv = ImageView::interleaved(&motion, w as usize, h as usize, 2).unwrap();
+    assert_eq!(b.config().guides, GuideSet { normal: true, position: true, ..GuideSet::NONE });
+    let mut want = vec![0f32; 3 * n];
+    let mut scratch = vec![0f32; b.temporal_scratch_len()];
+    b.denoise(&rframe, 3, &mut scratch, &mut ImageViewMut::interleaved(&mut want, w as usize, h as usize, 3).unwrap()).unwrap();
+
+    let mut out = vec![0f32; 3 * n];
+    let o =
+        LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
+    unsafe {
+        let mut bytes = 0usize;
+        assert_eq!(lrd_bmfr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
+        let mut cs = vec![0f32; bytes / 4];
+        let sp = cs.as_mut_ptr() as *mut _;
+        let mut rep = LrdReport::default();
+        assert_eq!(lrd_bmfr_denoise(&cfg, &frame, 3, &o, sp, bytes, &mut rep), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(out, want);
+        // errors
+        assert_eq!(lrd_bmfr_denoise(&cfg, &frame, 3, &o, sp, bytes - 4, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
+        assert_eq!(
+            lrd_bmfr_denoise(&cfg, &frame, 3, &o, (sp as *mut u8).add(2) as *mut _, bytes, null_mut()),
+            LrdStatus::LRD_STATUS_INVALID_ARGUMENT
+        );
+        assert_eq!(lrd_bmfr_denoise(null(), &frame, 3, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        let mut bad = cfg;
+        bad.block = 4;
+        assert_eq!(lrd_bmfr_denoise(&bad, &frame, 3, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        bad = cfg;
+        bad.taa_alpha = 0.0;
+        assert_eq!(lrd_bmfr_scratch_size(&bad, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        let mut missing = frame;
+        missing.guides.position = none();
+        assert_eq!(lrd_bmfr_denoise(&cfg, &missing, 3, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_GUIDE_MISMATCH);
+        let mut low = frame;
+        low.guides_low = frame.guides;
+        assert_eq!(lrd_bmfr_denoise(&cfg, &low, 3, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+
+        // temporal: three frames through both APIs
+        let (mut sb, mut hb) = (0usize, 0usize);
+        assert_eq!(lrd_bmfr_temporal_sizes(&cfg, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_OK);
+        assert_eq!((sb, hb), (4 * b.temporal_scratch_len(), 4 * b.history_len()));
+        let mut ts = vec![0f32; sb / 4];
+        let mut hd = vec![0f32; hb / 4];
+        let mut hist = LrdBmfrHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let mut rhd = vec![0f32; b.history_len()];
+        let mut rh = History::new(&mut rhd);
+        let mut rep = LrdReport::default();
+        let mut rrep = lrdenoise_core::bmfr::Report::default();
+        for k in 0..3 {
+            let m = if k == 0 { null() } else { &mv as *const LrdImage };
+            assert_eq!(
+                lrd_bmfr_denoise_temporal(&cfg, &frame, m, &mut hist, &o, ts.as_mut_ptr() as *mut _, sb, &mut rep),
+                LrdStatus::LRD_STATUS_OK
+            );
+            let rm = if k == 0 { None } else { Some(&rmv) };
+            rrep += b
+                .denoise_temporal(
+                    &rframe,
+                    rm,
+                    &mut rh,
+                    &mut scratch,
+                    &mut ImageViewMut::interleaved(&mut want, w as usize, h as usize, 3).unwrap(),
+                )
+                .unwrap();
+            assert_eq!(out, want, "frame {k}");
+            assert_eq!(hist.frames, k + 1);
+        }
+        assert_eq!(
+            (rep.history_rejected, rep.dropped_pivots, rep.fallback_pixels),
+            (rrep.history_rejected, rrep.dropped_features, rrep.fallback_pixels)
+        );
+        let mut short = hist;
+        short.bytes -= 4;
+        assert_eq!(
+            lrd_bmfr_denoise_temporal(&cfg, &frame, null(), &mut short, &o, ts.as_mut_ptr() as *mut _, sb, null_mut()),
+            LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
+        );
+        assert_eq!(
+            lrd_bmfr_denoise_temporal(&cfg, &frame, null(), null_mut(), &o, ts.as_mut_ptr() as *mut _, sb, null_mut()),
+            LrdStatus::LRD_STATUS_NULL_POINTER
+        );
+        assert_eq!(lrd_features() & LRD_FEATURE_BMFR, LRD_FEATURE_BMFR);
+    }
+}

@@ -1,5 +1,5 @@
-//! (c) The C entry points with arbitrary sizes, strides, formats, configs and
-//! NULL pointers. Buffers are allocated to span whatever layout is passed (the
+//! (c) The C entry points (FLR, and BMFR single frame + temporal) with
+//! arbitrary sizes, strides, formats, configs and NULL pointers. Buffers are allocated to span whatever layout is passed (the
 //! C contract), so any crash or non-finite output is a library bug.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
@@ -28,7 +28,7 @@ fn image(d: &[u8], at: usize, ch: usize, w: u32, h: u32, buf: &mut Vec<u32>) -> 
         return LrdImage { data: null(), format: fmt, width: w, height: h, pixel_stride: ps, row_stride: rs, channel_stride: cs };
     }
     for (i, v) in buf.iter_mut().enumerate() {
-        *v = 0x3e000000 + ((i as u32 * 2654435761) >> 12);
+        *v = 0x3e000000 + ((i as u32).wrapping_mul(2654435761) >> 12);
     }
     LrdImage { data: buf.as_ptr() as *const _, format: fmt, width: w, height: h, pixel_stride: ps, row_stride: rs, channel_stride: cs }
 }
@@ -48,7 +48,7 @@ fuzz_target!(|d: &[u8]| {
     cfg.regularization = d[13] as u32 % 3;
     cfg.upsample = [1, 1, 2, 4, 3][d[14] as usize % 5];
     let (lw, lh) = (w.div_ceil(cfg.upsample.max(1)), h.div_ceil(cfg.upsample.max(1)));
-    let mut bufs: Vec<Vec<u32>> = (0..10).map(|_| Vec::new()).collect();
+    let mut bufs: Vec<Vec<u32>> = (0..12).map(|_| Vec::new()).collect();
     let none = LrdImage { data: null(), format: 0, width: 0, height: 0, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
     let mut it = bufs.iter_mut();
     let mut next = || it.next().unwrap();
@@ -78,6 +78,40 @@ fuzz_target!(|d: &[u8]| {
         row_stride: 0,
         channel_stride: 0,
     };
+    // BMFR on the same images: its own guide bits (no positions here), block
+    // size, two temporal frames with a fuzzed motion image (or none).
+    {
+        let mut b = lrd_bmfr_config_default();
+        b.guides = cfg.guides & !LRD_GUIDE_POSITION;
+        b.block = [8, 32, 9, 64, 4, 65][d[9] as usize % 6];
+        b.noise = [0.01, 0.0, 1.0][d[10] as usize % 3];
+        let mut bf = frame;
+        bf.guides_low = LrdGuides { normal: none, depth: none, position: none, ao: none, user: [none; 4] };
+        if d[14] % 2 == 1 {
+            bf.noisy = image(d, 15, 3, w, h, next());
+        }
+        let mv = image(d, 21, 2, w, h, next());
+        let (mut sb, mut hb) = (0usize, 0usize);
+        let st = unsafe { lrd_bmfr_temporal_sizes(&b, w, h, &mut sb, &mut hb) };
+        assert_ne!(st, LrdStatus::LRD_STATUS_PANIC);
+        if st == LrdStatus::LRD_STATUS_OK {
+            let (mut s, mut hd) = (vec![0f32; sb / 4], vec![0f32; hb / 4]);
+            let mut hist = LrdBmfrHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+            for k in 0..2 {
+                let m = if d[22] % 2 == 0 { null() } else { &mv as *const LrdImage };
+                let r = unsafe { lrd_bmfr_denoise_temporal(&b, &bf, m, &mut hist, &o, s.as_mut_ptr() as *mut _, sb, null_mut()) };
+                assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
+                if r == LrdStatus::LRD_STATUS_OK {
+                    assert!(out.iter().all(|v| v.is_finite()), "temporal frame {k}");
+                }
+                let r = unsafe { lrd_bmfr_denoise(&b, &bf, k, &o, s.as_mut_ptr() as *mut _, sb, null_mut()) };
+                assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
+                if r == LrdStatus::LRD_STATUS_OK {
+                    assert!(out.iter().all(|v| v.is_finite()));
+                }
+            }
+        }
+    }
     let mut bytes = 0usize;
     let st = unsafe { lrd_flr_scratch_size(&cfg, w, h, &mut bytes) };
     if st != LrdStatus::LRD_STATUS_OK {
