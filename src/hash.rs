@@ -13,6 +13,7 @@ pub fn lowbias32(mut x: u32) -> u32 {
 }
 
 /// [`lowbias32`] on eight lanes (bit-identical per lane).
+#[cfg(feature = "bmfr")]
 #[inline(always)]
 pub fn lowbias32x8(mut x: wide::u32x8) -> wide::u32x8 {
     use wide::u32x8;
@@ -23,7 +24,7 @@ pub fn lowbias32x8(mut x: wide::u32x8) -> wide::u32x8 {
     x ^ (x >> 16)
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "bmfr"))]
 mod tests {
     #[test]
     fn lanes_equal_scalar() {

@@ -60,6 +60,7 @@ pub fn reproject3(planes: &[f32], np: usize, (w, h): (usize, usize), (px, py): (
     (tw > 0.0).then(|| sum.map(|v| v / tw))
 }
 
+#[cfg(feature = "bmfr")]
 /// The YCoCg clamp box of one row of pixels, from the rows above, at and
 /// below (`None` outside the image), each 3 planes of `w` in YCoCg: per
 /// channel, the mean of the 3×3 box's and the 5-pixel cross's minimum (and
@@ -129,6 +130,7 @@ mod tests {
     }
 
     /// The row-wise clamp box equals the per-pixel 3×3 box / cross extremes.
+    #[cfg(feature = "bmfr")]
     #[test]
     fn clamp_box_matches_per_pixel() {
         for (w, h) in [(1, 1), (1, 4), (5, 1), (7, 3), (9, 6)] {

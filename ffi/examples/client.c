@@ -206,7 +206,7 @@ int main(int argc, char **argv) {
         void *bscratch = malloc(sbytes), *hdata = malloc(hbytes);
         float *bout = malloc(sizeof(float) * 3 * W * H);
         if (!bscratch || !hdata || !bout) return 2;
-        LrdBmfrHistory hist = {hdata, hbytes, 0};
+        LrdHistory hist = {hdata, hbytes, 0};
         LrdImageMut bo = out;
         bo.data = bout;
         LrdReport brep;

@@ -170,7 +170,8 @@ pub struct LrdReport {
     pub empty_cells: u64,
     /// FLR: pivots floored in the solve; BMFR: features dropped by the QR.
     pub dropped_pivots: u64,
-    /// BMFR temporal: pixels without usable history (first frame, disocclusion).
+    /// Temporal pipelines: pixels whose history was rejected (disocclusion,
+    /// motion out of the frame; the first frame is not counted).
     pub history_rejected: u64,
 }
 
@@ -195,6 +196,7 @@ pub enum LrdStage {
 /// Feature bits returned by `lrd_features()`.
 pub const LRD_FEATURE_FLR: u32 = 1;
 pub const LRD_FEATURE_BMFR: u32 = 2;
+pub const LRD_FEATURE_WALR: u32 = 4;
 
 fn status_of(e: Error) -> LrdStatus {
     match e {
@@ -710,15 +712,16 @@ pub struct LrdBmfrConfig {
     pub depth_limit: f32,
 }
 
-/// The caller-owned state of the BMFR temporal pipeline: `data` (4-byte
-/// aligned, at least the history size from `lrd_bmfr_temporal_sizes`) and the
-/// number of frames accumulated. Set `frames = 0` to start (or after a camera
-/// cut); `lrd_bmfr_denoise_temporal` advances it. The contents of `data` are
-/// ignored while `frames == 0`.
-#[cfg(feature = "bmfr")]
+/// The caller-owned state of a temporal pipeline (BMFR or WALR): `data`
+/// (4-byte aligned, at least the history size from `lrd_bmfr_temporal_sizes` /
+/// `lrd_walr_temporal_sizes`) and the number of frames accumulated. Set
+/// `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
+/// call advances it. The contents of `data` are ignored while `frames == 0`.
+/// One history serves one method, size and configuration.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
-pub struct LrdBmfrHistory {
+pub struct LrdHistory {
     pub data: *mut c_void,
     pub bytes: usize,
     pub frames: u32,
@@ -756,7 +759,7 @@ fn bmfr_plan(c: *const LrdBmfrConfig, width: u32, height: u32) -> Result<lrdenoi
     lrdenoise_core::Bmfr::new(bmfr_config(c)?, width as usize, height as usize).map_err(status_of)
 }
 
-#[cfg(feature = "bmfr")]
+#[cfg(any(feature = "bmfr", feature = "walr"))]
 fn f32_bytes(len: usize) -> Result<usize, LrdStatus> {
     len.checked_mul(4).ok_or(LRD_STATUS_INVALID_ARGUMENT)
 }
@@ -765,7 +768,7 @@ fn f32_bytes(len: usize) -> Result<usize, LrdStatus> {
 ///
 /// # Safety
 /// `ptr` must point to `bytes` writable bytes, exclusively ours for `'a`.
-#[cfg(feature = "bmfr")]
+#[cfg(any(feature = "bmfr", feature = "walr"))]
 unsafe fn f32_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Result<&'a mut [f32], LrdStatus> {
     if ptr.is_null() {
         return Err(LRD_STATUS_NULL_POINTER);
@@ -899,7 +902,7 @@ pub unsafe extern "C" fn lrd_bmfr_denoise_temporal(
     config: *const LrdBmfrConfig,
     frame: *const LrdFrame,
     motion: *const LrdImage,
-    history: *mut LrdBmfrHistory,
+    history: *mut LrdHistory,
     out: *const LrdImageMut,
     scratch: *mut c_void,
     scratch_bytes: usize,
@@ -932,6 +935,248 @@ pub unsafe extern "C" fn lrd_bmfr_denoise_temporal(
             r
         };
         write_bmfr_report(report, r);
+        Ok(())
+    })
+}
+
+// ---------------------------------------------------------------- WALR
+
+/// WALR configuration (Meunier & Harada: edge-traced à-trous weighted
+/// averages, per-pixel Cholesky regression, and its pipeline). Start from
+/// `lrd_walr_config_default()`.
+#[cfg(feature = "walr")]
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdWalrConfig {
+    /// Bit set of LRD_GUIDE_*: normal and position are required; depth makes the
+    /// edge-stopping distances relative; AO and user guides become features
+    /// (default normal + depth + position).
+    pub guides: u32,
+    /// User guide channels (0..=4).
+    pub user_guides: u32,
+    /// À-trous iterations T, 1..=5 (default 4: an 81x81 window).
+    pub iterations: u32,
+    /// Plane distance below which a tap has full weight (0.005, relative to the
+    /// camera distance with depth).
+    pub near: f32,
+    /// Plane distance at which a tap's weight reaches 0 (0.01).
+    pub far: f32,
+    /// Trace the edge-stopping function along each tap's segment (true).
+    pub tracing: bool,
+    /// Replace a tap cut off by an edge with an average before the edge (true).
+    pub replace: bool,
+    /// Fraction of the previous iteration's edge distance tracing may skip (0.5).
+    pub sdf_step: f32,
+    /// Cholesky pivot floor for the features (1e-3).
+    pub epsilon: f32,
+    /// Store the averages as f16 (the paper's) instead of f32 (default false).
+    pub storage_f16: bool,
+    /// Use `view` (direction towards the camera, in the normals' space) as the
+    /// pole of the octahedral normal map; false: the frame's mean normal.
+    pub has_view: bool,
+    pub view: [f32; 3],
+    /// Clamp negative output to 0 (true).
+    pub clamp_negative: bool,
+    /// Use the scalar reference kernels (slow; for testing).
+    pub scalar_kernels: bool,
+    /// Temporal pipeline: frames after which accumulation becomes exponential (16).
+    pub max_samples: f32,
+    /// Lowest blend weight of the new frame in the post pass (0.1).
+    pub post_alpha: f32,
+    /// Half-width of the variance-clipping box in standard deviations (1.25).
+    pub clip_gamma: f32,
+    /// Largest relative camera-distance change of a history tap (0.05).
+    pub depth_limit: f32,
+    /// Without depth: largest world-position change of a history tap (0.05).
+    pub position_limit: f32,
+}
+
+#[cfg(feature = "walr")]
+fn walr_config(c: &LrdWalrConfig) -> Result<lrdenoise_core::WalrConfig, LrdStatus> {
+    use lrdenoise_core::walr::{temporal::TemporalConfig, Storage};
+    let cfg = lrdenoise_core::WalrConfig {
+        guides: guide_set(c.guides, c.user_guides)?,
+        iterations: u8::try_from(c.iterations).map_err(|_| LRD_STATUS_INVALID_CONFIG)?,
+        near: c.near,
+        far: c.far,
+        tracing: c.tracing,
+        replace: c.replace,
+        sdf_step: c.sdf_step,
+        epsilon: c.epsilon,
+        storage: if c.storage_f16 { Storage::F16 } else { Storage::F32 },
+        view: c.has_view.then_some(c.view),
+        clamp_negative: c.clamp_negative,
+        kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
+        temporal: TemporalConfig {
+            max_samples: c.max_samples,
+            post_alpha: c.post_alpha,
+            clip_gamma: c.clip_gamma,
+            depth_limit: c.depth_limit,
+            position_limit: c.position_limit,
+        },
+    };
+    cfg.validate().map_err(status_of)?;
+    Ok(cfg)
+}
+
+#[cfg(feature = "walr")]
+fn walr_plan(c: *const LrdWalrConfig, width: u32, height: u32) -> Result<lrdenoise_core::Walr, LrdStatus> {
+    // SAFETY: checked for NULL; the caller passes a valid config pointer.
+    let c = unsafe { c.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    lrdenoise_core::Walr::new(walr_config(c)?, width as usize, height as usize).map_err(status_of)
+}
+
+#[cfg(feature = "walr")]
+fn write_walr_report(report: *mut LrdReport, r: lrdenoise_core::walr::Report) {
+    // SAFETY: NULL is allowed; otherwise the caller passes a valid, exclusive pointer.
+    if let Some(out) = unsafe { report.as_mut() } {
+        out.nonfinite_noisy += r.nonfinite_noisy;
+        out.nonfinite_guides += r.nonfinite_guides;
+        out.fallback_pixels += r.fallback_pixels;
+        out.history_rejected += r.history_rejected;
+    }
+}
+
+/// WALR's defaults: normal + depth + position, T = 4, tracing and replacement
+/// on, thresholds 0.5 % / 1 %, f32 averages, and the pipeline's settings.
+#[cfg(feature = "walr")]
+#[no_mangle]
+pub extern "C" fn lrd_walr_config_default() -> LrdWalrConfig {
+    let d = lrdenoise_core::WalrConfig::default();
+    let t = d.temporal;
+    LrdWalrConfig {
+        guides: LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION,
+        user_guides: 0,
+        iterations: d.iterations as u32,
+        near: d.near,
+        far: d.far,
+        tracing: d.tracing,
+        replace: d.replace,
+        sdf_step: d.sdf_step,
+        epsilon: d.epsilon,
+        storage_f16: d.storage == lrdenoise_core::walr::Storage::F16,
+        has_view: d.view.is_some(),
+        view: d.view.unwrap_or([0.0, 0.0, 1.0]),
+        clamp_negative: d.clamp_negative,
+        scalar_kernels: false,
+        max_samples: t.max_samples,
+        post_alpha: t.post_alpha,
+        clip_gamma: t.clip_gamma,
+        depth_limit: t.depth_limit,
+        position_limit: t.position_limit,
+    }
+}
+
+/// Scratch bytes `lrd_walr_denoise` (single frame) needs for `width`x`height` frames.
+#[cfg(feature = "walr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_walr_scratch_size(config: *const LrdWalrConfig, width: u32, height: u32, bytes: *mut usize) -> LrdStatus {
+    guard(|| {
+        let b = f32_bytes(walr_plan(config, width, height)?.scratch_len())?;
+        // SAFETY: checked for NULL; caller passes a valid pointer.
+        *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
+        Ok(())
+    })
+}
+
+/// Scratch and history bytes of the WALR pipeline (`lrd_walr_denoise_temporal`).
+#[cfg(feature = "walr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_walr_temporal_sizes(
+    config: *const LrdWalrConfig,
+    width: u32,
+    height: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| {
+        let wl = walr_plan(config, width, height)?;
+        let (s, h) = (f32_bytes(wl.temporal_scratch_len())?, f32_bytes(wl.history_len())?);
+        // SAFETY: checked for NULL; caller passes valid pointers.
+        unsafe {
+            *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
+            *history_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = h;
+        }
+        Ok(())
+    })
+}
+
+/// Single-frame WALR on the calling thread. `index` seeds the replacement
+/// averages (use the frame number). `out` (3 channels) has the frame's size;
+/// `frame.guides_low` must be absent. `scratch`: 4-byte aligned, at least
+/// `lrd_walr_scratch_size` bytes. `report` may be NULL.
+#[cfg(feature = "walr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_walr_denoise(
+    config: *const LrdWalrConfig,
+    frame: *const LrdFrame,
+    index: u32,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    guard(|| {
+        // SAFETY: NULL-checked; the caller passes valid pointers.
+        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        let wl = walr_plan(config, out.width, out.height)?;
+        // SAFETY: the caller's images satisfy the LrdImage contract; the scratch
+        // is checked (NULL, alignment, size) and `out` is exclusively ours.
+        let r = unsafe {
+            let f = frame_views(frame, false)?;
+            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(wl.scratch_len())?)?;
+            let mut o = view_mut(out, 0, out.height as usize)?;
+            wl.denoise(&f, index, s, &mut o).map_err(status_of)?
+        };
+        write_walr_report(report, r);
+        Ok(())
+    })
+}
+
+/// One frame of the WALR pipeline (reprojection with depth rejection,
+/// accumulation, WALR, the variance-clipped post pass) on the calling thread.
+/// Arguments as for `lrd_bmfr_denoise_temporal`, with the sizes from
+/// `lrd_walr_temporal_sizes`.
+#[cfg(feature = "walr")]
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_walr_denoise_temporal(
+    config: *const LrdWalrConfig,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    guard(|| {
+        // SAFETY: NULL-checked; the caller passes valid pointers.
+        let (frame, out, hist) = unsafe {
+            (
+                frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
+                out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
+                history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?,
+            )
+        };
+        let wl = walr_plan(config, out.width, out.height)?;
+        // SAFETY: as in lrd_walr_denoise; the history buffer is checked the same
+        // way and must not overlap the scratch or the images (caller's contract).
+        let r = unsafe {
+            let f = frame_views(frame, false)?;
+            let mv = match motion.as_ref() {
+                Some(m) => view(m, 2)?,
+                None => None,
+            };
+            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(wl.temporal_scratch_len())?)?;
+            let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(wl.history_len())?)?;
+            let mut h = lrdenoise_core::History::resume(hd, hist.frames);
+            let mut o = view_mut(out, 0, out.height as usize)?;
+            let r = wl.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
+            hist.frames = h.frames();
+            r
+        };
+        write_walr_report(report, r);
         Ok(())
     })
 }
@@ -1038,6 +1283,9 @@ pub extern "C" fn lrd_features() -> u32 {
     }
     if cfg!(feature = "bmfr") {
         f |= LRD_FEATURE_BMFR;
+    }
+    if cfg!(feature = "walr") {
+        f |= LRD_FEATURE_WALR;
     }
     f
 }

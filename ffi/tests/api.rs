@@ -234,7 +234,7 @@ fn bmfr_matches_the_rust_api() {
         assert_eq!((sb, hb), (4 * b.temporal_scratch_len(), 4 * b.history_len()));
         let mut ts = vec![0f32; sb / 4];
         let mut hd = vec![0f32; hb / 4];
-        let mut hist = LrdBmfrHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
         let mut rhd = vec![0f32; b.history_len()];
         let mut rh = History::new(&mut rhd);
         let mut rep = LrdReport::default();
@@ -273,5 +273,88 @@ fn bmfr_matches_the_rust_api() {
             LrdStatus::LRD_STATUS_NULL_POINTER
         );
         assert_eq!(lrd_features() & LRD_FEATURE_BMFR, LRD_FEATURE_BMFR);
+    }
+}
+
+/// WALR through the C ABI gives exactly the Rust API's output, single frame and
+/// temporal, and validates its arguments.
+#[test]
+fn walr_matches_the_rust_api() {
+    use lrdenoise_core::{Frame, Guides, History, ImageView, ImageViewMut, Walr, WalrConfig};
+    let (w, h) = (41u32, 29u32);
+    let (wu, hu) = (w as usize, h as usize);
+    let n = wu * hu;
+    let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 1000) as f32 / 500.0).collect();
+    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == (i / 3 / 300) % 3 { 1.0 } else { 0.0 }).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 2.0 + (i / wu) as f32 * 0.01).collect();
+    let position: Vec<f32> = (0..3 * n).map(|i| ((i / 3) % wu) as f32 * 0.1 + (i % 3) as f32 + ((i / 3) / wu) as f32 * 0.05).collect();
+    let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { 0.5 } else { -0.25 }).collect();
+    let cfg = lrd_walr_config_default();
+    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
+    frame.guides.normal = img(normal.as_ptr(), w, h, 3);
+    frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+    frame.guides.position = img(position.as_ptr(), w, h, 3);
+    let mv = img(motion.as_ptr(), w, h, 2);
+
+    let wl = Walr::new(WalrConfig::default(), wu, hu).unwrap();
+    let rguides = Guides {
+        normal: Some(ImageView::interleaved(&normal, wu, hu, 3).unwrap()),
+        depth: Some(ImageView::interleaved(&depth, wu, hu, 1).unwrap()),
+        position: Some(ImageView::interleaved(&position, wu, hu, 3).unwrap()),
+        ..Default::default()
+    };
+    let rframe = Frame::new(ImageView::interleaved(&noisy, wu, hu, 3).unwrap(), rguides);
+    let rmv = ImageView::interleaved(&motion, wu, hu, 2).unwrap();
+    let mut want = vec![0f32; 3 * n];
+    let mut scratch = vec![0f32; wl.temporal_scratch_len()];
+    wl.denoise(&rframe, 2, &mut scratch, &mut ImageViewMut::interleaved(&mut want, wu, hu, 3).unwrap()).unwrap();
+
+    let mut out = vec![0f32; 3 * n];
+    let o =
+        LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
+    unsafe {
+        let mut bytes = 0usize;
+        assert_eq!(lrd_walr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
+        let mut cs = vec![0f32; bytes / 4];
+        let sp = cs.as_mut_ptr() as *mut _;
+        assert_eq!(lrd_walr_denoise(&cfg, &frame, 2, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(out, want);
+        assert_eq!(lrd_walr_denoise(&cfg, &frame, 2, &o, sp, bytes - 4, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
+        let mut bad = cfg;
+        bad.iterations = 300;
+        assert_eq!(lrd_walr_scratch_size(&bad, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        bad = cfg;
+        bad.iterations = 0;
+        assert_eq!(lrd_walr_scratch_size(&bad, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        let mut missing = frame;
+        missing.guides.position = none();
+        assert_eq!(lrd_walr_denoise(&cfg, &missing, 2, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_GUIDE_MISMATCH);
+
+        let (mut sb, mut hb) = (0usize, 0usize);
+        assert_eq!(lrd_walr_temporal_sizes(&cfg, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_OK);
+        assert_eq!((sb, hb), (4 * wl.temporal_scratch_len(), 4 * wl.history_len()));
+        let mut ts = vec![0f32; sb / 4];
+        let mut hd = vec![0f32; hb / 4];
+        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let mut rhd = vec![0f32; wl.history_len()];
+        let mut rh = History::new(&mut rhd);
+        let (mut rep, mut rrep) = (LrdReport::default(), lrdenoise_core::walr::Report::default());
+        for k in 0..3 {
+            let m = if k == 0 { null() } else { &mv as *const LrdImage };
+            assert_eq!(
+                lrd_walr_denoise_temporal(&cfg, &frame, m, &mut hist, &o, ts.as_mut_ptr() as *mut _, sb, &mut rep),
+                LrdStatus::LRD_STATUS_OK
+            );
+            let rm = if k == 0 { None } else { Some(&rmv) };
+            let r = wl
+                .denoise_temporal(&rframe, rm, &mut rh, &mut scratch, &mut ImageViewMut::interleaved(&mut want, wu, hu, 3).unwrap())
+                .unwrap();
+            rrep.history_rejected += r.history_rejected;
+            rrep.fallback_pixels += r.fallback_pixels;
+            assert_eq!(out, want, "frame {k}");
+            assert_eq!(hist.frames, k + 1);
+        }
+        assert_eq!((rep.history_rejected, rep.fallback_pixels), (rrep.history_rejected, rrep.fallback_pixels));
+        assert_eq!(lrd_features() & LRD_FEATURE_WALR, LRD_FEATURE_WALR);
     }
 }

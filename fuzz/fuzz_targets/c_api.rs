@@ -1,4 +1,4 @@
-//! (c) The C entry points (FLR, and BMFR single frame + temporal) with
+//! (c) The C entry points (FLR; BMFR and WALR, single frame + temporal) with
 //! arbitrary sizes, strides, formats, configs and NULL pointers. Buffers are allocated to span whatever layout is passed (the
 //! C contract), so any crash or non-finite output is a library bug.
 #![no_main]
@@ -48,7 +48,7 @@ fuzz_target!(|d: &[u8]| {
     cfg.regularization = d[13] as u32 % 3;
     cfg.upsample = [1, 1, 2, 4, 3][d[14] as usize % 5];
     let (lw, lh) = (w.div_ceil(cfg.upsample.max(1)), h.div_ceil(cfg.upsample.max(1)));
-    let mut bufs: Vec<Vec<u32>> = (0..12).map(|_| Vec::new()).collect();
+    let mut bufs: Vec<Vec<u32>> = (0..13).map(|_| Vec::new()).collect();
     let none = LrdImage { data: null(), format: 0, width: 0, height: 0, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
     let mut it = bufs.iter_mut();
     let mut next = || it.next().unwrap();
@@ -109,6 +109,35 @@ fuzz_target!(|d: &[u8]| {
                 if r == LrdStatus::LRD_STATUS_OK {
                     assert!(out.iter().all(|v| v.is_finite()));
                 }
+            }
+        }
+    }
+    // WALR (needs positions): single frame and one temporal frame.
+    {
+        let mut c = lrd_walr_config_default();
+        c.guides = (cfg.guides | LRD_GUIDE_POSITION) & !LRD_GUIDE_AO;
+        c.iterations = d[13] as u32 % 7; // 0, 6: invalid
+        c.tracing = d[12] % 2 == 0;
+        c.storage_f16 = d[11] % 3 == 0;
+        let mut wf = frame;
+        wf.guides_low = LrdGuides { normal: none, depth: none, position: none, ao: none, user: [none; 4] };
+        wf.guides.ao = none;
+        wf.guides.position = image(d, 19, 3, w, h, next());
+        let (mut sb, mut hb) = (0usize, 0usize);
+        let st = unsafe { lrd_walr_temporal_sizes(&c, w, h, &mut sb, &mut hb) };
+        assert_ne!(st, LrdStatus::LRD_STATUS_PANIC);
+        if st == LrdStatus::LRD_STATUS_OK {
+            let (mut s, mut hd) = (vec![0f32; sb / 4], vec![0f32; hb / 4]);
+            let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+            let r = unsafe { lrd_walr_denoise_temporal(&c, &wf, null(), &mut hist, &o, s.as_mut_ptr() as *mut _, sb, null_mut()) };
+            assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
+            if r == LrdStatus::LRD_STATUS_OK {
+                assert!(out.iter().all(|v| v.is_finite()));
+            }
+            let r = unsafe { lrd_walr_denoise(&c, &wf, 1, &o, s.as_mut_ptr() as *mut _, sb, null_mut()) };
+            assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
+            if r == LrdStatus::LRD_STATUS_OK {
+                assert!(out.iter().all(|v| v.is_finite()));
             }
         }
     }
