@@ -96,7 +96,7 @@ fuzz_target!(|d: &[u8]| {
         assert_ne!(st, LrdStatus::LRD_STATUS_PANIC);
         if st == LrdStatus::LRD_STATUS_OK {
             let (mut s, mut hd) = (vec![0f32; sb / 4], vec![0f32; hb / 4]);
-            let mut hist = LrdBmfrHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+            let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
             for k in 0..2 {
                 let m = if d[22] % 2 == 0 { null() } else { &mv as *const LrdImage };
                 let r = unsafe { lrd_bmfr_denoise_temporal(&b, &bf, m, &mut hist, &o, s.as_mut_ptr() as *mut _, sb, null_mut()) };
