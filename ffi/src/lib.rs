@@ -783,17 +783,172 @@ unsafe fn f32_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Resul
     Ok(unsafe { core::slice::from_raw_parts_mut(ptr as *mut f32, needed / 4) })
 }
 
+/// What the C entry points of the methods with a temporal pipeline (BMFR,
+/// WALR) call; one implementation of the entry points serves both.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+trait Temporal {
+    type Report;
+    fn scratch_len(&self) -> usize;
+    fn temporal_scratch_len(&self) -> usize;
+    fn history_len(&self) -> usize;
+    fn denoise(&self, f: &Frame<'_>, index: u32, scratch: &mut [f32], out: &mut ImageViewMut<'_>) -> Result<Self::Report, Error>;
+    fn denoise_temporal(
+        &self,
+        f: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut lrdenoise_core::History<'_>,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Self::Report, Error>;
+    /// Adds a run's counts to the C report.
+    fn add(r: &Self::Report, out: &mut LrdReport);
+}
+
+/// Forwards the trait to the method's own functions of the same names.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+macro_rules! temporal_method {
+    ($ty:ty, $report:ty, |$r:ident, $o:ident| $add:block) => {
+        impl Temporal for $ty {
+            type Report = $report;
+            fn scratch_len(&self) -> usize {
+                <$ty>::scratch_len(self)
+            }
+            fn temporal_scratch_len(&self) -> usize {
+                <$ty>::temporal_scratch_len(self)
+            }
+            fn history_len(&self) -> usize {
+                <$ty>::history_len(self)
+            }
+            fn denoise(&self, f: &Frame<'_>, index: u32, s: &mut [f32], o: &mut ImageViewMut<'_>) -> Result<$report, Error> {
+                <$ty>::denoise(self, f, index, s, o)
+            }
+            fn denoise_temporal(
+                &self,
+                f: &Frame<'_>,
+                m: Option<&ImageView<'_>>,
+                h: &mut lrdenoise_core::History<'_>,
+                s: &mut [f32],
+                o: &mut ImageViewMut<'_>,
+            ) -> Result<$report, Error> {
+                <$ty>::denoise_temporal(self, f, m, h, s, o)
+            }
+            fn add($r: &$report, $o: &mut LrdReport) $add
+        }
+    };
+}
+
 #[cfg(feature = "bmfr")]
-fn write_bmfr_report(report: *mut LrdReport, r: lrdenoise_core::bmfr::Report) {
+temporal_method!(lrdenoise_core::Bmfr, lrdenoise_core::bmfr::Report, |r, out| {
+    out.nonfinite_noisy += r.nonfinite_noisy;
+    out.nonfinite_guides += r.nonfinite_guides;
+    out.fallback_pixels += r.fallback_pixels;
+    out.empty_blocks += r.empty_blocks;
+    out.dropped_pivots += r.dropped_features;
+    out.history_rejected += r.history_rejected;
+});
+
+#[cfg(feature = "walr")]
+temporal_method!(lrdenoise_core::Walr, lrdenoise_core::walr::Report, |r, out| {
+    out.nonfinite_noisy += r.nonfinite_noisy;
+    out.nonfinite_guides += r.nonfinite_guides;
+    out.fallback_pixels += r.fallback_pixels;
+    out.history_rejected += r.history_rejected;
+});
+
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+fn add_report<M: Temporal>(report: *mut LrdReport, r: &M::Report) {
     // SAFETY: NULL is allowed; otherwise the caller passes a valid, exclusive pointer.
     if let Some(out) = unsafe { report.as_mut() } {
-        out.nonfinite_noisy += r.nonfinite_noisy;
-        out.nonfinite_guides += r.nonfinite_guides;
-        out.fallback_pixels += r.fallback_pixels;
-        out.empty_blocks += r.empty_blocks;
-        out.dropped_pivots += r.dropped_features;
-        out.history_rejected += r.history_rejected;
+        M::add(r, out);
     }
+}
+
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+fn scratch_size<M: Temporal>(plan: M, bytes: *mut usize) -> Result<(), LrdStatus> {
+    let b = f32_bytes(plan.scratch_len())?;
+    // SAFETY: checked for NULL; caller passes a valid pointer.
+    *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
+    Ok(())
+}
+
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+fn temporal_sizes<M: Temporal>(plan: M, scratch_bytes: *mut usize, history_bytes: *mut usize) -> Result<(), LrdStatus> {
+    let (s, h) = (f32_bytes(plan.temporal_scratch_len())?, f32_bytes(plan.history_len())?);
+    // SAFETY: checked for NULL; caller passes valid pointers.
+    unsafe {
+        *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
+        *history_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = h;
+    }
+    Ok(())
+}
+
+/// A single frame of a temporal method (`plan(width, height)` from the output size).
+///
+/// # Safety
+/// The pointers satisfy the contracts of the `lrd_*_denoise` entry points.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[allow(clippy::too_many_arguments)]
+unsafe fn denoise_single<M: Temporal>(
+    plan: impl FnOnce(u32, u32) -> Result<M, LrdStatus>,
+    frame: *const LrdFrame,
+    index: u32,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> Result<(), LrdStatus> {
+    // SAFETY: NULL-checked; the caller passes valid pointers. The images satisfy
+    // the LrdImage contract; the scratch is checked (NULL, alignment, size) and
+    // `out` is exclusively ours.
+    unsafe {
+        let (frame, out) = (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?);
+        let m = plan(out.width, out.height)?;
+        let f = frame_views(frame, false)?;
+        let s = f32_buffer(scratch, scratch_bytes, f32_bytes(m.scratch_len())?)?;
+        let mut o = view_mut(out, 0, out.height as usize)?;
+        let r = m.denoise(&f, index, s, &mut o).map_err(status_of)?;
+        add_report::<M>(report, &r);
+    }
+    Ok(())
+}
+
+/// One frame of a temporal pipeline; advances `history.frames`.
+///
+/// # Safety
+/// The pointers satisfy the contracts of the `lrd_*_denoise_temporal` entry
+/// points; the history buffer must not overlap the scratch or the images.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[allow(clippy::too_many_arguments)]
+unsafe fn denoise_temporal<M: Temporal>(
+    plan: impl FnOnce(u32, u32) -> Result<M, LrdStatus>,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> Result<(), LrdStatus> {
+    // SAFETY: as in `denoise_single`; the history buffer is checked the same way.
+    unsafe {
+        let frame = frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?;
+        let out = out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?;
+        let hist = history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?;
+        let m = plan(out.width, out.height)?;
+        let f = frame_views(frame, false)?;
+        let mv = match motion.as_ref() {
+            Some(mi) => view(mi, 2)?,
+            None => None,
+        };
+        let s = f32_buffer(scratch, scratch_bytes, f32_bytes(m.temporal_scratch_len())?)?;
+        let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(m.history_len())?)?;
+        let mut h = lrdenoise_core::History::resume(hd, hist.frames);
+        let mut o = view_mut(out, 0, out.height as usize)?;
+        let r = m.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
+        hist.frames = h.frames();
+        add_report::<M>(report, &r);
+    }
+    Ok(())
 }
 
 /// The paper's BMFR configuration: normal + position guides (M = 10
@@ -826,12 +981,7 @@ pub extern "C" fn lrd_bmfr_config_default() -> LrdBmfrConfig {
 #[cfg(feature = "bmfr")]
 #[no_mangle]
 pub unsafe extern "C" fn lrd_bmfr_scratch_size(config: *const LrdBmfrConfig, width: u32, height: u32, bytes: *mut usize) -> LrdStatus {
-    guard(|| {
-        let b = f32_bytes(bmfr_plan(config, width, height)?.scratch_len())?;
-        // SAFETY: checked for NULL; caller passes a valid pointer.
-        *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
-        Ok(())
-    })
+    guard(|| scratch_size(bmfr_plan(config, width, height)?, bytes))
 }
 
 /// Scratch and history bytes of the temporal pipeline (`lrd_bmfr_denoise_temporal`).
@@ -844,16 +994,7 @@ pub unsafe extern "C" fn lrd_bmfr_temporal_sizes(
     scratch_bytes: *mut usize,
     history_bytes: *mut usize,
 ) -> LrdStatus {
-    guard(|| {
-        let b = bmfr_plan(config, width, height)?;
-        let (s, h) = (f32_bytes(b.temporal_scratch_len())?, f32_bytes(b.history_len())?);
-        // SAFETY: checked for NULL; caller passes valid pointers.
-        unsafe {
-            *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
-            *history_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = h;
-        }
-        Ok(())
-    })
+    guard(|| temporal_sizes(bmfr_plan(config, width, height)?, scratch_bytes, history_bytes))
 }
 
 /// Single-frame BMFR on the calling thread. `index` picks the block-grid
@@ -872,21 +1013,8 @@ pub unsafe extern "C" fn lrd_bmfr_denoise(
     scratch_bytes: usize,
     report: *mut LrdReport,
 ) -> LrdStatus {
-    guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
-        let b = bmfr_plan(config, out.width, out.height)?;
-        // SAFETY: the caller's images satisfy the LrdImage contract; the scratch
-        // is checked (NULL, alignment, size) and `out` is exclusively ours.
-        let r = unsafe {
-            let f = frame_views(frame, false)?;
-            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(b.scratch_len())?)?;
-            let mut o = view_mut(out, 0, out.height as usize)?;
-            b.denoise(&f, index, s, &mut o).map_err(status_of)?
-        };
-        write_bmfr_report(report, r);
-        Ok(())
-    })
+    // SAFETY: forwarded contract (see `denoise_single`).
+    guard(|| unsafe { denoise_single(|w, h| bmfr_plan(config, w, h), frame, index, out, scratch, scratch_bytes, report) })
 }
 
 /// One frame of BMFR's temporal pipeline (reprojection and rejection, noisy
@@ -908,35 +1036,8 @@ pub unsafe extern "C" fn lrd_bmfr_denoise_temporal(
     scratch_bytes: usize,
     report: *mut LrdReport,
 ) -> LrdStatus {
-    guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out, hist) = unsafe {
-            (
-                frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
-                out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
-                history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?,
-            )
-        };
-        let b = bmfr_plan(config, out.width, out.height)?;
-        // SAFETY: as in lrd_bmfr_denoise; the history buffer is checked the same
-        // way and must not overlap the scratch or the images (caller's contract).
-        let r = unsafe {
-            let f = frame_views(frame, false)?;
-            let mv = match motion.as_ref() {
-                Some(m) => view(m, 2)?,
-                None => None,
-            };
-            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(b.temporal_scratch_len())?)?;
-            let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(b.history_len())?)?;
-            let mut h = lrdenoise_core::History::resume(hd, hist.frames);
-            let mut o = view_mut(out, 0, out.height as usize)?;
-            let r = b.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
-            hist.frames = h.frames();
-            r
-        };
-        write_bmfr_report(report, r);
-        Ok(())
-    })
+    // SAFETY: forwarded contract (see `denoise_temporal`).
+    guard(|| unsafe { denoise_temporal(|w, h| bmfr_plan(config, w, h), frame, motion, history, out, scratch, scratch_bytes, report) })
 }
 
 // ---------------------------------------------------------------- WALR
@@ -1026,17 +1127,6 @@ fn walr_plan(c: *const LrdWalrConfig, width: u32, height: u32) -> Result<lrdenoi
     lrdenoise_core::Walr::new(walr_config(c)?, width as usize, height as usize).map_err(status_of)
 }
 
-#[cfg(feature = "walr")]
-fn write_walr_report(report: *mut LrdReport, r: lrdenoise_core::walr::Report) {
-    // SAFETY: NULL is allowed; otherwise the caller passes a valid, exclusive pointer.
-    if let Some(out) = unsafe { report.as_mut() } {
-        out.nonfinite_noisy += r.nonfinite_noisy;
-        out.nonfinite_guides += r.nonfinite_guides;
-        out.fallback_pixels += r.fallback_pixels;
-        out.history_rejected += r.history_rejected;
-    }
-}
-
 /// WALR's defaults: normal + depth + position, T = 4, tracing and replacement
 /// on, thresholds 0.5 % / 1 %, f32 averages, and the pipeline's settings.
 #[cfg(feature = "walr")]
@@ -1071,12 +1161,7 @@ pub extern "C" fn lrd_walr_config_default() -> LrdWalrConfig {
 #[cfg(feature = "walr")]
 #[no_mangle]
 pub unsafe extern "C" fn lrd_walr_scratch_size(config: *const LrdWalrConfig, width: u32, height: u32, bytes: *mut usize) -> LrdStatus {
-    guard(|| {
-        let b = f32_bytes(walr_plan(config, width, height)?.scratch_len())?;
-        // SAFETY: checked for NULL; caller passes a valid pointer.
-        *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
-        Ok(())
-    })
+    guard(|| scratch_size(walr_plan(config, width, height)?, bytes))
 }
 
 /// Scratch and history bytes of the WALR pipeline (`lrd_walr_denoise_temporal`).
@@ -1089,16 +1174,7 @@ pub unsafe extern "C" fn lrd_walr_temporal_sizes(
     scratch_bytes: *mut usize,
     history_bytes: *mut usize,
 ) -> LrdStatus {
-    guard(|| {
-        let wl = walr_plan(config, width, height)?;
-        let (s, h) = (f32_bytes(wl.temporal_scratch_len())?, f32_bytes(wl.history_len())?);
-        // SAFETY: checked for NULL; caller passes valid pointers.
-        unsafe {
-            *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
-            *history_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = h;
-        }
-        Ok(())
-    })
+    guard(|| temporal_sizes(walr_plan(config, width, height)?, scratch_bytes, history_bytes))
 }
 
 /// Single-frame WALR on the calling thread. `index` seeds the replacement
@@ -1116,21 +1192,8 @@ pub unsafe extern "C" fn lrd_walr_denoise(
     scratch_bytes: usize,
     report: *mut LrdReport,
 ) -> LrdStatus {
-    guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
-        let wl = walr_plan(config, out.width, out.height)?;
-        // SAFETY: the caller's images satisfy the LrdImage contract; the scratch
-        // is checked (NULL, alignment, size) and `out` is exclusively ours.
-        let r = unsafe {
-            let f = frame_views(frame, false)?;
-            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(wl.scratch_len())?)?;
-            let mut o = view_mut(out, 0, out.height as usize)?;
-            wl.denoise(&f, index, s, &mut o).map_err(status_of)?
-        };
-        write_walr_report(report, r);
-        Ok(())
-    })
+    // SAFETY: forwarded contract (see `denoise_single`).
+    guard(|| unsafe { denoise_single(|w, h| walr_plan(config, w, h), frame, index, out, scratch, scratch_bytes, report) })
 }
 
 /// One frame of the WALR pipeline (reprojection with depth rejection,
@@ -1150,35 +1213,8 @@ pub unsafe extern "C" fn lrd_walr_denoise_temporal(
     scratch_bytes: usize,
     report: *mut LrdReport,
 ) -> LrdStatus {
-    guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out, hist) = unsafe {
-            (
-                frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
-                out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?,
-                history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?,
-            )
-        };
-        let wl = walr_plan(config, out.width, out.height)?;
-        // SAFETY: as in lrd_walr_denoise; the history buffer is checked the same
-        // way and must not overlap the scratch or the images (caller's contract).
-        let r = unsafe {
-            let f = frame_views(frame, false)?;
-            let mv = match motion.as_ref() {
-                Some(m) => view(m, 2)?,
-                None => None,
-            };
-            let s = f32_buffer(scratch, scratch_bytes, f32_bytes(wl.temporal_scratch_len())?)?;
-            let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(wl.history_len())?)?;
-            let mut h = lrdenoise_core::History::resume(hd, hist.frames);
-            let mut o = view_mut(out, 0, out.height as usize)?;
-            let r = wl.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
-            hist.frames = h.frames();
-            r
-        };
-        write_walr_report(report, r);
-        Ok(())
-    })
+    // SAFETY: forwarded contract (see `denoise_temporal`).
+    guard(|| unsafe { denoise_temporal(|w, h| walr_plan(config, w, h), frame, motion, history, out, scratch, scratch_bytes, report) })
 }
 
 /// One compute dispatch of the GPU path: the WGSL entry point and its workgroup counts.

@@ -86,22 +86,22 @@ fn axpy(y: &mut [f32], alpha: f32, x: &[f32], simd: bool) {
 /// `diag`), the reflection vectors' tails below it. The textbook two passes
 /// per reflection (the dot products `vᵀa_c`, then the updates): the scalar
 /// oracle of [`triangularize_fused`].
-fn triangularize(a: &mut [f32], ld: usize, rows: usize, cols: usize, m: usize, simd: bool, diag: &mut [f32; MAX_FEATURES]) {
+fn triangularize(a: &mut [f32], ld: usize, rows: usize, cols: usize, m: usize, diag: &mut [f32; MAX_FEATURES]) {
     for j in 0..m.min(rows) {
         let (head, tail) = a.split_at_mut((j + 1) * ld);
         let v = &mut head[j * ld + j..j * ld + rows];
-        let norm = libm::sqrtf(dot(v, v, simd));
+        let norm = libm::sqrtf(dot(v, v, false));
         if !(norm > 0.0) || !norm.is_finite() {
             diag[j] = 0.0;
             continue;
         }
         let alpha = if v[0] > 0.0 { -norm } else { norm };
         v[0] -= alpha; // v = x − α e1
-        let vv = dot(v, v, simd); // = 2 ‖x‖ (‖x‖ + |x0|) > 0
+        let vv = dot(v, v, false); // = 2 ‖x‖ (‖x‖ + |x0|) > 0
         for c in 0..(cols - j - 1) {
             let col = &mut tail[c * ld + j..c * ld + rows];
-            let s = -2.0 * dot(v, col, simd) / vv;
-            axpy(col, s, v, simd);
+            let s = -2.0 * dot(v, col, false) / vv;
+            axpy(col, s, v, false);
         }
         v[0] = alpha; // column j now holds R's column j on and above the diagonal
         diag[j] = alpha;
@@ -324,7 +324,7 @@ pub fn lstsq_ld(a: &mut [f32], ld: usize, rows: usize, m: usize, k: usize, rel_t
     if simd {
         triangularize_fused(a, ld, rows, cols, m, &mut diag);
     } else {
-        triangularize(a, ld, rows, cols, m, false, &mut diag);
+        triangularize(a, ld, rows, cols, m, &mut diag);
     }
     for d in diag.iter_mut().skip(rows) {
         *d = 0.0;
