@@ -151,3 +151,107 @@ fn row_access_matches_element_reads() {
         }
     }
 }
+
+/// Moments read in place (`moments_rows`) are bit-identical to moments of the
+/// same band gathered into weighted planes (`moments_band`), NaN/Inf included.
+fn rows_match_planes<const Q: usize>(seed: u64, block: usize, offset: f32, bad: usize) {
+    use lrdenoise::kernels::moments::*;
+    let (nb, rows) = (5, block);
+    let width = nb * block + 3; // a few pixels past the last whole block
+    let mut rng = seed | 1;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let planes_n = 3 + Q;
+    // raw rows: planes_n × rows × width
+    let mut raw: Vec<f32> = (0..planes_n * rows * width)
+        .map(|i| {
+            let p = i / (rows * width);
+            if p < 3 {
+                next() * 4.0
+            } else {
+                offset * (p as f32 - 2.0) + next() * 3.0
+            }
+        })
+        .collect();
+    for _ in 0..bad {
+        let i = (next() * raw.len() as f32) as usize % raw.len();
+        raw[i] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][i % 3];
+    }
+    let mut reference = [0f32; 12];
+    for (q, r) in reference.iter_mut().enumerate().take(Q) {
+        *r = raw[(3 + q) * rows * width + 1];
+    }
+    let row = |p: usize, r: usize| &raw[(p * rows + r) * width..(p * rows + r + 1) * width];
+    let mut band = BandRows { planes: [[&[][..]; 15]; MAX_ROWS], rows, width, reference };
+    for r in 0..rows {
+        for p in 0..planes_n {
+            band.planes[r][p] = row(p, r);
+        }
+    }
+    let k = CellLayout::new(Q).k;
+    let mut scratch = BlockScratch::default();
+    let mut a = vec![0f64; nb * k];
+    let counts = moments_rows::<Q>(&band, block, &mut a, &mut scratch);
+    // the same band as the driver gathers it: weight, colours, guides − m, zeros where invalid
+    let pw = nb * block;
+    let mut planes = vec![0f32; BandPlanes::len(Q, rows, pw)];
+    let n = rows * pw;
+    let (mut bad_noisy, mut bad_guides) = (0, 0);
+    for r in 0..rows {
+        for x in 0..pw {
+            let nok = (0..3).all(|p| row(p, r)[x].is_finite());
+            let gok = (3..planes_n).all(|p| row(p, r)[x].is_finite());
+            bad_noisy += !nok as usize;
+            bad_guides += !gok as usize;
+            let ok = nok && gok;
+            planes[r * pw + x] = ok as u32 as f32;
+            for p in 0..planes_n {
+                let v = row(p, r)[x];
+                let v = if p >= 3 { v - reference[p - 3] } else { v };
+                planes[(1 + p) * n + r * pw + x] = if ok { v } else { 0.0 };
+            }
+        }
+    }
+    let mut b = vec![0f64; nb * k];
+    let empty = moments_band::<Q>(BandPlanes { data: &planes, rows, width: pw }, block, true, 0, &mut b, &mut scratch);
+    assert_eq!(counts.empty_blocks, empty);
+    assert_eq!((counts.nonfinite_noisy, counts.nonfinite_guides), (bad_noisy, bad_guides));
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(x.to_bits() == y.to_bits() || (*x == 0.0 && *y == 0.0), "Q {Q} block {block} moment {i}: {x} vs {y}");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    #[test]
+    fn moments_in_place_match_gathered(seed in 0u64..1 << 40, big in proptest::bool::ANY, bad in 0usize..6, b16 in proptest::bool::ANY) {
+        let offset = if big { 1e4 } else { 0.5 };
+        let block = if b16 { 16 } else { 8 };
+        rows_match_planes::<0>(seed, block, offset, bad);
+        rows_match_planes::<1>(seed, block, offset, bad);
+        rows_match_planes::<5>(seed, block, offset, bad);
+        rows_match_planes::<8>(seed, block, offset, bad);
+        rows_match_planes::<12>(seed, block, offset, bad);
+    }
+}
+
+#[test]
+fn moments_in_place_whole_block_invalid() {
+    // every value NaN: all blocks empty, every pixel counted
+    use lrdenoise::kernels::moments::*;
+    let nan = vec![f32::NAN; 16];
+    let mut band = BandRows { planes: [[&[][..]; 15]; MAX_ROWS], rows: 8, width: 16, reference: [0.0; 12] };
+    for r in 0..8 {
+        for p in 0..4 {
+            band.planes[r][p] = &nan;
+        }
+    }
+    let mut cells = vec![1f64; 2 * CellLayout::new(1).k];
+    let c = moments_rows::<1>(&band, 8, &mut cells, &mut BlockScratch::default());
+    assert_eq!((c.empty_blocks, c.nonfinite_noisy, c.nonfinite_guides), (2, 128, 128));
+    assert!(cells.iter().all(|v| *v == 0.0));
+}

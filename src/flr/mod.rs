@@ -21,7 +21,7 @@ use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
 use crate::kernels::blur::{blur_cols_band, blur_row, Taps};
-use crate::kernels::moments::{moments_band, BandPlanes, BlockScratch};
+use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cells4, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
 
@@ -249,8 +249,11 @@ impl Flr {
     /// f32 values of one worker's private buffer.
     pub fn worker_len(&self) -> usize {
         let pw = self.cells_x * self.bin;
-        let moments = BandPlanes::len(self.q, self.bin, pw);
-        let apply = self.q * self.width + self.cells_x * self.ml + 3 * self.width;
+        let gathered = BandPlanes::len(self.q, self.bin, pw);
+        // in place: colour rows, guide rows that are not planar f32, the edge block gathered
+        let in_place = (3 + self.q) * self.bin * self.in_w + BandPlanes::len(self.q, self.bin, self.bin);
+        let moments = gathered.max(in_place);
+        let apply = self.q * self.width + 2 * self.cells_x * self.ml + 3 * self.width;
         moments.max(apply)
     }
     /// Scratch length in f64 elements for `workers` concurrent workers.
@@ -343,9 +346,81 @@ impl Flr {
         let mut rep = Report::default();
         let mut block_scratch = BlockScratch::default();
         for (j, cells_row) in (r0..r1).zip(cells_tile.chunks_exact_mut(row_len)) {
-            // (Splitting rows into column chunks to keep the planes in L2 was
-            // measured slower: whole rows it is.)
-            rep += self.moments_chunk(frame, stats, (t, j, 0, self.cells_x), cells_row, worker, &mut block_scratch)?;
+            rep += if self.reads_in_place(j) {
+                self.moments_in_place(frame, stats, (t, j), cells_row, worker, &mut block_scratch)?
+            } else {
+                // (Splitting rows into column chunks to keep the planes in L2 was
+                // measured slower: whole rows it is.)
+                self.moments_chunk(frame, stats, (t, j, 0, self.cells_x), cells_row, worker, &mut block_scratch)?
+            };
+        }
+        Ok(rep)
+    }
+
+    /// Whether cell row `j` is read in place ([`moments_rows`]): SIMD kernel,
+    /// a supported block size and every row of the band inside the image.
+    fn reads_in_place(&self, j: usize) -> bool {
+        self.kernel_simd() && rows_supported(self.bin, self.bin) && (j + 1) * self.bin <= self.in_h
+    }
+
+    /// Cell row `j` read in place: colour rows (and guides that are not planar
+    /// f32) are copied into `worker`, planar f32 guides are borrowed; whole
+    /// blocks go to [`moments_rows`], a partial block at the right edge to the
+    /// gathering path.
+    fn moments_in_place(
+        &self,
+        frame: &CheckedFrame<'_>,
+        stats: &Stats,
+        (t, j): (usize, usize),
+        cells: &mut [f64],
+        worker: &mut [f32],
+        block_scratch: &mut BlockScratch,
+    ) -> Result<Report, Error> {
+        let (bin, w, q) = (self.bin, self.in_w, self.q);
+        let bad = Error::InvalidTile { index: t, count: 0 };
+        let y0 = j * bin;
+        let (colour, rest) = worker.split_at_mut(3 * bin * w);
+        let (gathered, edge) = rest.split_at_mut(q * bin * w);
+        for (r, rgb) in colour.chunks_exact_mut(3 * w).enumerate() {
+            let (p0, p12) = rgb.split_at_mut(w);
+            let (p1, p2) = p12.split_at_mut(w);
+            frame.noisy.read_row_n(y0 + r, 0, [p0, p1, p2]).ok_or(bad)?;
+        }
+        let mut borrowed = [false; MAX_GUIDES];
+        for (g, dst) in gathered.chunks_exact_mut(bin * w).enumerate() {
+            let v = frame.fit[g].ok_or(Error::GuideMismatch)?;
+            borrowed[g] = v.row_f32(y0, 0, 0, w).is_some();
+            if !borrowed[g] {
+                for (r, row) in dst.chunks_exact_mut(w).enumerate() {
+                    v.read_row(y0 + r, 0, 0, row).ok_or(bad)?;
+                }
+            }
+        }
+        let mut band = BandRows { planes: [[&[][..]; 3 + MAX_GUIDES]; MAX_ROWS], rows: bin, width: w, reference: stats.reference };
+        for (r, planes) in band.planes.iter_mut().enumerate().take(bin) {
+            for c in 0..3 {
+                planes[c] = &colour[(3 * r + c) * w..(3 * r + c + 1) * w];
+            }
+            for g in 0..q {
+                planes[3 + g] = if borrowed[g] {
+                    frame.fit[g].and_then(|v| v.row_f32(y0 + r, 0, 0, w)).ok_or(bad)?
+                } else {
+                    &gathered[(g * bin + r) * w..(g * bin + r + 1) * w]
+                };
+            }
+        }
+        let whole = (w / bin).min(self.cells_x);
+        let k = self.lay.k;
+        let (cells_whole, cells_edge) = cells.split_at_mut(whole * k);
+        let counts = dispatch_q!(q, moments_rows(&band, bin, cells_whole, block_scratch));
+        let mut rep = Report {
+            nonfinite_noisy: counts.nonfinite_noisy as u64,
+            nonfinite_guides: counts.nonfinite_guides as u64,
+            empty_blocks: counts.empty_blocks as u64,
+            ..Report::default()
+        };
+        if whole < self.cells_x {
+            rep += self.moments_chunk(frame, stats, (t, j, whole, self.cells_x - whole), cells_edge, edge, block_scratch)?;
         }
         Ok(rep)
     }
@@ -548,6 +623,7 @@ impl Flr {
         let w = self.width;
         let (gbuf, rest) = worker.split_at_mut(self.q * w);
         let (row_models, rest) = rest.split_at_mut(self.cells_x * self.ml);
+        let (row_slopes, rest) = rest.split_at_mut(self.cells_x * self.ml);
         let outbuf = &mut rest[..3 * w];
         let mut rep = Report::default();
         let simd = self.kernel_simd();
@@ -567,10 +643,11 @@ impl Flr {
                     }
                 };
             }
-            lerp_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y, row_models);
+            lerp_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y, row_models, row_slopes);
             let guides = RowGuides { rows, reference: stats.reference, width: w };
             let clamp = self.cfg.clamp_negative;
-            let fallback = dispatch_q!(self.q, apply_row(row_models, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
+            let fallback =
+                dispatch_q!(self.q, apply_row(row_models, row_slopes, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
             rep.fallback_pixels += fallback as u64;
             let (r, gb) = outbuf.split_at(w);
             let (g, b) = gb.split_at(w);

@@ -25,18 +25,25 @@ pub fn cell_pos(x: usize, block: usize, cells: usize) -> (usize, f32) {
     (i, c - i as f32)
 }
 
-/// Vertically interpolated model row for output row `y` into `out` (`cells_x * ml`).
-pub fn lerp_rows(models: &[f32], cells_x: usize, cells_y: usize, ml: usize, block: usize, y: usize, out: &mut [f32]) {
+/// Vertically interpolated model row for output row `y` into `out` (`cells_x * ml`),
+/// and the horizontal differences `slopes[i] = out[i + 1] − out[i]` per cell
+/// (`(cells_x − 1) * ml`), so the SIMD path splats both straight from memory.
+#[allow(clippy::too_many_arguments)]
+pub fn lerp_rows(models: &[f32], cells_x: usize, cells_y: usize, ml: usize, block: usize, y: usize, out: &mut [f32], slopes: &mut [f32]) {
     let (j, fy) = cell_pos(y, block, cells_y);
     let row = cells_x * ml;
     let a = &models[j * row..(j + 1) * row];
     if fy == 0.0 {
         out.copy_from_slice(a);
-        return;
+    } else {
+        let b = &models[(j + 1) * row..(j + 2) * row];
+        for ((o, a), b) in out.iter_mut().zip(a).zip(b) {
+            *o = a + (b - a) * fy;
+        }
     }
-    let b = &models[(j + 1) * row..(j + 2) * row];
-    for ((o, a), b) in out.iter_mut().zip(a).zip(b) {
-        *o = a + (b - a) * fy;
+    let n = (cells_x - 1) * ml;
+    for ((s, a), b) in slopes[..n].iter_mut().zip(&out[..n]).zip(&out[ml..]) {
+        *s = b - a;
     }
 }
 
@@ -51,9 +58,12 @@ pub struct RowGuides<'a> {
 }
 
 /// Evaluates one output row into `out` (3 planes of `width`). A pixel with a
-/// non-finite guide gets the local mean; returns how many did.
+/// non-finite guide gets the local mean; returns how many did. `row_slopes`
+/// are the differences of consecutive cells' models ([`lerp_rows`]).
+#[allow(clippy::too_many_arguments)]
 pub fn apply_row<const Q: usize>(
     row_models: &[f32],
+    row_slopes: &[f32],
     cells_x: usize,
     block: usize,
     guides: RowGuides<'_>,
@@ -63,7 +73,11 @@ pub fn apply_row<const Q: usize>(
 ) -> usize {
     let w = guides.width;
     let ml = super::model_len(Q);
-    if guides.rows[..Q].iter().any(|r| r.len() < w) || out.len() < 3 * w || row_models.len() < cells_x * ml {
+    if guides.rows[..Q].iter().any(|r| r.len() < w)
+        || out.len() < 3 * w
+        || row_models.len() < cells_x * ml
+        || row_slopes.len() < (cells_x - 1) * ml
+    {
         return 0; // unreachable from the FLR driver, which sizes every buffer
     }
     let (o0, rest) = out.split_at_mut(w);
@@ -82,15 +96,9 @@ pub fn apply_row<const Q: usize>(
         let inv_b = 1.0 / block as f32;
         for i in 0..cells_x - 1 {
             let start = i * block + half;
-            let a = &row_models[i * ml..(i + 1) * ml];
-            let b = &row_models[(i + 1) * ml..(i + 2) * ml];
-            // The span's model as `a + fx·(b − a)`, splatted once for its groups.
-            let mut base = [f32x8::ZERO; MAX_ML];
-            let mut slope = [f32x8::ZERO; MAX_ML];
-            for j in 0..ml {
-                base[j] = f32x8::splat(a[j]);
-                slope[j] = f32x8::splat(b[j] - a[j]);
-            }
+            // The span's model is `a + fx·(b − a)`: both splatted from memory per group.
+            let base = &row_models[i * ml..(i + 1) * ml];
+            let slope = &row_slopes[i * ml..(i + 1) * ml];
             for g in 0..block / 8 {
                 let x0 = start + 8 * g;
                 if x0 + 8 > w {
@@ -98,7 +106,7 @@ pub fn apply_row<const Q: usize>(
                 }
                 let fx = f32x8::from([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]) + f32x8::splat((8 * g) as f32);
                 let fx = fx * f32x8::splat(inv_b);
-                fallback += simd_group::<Q>(&base, &slope, fx, &guides, clamp, x0, &mut outs);
+                fallback += simd_group::<Q>(base, slope, fx, &guides, clamp, x0, &mut outs);
                 x = x0 + 8;
             }
             if x < start + block {
@@ -112,9 +120,6 @@ pub fn apply_row<const Q: usize>(
     }
     fallback
 }
-
-/// Largest model length (Q = 12).
-const MAX_ML: usize = super::model_len(MAX_GUIDES);
 
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -151,10 +156,14 @@ fn scalar_px<const Q: usize>(
     !valid as usize
 }
 
+/// One group of 8 pixels. A non-finite guide makes every channel's `y`
+/// non-finite (`c·d` is NaN or ±Inf for any `c`, 0·Inf included), so one
+/// finiteness test of `y` covers the guides too; the guides are looked at
+/// only to count fallbacks when some lane failed.
 #[inline(always)]
 fn simd_group<const Q: usize>(
-    base: &[f32x8; MAX_ML],
-    slope: &[f32x8; MAX_ML],
+    base: &[f32],
+    slope: &[f32],
     fx: f32x8,
     g: &RowGuides<'_>,
     clamp: bool,
@@ -167,29 +176,37 @@ fn simd_group<const Q: usize>(
         // checked that every guide row holds at least `width` values.
         unsafe { core::ptr::read_unaligned(s.as_ptr().add(x0) as *const f32x8) }
     };
-    let lerp = |j: usize| slope[j].mul_add(fx, base[j]);
+    let lerp = |j: usize| f32x8::splat(slope[j]).mul_add(fx, f32x8::splat(base[j]));
     let max = f32x8::splat(f32::MAX);
     let mut dv = [f32x8::ZERO; MAX_GUIDES];
-    // finite: |v| <= MAX (false for NaN and ±Inf)
-    let mut ok = f32x8::splat(f32::from_bits(u32::MAX));
     for q in 0..Q {
-        let v = load(g.rows[q]);
-        ok &= v.abs().simd_le(max);
-        dv[q] = v - f32x8::splat(g.reference[q]);
+        dv[q] = load(g.rows[q]) - f32x8::splat(g.reference[q]);
     }
+    let mut all_ok = true;
     for c in 0..3 {
         let mut y = lerp(c);
         for q in 0..Q {
             y = lerp(3 + 3 * q + c).mul_add(dv[q], y);
         }
-        let muy = lerp(3 + 3 * Q + c);
         let finite = y.abs().simd_le(max);
-        let mut r = (ok & finite).select(y, muy);
+        let mut r = if finite.all() {
+            y
+        } else {
+            all_ok = false;
+            finite.select(y, lerp(3 + 3 * Q + c))
+        };
         if clamp {
             r = r.fast_max(f32x8::ZERO);
         }
         let arr: [f32; 8] = r.into();
         outs[c][x0..x0 + 8].copy_from_slice(&arr);
+    }
+    if all_ok {
+        return 0;
+    }
+    let mut ok = f32x8::splat(f32::from_bits(u32::MAX));
+    for q in 0..Q {
+        ok &= load(g.rows[q]).abs().simd_le(max);
     }
     8 - ok.to_bitmask().count_ones() as usize
 }

@@ -1,10 +1,13 @@
 //! Kernel 1: per-pixel moments summed over B×B blocks (paper §3.2, eq. 12).
 //!
-//! Input is one band of `B` rows already gathered into planes (see
-//! [`BandPlanes`]). Each block is accumulated *relative to its first valid
-//! pixel* in f32 (so large guide offsets do not cancel), then shifted to the
-//! frame reference in f64 and stored. With B a multiple of 8 one block row
-//! maps onto `f32x8` lanes.
+//! Two ways in: [`moments_rows`] reads one band of `B` rows in place (row
+//! slices of the caller's images, no copy; the fast path for whole blocks) and
+//! [`moments_band`] reads a band already gathered into planes with validity
+//! weights ([`BandPlanes`]; edges, odd block sizes, the scalar oracle). Both
+//! give bit-identical cells. Each block is accumulated *relative to its first
+//! valid pixel* in f32 (so large guide offsets do not cancel), then shifted
+//! to the frame reference in f64 and stored. With B a multiple of 8 one block
+//! row maps onto `f32x8` lanes.
 
 use super::CellLayout;
 use crate::guides::MAX_GUIDES;
@@ -106,6 +109,207 @@ pub fn moments_band<const Q: usize>(
     empty
 }
 
+/// Most rows in a [`BandRows`] (B = 16).
+pub const MAX_ROWS: usize = 16;
+
+/// One band of `rows` input rows read in place: `planes[r][0..3]` are the
+/// noisy colour rows of band row `r`, `planes[r][3 + q]` the raw guide rows
+/// (not centred), each at least `width` long; `reference` is the frame
+/// reference `m` subtracted from each guide.
+#[derive(Clone, Copy, Debug)]
+pub struct BandRows<'a> {
+    pub planes: [[&'a [f32]; 3 + MAX_GUIDES]; MAX_ROWS],
+    pub rows: usize,
+    pub width: usize,
+    pub reference: [f32; MAX_GUIDES],
+}
+
+/// What [`moments_rows`] found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RowsCounts {
+    /// Blocks without a valid pixel.
+    pub empty_blocks: usize,
+    /// Pixels with a NaN/Inf noisy value.
+    pub nonfinite_noisy: usize,
+    /// Pixels with a NaN/Inf guide value.
+    pub nonfinite_guides: usize,
+}
+
+/// Whether [`moments_rows`] handles this block size and band height.
+pub const fn rows_supported(block: usize, rows: usize) -> bool {
+    block % 8 == 0 && block > 0 && rows <= MAX_ROWS && rows * block / 8 <= MAX_GROUPS
+}
+
+/// Accumulates the moments of blocks `0..cells.len() / k` (all whole: they
+/// must lie inside `width`) of a band read in place, bit-identical to
+/// gathering it into [`BandPlanes`] and calling [`moments_band`].
+///
+/// Each block is first accumulated as if every pixel were valid, with the
+/// block's first pixel as reference: one subtraction pair per value and no
+/// masks. If a plain sum comes out non-finite the block holds a NaN/Inf and is
+/// redone with per-pixel validity (and counted). Unsupported shapes
+/// ([`rows_supported`], short rows) give zero cells, all counted empty.
+pub fn moments_rows<const Q: usize>(band: &BandRows<'_>, block: usize, cells: &mut [f64], scratch: &mut BlockScratch) -> RowsCounts {
+    let lay = CellLayout::new(Q);
+    let k = lay.k.max(1);
+    let nb = cells.len() / k;
+    let mut counts = RowsCounts::default();
+    let shape_ok = rows_supported(block, band.rows)
+        && band.rows > 0
+        && nb * block <= band.width
+        && band.planes[..band.rows].iter().all(|row| row[..3 + Q].iter().all(|p| p.len() >= band.width));
+    if !shape_ok {
+        cells.fill(0.0);
+        counts.empty_blocks = nb;
+        return counts;
+    }
+    let mut acc = [0f32; MAX_K];
+    for (cx, cell) in cells.chunks_exact_mut(k).enumerate() {
+        let x0 = cx * block;
+        // Fast attempt: the first pixel as reference, every pixel valid.
+        let mut r = [0f32; MAX_GUIDES];
+        for q in 0..Q {
+            r[q] = band.planes[0][3 + q][x0] - band.reference[q];
+        }
+        let ng = groups_plain::<Q>(band, x0, block, &r, &mut scratch.groups);
+        // every lane of every group has weight 1
+        let wsum = f32x8::splat(ng as f32);
+        if !accumulate::<Q>(&scratch.groups[..ng], wsum, &lay, &mut acc, true) {
+            // Some value is NaN/Inf: count, pick the first valid pixel, mask.
+            let Some(r2) = first_valid::<Q>(band, x0, block, &mut counts) else {
+                cell.fill(0.0);
+                counts.empty_blocks += 1;
+                continue;
+            };
+            r = r2;
+            let (ng, wsum) = groups_masked::<Q>(band, x0, block, &r, &mut scratch.groups);
+            accumulate::<Q>(&scratch.groups[..ng], wsum, &lay, &mut acc, false);
+        }
+        store_shifted::<Q>(&acc, &r, &lay, cell);
+    }
+    counts
+}
+
+#[inline(always)]
+fn load_at(s: &[f32], i: usize) -> f32x8 {
+    debug_assert!(i + 8 <= s.len());
+    // SAFETY: callers pass `i + 8 <= s.len()`: `moments_rows` checked that every row
+    // slice holds `width` values and that its blocks (block % 8 == 0) lie inside `width`.
+    unsafe { core::ptr::read_unaligned(s.as_ptr().add(i) as *const f32x8) }
+}
+
+/// How far ahead (values) the in-place path asks for its guide rows. The
+/// band has `rows × Q` guide streams advancing by one block each: more than
+/// the hardware prefetchers follow, so every block's loads would wait on DRAM.
+const PREFETCH_AHEAD: usize = 48;
+
+/// Hints that `s[i..]` will be read soon (nothing when out of range or not x86-64).
+#[inline(always)]
+fn prefetch(s: &[f32], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if i < s.len() {
+        // SAFETY: `i < s.len()`, so the pointer is inside the slice; a prefetch
+        // reads nothing architecturally and cannot fault.
+        unsafe { core::arch::x86_64::_mm_prefetch(s.as_ptr().add(i) as *const i8, core::arch::x86_64::_MM_HINT_T0) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (s, i);
+}
+
+/// Group vectors of a block assuming every pixel valid: `e = (g − m) − r`
+/// (the value the gathered plane holds, minus the reference, times weight 1).
+#[inline(always)]
+fn groups_plain<const Q: usize>(
+    band: &BandRows<'_>,
+    x0: usize,
+    block: usize,
+    r: &[f32; MAX_GUIDES],
+    v: &mut [[f32x8; VW]; MAX_GROUPS],
+) -> usize {
+    let mut mv = [f32x8::ZERO; MAX_GUIDES];
+    let mut rv = [f32x8::ZERO; MAX_GUIDES];
+    for q in 0..Q {
+        mv[q] = f32x8::splat(band.reference[q]);
+        rv[q] = f32x8::splat(r[q]);
+    }
+    let mut ng = 0;
+    for row in &band.planes[..band.rows] {
+        for q in 0..Q {
+            prefetch(row[3 + q], x0 + PREFETCH_AHEAD);
+        }
+        for x in (x0..x0 + block).step_by(8) {
+            let vg = &mut v[ng];
+            for q in 0..Q {
+                vg[q] = (load_at(row[3 + q], x) - mv[q]) - rv[q];
+            }
+            for c in 0..3 {
+                vg[Q + c] = load_at(row[c], x);
+            }
+            ng += 1;
+        }
+    }
+    ng
+}
+
+/// The first pixel of the block (row-major) whose values are all finite, as
+/// `g − m`, counting the pixels that are not; `None` if there is none.
+#[inline(never)]
+fn first_valid<const Q: usize>(band: &BandRows<'_>, x0: usize, block: usize, counts: &mut RowsCounts) -> Option<[f32; MAX_GUIDES]> {
+    let mut first = None;
+    for row in &band.planes[..band.rows] {
+        for x in x0..x0 + block {
+            let noisy_ok = row[..3].iter().all(|p| p[x].is_finite());
+            let guides_ok = row[3..3 + Q].iter().all(|p| p[x].is_finite());
+            counts.nonfinite_noisy += !noisy_ok as usize;
+            counts.nonfinite_guides += !guides_ok as usize;
+            if noisy_ok && guides_ok && first.is_none() {
+                let mut r = [0f32; MAX_GUIDES];
+                for q in 0..Q {
+                    r[q] = row[3 + q][x] - band.reference[q];
+                }
+                first = Some(r);
+            }
+        }
+    }
+    first
+}
+
+/// Group vectors with per-pixel validity, exactly as [`moments_band`] sees a
+/// gathered band: an invalid pixel has weight 0 and all its planes 0.
+#[inline(never)]
+fn groups_masked<const Q: usize>(
+    band: &BandRows<'_>,
+    x0: usize,
+    block: usize,
+    r: &[f32; MAX_GUIDES],
+    v: &mut [[f32x8; VW]; MAX_GROUPS],
+) -> (usize, f32x8) {
+    let max = f32x8::splat(f32::MAX);
+    let one = f32x8::splat(1.0);
+    let mut ng = 0;
+    let mut wsum = f32x8::ZERO;
+    for row in &band.planes[..band.rows] {
+        for x in (x0..x0 + block).step_by(8) {
+            let mut ok = f32x8::splat(f32::from_bits(u32::MAX));
+            for p in &row[..3 + Q] {
+                ok &= load_at(p, x).abs().simd_le(max);
+            }
+            let w = ok & one;
+            wsum += w;
+            let vg = &mut v[ng];
+            for q in 0..Q {
+                let d = ok.select(load_at(row[3 + q], x) - f32x8::splat(band.reference[q]), f32x8::ZERO);
+                vg[q] = (d - f32x8::splat(r[q])) * w;
+            }
+            for c in 0..3 {
+                vg[Q + c] = ok.select(load_at(row[c], x), f32x8::ZERO);
+            }
+            ng += 1;
+        }
+    }
+    (ng, wsum)
+}
+
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn block_scalar<const Q: usize>(
@@ -154,11 +358,9 @@ const MAX_GROUPS: usize = 32;
 /// Vectors per group: Q centred guides, then 3 colours.
 const VW: usize = MAX_GUIDES + 3;
 
-/// SIMD block accumulation. First every 8-pixel group of the block is turned
-/// into vectors `v = [e_0..e_Q, y_0, y_1, y_2]` (e = (g − r)·w); then for each
-/// guide `a` the whole row `Σ v_a v_b, b ≥ a` (that is `S_a·` and `P_a·`) is
-/// accumulated in registers over the groups, one fused multiply-add per
-/// product, and reduced once.
+/// SIMD block accumulation from gathered planes: every 8-pixel group of the
+/// block is turned into vectors `v = [e_0..e_Q, y_0, y_1, y_2]`
+/// (e = (g − r)·w), then [`accumulate`]d.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn block_simd<const Q: usize>(
@@ -203,7 +405,17 @@ fn block_simd<const Q: usize>(
             i += 8;
         }
     }
-    let groups = &v[..ng];
+    accumulate::<Q>(&v[..ng], wsum, lay, acc, false);
+}
+
+/// Block sums of the group vectors `v = [e_0..e_Q, y_0, y_1, y_2]` into
+/// `acc` (cell layout, about the block reference): plain sums, then for each
+/// guide `a` the whole row `Σ v_a v_b, b ≥ a` (that is `S_a·` and `P_a·`)
+/// accumulated in registers over the groups, one fused multiply-add per
+/// product, reduced eight at a time. With `check`, returns `false` (and
+/// leaves `acc` unspecified) as soon as a plain sum is not finite.
+#[inline(always)]
+fn accumulate<const Q: usize>(groups: &[[f32x8; VW]], wsum: f32x8, lay: &CellLayout, acc: &mut [f32; MAX_K], check: bool) -> bool {
     // Block sums as vectors (8 column partial sums each), in the cell layout,
     // then reduced eight at a time.
     let mut sums = [f32x8::ZERO; MAX_K];
@@ -213,6 +425,17 @@ fn block_simd<const Q: usize>(
     for vg in groups {
         for j in 0..Q + 3 {
             plain[j] += vg[j];
+        }
+    }
+    if check {
+        // A non-finite input makes its plain sum non-finite (Inf, or NaN).
+        let max = f32x8::splat(f32::MAX);
+        let mut ok = f32x8::splat(f32::from_bits(u32::MAX));
+        for j in 0..Q + 3 {
+            ok &= plain[j].abs().simd_le(max);
+        }
+        if !ok.all() {
+            return false;
         }
     }
     for a in 0..Q {
@@ -256,6 +479,7 @@ fn block_simd<const Q: usize>(
         let total: [f32; 8] = ((t[0] + t[1]) + (t[2] + t[3]) + ((t[4] + t[5]) + (t[6] + t[7]))).into();
         dst.copy_from_slice(&total[..dst.len()]);
     }
+    true
 }
 
 /// Moments about the block reference `r` → moments about the frame reference (f64).
