@@ -7,6 +7,7 @@
 //! is independent: the caller may run bands in any order or in parallel.
 
 use crate::config::MAX_RADIUS_CELLS;
+use wide::f64x4;
 
 /// Gaussian taps `w[0..=r]` for offsets `0..=r` (symmetric), normalised so the
 /// full 1-D kernel sums to 1.
@@ -84,14 +85,16 @@ pub fn blur_row(taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     let (i0, i1) = if cx > 2 * r { (r, cx - r) } else { (cx, cx) };
     let mut x = i0 * k;
     while x + LANES <= i1 * k {
-        let mut acc = load::<LANES>(&src[x..]).map(|v| v * taps.w[0]);
+        let w0 = f64x4::splat(taps.w[0]);
+        let mut acc = load(&src[x..]).map(|v| v * w0);
         for o in 1..=r {
-            let (a, b) = (load::<LANES>(&src[x - o * k..]), load::<LANES>(&src[x + o * k..]));
-            for l in 0..LANES {
-                acc[l] += taps.w[o] * (a[l] + b[l]);
+            let (a, b) = (load(&src[x - o * k..]), load(&src[x + o * k..]));
+            let wo = f64x4::splat(taps.w[o]);
+            for l in 0..VECS {
+                acc[l] = (a[l] + b[l]).mul_add(wo, acc[l]);
             }
         }
-        dst[x..x + LANES].copy_from_slice(&acc);
+        store(&acc, &mut dst[x..x + LANES]);
         x += LANES;
     }
     let interior_tail = x..i1 * k;
@@ -112,16 +115,23 @@ pub fn blur_row(taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     }
 }
 
-/// Values accumulated in registers at once by the Gaussian passes (4 AVX f64x4).
+/// Values accumulated in registers at once by the Gaussian passes (4 f64x4,
+/// fused multiply-adds where the target has them).
 const LANES: usize = 16;
+const VECS: usize = LANES / 4;
 /// Column strip of the vertical pass: the band's source rows of one strip stay in L1.
 const STRIP: usize = 256;
 
 #[inline(always)]
-fn load<const N: usize>(s: &[f64]) -> [f64; N] {
-    let mut a = [0f64; N];
-    a.copy_from_slice(&s[..N]);
-    a
+fn load(s: &[f64]) -> [f64x4; VECS] {
+    let mut a = [0f64; LANES];
+    a.copy_from_slice(&s[..LANES]);
+    bytemuck::cast(a)
+}
+
+#[inline(always)]
+fn store(a: &[f64x4; VECS], d: &mut [f64]) {
+    d[..LANES].copy_from_slice(&bytemuck::cast::<[f64x4; VECS], [f64; LANES]>(*a));
 }
 
 /// Vertical pass for output rows `row0..row0 + dst.len() / row_len` of a grid
@@ -163,15 +173,15 @@ pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, 
             let hi = (j + r).min(cells_y as isize - 1);
             let mut c = s0;
             while c + LANES <= s1 {
-                let mut acc = [0f64; LANES];
+                let mut acc = [f64x4::ZERO; VECS];
                 for jj in lo..=hi {
-                    let wk = taps.w[(jj - j).unsigned_abs()];
-                    let a = load::<LANES>(&row(jj)[c..]);
-                    for l in 0..LANES {
-                        acc[l] += wk * a[l];
+                    let wk = f64x4::splat(taps.w[(jj - j).unsigned_abs()]);
+                    let a = load(&row(jj)[c..]);
+                    for l in 0..VECS {
+                        acc[l] = a[l].mul_add(wk, acc[l]);
                     }
                 }
-                out[c..c + LANES].copy_from_slice(&acc);
+                store(&acc, &mut out[c..c + LANES]);
                 c += LANES;
             }
             for cc in c..s1 {

@@ -71,22 +71,50 @@ pub fn solve_cells4<const Q: usize>(cells: &[f64], p: &SolveParams, models: &mut
     };
     let get = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
     let (c0, coef, muy, dropped) = normalized::<f64x4, Q>(get, p, eps_mul, eps_add);
-    let lane = |v: f64x4, l: usize| v.to_array()[l];
+    write_models4::<Q>(&c0, &coef, &muy, models);
     core::array::from_fn(|l| {
-        let model = &mut models[l * ml..(l + 1) * ml];
         if is_empty(cells[l * k], p) {
-            model.fill(0.0);
+            models[l * ml..(l + 1) * ml].fill(0.0);
             return CellOutcome { empty: true, dropped: 0 };
         }
-        let c0l = c0.map(|v| lane(v, l));
-        let muyl = muy.map(|v| lane(v, l));
-        let mut coefl = [[0f64; 3]; MAX_GUIDES];
-        for a in 0..Q {
-            coefl[a] = coef[a].map(|v| lane(v, l));
-        }
-        write_model::<Q>(&c0l, &coefl[..Q], &muyl, model);
         CellOutcome { empty: false, dropped: dropped[l] }
     })
+}
+
+/// [`write_model`] for four cells at once: finiteness tested in lanes, each
+/// value transposed straight into its cell's model; the rare lane with a
+/// non-finite value is redone by [`write_model`] (same result).
+#[inline(always)]
+fn write_models4<const Q: usize>(c0: &[f64x4; 3], coef: &[[f64x4; 3]; Q], muy: &[f64x4; 3], models: &mut [f32]) {
+    let ml = super::model_len(Q);
+    let limit = f64x4::splat(f32::MAX as f64);
+    let mut ok = f64x4::splat(f64::from_bits(u64::MAX));
+    let mut put = |j: usize, v: f64x4, ok: &mut f64x4| {
+        *ok &= v.abs().simd_lt(limit);
+        for (l, x) in v.to_array().into_iter().enumerate() {
+            models[l * ml + j] = x as f32;
+        }
+    };
+    for c in 0..3 {
+        put(c, c0[c], &mut ok);
+        put(3 + 3 * Q + c, muy[c], &mut ok);
+    }
+    for a in 0..Q {
+        for c in 0..3 {
+            put(3 + 3 * a + c, coef[a][c], &mut ok);
+        }
+    }
+    let ok = ok.to_bitmask();
+    for l in 0..4 {
+        if ok & (1 << l) == 0 {
+            let lane = |v: f64x4| v.to_array()[l];
+            let mut coefl = [[0f64; 3]; MAX_GUIDES];
+            for a in 0..Q {
+                coefl[a] = coef[a].map(lane);
+            }
+            write_model::<Q>(&c0.map(lane), &coefl[..Q], &muy.map(lane), &mut models[l * ml..(l + 1) * ml]);
+        }
+    }
 }
 
 #[inline(always)]
