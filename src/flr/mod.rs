@@ -549,11 +549,24 @@ impl Flr {
 
     /// Stage 4: vertical blur of tile `t`: all of `tmp` → `cells_tile`.
     pub fn blur_cols_tile(&self, t: usize, tmp: &[f64], cells_tile: &mut [f64]) -> Result<(), Error> {
-        let (r0, _) = self.tile_rows(t)?;
-        if tmp.len() != self.grid_len() || cells_tile.len() != self.cells_tile_len(t)? {
-            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        self.blur_cols_tiles(t..t + 1, tmp, cells_tile)
+    }
+
+    /// Stage 4 for consecutive tiles `tiles` at once (`cells_band` spans them):
+    /// bit-identical to one tile at a time, and each source row is fetched
+    /// from memory fewer times (a tile's 4 rows read 4 + 2r source rows).
+    pub fn blur_cols_tiles(&self, tiles: core::ops::Range<usize>, tmp: &[f64], cells_band: &mut [f64]) -> Result<(), Error> {
+        let bad = Error::InvalidTile { index: tiles.end, count: self.tile_count() };
+        if tiles.is_empty() {
+            return Err(bad);
         }
-        blur_cols_band(&self.taps, self.cells_x * self.lay.k, self.cells_y, r0, tmp, cells_tile);
+        let (r0, _) = self.tile_rows(tiles.start)?;
+        let (_, r1) = self.tile_rows(tiles.end - 1)?;
+        let row_len = self.cells_x * self.lay.k;
+        if tmp.len() != self.grid_len() || cells_band.len() != (r1 - r0) * row_len {
+            return Err(bad);
+        }
+        blur_cols_band(&self.taps, row_len, self.cells_y, r0, tmp, cells_band);
         Ok(())
     }
 
@@ -674,10 +687,15 @@ impl Flr {
             self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
         }
         self.finish_stats(parts.cells, &mut stats)?;
-        for t in 0..tiles {
-            let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
-            self.blur_cols_tile(t, parts.tmp, &mut parts.cells[c.clone()])?;
-            rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
+        // Vertical blur four tiles at a time (fewer re-reads of `tmp`), then their solves.
+        for t0 in (0..tiles).step_by(4) {
+            let t1 = (t0 + 4).min(tiles);
+            let band = self.cells_tile_range(t0)?.start..self.cells_tile_range(t1 - 1)?.end;
+            self.blur_cols_tiles(t0..t1, parts.tmp, &mut parts.cells[band])?;
+            for t in t0..t1 {
+                let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
+                rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
+            }
         }
         for t in 0..tiles {
             let (y0, y1) = self.tile_pixel_rows(t)?;

@@ -93,26 +93,14 @@ pub fn apply_row<const Q: usize>(
             fallback += scalar_px::<Q>(row_models, cells_x, block, ml, &guides, clamp, x, &mut outs);
             x += 1;
         }
-        let inv_b = 1.0 / block as f32;
-        for i in 0..cells_x - 1 {
-            let start = i * block + half;
-            // The span's model is `a + fx·(b − a)`: both splatted from memory per group.
-            let base = &row_models[i * ml..(i + 1) * ml];
-            let slope = &row_slopes[i * ml..(i + 1) * ml];
-            for g in 0..block / 8 {
-                let x0 = start + 8 * g;
-                if x0 + 8 > w {
-                    break;
-                }
-                let fx = f32x8::from([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]) + f32x8::splat((8 * g) as f32);
-                let fx = fx * f32x8::splat(inv_b);
-                fallback += simd_group::<Q>(base, slope, fx, &guides, clamp, x0, &mut outs);
-                x = x0 + 8;
-            }
-            if x < start + block {
-                break;
-            }
-        }
+        let span = Span { ml, block, half, cells_x };
+        let (f, end) = if clamp {
+            simd_spans::<Q, true>(row_models, row_slopes, &span, &guides, &mut outs)
+        } else {
+            simd_spans::<Q, false>(row_models, row_slopes, &span, &guides, &mut outs)
+        };
+        fallback += f;
+        x = end;
     }
     while x < w {
         fallback += scalar_px::<Q>(row_models, cells_x, block, ml, &guides, clamp, x, &mut outs);
@@ -156,17 +144,77 @@ fn scalar_px<const Q: usize>(
     !valid as usize
 }
 
-/// One group of 8 pixels. A non-finite guide makes every channel's `y`
-/// non-finite (`c·d` is NaN or ±Inf for any `c`, 0·Inf included), so one
-/// finiteness test of `y` covers the guides too; the guides are looked at
-/// only to count fallbacks when some lane failed.
+/// Geometry of the spans between cell centres of one row.
+struct Span {
+    ml: usize,
+    block: usize,
+    half: usize,
+    cells_x: usize,
+}
+
+/// Every whole 8-pixel group between the first and last cell centres; returns
+/// the fallback count and the first pixel not done.
 #[inline(always)]
-fn simd_group<const Q: usize>(
+fn simd_spans<const Q: usize, const CLAMP: bool>(
+    row_models: &[f32],
+    row_slopes: &[f32],
+    sp: &Span,
+    guides: &RowGuides<'_>,
+    outs: &mut [&mut [f32]; 3],
+) -> (usize, usize) {
+    let (ml, w) = (sp.ml, guides.width);
+    let inv_b = f32x8::splat(1.0 / sp.block as f32);
+    let fx0 = f32x8::from([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]) * inv_b;
+    let mut reference = [f32x8::ZERO; MAX_GUIDES];
+    for q in 0..Q {
+        reference[q] = f32x8::splat(guides.reference[q]);
+    }
+    let (mut fallback, mut x) = (0, sp.half.min(w));
+    if sp.block == 8 {
+        // One group per span. Kept apart from the general loop: there the
+        // compiler hoists the span's 2·ml splats out of the group loop and,
+        // with too few registers, spills them: ~2× the instructions per group.
+        for i in 0..sp.cells_x - 1 {
+            let x0 = i * 8 + sp.half;
+            if x0 + 8 > w {
+                break;
+            }
+            let (base, slope) = (&row_models[i * ml..(i + 1) * ml], &row_slopes[i * ml..(i + 1) * ml]);
+            fallback += simd_group::<Q, CLAMP>(base, slope, fx0, &reference, guides, x0, outs);
+            x = x0 + 8;
+        }
+        return (fallback, x);
+    }
+    for i in 0..sp.cells_x - 1 {
+        let start = i * sp.block + sp.half;
+        // The span's model is `a + fx·(b − a)`: both splatted from memory per group.
+        let base = &row_models[i * ml..(i + 1) * ml];
+        let slope = &row_slopes[i * ml..(i + 1) * ml];
+        for g in 0..sp.block / 8 {
+            let x0 = start + 8 * g;
+            if x0 + 8 > w {
+                return (fallback, x);
+            }
+            let fx = if g == 0 { fx0 } else { fx0 + f32x8::splat((8 * g) as f32) * inv_b };
+            fallback += simd_group::<Q, CLAMP>(base, slope, fx, &reference, guides, x0, outs);
+            x = x0 + 8;
+        }
+    }
+    (fallback, x)
+}
+
+/// One group of 8 pixels (channels one after the other: interleaving their
+/// chains measured slower, it spills). A non-finite guide makes every channel's `y` non-finite (`c·d` is NaN or
+/// ±Inf for any `c`, 0·Inf included), so one finiteness test of `y` covers
+/// the guides too; the guides are looked at only to count fallbacks when
+/// some lane failed.
+#[inline(always)]
+fn simd_group<const Q: usize, const CLAMP: bool>(
     base: &[f32],
     slope: &[f32],
     fx: f32x8,
+    reference: &[f32x8; MAX_GUIDES],
     g: &RowGuides<'_>,
-    clamp: bool,
     x0: usize,
     outs: &mut [&mut [f32]; 3],
 ) -> usize {
@@ -178,15 +226,15 @@ fn simd_group<const Q: usize>(
     };
     let lerp = |j: usize| f32x8::splat(slope[j]).mul_add(fx, f32x8::splat(base[j]));
     let max = f32x8::splat(f32::MAX);
-    let mut dv = [f32x8::ZERO; MAX_GUIDES];
+    let mut d = [f32x8::ZERO; MAX_GUIDES];
     for q in 0..Q {
-        dv[q] = load(g.rows[q]) - f32x8::splat(g.reference[q]);
+        d[q] = load(g.rows[q]) - reference[q];
     }
     let mut all_ok = true;
     for c in 0..3 {
         let mut y = lerp(c);
         for q in 0..Q {
-            y = lerp(3 + 3 * q + c).mul_add(dv[q], y);
+            y = lerp(3 + 3 * q + c).mul_add(d[q], y);
         }
         let finite = y.abs().simd_le(max);
         let mut r = if finite.all() {
@@ -195,7 +243,7 @@ fn simd_group<const Q: usize>(
             all_ok = false;
             finite.select(y, lerp(3 + 3 * Q + c))
         };
-        if clamp {
+        if CLAMP {
             r = r.fast_max(f32x8::ZERO);
         }
         let arr: [f32; 8] = r.into();

@@ -86,32 +86,41 @@ pub fn blur_row(taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     let mut x = i0 * k;
     while x + LANES <= i1 * k {
         let w0 = f64x4::splat(taps.w[0]);
-        let mut acc = load(&src[x..]).map(|v| v * w0);
+        let mut acc = load::<VECS>(&src[x..]).map(|v| v * w0);
         for o in 1..=r {
-            let (a, b) = (load(&src[x - o * k..]), load(&src[x + o * k..]));
+            let (a, b) = (load::<VECS>(&src[x - o * k..]), load::<VECS>(&src[x + o * k..]));
             let wo = f64x4::splat(taps.w[o]);
             for l in 0..VECS {
                 acc[l] = (a[l] + b[l]).mul_add(wo, acc[l]);
             }
         }
-        store(&acc, &mut dst[x..x + LANES]);
+        store(&acc, &mut dst[x..]);
         x += LANES;
     }
-    let interior_tail = x..i1 * k;
-    // Border cells (taps beyond the row are zero) and the interior's tail.
-    let border = (0..i0.min(cx) * k).chain(interior_tail).chain(i1.max(i0) * k..cx * k);
-    for x in border {
-        let i = x / k;
+    // The interior's tail (fewer than LANES values), value by value.
+    for x in x..i1 * k {
         let mut acc = src[x] * taps.w[0];
         for o in 1..=r {
-            if o <= i {
-                acc += taps.w[o] * at(x, o, true);
-            }
-            if i + o < cx {
-                acc += taps.w[o] * at(x, o, false);
-            }
+            acc += taps.w[o] * at(x, o, true);
+            acc += taps.w[o] * at(x, o, false);
         }
         dst[x] = acc;
+    }
+    // Border cells (taps beyond the row are zero), a whole cell at a time so
+    // the k values vectorise; same operations in the same order per value.
+    for i in (0..i0.min(cx)).chain(i1.max(i0)..cx) {
+        let out = &mut dst[i * k..(i + 1) * k];
+        for (d, s) in out.iter_mut().zip(&src[i * k..(i + 1) * k]) {
+            *d = s * taps.w[0];
+        }
+        for o in 1..=r {
+            if o <= i {
+                axpy(out, taps.w[o], &src[(i - o) * k..(i - o + 1) * k]);
+            }
+            if i + o < cx {
+                axpy(out, taps.w[o], &src[(i + o) * k..(i + o + 1) * k]);
+            }
+        }
     }
 }
 
@@ -123,15 +132,15 @@ const VECS: usize = LANES / 4;
 const STRIP: usize = 256;
 
 #[inline(always)]
-fn load(s: &[f64]) -> [f64x4; VECS] {
-    let mut a = [0f64; LANES];
-    a.copy_from_slice(&s[..LANES]);
-    bytemuck::cast(a)
+fn load<const V: usize>(s: &[f64]) -> [f64x4; V] {
+    let mut a = [f64x4::ZERO; V];
+    bytemuck::cast_slice_mut::<f64x4, f64>(&mut a).copy_from_slice(&s[..4 * V]);
+    a
 }
 
 #[inline(always)]
-fn store(a: &[f64x4; VECS], d: &mut [f64]) {
-    d[..LANES].copy_from_slice(&bytemuck::cast::<[f64x4; VECS], [f64; LANES]>(*a));
+fn store<const V: usize>(a: &[f64x4; V], d: &mut [f64]) {
+    d[..4 * V].copy_from_slice(bytemuck::cast_slice::<f64x4, f64>(a));
 }
 
 /// Vertical pass for output rows `row0..row0 + dst.len() / row_len` of a grid
@@ -176,12 +185,12 @@ pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, 
                 let mut acc = [f64x4::ZERO; VECS];
                 for jj in lo..=hi {
                     let wk = f64x4::splat(taps.w[(jj - j).unsigned_abs()]);
-                    let a = load(&row(jj)[c..]);
+                    let a = load::<VECS>(&row(jj)[c..]);
                     for l in 0..VECS {
                         acc[l] = a[l].mul_add(wk, acc[l]);
                     }
                 }
-                store(&acc, &mut out[c..c + LANES]);
+                store(&acc, &mut out[c..]);
                 c += LANES;
             }
             for cc in c..s1 {
