@@ -553,8 +553,9 @@ impl Flr {
     }
 
     /// Stage 4 for consecutive tiles `tiles` at once (`cells_band` spans them):
-    /// bit-identical to one tile at a time, and each source row is fetched
-    /// from memory fewer times (a tile's 4 rows read 4 + 2r source rows).
+    /// bit-identical to one tile at a time, and each source row of a Gaussian
+    /// is fetched from memory fewer times (a tile's 4 rows read 4 + 2r source
+    /// rows). The box blur's sliding window still restarts at every tile.
     pub fn blur_cols_tiles(&self, tiles: core::ops::Range<usize>, tmp: &[f64], cells_band: &mut [f64]) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: tiles.end, count: self.tile_count() };
         if tiles.is_empty() {
@@ -566,7 +567,19 @@ impl Flr {
         if tmp.len() != self.grid_len() || cells_band.len() != (r1 - r0) * row_len {
             return Err(bad);
         }
-        blur_cols_band(&self.taps, row_len, self.cells_y, r0, tmp, cells_band);
+        if self.taps.is_box {
+            // The sliding window restarts at each tile (its running sums round
+            // differently from a fresh sum), so the box blur goes tile by tile.
+            let mut rest = cells_band;
+            for t in tiles {
+                let (a, b) = self.tile_rows(t)?;
+                let (band, tail) = rest.split_at_mut((b - a) * row_len);
+                blur_cols_band(&self.taps, row_len, self.cells_y, a, tmp, band);
+                rest = tail;
+            }
+        } else {
+            blur_cols_band(&self.taps, row_len, self.cells_y, r0, tmp, cells_band);
+        }
         Ok(())
     }
 
