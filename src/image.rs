@@ -171,6 +171,11 @@ impl<'a> ImageView<'a> {
                     }
                 }
             }
+            Samples::F16(s) if ps == 1 => {
+                // contiguous halves: `half` converts them 4 or 8 at a time (F16C where enabled)
+                use half::slice::HalfFloatSliceExt;
+                s.get(start..start + dst.len())?.convert_to_f32_slice(dst);
+            }
             Samples::F16(s) => {
                 for (i, d) in dst.iter_mut().enumerate() {
                     // SAFETY: as above.

@@ -113,6 +113,34 @@ fn four_cell_solve_every_guide_count() {
     run::<12>();
 }
 
+/// f16 rows (contiguous: converted in bulk; strided: one at a time) give
+/// exactly `f16::to_f32` of every sample, specials and subnormals included.
+#[test]
+fn f16_rows_convert_exactly() {
+    let (w, h) = (45, 3);
+    let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 6e-8, -3e-6, 65504.0, 1e-5];
+    for ps in [1, 3] {
+        let data: Vec<half::f16> = (0..w * h * ps)
+            .map(|i| half::f16::from_f32(if i % 7 == 3 { specials[(i / 7) % specials.len()] } else { i as f32 * 0.37 - 20.0 }))
+            .collect();
+        let v = ImageView::f16(&data, w, h, ps, Layout::interleaved(w, ps)).unwrap();
+        for y in 0..h {
+            for (x0, n) in [(0, w), (5, 33), (44, 1)] {
+                let mut row = vec![0f32; n];
+                v.read_row(y, 0, x0, &mut row).unwrap();
+                for (i, got) in row.iter().enumerate() {
+                    let want = data[(y * w + x0 + i) * ps].to_f32();
+                    assert!(
+                        got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                        "ps {ps} y {y} x {}: {got} vs {want}",
+                        x0 + i
+                    );
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn row_access_matches_element_reads() {
     let (w, h) = (37, 5);
