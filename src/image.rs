@@ -241,6 +241,35 @@ impl<'a> ImageView<'a> {
                     }
                 }
             }
+            Samples::F16(s) if ps == 1 => {
+                // planar: each channel's halves are contiguous, converted in bulk
+                use half::slice::HalfFloatSliceExt;
+                for (c, d) in dst.iter_mut().enumerate() {
+                    s.get(start + c * cs..start + c * cs + len)?.convert_to_f32_slice(d);
+                }
+            }
+            Samples::F16(s) if cs == 1 && (ps == 3 || ps == 4) && N == 3 => {
+                // Interleaved RGB / RGBA halves: 16 pixels at a time converted in
+                // bulk into a small buffer, then de-interleaved as f32.
+                use half::slice::HalfFloatSliceExt;
+                const PX: usize = 16;
+                let src = s.get(start..start + (len - 1) * ps + N)?;
+                let [d0, d1, d2] = &mut dst[..] else { return None };
+                let mut buf = [0f32; PX * 4];
+                let mut i = 0;
+                while i + PX <= len && (i + PX) * ps <= src.len() {
+                    let b = &mut buf[..PX * ps];
+                    src[i * ps..(i + PX) * ps].convert_to_f32_slice(b);
+                    for (j, px) in b.chunks_exact(ps).enumerate() {
+                        (d0[i + j], d1[i + j], d2[i + j]) = (px[0], px[1], px[2]);
+                    }
+                    i += PX;
+                }
+                for i in i..len {
+                    let px = &src[i * ps..i * ps + N];
+                    (d0[i], d1[i], d2[i]) = (f16_to_f32(px[0]), f16_to_f32(px[1]), f16_to_f32(px[2]));
+                }
+            }
             Samples::F16(s) => {
                 for i in 0..len {
                     for (c, d) in dst.iter_mut().enumerate() {

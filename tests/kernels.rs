@@ -141,6 +141,39 @@ fn f16_rows_convert_exactly() {
     }
 }
 
+/// `read_row_n` on f16 images (planar: bulk per channel; interleaved RGB and
+/// RGBA: 16-pixel bulk chunks and a per-pixel tail; other strides per value)
+/// equals `f16::to_f32` of every sample.
+#[test]
+fn f16_rows_n_convert_exactly() {
+    let (w, h) = (45, 3);
+    let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 6e-8, -3e-6, 65504.0, 1e-5];
+    for (ps, cs, chans) in [(1, w * h, 3), (3, 1, 3), (4, 1, 4), (5, 1, 5)] {
+        let n = if ps == 1 { chans * w * h } else { ps * w * h };
+        let data: Vec<half::f16> = (0..n)
+            .map(|i| half::f16::from_f32(if i % 7 == 3 { specials[(i / 7) % specials.len()] } else { i as f32 * 0.37 - 20.0 }))
+            .collect();
+        let layout = Layout { offset: 0, pixel_stride: ps, row_stride: w * ps, channel_stride: cs };
+        let v = ImageView::f16(&data, w, h, chans, layout).unwrap();
+        for y in 0..h {
+            for (x0, len) in [(0, w), (5, 33), (44, 1), (3, 16), (2, 17)] {
+                let (mut a, mut b, mut c) = (vec![0f32; len], vec![0f32; len], vec![0f32; len]);
+                v.read_row_n(y, x0, [&mut a, &mut b, &mut c]).unwrap();
+                for (ch, got) in [&a, &b, &c].into_iter().enumerate() {
+                    for (i, g) in got.iter().enumerate() {
+                        let want = data[y * w * ps + (x0 + i) * ps + ch * cs].to_f32();
+                        assert!(
+                            g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
+                            "ps {ps} ch {ch} y {y} x {}: {g} vs {want}",
+                            x0 + i
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn row_access_matches_element_reads() {
     let (w, h) = (37, 5);
