@@ -241,11 +241,10 @@ impl<'a> ImageView<'a> {
                     }
                 }
             }
-            Samples::F16(s) if ps == 1 => {
-                // planar: each channel's halves are contiguous, converted in bulk
-                use half::slice::HalfFloatSliceExt;
+            Samples::F16(_) if ps == 1 => {
+                // planar: each channel's halves are contiguous, `read_row` converts them in bulk
                 for (c, d) in dst.iter_mut().enumerate() {
-                    s.get(start + c * cs..start + c * cs + len)?.convert_to_f32_slice(d);
+                    self.read_row(y, c, x0, d)?;
                 }
             }
             Samples::F16(s) if cs == 1 && (ps == 3 || ps == 4) && N == 3 => {

@@ -113,41 +113,16 @@ fn four_cell_solve_every_guide_count() {
     run::<12>();
 }
 
-/// f16 rows (contiguous: converted in bulk; strided: one at a time) give
-/// exactly `f16::to_f32` of every sample, specials and subnormals included.
+/// f16 rows read one channel at a time (`read_row`: contiguous halves in bulk,
+/// strided one at a time) and three at a time (`read_row_n`: planar per
+/// channel; interleaved RGB and RGBA in 16-pixel bulk chunks and a per-pixel
+/// tail; other strides per value) give exactly `f16::to_f32` of every sample,
+/// specials and subnormals included.
 #[test]
 fn f16_rows_convert_exactly() {
     let (w, h) = (45, 3);
     let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 6e-8, -3e-6, 65504.0, 1e-5];
-    for ps in [1, 3] {
-        let data: Vec<half::f16> = (0..w * h * ps)
-            .map(|i| half::f16::from_f32(if i % 7 == 3 { specials[(i / 7) % specials.len()] } else { i as f32 * 0.37 - 20.0 }))
-            .collect();
-        let v = ImageView::f16(&data, w, h, ps, Layout::interleaved(w, ps)).unwrap();
-        for y in 0..h {
-            for (x0, n) in [(0, w), (5, 33), (44, 1)] {
-                let mut row = vec![0f32; n];
-                v.read_row(y, 0, x0, &mut row).unwrap();
-                for (i, got) in row.iter().enumerate() {
-                    let want = data[(y * w + x0 + i) * ps].to_f32();
-                    assert!(
-                        got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
-                        "ps {ps} y {y} x {}: {got} vs {want}",
-                        x0 + i
-                    );
-                }
-            }
-        }
-    }
-}
-
-/// `read_row_n` on f16 images (planar: bulk per channel; interleaved RGB and
-/// RGBA: 16-pixel bulk chunks and a per-pixel tail; other strides per value)
-/// equals `f16::to_f32` of every sample.
-#[test]
-fn f16_rows_n_convert_exactly() {
-    let (w, h) = (45, 3);
-    let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 6e-8, -3e-6, 65504.0, 1e-5];
+    let same = |g: f32, want: f32| g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan());
     for (ps, cs, chans) in [(1, w * h, 3), (3, 1, 3), (4, 1, 4), (5, 1, 5)] {
         let n = if ps == 1 { chans * w * h } else { ps * w * h };
         let data: Vec<half::f16> = (0..n)
@@ -155,18 +130,23 @@ fn f16_rows_n_convert_exactly() {
             .collect();
         let layout = Layout { offset: 0, pixel_stride: ps, row_stride: w * ps, channel_stride: cs };
         let v = ImageView::f16(&data, w, h, chans, layout).unwrap();
+        let want = |ch: usize, y: usize, x: usize| data[y * w * ps + x * ps + ch * cs].to_f32();
         for y in 0..h {
             for (x0, len) in [(0, w), (5, 33), (44, 1), (3, 16), (2, 17)] {
-                let (mut a, mut b, mut c) = (vec![0f32; len], vec![0f32; len], vec![0f32; len]);
-                v.read_row_n(y, x0, [&mut a, &mut b, &mut c]).unwrap();
-                for (ch, got) in [&a, &b, &c].into_iter().enumerate() {
-                    for (i, g) in got.iter().enumerate() {
-                        let want = data[y * w * ps + (x0 + i) * ps + ch * cs].to_f32();
-                        assert!(
-                            g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
-                            "ps {ps} ch {ch} y {y} x {}: {g} vs {want}",
-                            x0 + i
-                        );
+                let mut rows = [vec![0f32; len], vec![0f32; len], vec![0f32; len]];
+                for (ch, row) in rows.iter_mut().enumerate() {
+                    v.read_row(y, ch, x0, row).unwrap();
+                    for (i, g) in row.iter().enumerate() {
+                        assert!(same(*g, want(ch, y, x0 + i)), "read_row ps {ps} ch {ch} y {y} x {}: {g}", x0 + i);
+                    }
+                }
+                // overwrite what read_row wrote (12345 is no sample's value)
+                rows.iter_mut().for_each(|r| r.fill(12345.0));
+                let [a, b, c] = &mut rows;
+                v.read_row_n(y, x0, [a, b, c]).unwrap();
+                for (ch, row) in rows.iter().enumerate() {
+                    for (i, g) in row.iter().enumerate() {
+                        assert!(same(*g, want(ch, y, x0 + i)), "read_row_n ps {ps} ch {ch} y {y} x {}: {g}", x0 + i);
                     }
                 }
             }
