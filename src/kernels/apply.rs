@@ -203,11 +203,11 @@ fn simd_spans<const Q: usize, const CLAMP: bool>(
     (fallback, x)
 }
 
-/// One group of 8 pixels (channels one after the other: interleaving their
-/// chains measured slower, it spills). A non-finite guide makes every channel's `y` non-finite (`c·d` is NaN or
-/// ±Inf for any `c`, 0·Inf included), so one finiteness test of `y` covers
-/// the guides too; the guides are looked at only to count fallbacks when
-/// some lane failed.
+/// One group of 8 pixels, channels one after the other (interleaving their
+/// chains measured slower: it spills). A non-finite guide makes every
+/// channel's `y` non-finite (`c·d` is NaN or ±Inf for any `c`, 0·Inf
+/// included), so one finiteness test of `y` covers the guides too; the guides
+/// are looked at again only to count fallbacks when some lane failed.
 #[inline(always)]
 fn simd_group<const Q: usize, const CLAMP: bool>(
     base: &[f32],
