@@ -175,7 +175,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
     for path in frames {
         let exr = ExrFrame::read(path)?;
         if !exr.has("reference") {
-            pb.println(format!("{}: no 'reference' layer, skipped", path.display()));
+            pb.suspend(|| eprintln!("{}: no 'reference' layer, skipped", path.display()));
             pb.inc(variants.len() as u64);
             continue;
         }
@@ -195,7 +195,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
         for (vi, v) in variants.iter().enumerate() {
             pb.inc(1);
             if !exr.has(&v.input_layer) {
-                pb.println(format!("{}: no '{}' layer, variant skipped", path.display(), v.input_layer));
+                pb.suspend(|| eprintln!("{}: no '{}' layer, variant skipped", path.display(), v.input_layer));
                 continue;
             }
             let inputs = if v.input_layer == "noisy" {
@@ -217,7 +217,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                         name => match Method::build(name, &v.args, &inputs, opt.threads) {
                             Ok(b) => b,
                             Err(e) => {
-                                pb.println(format!("{}: {e}; variant skipped", path.display()));
+                                pb.suspend(|| eprintln!("{}: {e}; variant skipped", path.display()));
                                 continue;
                             }
                         },

@@ -307,6 +307,7 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         ("depth", inputs.depth.is_some()),
         ("position", inputs.position.is_some()),
         ("ao", inputs.ao.is_some()),
+        ("albedo", inputs.albedo.is_some()),
     ]
     .iter()
     .filter(|(_, a)| *a)
@@ -343,9 +344,13 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
     };
     // What each guide is worth: best PSNR with it minus best without it.
     println!("{}: {} configurations measured, {threads} thread(s), noisy input {noisy:.2} dB", frame.display(), flr.len());
+    // (By the --guides value: "normal" also occurs in "--regularization normalized:...".)
+    let uses = |r: &Record, g: &str| {
+        r.flags.split("--guides ").nth(1).and_then(|v| v.split_whitespace().next()).is_some_and(|v| v.split(',').any(|x| x == g))
+    };
     for gname in &avail {
-        let with = flr.iter().filter(|r| r.flags.contains(gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
-        let without = flr.iter().filter(|r| !r.flags.contains(gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
+        let with = flr.iter().filter(|r| uses(r, gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
+        let without = flr.iter().filter(|r| !uses(r, gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
         let verdict = if with - without > 0.1 { "keep" } else { "can drop" };
         println!("  guide {gname:<8}: best with {with:.2} dB, without {without:.2} dB ({:+.2} dB) -> {verdict}", with - without);
     }

@@ -99,6 +99,9 @@ impl FlrArgs {
     }
 }
 
+/// User guide channels that `--guides albedo` adds (the albedo's R, G, B).
+pub const ALBEDO_CHANNELS: u8 = 3;
+
 pub fn parse_guides(s: &str) -> Result<GuideSet, String> {
     let mut g = GuideSet::NONE;
     if s.trim() == "none" {
@@ -110,7 +113,9 @@ pub fn parse_guides(s: &str) -> Result<GuideSet, String> {
             "depth" => g.depth = true,
             "position" => g.position = true,
             "ao" => g.ao = true,
-            _ => return Err(format!("--guides: unknown guide '{p}' (use normal, depth, position, ao or none)")),
+            // The albedo's three channels go in as user guides (opt-in: see the README).
+            "albedo" => g.user = ALBEDO_CHANNELS,
+            _ => return Err(format!("--guides: unknown guide '{p}' (use normal, depth, position, ao, albedo or none)")),
         }
     }
     Ok(g)
@@ -129,6 +134,9 @@ pub fn guides_string(g: &GuideSet) -> String {
     }
     if g.ao {
         v.push("ao");
+    }
+    if g.user == ALBEDO_CHANNELS {
+        v.push("albedo");
     }
     if v.is_empty() {
         "none".into()
@@ -275,7 +283,14 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
 }
 
 fn short_guides(g: &GuideSet) -> String {
-    guides_string(g).split(',').map(|p| if p == "none" { "-".to_string() } else { p[..1].to_uppercase() }).collect()
+    guides_string(g)
+        .split(',')
+        .map(|p| match p {
+            "none" => "-".to_string(),
+            "albedo" => "Alb".to_string(), // "A" is AO
+            _ => p[..1].to_uppercase(),
+        })
+        .collect()
 }
 
 /// A flag line that reproduces `c` on the command line.
@@ -501,6 +516,28 @@ mod tests {
     }
 
     #[test]
+    fn albedo_guide_is_three_user_channels() {
+        let g = parse_guides("normal,albedo").unwrap();
+        assert_eq!(g, GuideSet { normal: true, user: ALBEDO_CHANNELS, ..GuideSet::NONE });
+        assert_eq!(guides_string(&g), "normal,albedo");
+        assert_eq!(short_guides(&g), "NAlb");
+        // asked for but absent: named
+        let a = FlrArgs { guides: Some("normal,albedo".into()), ..Default::default() };
+        let e = a.config(&inputs()).unwrap_err();
+        assert!(e.contains("'albedo'"), "{e}");
+        // present: the user guides are the albedo's channels R, G, B in order
+        let mut i = inputs();
+        i.albedo = Some(vec![0.1, 0.2, 0.3, 0.4, 0.5, 0.6]);
+        let c = a.config(&i).unwrap();
+        let gd = i.guides(&c.guides).unwrap();
+        for (ch, u) in gd.user.iter().take(3).enumerate() {
+            let v = u.expect("user guide");
+            assert_eq!((v.get(0, 0, 0), v.get(1, 0, 0)), (Some(0.1 * (ch + 1) as f32), Some(0.1 * (ch + 4) as f32)));
+        }
+        assert!(gd.user[3].is_none());
+    }
+
+    #[test]
     fn flags_round_trip() {
         let a = FlrArgs {
             guides: Some("normal,ao".into()),
@@ -514,6 +551,6 @@ mod tests {
         let line = flag_line(&c);
         assert_eq!(line, "--method flr --guides normal,ao --block 16 --sigma 7.5 --regularization tikhonov:1e-5 --upsample 2");
         assert!(parse_regularization("normalized:1e-3").is_err());
-        assert!(parse_guides("normal,albedo").is_err());
+        assert!(parse_guides("normal,colour").is_err());
     }
 }

@@ -61,6 +61,7 @@ impl Inputs {
             (set.depth, self.depth.is_none(), "depth"),
             (set.position, self.position.is_none(), "position"),
             (set.ao, self.ao.is_none(), "ao"),
+            (set.user > 0, self.albedo.is_none(), "albedo"),
         ]
         .into_iter()
         .find(|(want, lack, _)| *want && *lack)
@@ -68,7 +69,7 @@ impl Inputs {
     }
 
     /// A `w`×`h` frame whose pixel (x, y) is this frame's pixel `src(x, y)`
-    /// (every layer the denoisers read; albedo and reference are dropped).
+    /// (every layer the denoisers read; the reference is dropped).
     pub fn pick(&self, w: usize, h: usize, src: impl Fn(usize, usize) -> (usize, usize)) -> Inputs {
         let layer = |v: &Vec<f32>, c: usize| -> Vec<f32> {
             let mut o = Vec::with_capacity(w * h * c);
@@ -89,7 +90,7 @@ impl Inputs {
             depth: self.depth.as_ref().map(|v| layer(v, 1)),
             position: self.position.as_ref().map(|v| layer(v, 3)),
             ao: self.ao.as_ref().map(|v| layer(v, 1)),
-            albedo: None,
+            albedo: self.albedo.as_ref().map(|v| layer(v, 3)),
             reference: None,
             motion: self.motion.as_ref().map(|v| layer(v, 2)),
         }
@@ -116,7 +117,15 @@ impl Inputs {
             }
         }
         let view = |v, want, c| view(v, want, w, h, c);
+        // User guides are the albedo's channels, in order (`--guides albedo`).
+        let mut user = [None; lrdenoise::MAX_USER_GUIDES];
+        if let Some(alb) = view(&self.albedo, set.user > 0, 3)? {
+            for (c, u) in user.iter_mut().enumerate().take((set.user as usize).min(3)) {
+                *u = Some(alb.channels(c, 1)?);
+            }
+        }
         Ok(Guides {
+            user,
             normal: view(&self.normal, set.normal, 3)?,
             depth: view(&self.depth, set.depth, 1)?,
             position: view(&self.position, set.position, 3)?,
