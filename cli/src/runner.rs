@@ -130,7 +130,6 @@ impl Inputs {
             depth: view(&self.depth, set.depth, 1)?,
             position: view(&self.position, set.position, 3)?,
             ao: view(&self.ao, set.ao, 1)?,
-            ..Default::default()
         })
     }
 }
