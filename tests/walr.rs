@@ -704,3 +704,38 @@ fn temporal_rejects_disocclusions_and_survives_nan() {
     history.reset();
     assert_eq!(history.frames(), 0);
 }
+
+#[test]
+fn walr_equals_refwlr_without_edges_extra_guide() {
+    // As above with AO as a fourth feature (m = 4), varying over the frame.
+    for &(w, h, t) in &[(40, 32, 2u8), (64, 40, 3)] {
+        let mut f = scene(w, h, 11, 0.6, false, false).f;
+        for (i, a) in f.ao.iter_mut().enumerate() {
+            *a = 0.5 + 0.4 * ((i % w) as f32 * 0.3).sin() * ((i / w) as f32 * 0.2).cos();
+        }
+        let guides = GuideSet { ao: true, ..NDP };
+        let cfg = WalrConfig {
+            iterations: t,
+            tracing: false,
+            replace: false,
+            storage: Storage::F32,
+            ..flat_weights(WalrConfig::with_guides(guides))
+        };
+        let (a, _) = run(cfg, &f, 0);
+        let b = run_ref(cfg, &f);
+        let r = (3usize.pow(t as u32) - 1) / 2;
+        let mut worst = 0f32;
+        for y in r..h.saturating_sub(r) {
+            for x in r..w.saturating_sub(r) {
+                for c in 0..3 {
+                    let i = 3 * (y * w + x) + c;
+                    worst = worst.max((a[i] - b[i]).abs() / b[i].abs().max(1e-3));
+                }
+            }
+        }
+        assert!(worst < 1e-3, "{w}x{h}: worst relative difference {worst}");
+        let e = rmse(&a, &f.clean);
+        let e3 = rmse(&run(WalrConfig { guides: NDP, ..cfg }, &f, 0).0, &f.clean);
+        assert!(e < 2.0 * e3 + 0.05, "{w}x{h}: rmse with AO {e}, without {e3}");
+    }
+}
