@@ -313,6 +313,20 @@ fn atrous_counts_every_sample_once() {
 
 // ------------------------------------------------------ WALR vs REFWLR
 
+/// Largest relative difference of `a` from `b` (RGB) at least `r` pixels from the border.
+fn worst_interior_relative(a: &[f32], b: &[f32], w: usize, h: usize, r: usize) -> f32 {
+    let mut worst = 0f32;
+    for y in r..h.saturating_sub(r) {
+        for x in r..w.saturating_sub(r) {
+            for c in 0..3 {
+                let i = 3 * (y * w + x) + c;
+                worst = worst.max((a[i] - b[i]).abs() / b[i].abs().max(1e-3));
+            }
+        }
+    }
+    worst
+}
+
 #[test]
 fn walr_equals_refwlr_without_edges() {
     // Every weight 1, no tracing, no replacement: the à-trous averages are
@@ -324,16 +338,7 @@ fn walr_equals_refwlr_without_edges() {
             WalrConfig { iterations: t, tracing: false, replace: false, storage: Storage::F32, ..flat_weights(WalrConfig::default()) };
         let (a, _) = run(cfg, &f, 0);
         let b = run_ref(cfg, &f);
-        let r = (3usize.pow(t as u32) - 1) / 2;
-        let mut worst = 0f32;
-        for y in r..h.saturating_sub(r) {
-            for x in r..w.saturating_sub(r) {
-                for c in 0..3 {
-                    let i = 3 * (y * w + x) + c;
-                    worst = worst.max((a[i] - b[i]).abs() / b[i].abs().max(1e-3));
-                }
-            }
-        }
+        let worst = worst_interior_relative(&a, &b, w, h, (3usize.pow(t as u32) - 1) / 2);
         assert!(worst < 1e-3, "{w}x{h}: worst relative difference {worst}");
     }
 }
@@ -723,16 +728,7 @@ fn walr_equals_refwlr_without_edges_extra_guide() {
         };
         let (a, _) = run(cfg, &f, 0);
         let b = run_ref(cfg, &f);
-        let r = (3usize.pow(t as u32) - 1) / 2;
-        let mut worst = 0f32;
-        for y in r..h.saturating_sub(r) {
-            for x in r..w.saturating_sub(r) {
-                for c in 0..3 {
-                    let i = 3 * (y * w + x) + c;
-                    worst = worst.max((a[i] - b[i]).abs() / b[i].abs().max(1e-3));
-                }
-            }
-        }
+        let worst = worst_interior_relative(&a, &b, w, h, (3usize.pow(t as u32) - 1) / 2);
         assert!(worst < 1e-3, "{w}x{h}: worst relative difference {worst}");
         let e = rmse(&a, &f.clean);
         let e3 = rmse(&run(WalrConfig { guides: NDP, ..cfg }, &f, 0).0, &f.clean);
