@@ -14,6 +14,22 @@ pub enum Blur {
     Gaussian { sigma: f32, radius: Option<f32> },
     /// Box of half-width `radius` (the guided filter's window), O(1) per cell.
     Box { radius: f32 },
+    /// Three Gaussian windows `sigmas[0] < sigmas[1] < sigmas[2]` (each
+    /// truncated at 3σ), fitted side by side and blended per cell with weights
+    /// 1 / (estimated squared error): small windows where the light changes
+    /// faster than the guides explain, large ones where it does not
+    /// (`flr::adaptive`).
+    Adaptive { sigmas: [f32; 3] },
+}
+
+impl Blur {
+    /// The window sizes this blur fits: one, or three for [`Blur::Adaptive`].
+    pub fn scale_count(&self) -> usize {
+        match self {
+            Blur::Adaptive { .. } => 3,
+            _ => 1,
+        }
+    }
 }
 
 /// How the per-cell normal equations are regularised.
@@ -123,6 +139,11 @@ impl FlrConfig {
                     return Err(Error::InvalidConfig("radius (must be finite and >= 0)"));
                 }
             }
+            Blur::Adaptive { sigmas } => {
+                if !(sigmas.iter().all(|&s| ok(s) && s <= 4096.0) && sigmas[0] < sigmas[1] && sigmas[1] < sigmas[2]) {
+                    return Err(Error::InvalidConfig("adaptive sigmas (must be finite, > 0 and increasing)"));
+                }
+            }
         }
         let reg_ok = |v: f64| (0.0..1.0).contains(&v);
         match self.regularization {
@@ -143,11 +164,12 @@ impl FlrConfig {
         Ok(())
     }
 
-    /// Window half-width on the cell grid: ⌈radius / B⌉.
+    /// Window half-width on the cell grid: ⌈radius / B⌉ (the largest window's).
     pub fn radius_cells(&self) -> usize {
         let r = match self.blur {
             Blur::Gaussian { sigma, radius } => radius.unwrap_or(3.0 * sigma),
             Blur::Box { radius } => radius,
+            Blur::Adaptive { sigmas } => 3.0 * sigmas[2],
         };
         let cells = libm::ceilf(r / self.block as f32 - 1e-4);
         if cells.is_finite() && cells >= 0.0 {

@@ -246,6 +246,7 @@ impl GpuPlan {
         let taps = match cfg.blur {
             Blur::Gaussian { sigma, .. } => Taps::gaussian(sigma as f64 / cfg.block as f64, r),
             Blur::Box { .. } => Taps::boxed(r),
+            Blur::Adaptive { .. } => return Err(Error::Unsupported("the GPU path fits one window size (no adaptive window)")),
         };
         let (cells_x, cells_y) = flr.cells();
         let (in_width, in_height) = flr.input_size();

@@ -231,8 +231,8 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(g("normal,depth,position,ao")),
         Variant::flr(FlrArgs { block: Some(4), ..Default::default() }),
         Variant::flr(FlrArgs { block: Some(16), ..Default::default() }),
-        Variant::flr(FlrArgs { sigma: Some(6.0), ..Default::default() }),
-        Variant::flr(FlrArgs { sigma: Some(24.0), ..Default::default() }),
+        Variant::flr(FlrArgs { sigma: Some("6".into()), ..Default::default() }),
+        Variant::flr(FlrArgs { sigma: Some("24".into()), ..Default::default() }),
         Variant::flr(FlrArgs { box_radius: Some(16.0), ..Default::default() }),
         Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
         Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
@@ -318,11 +318,11 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         let g: Vec<&str> = avail.iter().enumerate().filter(|(i, _)| mask >> i & 1 == 1).map(|(_, n)| *n).collect();
         let gs = if g.is_empty() { "none".to_string() } else { g.join(",") };
         for block in [4, 8, 16] {
-            for sigma in [6.0, 12.0, 24.0] {
+            for sigma in ["6", "12", "24"] {
                 variants.push(Variant::flr(FlrArgs {
                     guides: Some(gs.clone()),
                     block: Some(block),
-                    sigma: Some(sigma),
+                    sigma: Some(sigma.into()),
                     ..Default::default()
                 }));
             }

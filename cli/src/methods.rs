@@ -1,6 +1,7 @@
 //! Methods and their flags. The FLR flags mean exactly what issue #2 says:
 //! `--guides normal,depth,ao` (default: those of normal, depth, ao present),
 //! `--block B`, `--sigma S`, `--radius R` (full-resolution pixels; default 3σ),
+//! or `--sigma S0,S1,S2` (the adaptive window: three sizes blended per cell),
 //! `--regularization normalized:EPS_MUL,EPS_ADD | tikhonov:EPS`, `--upsample 2|4`.
 //!
 //! BMFR (`--method bmfr`, single frame; `bmfr-temporal`, the pipeline over a
@@ -26,9 +27,9 @@ pub struct FlrArgs {
     /// Block size B: one affine model per BxB pixels (1, 2, 4, 8, 16)
     #[arg(long)]
     pub block: Option<usize>,
-    /// Gaussian window sigma in full-resolution pixels
+    /// Gaussian window sigma in full-resolution pixels; three increasing values (6,12,20) fit all three and blend them per cell (the adaptive window)
     #[arg(long)]
-    pub sigma: Option<f32>,
+    pub sigma: Option<String>,
     /// Window truncation radius in full-resolution pixels (default 3*sigma)
     #[arg(long)]
     pub radius: Option<f32>,
@@ -173,10 +174,18 @@ impl FlrArgs {
         if let Some(b) = self.block {
             c.block = b;
         }
-        let sigma = self.sigma.unwrap_or(lrdenoise::config::DEFAULT_SIGMA);
-        c.blur = match self.box_radius {
-            Some(r) => Blur::Box { radius: r },
-            None => Blur::Gaussian { sigma, radius: self.radius },
+        c.blur = match (self.box_radius, &self.sigma) {
+            (Some(r), None) => Blur::Box { radius: r },
+            (Some(_), Some(_)) => return Err("--box and --sigma are two different windows: give one".into()),
+            (None, None) if self.radius.is_none() => c.blur,
+            (None, None) => Blur::Gaussian { sigma: lrdenoise::config::DEFAULT_SIGMA, radius: self.radius },
+            (None, Some(s)) => match parse_sigmas(s)? {
+                Blur::Gaussian { sigma, .. } => Blur::Gaussian { sigma, radius: self.radius },
+                _ if self.radius.is_some() => {
+                    return Err("--radius applies to a single --sigma (each adaptive window is truncated at 3 sigma)".into())
+                }
+                adaptive => adaptive,
+            },
         };
         if let Some(r) = &self.regularization {
             c.regularization = parse_regularization(r)?;
@@ -293,6 +302,19 @@ fn short_guides(g: &GuideSet) -> String {
         .collect()
 }
 
+/// `--sigma`: one number (a Gaussian window) or three increasing ones (the adaptive window).
+pub fn parse_sigmas(s: &str) -> Result<Blur, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>().map_err(|_| format!("--sigma {s}: '{x}' is not a number")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [sigma] => Ok(Blur::Gaussian { sigma, radius: None }),
+        [a, b, c] => Ok(Blur::Adaptive { sigmas: [a, b, c] }),
+        _ => Err(format!("--sigma {s}: give one sigma, or three increasing ones for the adaptive window (e.g. 6,12,20)")),
+    }
+}
+
 /// A flag line that reproduces `c` on the command line.
 pub fn flag_line(c: &FlrConfig) -> String {
     let mut s = format!("--method flr --guides {} --block {}", guides_string(&c.guides), c.block);
@@ -304,6 +326,7 @@ pub fn flag_line(c: &FlrConfig) -> String {
             }
         }
         Blur::Box { radius } => s += &format!(" --box {radius}"),
+        Blur::Adaptive { sigmas: [a, b, c] } => s += &format!(" --sigma {a},{b},{c}"),
     }
     match c.regularization {
         Regularization::Normalized { eps_mul, eps_add } => s += &format!(" --regularization normalized:{eps_mul:e},{eps_add:e}"),
@@ -321,6 +344,7 @@ pub fn label(c: &FlrConfig) -> String {
     let blur = match c.blur {
         Blur::Gaussian { sigma, .. } => format!("s{sigma}"),
         Blur::Box { radius } => format!("box{radius}"),
+        Blur::Adaptive { sigmas: [a, b, c] } => format!("s{a}/{b}/{c}"),
     };
     let reg = match c.regularization {
         Regularization::Tikhonov { .. } => " tik",
@@ -542,7 +566,7 @@ mod tests {
         let a = FlrArgs {
             guides: Some("normal,ao".into()),
             block: Some(16),
-            sigma: Some(7.5),
+            sigma: Some("7.5".into()),
             regularization: Some("tikhonov:1e-5".into()),
             upsample: Some(2),
             ..Default::default()

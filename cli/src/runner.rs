@@ -246,12 +246,36 @@ pub fn denoise_parallel(
     rep += par_groups(pool, items, &mut workers, &|(t, c), w| flr.moments_tile(&f, &st, t, c, w))?;
     flr.finish_stats(p.cells, &mut stats)?;
     let st = stats;
-    {
-        let cells: &[f64] = p.cells;
-        let items: Vec<_> = split_lens(p.tmp, &cl).into_iter().enumerate().collect();
-        par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile(t, cells, d).map(|_| Report::default()))?;
-    }
-    {
+    if flr.scale_count() > 1 {
+        // The adaptive window: blur and solve each window, then blend.
+        let vl: Vec<usize> = (0..nt).map(|t| flr.variances_tile_range(t).map(|r| r.len())).collect::<Result<_, _>>()?;
+        let (mlen, vlen) = (ml.iter().sum::<usize>(), vl.iter().sum::<usize>());
+        for s in 0..flr.scale_count() {
+            let cells: &[f64] = p.cells;
+            let items: Vec<_> = split_lens(&mut *p.tmp, &cl).into_iter().enumerate().collect();
+            par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile_at(s, t, cells, d).map(|_| Report::default()))?;
+            let tmp: &[f64] = p.tmp;
+            let dst = if s == 0 { &mut *p.first } else { &mut *p.blurred };
+            let grids = split_lens(dst, &cl);
+            let models = split_lens(&mut p.scale_models[s * mlen..(s + 1) * mlen], &ml);
+            let vars = split_lens(&mut p.variances[s * vlen..(s + 1) * vlen], &vl);
+            let items: Vec<_> = grids.into_iter().zip(models).zip(vars).enumerate().collect();
+            rep += par_groups(pool, items, &mut units, &|(t, ((c, m), v)), _| {
+                flr.blur_cols_tiles_at(s, t..t + 1, tmp, c)?;
+                flr.solve_tile_at(s, &st, t, c, m, v)
+            })?;
+        }
+        let (first, sm, vars): (&[f64], &[f32], &[f64]) = (p.first, p.scale_models, p.variances);
+        let items: Vec<_> = split_lens(&mut *p.models, &ml).into_iter().enumerate().collect();
+        par_groups(pool, items, &mut units, &|(t, m), _| {
+            flr.blend_tile(t, &first[flr.cells_tile_range(t)?], sm, vars, m).map(|_| Report::default())
+        })?;
+    } else {
+        {
+            let cells: &[f64] = p.cells;
+            let items: Vec<_> = split_lens(&mut *p.tmp, &cl).into_iter().enumerate().collect();
+            par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile(t, cells, d).map(|_| Report::default()))?;
+        }
         let tmp: &[f64] = p.tmp;
         let cells = split_lens(p.cells, &cl);
         let models = split_lens(p.models, &ml);

@@ -169,6 +169,11 @@ enum LrdBlur
  {
   LRD_BLUR_GAUSSIAN = 0,
   LRD_BLUR_BOX = 1,
+  /**
+   * Three Gaussian windows (`sigmas`) blended per cell; `lrd_flr_denoise`
+   * only (the tiled API returns LRD_STATUS_UNSUPPORTED).
+   */
+  LRD_BLUR_ADAPTIVE = 2,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L
@@ -231,6 +236,10 @@ typedef struct LrdFlrConfig {
    * Window radius in full-resolution pixels (Gaussian: < 0 means 3·sigma).
    */
   float radius;
+  /**
+   * LRD_BLUR_ADAPTIVE: the three window sigmas, increasing (full-resolution pixels).
+   */
+  float sigmas[3];
   /**
    * LrdRegularization.
    */

@@ -119,6 +119,9 @@ pub const LRD_GUIDE_AO: u32 = 8;
 pub enum LrdBlur {
     LRD_BLUR_GAUSSIAN = 0,
     LRD_BLUR_BOX = 1,
+    /// Three Gaussian windows (`sigmas`) blended per cell; `lrd_flr_denoise`
+    /// only (the tiled API returns LRD_STATUS_UNSUPPORTED).
+    LRD_BLUR_ADAPTIVE = 2,
 }
 
 /// Regulariser.
@@ -147,6 +150,8 @@ pub struct LrdFlrConfig {
     pub sigma: f32,
     /// Window radius in full-resolution pixels (Gaussian: < 0 means 3·sigma).
     pub radius: f32,
+    /// LRD_BLUR_ADAPTIVE: the three window sigmas, increasing (full-resolution pixels).
+    pub sigmas: [f32; 3],
     /// LrdRegularization.
     pub regularization: u32,
     pub eps_mul: f64,
@@ -343,6 +348,7 @@ fn config(c: &LrdFlrConfig) -> Result<FlrConfig, LrdStatus> {
     let blur = match c.blur {
         0 => Blur::Gaussian { sigma: c.sigma, radius: (c.radius >= 0.0).then_some(c.radius) },
         1 => Blur::Box { radius: c.radius },
+        2 => Blur::Adaptive { sigmas: c.sigmas },
         _ => return Err(LRD_STATUS_INVALID_CONFIG),
     };
     let regularization = match c.regularization {
@@ -412,9 +418,10 @@ unsafe fn frame_views<'a>(frame: &LrdFrame, low_ok: bool) -> Result<Frame<'a>, L
 #[no_mangle]
 pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
     let d = FlrConfig::default();
-    let (sigma, radius) = match d.blur {
-        Blur::Gaussian { sigma, radius } => (sigma, radius.unwrap_or(-1.0)),
-        Blur::Box { radius } => (0.0, radius),
+    let (blur, sigma, radius, sigmas) = match d.blur {
+        Blur::Gaussian { sigma, radius } => (LrdBlur::LRD_BLUR_GAUSSIAN, sigma, radius.unwrap_or(-1.0), [0.0; 3]),
+        Blur::Box { radius } => (LrdBlur::LRD_BLUR_BOX, 0.0, radius, [0.0; 3]),
+        Blur::Adaptive { sigmas } => (LrdBlur::LRD_BLUR_ADAPTIVE, sigmas[1], -1.0, sigmas),
     };
     let (eps_mul, eps_add) = match d.regularization {
         Regularization::Normalized { eps_mul, eps_add } => (eps_mul, eps_add),
@@ -424,9 +431,10 @@ pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
         guides: LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_AO,
         user_guides: 0,
         block: d.block as u32,
-        blur: LrdBlur::LRD_BLUR_GAUSSIAN as u32,
+        blur: blur as u32,
         sigma,
         radius,
+        sigmas,
         regularization: LrdRegularization::LRD_REGULARIZATION_NORMALIZED as u32,
         eps_mul,
         eps_add,
@@ -491,6 +499,9 @@ struct Raw {
 }
 
 fn split_raw(flr: &Flr, scratch: *mut c_void, bytes: usize, workers: usize) -> Result<Raw, LrdStatus> {
+    if flr.scale_count() > 1 {
+        return Err(LRD_STATUS_UNSUPPORTED); // the adaptive window: lrd_flr_denoise only
+    }
     if scratch.is_null() {
         return Err(LRD_STATUS_NULL_POINTER);
     }

@@ -14,6 +14,14 @@
 //! | [`Flr::blur_cols_tile`] | all `tmp` | `cells` band |
 //! | [`Flr::solve_tile`] | `cells` band | `models` band |
 //! | [`Flr::apply_tile`] | all `models`, frame rows | output rows |
+//!
+//! With an adaptive window ([`Blur::Adaptive`], three window sizes) the blur
+//! and solve stages run once per window `s` (`*_at(s, ..)`, the blurred grid of
+//! window 0 into `first`, the others into `blurred`; each window's models and
+//! variances into `scale_models` / `variances`), and [`Flr::blend_tile`] then
+//! writes `models` from them. See [`adaptive`].
+
+pub mod adaptive;
 
 use crate::config::{Blur, FlrConfig, Kernel};
 use crate::error::{Arg, Error};
@@ -24,6 +32,9 @@ use crate::kernels::blur::{blur_cols_band, blur_row, Taps};
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cells4, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
+
+/// Most window sizes one run fits ([`Blur::Adaptive`]).
+pub const MAX_SCALES: usize = 3;
 
 /// Cell rows per tile. Small enough for parallelism at 720p, large enough to
 /// amortise the vertical box-window initialisation.
@@ -129,6 +140,14 @@ pub struct Parts<'s> {
     pub models: &'s mut [f32],
     /// One private buffer of `worker_len()` f32 per worker.
     pub workers: &'s mut [f32],
+    /// Adaptive window only (else empty): window 0's blurred grid.
+    pub first: &'s mut [f64],
+    /// Adaptive window only: the blurred grid of windows 1 and 2 (in turn).
+    pub blurred: &'s mut [f64],
+    /// Adaptive window only: each window's model grid (window-major).
+    pub scale_models: &'s mut [f32],
+    /// Adaptive window only: each window's per-cell variance estimate (window-major).
+    pub variances: &'s mut [f64],
 }
 
 /// Fast Local Regression for one frame size and configuration.
@@ -146,7 +165,11 @@ pub struct Flr {
     q: usize,
     lay: CellLayout,
     ml: usize,
-    taps: Taps,
+    /// One set of taps per window (only `scales` are used).
+    taps: [Taps; MAX_SCALES],
+    /// `4πσ²` per window, in input pixels (adaptive variance estimate).
+    areas: [f64; MAX_SCALES],
+    scales: usize,
 }
 
 impl Flr {
@@ -162,9 +185,18 @@ impl Flr {
         }
         let b = cfg.block;
         let r = cfg.radius_cells();
+        let one = |t: Taps| [t; MAX_SCALES];
+        let mut areas = [0f64; MAX_SCALES];
         let taps = match cfg.blur {
-            Blur::Gaussian { sigma, .. } => Taps::gaussian(sigma as f64 / b as f64, r),
-            Blur::Box { .. } => Taps::boxed(r),
+            Blur::Gaussian { sigma, .. } => one(Taps::gaussian(sigma as f64 / b as f64, r)),
+            Blur::Box { .. } => one(Taps::boxed(r)),
+            Blur::Adaptive { sigmas } => {
+                let up = cfg.upsample as f64;
+                for (a, &s) in areas.iter_mut().zip(&sigmas) {
+                    *a = 4.0 * core::f64::consts::PI * (s as f64 / up) * (s as f64 / up);
+                }
+                sigmas.map(|s| Taps::gaussian(s as f64 / b as f64, libm::ceilf(3.0 * s / b as f32 - 1e-4) as usize))
+            }
         };
         Ok(Flr {
             cfg,
@@ -179,6 +211,8 @@ impl Flr {
             lay: CellLayout::new(q),
             ml: model_len(q),
             taps,
+            areas,
+            scales: cfg.blur.scale_count(),
         })
     }
 
@@ -200,6 +234,11 @@ impl Flr {
     /// Guide channel count Q.
     pub fn guide_channels(&self) -> usize {
         self.q
+    }
+    /// Window sizes fitted: 1, or 3 with [`Blur::Adaptive`] (then the blur and
+    /// solve stages run per window, `*_at`, and [`Flr::blend_tile`] follows).
+    pub fn scale_count(&self) -> usize {
+        self.scales
     }
     /// Number of tiles of every tiled stage.
     pub fn tile_count(&self) -> usize {
@@ -243,6 +282,33 @@ impl Flr {
     fn grid_len(&self) -> usize {
         self.cells_x * self.cells_y * self.lay.k
     }
+    fn cell_count(&self) -> usize {
+        self.cells_x * self.cells_y
+    }
+    /// Where tile `t` of window `s` lies in `scale_models`.
+    pub fn scale_models_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
+        let r = self.models_tile_range(t)?;
+        let o = s * self.models_len();
+        Ok(o + r.start..o + r.end)
+    }
+    /// Where tile `t`'s cells lie in one window's `variances` (one f64 per cell).
+    pub fn variances_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
+        let (a, b) = self.tile_rows(t)?;
+        Ok(a * self.cells_x..b * self.cells_x)
+    }
+    /// Where tile `t` of window `s` lies in `variances`.
+    pub fn scale_variances_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
+        let r = self.variances_tile_range(t)?;
+        let o = s * self.cell_count();
+        Ok(o + r.start..o + r.end)
+    }
+    /// f64 values of the adaptive window's extra regions (0 for one window).
+    fn adaptive_len(&self) -> usize {
+        if self.scales == 1 {
+            return 0;
+        }
+        2 * self.grid_len() + (self.scales * self.models_len()).div_ceil(2) + self.scales * self.cell_count()
+    }
     fn models_len(&self) -> usize {
         self.cells_x * self.cells_y * self.ml
     }
@@ -258,7 +324,7 @@ impl Flr {
     }
     /// Scratch length in f64 elements for `workers` concurrent workers.
     pub fn scratch_len_for(&self, workers: usize) -> usize {
-        2 * self.grid_len() + self.models_len().div_ceil(2) + (workers.max(1) * self.worker_len()).div_ceil(2)
+        2 * self.grid_len() + self.models_len().div_ceil(2) + (workers.max(1) * self.worker_len()).div_ceil(2) + self.adaptive_len()
     }
     /// Scratch length in f64 elements for [`Flr::denoise`] (one worker).
     pub fn scratch_len(&self) -> usize {
@@ -276,8 +342,16 @@ impl Flr {
         let (models, rest) = rest.split_at_mut(self.models_len().div_ceil(2));
         let models = &mut bytemuck::cast_slice_mut::<f64, f32>(models)[..self.models_len()];
         let wl = workers.max(1) * self.worker_len();
-        let workers = &mut bytemuck::cast_slice_mut::<f64, f32>(rest)[..wl];
-        Ok(Parts { cells, tmp, models, workers })
+        let (workers, rest) = rest.split_at_mut(wl.div_ceil(2));
+        let workers = &mut bytemuck::cast_slice_mut::<f64, f32>(workers)[..wl];
+        let (ng, nm, nv) =
+            if self.scales == 1 { (0, 0, 0) } else { (self.grid_len(), self.scales * self.models_len(), self.scales * self.cell_count()) };
+        let (first, rest) = rest.split_at_mut(ng);
+        let (blurred, rest) = rest.split_at_mut(ng);
+        let (scale_models, rest) = rest.split_at_mut(nm.div_ceil(2));
+        let scale_models = &mut bytemuck::cast_slice_mut::<f64, f32>(scale_models)[..nm];
+        let variances = &mut rest[..nv];
+        Ok(Parts { cells, tmp, models, workers, first, blurred, scale_models, variances })
     }
 
     /// Checks a frame against the plan (sizes, channels, guide set).
@@ -535,6 +609,21 @@ impl Flr {
 
     /// Stage 3: horizontal blur of tile `t`: `cells` band → `tmp_tile`.
     pub fn blur_rows_tile(&self, t: usize, cells: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
+        self.blur_rows_tile_at(0, t, cells, tmp_tile)
+    }
+
+    /// The window index checked against the plan.
+    fn scale(&self, s: usize) -> Result<usize, Error> {
+        if s < self.scales {
+            Ok(s)
+        } else {
+            Err(Error::InvalidTile { index: s, count: self.scales })
+        }
+    }
+
+    /// Stage 3 for window `s` (`s < scale_count()`).
+    pub fn blur_rows_tile_at(&self, s: usize, t: usize, cells: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
+        let taps = &self.taps[self.scale(s)?];
         let (r0, _) = self.tile_rows(t)?;
         if cells.len() != self.grid_len() || tmp_tile.len() != self.cells_tile_len(t)? {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
@@ -542,7 +631,7 @@ impl Flr {
         let row_len = self.cells_x * self.lay.k;
         for (b, dst) in tmp_tile.chunks_exact_mut(row_len).enumerate() {
             let j = r0 + b;
-            blur_row(&self.taps, self.lay.k, &cells[j * row_len..(j + 1) * row_len], dst);
+            blur_row(taps, self.lay.k, &cells[j * row_len..(j + 1) * row_len], dst);
         }
         Ok(())
     }
@@ -557,6 +646,14 @@ impl Flr {
     /// is fetched from memory fewer times (a tile's 4 rows read 4 + 2r source
     /// rows). The box blur's sliding window still restarts at every tile.
     pub fn blur_cols_tiles(&self, tiles: core::ops::Range<usize>, tmp: &[f64], cells_band: &mut [f64]) -> Result<(), Error> {
+        self.blur_cols_tiles_at(0, tiles, tmp, cells_band)
+    }
+
+    /// [`Flr::blur_cols_tiles`] for window `s`; `out_band` is the band of the
+    /// grid that window's solve reads (`cells`, or `first` / `blurred`).
+    pub fn blur_cols_tiles_at(&self, s: usize, tiles: core::ops::Range<usize>, tmp: &[f64], out_band: &mut [f64]) -> Result<(), Error> {
+        let taps = &self.taps[self.scale(s)?];
+        let cells_band = out_band;
         let bad = Error::InvalidTile { index: tiles.end, count: self.tile_count() };
         if tiles.is_empty() {
             return Err(bad);
@@ -567,28 +664,29 @@ impl Flr {
         if tmp.len() != self.grid_len() || cells_band.len() != (r1 - r0) * row_len {
             return Err(bad);
         }
-        if self.taps.is_box {
+        if taps.is_box {
             // The sliding window restarts at each tile (its running sums round
             // differently from a fresh sum), so the box blur goes tile by tile.
             let mut rest = cells_band;
             for t in tiles {
                 let (a, b) = self.tile_rows(t)?;
                 let (band, tail) = rest.split_at_mut((b - a) * row_len);
-                blur_cols_band(&self.taps, row_len, self.cells_y, a, tmp, band);
+                blur_cols_band(taps, row_len, self.cells_y, a, tmp, band);
                 rest = tail;
             }
         } else {
-            blur_cols_band(&self.taps, row_len, self.cells_y, r0, tmp, cells_band);
+            blur_cols_band(taps, row_len, self.cells_y, r0, tmp, cells_band);
         }
         Ok(())
     }
 
-    fn solve_params(&self, stats: &Stats) -> SolveParams {
+    fn solve_params(&self, stats: &Stats, s: usize) -> SolveParams {
+        let taps = &self.taps[s];
         let mut reference = [0f64; MAX_GUIDES];
         for (r, s) in reference.iter_mut().zip(&stats.reference) {
             *r = *s as f64;
         }
-        let total = (self.bin * self.bin) as f64 * self.taps.sum() * self.taps.sum();
+        let total = (self.bin * self.bin) as f64 * taps.sum() * taps.sum();
         SolveParams {
             reference,
             mean: stats.mean,
@@ -601,10 +699,29 @@ impl Flr {
 
     /// Stage 5: solve every cell of tile `t`: `cells` band → `models_tile`.
     pub fn solve_tile(&self, stats: &Stats, t: usize, cells_tile: &[f64], models_tile: &mut [f32]) -> Result<Report, Error> {
-        if cells_tile.len() != self.cells_tile_len(t)? || models_tile.len() != self.models_tile_len(t)? {
+        self.solve_tile_at(0, stats, t, cells_tile, models_tile, &mut [])
+    }
+
+    /// Stage 5 for window `s`: also writes each cell's variance estimate to
+    /// `variances_tile` (one f64 per cell of the tile; empty to skip it).
+    pub fn solve_tile_at(
+        &self,
+        s: usize,
+        stats: &Stats,
+        t: usize,
+        cells_tile: &[f64],
+        models_tile: &mut [f32],
+        variances_tile: &mut [f64],
+    ) -> Result<Report, Error> {
+        let s = self.scale(s)?;
+        let cells_n = self.variances_tile_range(t)?.len();
+        if cells_tile.len() != self.cells_tile_len(t)?
+            || models_tile.len() != self.models_tile_len(t)?
+            || !(variances_tile.is_empty() || variances_tile.len() == cells_n)
+        {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
         }
-        let p = self.solve_params(stats);
+        let p = self.solve_params(stats, s);
         let mut rep = Report::default();
         let (k, ml) = (self.lay.k, self.ml);
         let mut count = |o: CellOutcome| {
@@ -621,7 +738,47 @@ impl Flr {
         for (cell, model) in cr.chunks_exact(k).zip(mr.chunks_exact_mut(ml)) {
             count(dispatch_q!(self.q, solve_cell(cell, &p, model)));
         }
+        if !variances_tile.is_empty() {
+            dispatch_q!(self.q, variances_of(cells_tile, models_tile, &p, self.areas[s], variances_tile));
+        }
         Ok(rep)
+    }
+
+    /// Adaptive window: blends the three windows' models of tile `t` into
+    /// `models_tile`. `first_tile` is window 0's blurred band, `scale_models`
+    /// and `variances` the whole window-major grids.
+    pub fn blend_tile(
+        &self,
+        t: usize,
+        first_tile: &[f64],
+        scale_models: &[f32],
+        variances: &[f64],
+        models_tile: &mut [f32],
+    ) -> Result<(), Error> {
+        let bad = Error::InvalidTile { index: t, count: self.tile_count() };
+        if self.scales != MAX_SCALES
+            || first_tile.len() != self.cells_tile_len(t)?
+            || scale_models.len() != self.scales * self.models_len()
+            || variances.len() != self.scales * self.cell_count()
+            || models_tile.len() != self.models_tile_len(t)?
+        {
+            return Err(bad);
+        }
+        let m: [&[f32]; MAX_SCALES] = [0, 1, 2].map(|s| &scale_models[s * self.models_len()..(s + 1) * self.models_len()]);
+        let v: [&[f64]; MAX_SCALES] = [0, 1, 2].map(|s| &variances[s * self.cell_count()..(s + 1) * self.cell_count()]);
+        let (mr, vr) = (self.models_tile_range(t)?, self.variances_tile_range(t)?);
+        let min_weight = self.solve_params(&Stats::default(), 0).min_weight;
+        dispatch_q!(
+            self.q,
+            blend_band(
+                first_tile,
+                [&m[0][mr.clone()], &m[1][mr.clone()], &m[2][mr]],
+                [&v[0][vr.clone()], &v[1][vr.clone()], &v[2][vr]],
+                min_weight,
+                models_tile
+            )
+        );
+        Ok(())
     }
 
     /// Stage 6: apply the models to the output rows of tile `t`. `out_band`
@@ -695,19 +852,29 @@ impl Flr {
         let mut rep = Report::default();
         let tiles = self.tile_count();
         for t in 0..tiles {
-            // The horizontal blur reads only its own band: run it while the band is in cache.
             rep += self.moments_tile(&f, &stats, t, &mut parts.cells[self.cells_tile_range(t)?], parts.workers)?;
-            self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
+            if self.scales == 1 {
+                // The horizontal blur reads only its own band: run it while the band is in cache.
+                self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
+            }
         }
         self.finish_stats(parts.cells, &mut stats)?;
-        // Vertical blur four tiles at a time (fewer re-reads of `tmp`), then their solves.
-        for t0 in (0..tiles).step_by(4) {
-            let t1 = (t0 + 4).min(tiles);
-            let band = self.cells_tile_range(t0)?.start..self.cells_tile_range(t1 - 1)?.end;
-            self.blur_cols_tiles(t0..t1, parts.tmp, &mut parts.cells[band])?;
-            for t in t0..t1 {
+        if self.scales > 1 {
+            rep += self.fit_windows(&stats, parts.cells, parts.tmp, parts.first, parts.blurred, parts.scale_models, parts.variances)?;
+            for t in 0..tiles {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
-                rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
+                self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
+            }
+        } else {
+            // Vertical blur four tiles at a time (fewer re-reads of `tmp`), then their solves.
+            for t0 in (0..tiles).step_by(4) {
+                let t1 = (t0 + 4).min(tiles);
+                let band = self.cells_tile_range(t0)?.start..self.cells_tile_range(t1 - 1)?.end;
+                self.blur_cols_tiles(t0..t1, parts.tmp, &mut parts.cells[band])?;
+                for t in t0..t1 {
+                    let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
+                    rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
+                }
             }
         }
         for t in 0..tiles {
@@ -716,5 +883,52 @@ impl Flr {
             rep += self.apply_tile(&f, &stats, t, parts.models, parts.workers, &mut band)?;
         }
         Ok(rep)
+    }
+
+    /// Adaptive window, on the calling thread: blur and solve every window.
+    #[allow(clippy::too_many_arguments)]
+    fn fit_windows(
+        &self,
+        stats: &Stats,
+        cells: &[f64],
+        tmp: &mut [f64],
+        first: &mut [f64],
+        blurred: &mut [f64],
+        scale_models: &mut [f32],
+        variances: &mut [f64],
+    ) -> Result<Report, Error> {
+        let tiles = self.tile_count();
+        let mut rep = Report::default();
+        for s in 0..self.scales {
+            for t in 0..tiles {
+                self.blur_rows_tile_at(s, t, cells, &mut tmp[self.cells_tile_range(t)?])?;
+            }
+            let dst = if s == 0 { &mut *first } else { &mut *blurred };
+            self.blur_cols_tiles_at(s, 0..tiles, tmp, dst)?;
+            for t in 0..tiles {
+                let (c, m, v) = (self.cells_tile_range(t)?, self.scale_models_tile_range(s, t)?, self.scale_variances_tile_range(s, t)?);
+                rep += self.solve_tile_at(s, stats, t, &dst[c], &mut scale_models[m], &mut variances[v])?;
+            }
+        }
+        Ok(rep)
+    }
+}
+
+/// Each cell's variance estimate ([`adaptive::variance`]).
+fn variances_of<const Q: usize>(cells: &[f64], models: &[f32], p: &SolveParams, area: f64, out: &mut [f64]) {
+    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
+    for ((cell, model), v) in cells.chunks_exact(k).zip(models.chunks_exact(ml)).zip(out) {
+        *v = adaptive::variance::<Q>(cell, model, p.weight_norm, area, p.min_weight);
+    }
+}
+
+/// Blends one band of cells ([`adaptive::blend`]).
+fn blend_band<const Q: usize>(first: &[f64], models: [&[f32]; 3], variances: [&[f64]; 3], min_weight: f64, out: &mut [f32]) {
+    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
+    for (i, (cell, o)) in first.chunks_exact(k).zip(out.chunks_exact_mut(ml)).enumerate() {
+        let m = models.map(|g| &g[i * ml..(i + 1) * ml]);
+        let gaps =
+            [0.0, adaptive::prediction_gap::<Q>(cell, m[0], m[1], min_weight), adaptive::prediction_gap::<Q>(cell, m[0], m[2], min_weight)];
+        adaptive::blend(m, variances.map(|v| v[i]), gaps, o);
     }
 }

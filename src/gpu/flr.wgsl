@@ -13,7 +13,7 @@
 // views (element units); the output is f32.
 
 const MAX_Q: u32 = 8u;
-const MAX_K: u32 = 72u; // moment count at Q = 8: 1 + 8 + 36 + 3 + 24
+const MAX_K: u32 = 73u; // moment count at Q = 8: 1 + 8 + 36 + 3 + 24 + 1
 const MAX_ML: u32 = 30u; // model length at Q = 8: 3 + 24 + 3
 const WG: u32 = 64u;
 const NONE: u32 = 0xffffffffu;
@@ -125,6 +125,7 @@ fn off_s() -> u32 { return 1u; }
 fn off_ss() -> u32 { return 1u + P.q; }
 fn off_t() -> u32 { return 1u + P.q + P.q * (P.q + 1u) / 2u; }
 fn off_p() -> u32 { return off_t() + 3u; }
+fn off_e() -> u32 { return off_p() + 3u * P.q; }
 
 // ---------------------------------------------------------------------------
 // Stage 0: the per-guide frame reference (first finite value among 16 fixed
@@ -163,11 +164,11 @@ fn reference() {
 // invocation j sums moment j (and j + 64) over them: no reduction tree, two
 // barriers per 64 pixels. Pixels with a non-finite sample are left out and
 // counted.
-const PIX: u32 = 12u; // values staged per pixel: w, e[MAX_Q], y[3]
+const PIX: u32 = 13u; // values staged per pixel: w, e[MAX_Q], y[3], luminance
 var<workgroup> first_valid: atomic<u32>;
 var<workgroup> first_plain: u32;
-var<workgroup> pix: array<f32, 768>; // 64 pixels × PIX
-var<workgroup> sums: array<f32, 72>;
+var<workgroup> pix: array<f32, 832>; // 64 pixels × PIX
+var<workgroup> sums: array<f32, 73>;
 
 fn pixel_valid(x: u32, y: u32) -> vec2<bool> {
     var ok_noisy = true;
@@ -201,6 +202,9 @@ fn factors(m: u32) -> vec2<u32> {
     }
     if m < off_p() {
         return vec2<u32>(0u, 1u + q + (m - off_t())); // t_c = Σ w·y_c
+    }
+    if m == off_e() {
+        return vec2<u32>(4u + q, 4u + q); // e = Σ w·ℓ² (ℓ is 0 where w is)
     }
     let j = m - off_p();
     return vec2<u32>(1u + j / 3u, 1u + q + j % 3u); // P_ac
@@ -277,6 +281,8 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
                 for (var c = 0u; c < 3u; c++) {
                     pix[o + 1u + q + c] = noisy_at(c, x, y);
                 }
+                let l = 0.2126 * pix[o + 1u + q] + 0.7152 * pix[o + 2u + q] + 0.0722 * pix[o + 3u + q];
+                pix[o + 4u + q] = l;
             }
         }
         workgroupBarrier();
@@ -300,8 +306,8 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
     for (var m = lid; m < k; m += WG) {
         let f = factors(m);
         var v = sums[m];
-        if m == 0u || m >= off_t() && m < off_p() {
-            // n and t do not depend on the reference
+        if m == 0u || m >= off_t() && m < off_p() || m == off_e() {
+            // n, t and e do not depend on the reference
         } else if m < off_ss() {
             v = sums[m] + n * r[m - 1u];
         } else if m < off_t() {

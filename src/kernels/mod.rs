@@ -1,9 +1,11 @@
 //! The FLR kernels, each callable on its own on one band of cells.
 //!
 //! Cell layout (f64, `k = moment_count(Q)` values per cell), eq. 12:
-//! `[n, s_0..s_Q, S (upper triangle, row-major), t_0..t_3, P (Q×3, guide-major)]`
-//! with `n = Σw`, `s = Σw g`, `S = Σw g gᵀ`, `t = Σw y`, `P = Σw g yᵀ`; guides
-//! relative to the frame reference `m` (see `flr::Stats`).
+//! `[n, s_0..s_Q, S (upper triangle, row-major), t_0..t_2, P (Q×3, guide-major), e]`
+//! with `n = Σw`, `s = Σw g`, `S = Σw g gᵀ`, `t = Σw y`, `P = Σw g yᵀ`,
+//! `e = Σw ℓ²` (ℓ = [`LUMA`]·y, the light's luminance: the residual variance of
+//! the adaptive window, `flr::adaptive`); guides relative to the frame
+//! reference `m` (see `flr::Stats`).
 //!
 //! Index loops are kept where they mirror the equations (`needless_range_loop`),
 //! and `!(x > floor)` is used on purpose: it is also true for NaN.
@@ -21,10 +23,13 @@ pub const fn packed_len(q: usize) -> usize {
     q * (q + 1) / 2
 }
 
-/// Moments per cell for `q` guides: n, s, S, t, P.
+/// Moments per cell for `q` guides: n, s, S, t, P, e.
 pub const fn moment_count(q: usize) -> usize {
-    1 + q + packed_len(q) + 3 + 3 * q
+    1 + q + packed_len(q) + 3 + 3 * q + 1
 }
+
+/// Luminance weights (Rec. 709) of the energy moment `e = Σw ℓ²`.
+pub const LUMA: [f32; 3] = [0.2126, 0.7152, 0.0722];
 
 /// Model floats per cell: intercept (3), coefficients (Q×3), local mean of y (3).
 pub const fn model_len(q: usize) -> usize {
@@ -39,6 +44,8 @@ pub struct CellLayout {
     pub ss: usize,
     pub t: usize,
     pub p: usize,
+    /// The energy moment `e = Σw ℓ²`.
+    pub e: usize,
     pub k: usize,
 }
 
@@ -48,7 +55,7 @@ impl CellLayout {
         let ss = s + q;
         let t = ss + packed_len(q);
         let p = t + 3;
-        CellLayout { q, s, ss, t, p, k: p + 3 * q }
+        CellLayout { q, s, ss, t, p, e: p + 3 * q, k: p + 3 * q + 1 }
     }
 }
 

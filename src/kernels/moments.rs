@@ -344,6 +344,9 @@ fn block_scalar<const Q: usize>(
             for c in 0..3 {
                 acc[lay.t + c] += yy[c];
             }
+            let [l0, l1, l2] = super::LUMA;
+            let l = yy[0] * l0 + yy[1] * l1 + yy[2] * l2;
+            acc[lay.e] += l * l;
             for a in 0..Q {
                 for c in 0..3 {
                     acc[lay.p + 3 * a + c] += e[a] * yy[c];
@@ -422,10 +425,14 @@ fn accumulate<const Q: usize>(groups: &[[f32x8; VW]], wsum: f32x8, lay: &CellLay
     sums[0] = wsum;
     // s and t: plain sums of the vectors.
     let mut plain = [f32x8::ZERO; VW];
+    let mut energy = f32x8::ZERO;
+    let luma = super::LUMA.map(f32x8::splat);
     for vg in groups {
         for j in 0..Q + 3 {
             plain[j] += vg[j];
         }
+        let l = vg[Q].mul_add(luma[0], vg[Q + 1].mul_add(luma[1], vg[Q + 2] * luma[2]));
+        energy = l.mul_add(l, energy);
     }
     if check {
         // A non-finite input makes its plain sum non-finite (Inf, or NaN).
@@ -444,6 +451,7 @@ fn accumulate<const Q: usize>(groups: &[[f32x8; VW]], wsum: f32x8, lay: &CellLay
     for c in 0..3 {
         sums[lay.t + c] = plain[Q + c];
     }
+    sums[lay.e] = energy;
     // S (upper triangle) and P: for each guide `a`, the products with every
     // `b ≥ a` (guides then colours) accumulate in registers, up to `ROW` at a
     // time, loading `v_a` once per group.
@@ -511,4 +519,5 @@ fn store_shifted<const Q: usize>(acc: &[f32; MAX_K], r: &[f32; MAX_GUIDES], lay:
             cell[j] = acc[j] as f64 + rr[a] * t[c];
         }
     }
+    cell[lay.e] = acc[lay.e] as f64;
 }

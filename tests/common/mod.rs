@@ -193,13 +193,26 @@ pub fn gauss(mut a: Vec<f64>, n: usize, mut b: Vec<f64>, nrhs: usize) -> Vec<f64
     x
 }
 
-/// The f64 reference: per-pixel windowed weighted least squares at full
-/// resolution (no blocks), Gaussian or box window, the same regulariser
-/// equations written out plainly. `guides[q][pixel]`, `y` interleaved RGB.
-/// Pixels with a non-finite value are excluded. Output interleaved RGB, no clamping.
-pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
-    let q = guides.len();
-    let (kern, r) = match cfg.blur {
+/// One pixel's fitted model: `y_c = muy[c] + Σ_a beta[a][c] (g_a − mu[a])`.
+#[derive(Clone, Debug, Default)]
+#[allow(dead_code)]
+pub struct PixelModel {
+    pub mu: Vec<f64>,
+    pub muy: [f64; 3],
+    pub beta: Vec<[f64; 3]>,
+}
+
+#[allow(dead_code)]
+impl PixelModel {
+    /// The model's prediction of channel `c` at guide values `g`.
+    pub fn predict(&self, g: &[f64], c: usize) -> f64 {
+        self.muy[c] + g.iter().zip(&self.mu).zip(&self.beta).map(|((g, m), b)| b[c] * (g - m)).sum::<f64>()
+    }
+}
+
+/// The reference's window: normalised 1-D kernel and radius.
+pub fn window_kernel(blur: Blur) -> (Vec<f64>, isize) {
+    match blur {
         Blur::Gaussian { sigma, radius } => {
             let r = radius.unwrap_or(3.0 * sigma).ceil() as isize;
             let s = sigma as f64;
@@ -211,9 +224,57 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
             let r = radius.ceil() as isize;
             (vec![1.0 / (2 * r + 1) as f64; (2 * r + 1) as usize], r)
         }
-    };
-    let valid: Vec<bool> =
-        (0..w * h).map(|i| (0..3).all(|c| y[3 * i + c].is_finite()) && (0..q).all(|a| guides[a][i].is_finite())).collect();
+        Blur::Adaptive { .. } => panic!("one window at a time"),
+    }
+}
+
+/// The valid pixels of the window around `(px, py)` with their weights.
+pub fn window_taps(kern: &[f64], r: isize, (w, h): (usize, usize), valid: &[bool], (px, py): (isize, isize)) -> Vec<(usize, f64)> {
+    let mut idx = vec![];
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let (x, yy) = (px + dx, py + dy);
+            if x < 0 || yy < 0 || x >= w as isize || yy >= h as isize {
+                continue;
+            }
+            let i = (yy as usize) * w + x as usize;
+            if valid[i] {
+                idx.push((i, kern[(dx + r) as usize] * kern[(dy + r) as usize]));
+            }
+        }
+    }
+    idx
+}
+
+/// Pixels whose noisy value and guides are all finite.
+pub fn valid_pixels(w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<bool> {
+    (0..w * h).map(|i| (0..3).all(|c| y[3 * i + c].is_finite()) && guides.iter().all(|g| g[i].is_finite())).collect()
+}
+
+/// The f64 reference: per-pixel windowed weighted least squares at full
+/// resolution (no blocks), Gaussian or box window, the same regulariser
+/// equations written out plainly. `guides[q][pixel]`, `y` interleaved RGB.
+/// Pixels with a non-finite value are excluded. Output interleaved RGB, no clamping.
+pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
+    let q = guides.len();
+    let models = reference_models(cfg, w, h, guides, y);
+    let mut out = vec![0.0; 3 * w * h];
+    for (k, m) in models.iter().enumerate() {
+        if let Some(m) = m {
+            let g: Vec<f64> = (0..q).map(|a| guides[a][k]).collect();
+            for c in 0..3 {
+                out[3 * k + c] = m.predict(&g, c);
+            }
+        }
+    }
+    out
+}
+
+/// Each pixel's model of [`reference`] (`None` where its window is empty).
+pub fn reference_models(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<Option<PixelModel>> {
+    let q = guides.len();
+    let (kern, r) = window_kernel(cfg.blur);
+    let valid = valid_pixels(w, h, guides, y);
     // Frame statistics over valid pixels (two-pass).
     let nv = valid.iter().filter(|v| **v).count().max(1) as f64;
     let mut fmean = vec![0.0; q];
@@ -225,33 +286,19 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
         let sd = v.sqrt().max(1e-6 * m.abs());
         fscale[a] = if sd > 0.0 { sd } else { 1.0 };
     }
-    let mut out = vec![0.0; 3 * w * h];
+    let mut out = vec![None; w * h];
     for py in 0..h as isize {
         for px in 0..w as isize {
-            // weights and moments
-            let mut n = 0.0;
+            let idx = window_taps(&kern, r, (w, h), &valid, (px, py));
+            let n: f64 = idx.iter().map(|t| t.1).sum();
             let mut sx = vec![0.0; q];
             let mut sy = [0.0; 3];
-            let mut idx = vec![];
-            for dy in -r..=r {
-                for dx in -r..=r {
-                    let (x, yy) = (px + dx, py + dy);
-                    if x < 0 || yy < 0 || x >= w as isize || yy >= h as isize {
-                        continue;
-                    }
-                    let i = (yy as usize) * w + x as usize;
-                    if !valid[i] {
-                        continue;
-                    }
-                    let wt = kern[(dx + r) as usize] * kern[(dy + r) as usize];
-                    idx.push((i, wt));
-                    n += wt;
-                    for a in 0..q {
-                        sx[a] += wt * guides[a][i];
-                    }
-                    for c in 0..3 {
-                        sy[c] += wt * y[3 * i + c] as f64;
-                    }
+            for &(i, wt) in &idx {
+                for a in 0..q {
+                    sx[a] += wt * guides[a][i];
+                }
+                for c in 0..3 {
+                    sy[c] += wt * y[3 * i + c] as f64;
                 }
             }
             let k = (py as usize) * w + px as usize;
@@ -296,14 +343,8 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
                         }
                     }
                     let ah = gauss(c, q, bh, 3);
-                    for ch in 0..3 {
-                        let mut v = muy[ch];
-                        for a in 0..q {
-                            let z = (guides[a][k] - mu[a]) / fscale[a];
-                            v += z / sig[a] * ah[a * 3 + ch];
-                        }
-                        out[3 * k + ch] = v;
-                    }
+                    let beta = (0..q).map(|a| [0, 1, 2].map(|ch| ah[a * 3 + ch] / sig[a] / fscale[a])).collect();
+                    out[k] = Some(PixelModel { mu, muy: [muy[0], muy[1], muy[2]], beta });
                 }
                 Regularization::Tikhonov { eps } => {
                     let d = q + 1;
@@ -325,13 +366,8 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
                         xx[a * d + a] += eps;
                     }
                     let coef = gauss(xx, d, xy, 3);
-                    for c in 0..3 {
-                        let mut v = coef[c];
-                        for a in 0..q {
-                            v += coef[(a + 1) * 3 + c] * guides[a][k];
-                        }
-                        out[3 * k + c] = v;
-                    }
+                    let beta = (0..q).map(|a| [0, 1, 2].map(|c| coef[(a + 1) * 3 + c])).collect();
+                    out[k] = Some(PixelModel { mu: vec![0.0; q], muy: [coef[0], coef[1], coef[2]], beta });
                 }
             }
         }

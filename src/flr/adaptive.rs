@@ -1,0 +1,119 @@
+//! The adaptive window ([`crate::Blur::Adaptive`]): FLR fitted with three
+//! Gaussian windows, blended per cell by the inverse of each fit's estimated
+//! squared error at the cell (a bias–variance choice made from moments only).
+//!
+//! For window `s` with `N_s` effective samples (`4πσ_s²` pixels × the valid
+//! fraction of the window) and a model with `Q + 1` coefficients, the variance
+//! of its prediction is about `v_s = r_s (Q + 1) / N_s`, with `r_s` the
+//! weighted residual variance of the light's luminance, `E[ℓ²] − E[ℓ]² − βᵀ
+//! cov(g, ℓ)` (the energy moment `e` gives `E[ℓ²]`). The bias of a larger
+//! window is measured against the smallest: `d_s² = E₀[(x·(β_s − β₀))²]`, the
+//! mean squared difference of their predictions over the smallest window,
+//! which also holds the variance difference, so `b_s² = max(d_s² − K·(v₀ −
+//! v_s), 0)` with `K` = [`BIAS_DISCOUNT`]. Weights are `1 / (b_s² + v_s)`.
+//!
+//! Measured on the training scenes (256², 1 spp, σ = 6/12/20 px): +0.29 dB
+//! over σ = 12 alone; the prototype (`tools/flr_scales_proto.py`) found the
+//! same per pixel. Estimating `r_s` needs the energy moment, so this mode
+//! costs three blurs and three solves instead of one.
+
+use crate::kernels::{CellLayout, LUMA};
+
+/// `K`: the share of the variance difference `v₀ − v_s` that `d_s²` is taken
+/// to contain (0.5 measured best of 0.25 / 0.5 / 1 on the training scenes;
+/// flat within 0.1 dB).
+pub const BIAS_DISCOUNT: f64 = 0.5;
+
+/// Luminance weights in f64.
+const L: [f64; 3] = [LUMA[0] as f64, LUMA[1] as f64, LUMA[2] as f64];
+
+/// Estimated variance `v_s` of the prediction of `model` at a cell whose
+/// blurred moments are `cell`; `norm` turns the window weight into its valid
+/// fraction, `area` is `4πσ²` in input pixels. `+∞` for an empty window.
+pub fn variance<const Q: usize>(cell: &[f64], model: &[f32], norm: f64, area: f64, min_weight: f64) -> f64 {
+    let lay = CellLayout::new(Q);
+    let n = cell[0];
+    if !(n > min_weight && n.is_finite()) {
+        return f64::INFINITY;
+    }
+    let inv = 1.0 / n;
+    let luma = |at: usize| (L[0] * cell[at] + L[1] * cell[at + 1] + L[2] * cell[at + 2]) * inv;
+    let mean = luma(lay.t);
+    let mut explained = 0.0;
+    for a in 0..Q {
+        let cov = luma(lay.p + 3 * a) - cell[lay.s + a] * inv * mean;
+        let j = 3 + 3 * a;
+        let beta = L[0] * model[j] as f64 + L[1] * model[j + 1] as f64 + L[2] * model[j + 2] as f64;
+        explained += beta * cov;
+    }
+    let residual = (cell[lay.e] * inv - mean * mean - explained).max(0.0);
+    let samples = (area * (n * norm).min(1.0)).max(1.0);
+    let v = residual * (Q + 1) as f64 / samples;
+    if v.is_finite() {
+        v
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// `d_s²`: the mean squared difference between the luminance predictions of
+/// `model` and `first` (the smallest window's) over the smallest window, whose
+/// blurred moments are `cell`: `(Δc₀ + Δcᵀμ)² + Δcᵀ Σ Δc`.
+pub fn prediction_gap<const Q: usize>(cell: &[f64], first: &[f32], model: &[f32], min_weight: f64) -> f64 {
+    let lay = CellLayout::new(Q);
+    let n = cell[0];
+    if !(n > min_weight && n.is_finite()) {
+        return 0.0;
+    }
+    let inv = 1.0 / n;
+    let dl = |j: usize| (0..3).map(|c| L[c] * (model[j + c] as f64 - first[j + c] as f64)).sum::<f64>();
+    let mut dc = [0f64; crate::MAX_GUIDES];
+    let mut mu = [0f64; crate::MAX_GUIDES];
+    let mut at_mean = dl(0);
+    for a in 0..Q {
+        dc[a] = dl(3 + 3 * a);
+        mu[a] = cell[lay.s + a] * inv;
+        at_mean += dc[a] * mu[a];
+    }
+    let mut spread = 0.0;
+    let mut p = lay.ss;
+    for a in 0..Q {
+        for b in a..Q {
+            let cov = cell[p] * inv - mu[a] * mu[b];
+            spread += if a == b { dc[a] * dc[a] * cov } else { 2.0 * dc[a] * dc[b] * cov };
+            p += 1;
+        }
+    }
+    let d2 = at_mean * at_mean + spread.max(0.0);
+    if d2.is_finite() {
+        d2
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Blends the three windows' models of one cell into `out`: weights
+/// `1 / (b_s² + v_s)` from `variances` and the gaps `gaps[s]` (`gaps[0]` unused).
+/// Falls back to the middle window's model where no weight is usable.
+pub fn blend(models: [&[f32]; 3], variances: [f64; 3], gaps: [f64; 3], out: &mut [f32]) {
+    let mut w = [0f64; 3];
+    for s in 0..3 {
+        let mse = if s == 0 {
+            variances[0]
+        } else {
+            let seen = (variances[0] - variances[s]).max(0.0);
+            let bias = if seen.is_finite() { (gaps[s] - BIAS_DISCOUNT * seen).max(0.0) } else { 0.0 };
+            bias + variances[s]
+        };
+        w[s] = if mse.is_finite() { 1.0 / mse.max(1e-300) } else { 0.0 };
+    }
+    let total = w[0] + w[1] + w[2];
+    if !(total > 0.0 && total.is_finite()) {
+        out.copy_from_slice(models[1]);
+        return;
+    }
+    for (j, o) in out.iter_mut().enumerate() {
+        let v = (w[0] * models[0][j] as f64 + w[1] * models[1][j] as f64 + w[2] * models[2][j] as f64) / total;
+        *o = v as f32;
+    }
+}
