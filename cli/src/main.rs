@@ -233,6 +233,7 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(FlrArgs { block: Some(16), ..Default::default() }),
         Variant::flr(FlrArgs { sigma: Some("6".into()), ..Default::default() }),
         Variant::flr(FlrArgs { sigma: Some("24".into()), ..Default::default() }),
+        Variant::flr(FlrArgs { sigma: Some("6,12,20".into()), ..Default::default() }),
         Variant::flr(FlrArgs { box_radius: Some(16.0), ..Default::default() }),
         Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
         Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
@@ -318,7 +319,7 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         let g: Vec<&str> = avail.iter().enumerate().filter(|(i, _)| mask >> i & 1 == 1).map(|(_, n)| *n).collect();
         let gs = if g.is_empty() { "none".to_string() } else { g.join(",") };
         for block in [4, 8, 16] {
-            for sigma in ["6", "12", "24"] {
+            for sigma in ["6", "12", "24", "6,12,20"] {
                 variants.push(Variant::flr(FlrArgs {
                     guides: Some(gs.clone()),
                     block: Some(block),

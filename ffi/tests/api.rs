@@ -358,3 +358,44 @@ fn walr_matches_the_rust_api() {
         assert_eq!(lrd_features() & LRD_FEATURE_WALR, LRD_FEATURE_WALR);
     }
 }
+
+/// LRD_BLUR_ADAPTIVE runs through lrd_flr_denoise (same output as the Rust
+/// API); the tiled entry point refuses it.
+#[test]
+fn adaptive_window_whole_frame_only() {
+    use lrdenoise_core::{Blur, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut};
+    let (w, h) = (45u32, 33u32);
+    let n = (w * h) as usize;
+    let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 13) as f32 * 0.1).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 1.0 + (i / w as usize) as f32 * 0.1).collect();
+    let mut cfg = lrd_flr_config_default();
+    cfg.guides = LRD_GUIDE_DEPTH;
+    cfg.blur = LrdBlur::LRD_BLUR_ADAPTIVE as u32;
+    cfg.sigmas = [3.0, 6.0, 10.0];
+    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
+    frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+    let mut out = vec![0f32; 3 * n];
+    let o =
+        LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
+    let mut bytes = 0usize;
+    unsafe {
+        assert_eq!(lrd_flr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
+        let mut scratch = vec![0f64; bytes / 8 + 1];
+        let sp = scratch.as_mut_ptr() as *mut _;
+        assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_OK);
+        let st = lrd_flr_run_tile(&cfg, &frame, &o, sp, bytes, 1, 0, 0, 0, null_mut());
+        assert_eq!(st, LrdStatus::LRD_STATUS_UNSUPPORTED);
+        cfg.sigmas = [6.0, 3.0, 10.0];
+        assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+    }
+    let set = GuideSet { depth: true, ..GuideSet::NONE };
+    let c = FlrConfig { blur: Blur::Adaptive { sigmas: [3.0, 6.0, 10.0] }, ..FlrConfig::with_guides(set) };
+    let flr = Flr::new(c, w as usize, h as usize).unwrap();
+    let guides = Guides { depth: Some(ImageView::interleaved(&depth, w as usize, h as usize, 1).unwrap()), ..Guides::default() };
+    let f = Frame::new(ImageView::interleaved(&noisy, w as usize, h as usize, 3).unwrap(), guides);
+    let mut want = vec![0f32; 3 * n];
+    let mut scratch = vec![0f64; flr.scratch_len()];
+    flr.denoise(&f, &mut scratch, &mut ImageViewMut::interleaved(&mut want, w as usize, h as usize, 3).unwrap()).unwrap();
+    assert_eq!(out, want);
+}
+
