@@ -579,9 +579,11 @@ proptest! {
     /// not change the result beyond the inputs' own f32 resolution: the
     /// edge-stopping distances are relative, the light is normalised.
     #[test]
-    fn offset_scale_and_hdr_invariance(offset in -1e4f32..1e4, log_scale in -3f32..3.0, log_light in -8f32..6.0, seed in 0u64..100) {
+    /// Without depth too (distances relative to the positions' spread).
+    fn offset_scale_and_hdr_invariance(offset in -1e4f32..1e4, log_scale in -3f32..3.0, log_light in -8f32..6.0, seed in 0u64..100, depth in any::<bool>()) {
         let s = scene(40, 30, seed, 0.6, true, true);
-        let cfg = WalrConfig { storage: Storage::F32, ..WalrConfig::default() };
+        let mut cfg = WalrConfig { storage: Storage::F32, ..WalrConfig::default() };
+        cfg.guides.depth = depth;
         let (base, _) = run(cfg, &s.f, 0);
         let (scale, light) = (10f32.powf(log_scale), 10f32.powf(log_light));
         let g = transformed(&s.f, offset, scale, light);

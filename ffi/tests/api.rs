@@ -398,4 +398,3 @@ fn adaptive_window_whole_frame_only() {
     flr.denoise(&f, &mut scratch, &mut ImageViewMut::interleaved(&mut want, w as usize, h as usize, 3).unwrap()).unwrap();
     assert_eq!(out, want);
 }
-

@@ -61,8 +61,10 @@ impl Walr {
     /// `index` seeds the replacement choices.
     pub fn prepare(&self, f: &CheckedFrame<'_>, index: u32) -> Prepared {
         let (w, h) = (self.width, self.height);
-        let (cn, _, _, ce) = self.channels();
+        let (cn, cp, _, ce) = self.channels();
         let extras = self.m - 3;
+        // positions relative to the first finite sample (large offsets cancel)
+        let (mut p0, mut psum, mut psq, mut pcount) = (None::<[f64; 3]>, [0f64; 3], 0f64, 0u64);
         let mut nsum = [0f64; 3];
         let (mut lsum, mut lcount) = (0f64, 0u64);
         let mut ext = [(f32::INFINITY, f32::NEG_INFINITY); MAX_FEATURES - 3];
@@ -78,6 +80,15 @@ impl Walr {
                     for c in 0..3 {
                         nsum[c] += n[c] as f64;
                     }
+                }
+                let pos = [0, 1, 2].map(|c| get(cp + c, x, y, &mut row).unwrap_or(f32::NAN) as f64);
+                if pos.iter().all(|v| v.is_finite()) {
+                    let r = *p0.get_or_insert(pos);
+                    for c in 0..3 {
+                        psum[c] += pos[c] - r[c];
+                        psq += (pos[c] - r[c]) * (pos[c] - r[c]);
+                    }
+                    pcount += 1;
                 }
                 for c in 0..3 {
                     if let Some(v) = f.noisy.get(x, y, c).filter(|v| v.is_finite() && *v != 0.0) {
@@ -106,7 +117,16 @@ impl Walr {
             }
         });
         let seed = crate::hash::lowbias32(index.wrapping_mul(0x9E37_79B9) ^ 0x5A17_0001);
-        Prepared { basis: basis(pole), light_scale, extra, seed }
+        // Without depth, distances are relative to the positions' RMS spread
+        // about their mean (a stand-in for the camera distance, same units).
+        let spread = if pcount > 0 {
+            let n = pcount as f64;
+            libm::sqrt((psq / n - psum.iter().map(|s| (s / n) * (s / n)).sum::<f64>()).max(0.0)) as f32
+        } else {
+            1.0
+        };
+        let distance = if spread > 0.0 && spread.is_finite() && (1.0 / spread).is_finite() { spread } else { 1.0 };
+        Prepared { basis: basis(pole), light_scale, extra, seed, distance }
     }
 
     /// Stage 1 on rows `y0..`: geometry planes and `Z_0` (products of the
@@ -186,7 +206,7 @@ impl Walr {
             let v = (extra[e] - f32x8::splat(p.extra[e].0)) * f32x8::splat(p.extra[e].1);
             xf[3 + e] = valid.select(v, f32x8::ZERO);
         }
-        let inv_scale = if has_depth { one / scale } else { one };
+        let inv_scale = one / scale;
         let st = |geo: &mut [f32], c: usize, v: f32x8| <f32 as Store>::store8(geo, c * ps + x0, v);
         for c in 0..3 {
             st(geo, G_P + c, valid.select(pos[c], f32x8::ZERO));
@@ -256,7 +276,7 @@ impl Walr {
                     let v = f.guides[d].as_ref().ok_or(Error::GuideMismatch)?;
                     v.read_row(y, 0, 0, &mut geo[G_INV_SCALE * ps..G_INV_SCALE * ps + w]).ok_or(bad)?;
                 }
-                None => geo[G_INV_SCALE * ps..G_INV_SCALE * ps + w].fill(1.0),
+                None => geo[G_INV_SCALE * ps..G_INV_SCALE * ps + w].fill(p.distance),
             }
             for e in 0..m - 3 {
                 let o = (GEO_FIXED + 2 + e) * ps;
@@ -305,7 +325,7 @@ impl Walr {
                     for e in 0..m - 3 {
                         x_feat[3 + e] = (extra[e] - p.extra[e].0) * p.extra[e].1;
                     }
-                    (nn, pos, if cd.is_some() { 1.0 / scale } else { 1.0 })
+                    (nn, pos, 1.0 / scale)
                 } else {
                     x_feat[1] = 0.5;
                     x_feat[2] = 0.5;

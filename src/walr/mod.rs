@@ -27,7 +27,8 @@
 //!
 //! Deliberate choices where the paper is silent or GPU-specific:
 //! * edge-stopping distances are relative to the centre's camera distance when
-//!   the frame has depth (world units without), so they do not depend on scale;
+//!   the frame has depth, and to the RMS spread of the frame's positions
+//!   without (a stand-in of the same order), so they never depend on units;
 //! * pixels without geometry (zero normal) or with NaN/Inf guides are a
 //!   surface of their own: nothing is averaged across their border;
 //! * the octahedral map's pole is the frame's mean normal unless
@@ -87,7 +88,8 @@ pub struct WalrConfig {
     pub guides: GuideSet,
     /// À-trous iterations T (1..=5, default 4: an 81×81 window).
     pub iterations: u8,
-    /// Plane distance (relative to camera distance with depth) below which a
+    /// Plane distance (relative to camera distance with depth, else to the
+    /// positions' RMS spread) below which a
     /// tap has full weight (default 0.005, tuned on the training scenes).
     pub near: f32,
     /// Plane distance at and beyond which a tap has weight 0 (default 0.01).
@@ -218,6 +220,9 @@ pub struct Prepared {
     pub extra: [(f32, f32); MAX_FEATURES - 3],
     /// Seed of the replacement choices (from the frame index).
     pub seed: u32,
+    /// The RMS spread of the frame's positions: without depth, plane
+    /// distances are relative to it (with depth, to each pixel's depth).
+    pub distance: f32,
 }
 
 /// The scratch split into its buffers (see [`Walr::parts`]). Rows are
