@@ -15,6 +15,18 @@ fn guides_none() -> LrdGuides {
     LrdGuides { normal: none(), depth: none(), position: none(), ao: none(), user: [none(); 4] }
 }
 
+/// A frame of packed RGB noise and a depth guide (the views borrow the vectors).
+fn depth_frame(noisy: &[f32], depth: &[f32], w: u32, h: u32) -> LrdFrame {
+    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
+    frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+    frame
+}
+
+/// A packed f32 RGB output over `out`.
+fn packed_out(out: &mut [f32], w: u32, h: u32) -> LrdImageMut {
+    LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 }
+}
+
 #[test]
 fn entry_points_validate_everything() {
     let (w, h) = (37u32, 21u32);
@@ -23,11 +35,9 @@ fn entry_points_validate_everything() {
     let depth: Vec<f32> = (0..n).map(|i| 1.0 + (i / w as usize) as f32 * 0.1).collect();
     let mut cfg = lrd_flr_config_default();
     cfg.guides = LRD_GUIDE_DEPTH;
-    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
-    frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+    let frame = depth_frame(&noisy, &depth, w, h);
     let mut out = vec![0f32; 3 * n];
-    let o =
-        LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
+    let o = packed_out(&mut out, w, h);
     let mut bytes = 0usize;
     unsafe {
         assert_eq!(lrd_flr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
@@ -372,11 +382,9 @@ fn adaptive_window_whole_frame_only() {
     cfg.guides = LRD_GUIDE_DEPTH;
     cfg.blur = LrdBlur::LRD_BLUR_ADAPTIVE as u32;
     cfg.sigmas = [3.0, 6.0, 10.0];
-    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
-    frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+    let frame = depth_frame(&noisy, &depth, w, h);
     let mut out = vec![0f32; 3 * n];
-    let o =
-        LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
+    let o = packed_out(&mut out, w, h);
     let mut bytes = 0usize;
     unsafe {
         assert_eq!(lrd_flr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
