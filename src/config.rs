@@ -171,11 +171,17 @@ impl FlrConfig {
             Blur::Box { radius } => radius,
             Blur::Adaptive { sigmas } => 3.0 * sigmas[2],
         };
-        let cells = libm::ceilf(r / self.block as f32 - 1e-4);
-        if cells.is_finite() && cells >= 0.0 {
-            cells as usize
-        } else {
-            usize::MAX
-        }
+        radius_to_cells(r, self.block)
+    }
+}
+
+/// ⌈radius / block⌉ cells (a hair under a whole number of cells stays it);
+/// `usize::MAX` for a radius that is not finite and non-negative.
+pub(crate) fn radius_to_cells(radius: f32, block: usize) -> usize {
+    let cells = libm::ceilf(radius / block as f32 - 1e-4);
+    if cells.is_finite() && cells >= 0.0 {
+        cells as usize
+    } else {
+        usize::MAX
     }
 }

@@ -165,11 +165,8 @@ pub struct Flr {
     q: usize,
     lay: CellLayout,
     ml: usize,
-    /// One set of taps per window (only `scales` are used).
+    /// One set of taps per window (only `scale_count()` are used).
     taps: [Taps; MAX_SCALES],
-    /// `4πσ²` per window, in input pixels (adaptive variance estimate).
-    areas: [f64; MAX_SCALES],
-    scales: usize,
 }
 
 impl Flr {
@@ -186,17 +183,10 @@ impl Flr {
         let b = cfg.block;
         let r = cfg.radius_cells();
         let one = |t: Taps| [t; MAX_SCALES];
-        let mut areas = [0f64; MAX_SCALES];
         let taps = match cfg.blur {
             Blur::Gaussian { sigma, .. } => one(Taps::gaussian(sigma as f64 / b as f64, r)),
             Blur::Box { .. } => one(Taps::boxed(r)),
-            Blur::Adaptive { sigmas } => {
-                let up = cfg.upsample as f64;
-                for (a, &s) in areas.iter_mut().zip(&sigmas) {
-                    *a = 4.0 * core::f64::consts::PI * (s as f64 / up) * (s as f64 / up);
-                }
-                sigmas.map(|s| Taps::gaussian(s as f64 / b as f64, libm::ceilf(3.0 * s / b as f32 - 1e-4) as usize))
-            }
+            Blur::Adaptive { sigmas } => sigmas.map(|s| Taps::gaussian(s as f64 / b as f64, crate::config::radius_to_cells(3.0 * s, b))),
         };
         Ok(Flr {
             cfg,
@@ -211,8 +201,6 @@ impl Flr {
             lay: CellLayout::new(q),
             ml: model_len(q),
             taps,
-            areas,
-            scales: cfg.blur.scale_count(),
         })
     }
 
@@ -238,7 +226,14 @@ impl Flr {
     /// Window sizes fitted: 1, or 3 with [`Blur::Adaptive`] (then the blur and
     /// solve stages run per window, `*_at`, and [`Flr::blend_tile`] follows).
     pub fn scale_count(&self) -> usize {
-        self.scales
+        self.cfg.blur.scale_count()
+    }
+    /// `4πσ²` of window `s` in input pixels: its sample count when full
+    /// (the adaptive variance estimate).
+    fn window_area(&self, s: usize) -> f64 {
+        let Blur::Adaptive { sigmas } = self.cfg.blur else { return 0.0 };
+        let sigma = sigmas[s] as f64 / self.cfg.upsample as f64;
+        4.0 * core::f64::consts::PI * sigma * sigma
     }
     /// Number of tiles of every tiled stage.
     pub fn tile_count(&self) -> usize {
@@ -304,10 +299,10 @@ impl Flr {
     }
     /// f64 values of the adaptive window's extra regions (0 for one window).
     fn adaptive_len(&self) -> usize {
-        if self.scales == 1 {
+        if self.scale_count() == 1 {
             return 0;
         }
-        2 * self.grid_len() + (self.scales * self.models_len()).div_ceil(2) + self.scales * self.cell_count()
+        2 * self.grid_len() + (self.scale_count() * self.models_len()).div_ceil(2) + self.scale_count() * self.cell_count()
     }
     fn models_len(&self) -> usize {
         self.cells_x * self.cells_y * self.ml
@@ -344,8 +339,11 @@ impl Flr {
         let wl = workers.max(1) * self.worker_len();
         let (workers, rest) = rest.split_at_mut(wl.div_ceil(2));
         let workers = &mut bytemuck::cast_slice_mut::<f64, f32>(workers)[..wl];
-        let (ng, nm, nv) =
-            if self.scales == 1 { (0, 0, 0) } else { (self.grid_len(), self.scales * self.models_len(), self.scales * self.cell_count()) };
+        let (ng, nm, nv) = if self.scale_count() == 1 {
+            (0, 0, 0)
+        } else {
+            (self.grid_len(), self.scale_count() * self.models_len(), self.scale_count() * self.cell_count())
+        };
         let (first, rest) = rest.split_at_mut(ng);
         let (blurred, rest) = rest.split_at_mut(ng);
         let (scale_models, rest) = rest.split_at_mut(nm.div_ceil(2));
@@ -614,10 +612,10 @@ impl Flr {
 
     /// The window index checked against the plan.
     fn scale(&self, s: usize) -> Result<usize, Error> {
-        if s < self.scales {
+        if s < self.scale_count() {
             Ok(s)
         } else {
-            Err(Error::InvalidTile { index: s, count: self.scales })
+            Err(Error::InvalidTile { index: s, count: self.scale_count() })
         }
     }
 
@@ -680,20 +678,30 @@ impl Flr {
         Ok(())
     }
 
-    fn solve_params(&self, stats: &Stats, s: usize) -> SolveParams {
+    /// Total window weight of window `s` (the sum of its 2-D kernel over B×B pixels).
+    fn window_weight(&self, s: usize) -> f64 {
         let taps = &self.taps[s];
+        (self.bin * self.bin) as f64 * taps.sum() * taps.sum()
+    }
+
+    /// A cell of window `s` whose window weight is at most this is empty.
+    fn min_weight(&self, s: usize) -> f64 {
+        1e-12 * self.window_weight(s)
+    }
+
+    fn solve_params(&self, stats: &Stats, s: usize) -> SolveParams {
         let mut reference = [0f64; MAX_GUIDES];
-        for (r, s) in reference.iter_mut().zip(&stats.reference) {
-            *r = *s as f64;
+        for (r, v) in reference.iter_mut().zip(&stats.reference) {
+            *r = *v as f64;
         }
-        let total = (self.bin * self.bin) as f64 * taps.sum() * taps.sum();
+        let total = self.window_weight(s);
         SolveParams {
             reference,
             mean: stats.mean,
             scale: stats.scale,
             regularization: self.cfg.regularization,
             weight_norm: 1.0 / total,
-            min_weight: 1e-12 * total,
+            min_weight: self.min_weight(s),
         }
     }
 
@@ -739,7 +747,7 @@ impl Flr {
             count(dispatch_q!(self.q, solve_cell(cell, &p, model)));
         }
         if !variances_tile.is_empty() {
-            dispatch_q!(self.q, variances_of(cells_tile, models_tile, &p, self.areas[s], variances_tile));
+            dispatch_q!(self.q, variances_of(cells_tile, models_tile, &p, self.window_area(s), variances_tile));
         }
         Ok(rep)
     }
@@ -756,10 +764,10 @@ impl Flr {
         models_tile: &mut [f32],
     ) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: t, count: self.tile_count() };
-        if self.scales != MAX_SCALES
+        if self.scale_count() != MAX_SCALES
             || first_tile.len() != self.cells_tile_len(t)?
-            || scale_models.len() != self.scales * self.models_len()
-            || variances.len() != self.scales * self.cell_count()
+            || scale_models.len() != self.scale_count() * self.models_len()
+            || variances.len() != self.scale_count() * self.cell_count()
             || models_tile.len() != self.models_tile_len(t)?
         {
             return Err(bad);
@@ -767,7 +775,7 @@ impl Flr {
         let m: [&[f32]; MAX_SCALES] = [0, 1, 2].map(|s| &scale_models[s * self.models_len()..(s + 1) * self.models_len()]);
         let v: [&[f64]; MAX_SCALES] = [0, 1, 2].map(|s| &variances[s * self.cell_count()..(s + 1) * self.cell_count()]);
         let (mr, vr) = (self.models_tile_range(t)?, self.variances_tile_range(t)?);
-        let min_weight = self.solve_params(&Stats::default(), 0).min_weight;
+        let min_weight = self.min_weight(0);
         dispatch_q!(
             self.q,
             blend_band(
@@ -853,13 +861,13 @@ impl Flr {
         let tiles = self.tile_count();
         for t in 0..tiles {
             rep += self.moments_tile(&f, &stats, t, &mut parts.cells[self.cells_tile_range(t)?], parts.workers)?;
-            if self.scales == 1 {
+            if self.scale_count() == 1 {
                 // The horizontal blur reads only its own band: run it while the band is in cache.
                 self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
             }
         }
         self.finish_stats(parts.cells, &mut stats)?;
-        if self.scales > 1 {
+        if self.scale_count() > 1 {
             rep += self.fit_windows(&stats, parts.cells, parts.tmp, parts.first, parts.blurred, parts.scale_models, parts.variances)?;
             for t in 0..tiles {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
@@ -899,7 +907,7 @@ impl Flr {
     ) -> Result<Report, Error> {
         let tiles = self.tile_count();
         let mut rep = Report::default();
-        for s in 0..self.scales {
+        for s in 0..self.scale_count() {
             for t in 0..tiles {
                 self.blur_rows_tile_at(s, t, cells, &mut tmp[self.cells_tile_range(t)?])?;
             }

@@ -61,7 +61,7 @@ impl Walr {
     /// `index` seeds the replacement choices.
     pub fn prepare(&self, f: &CheckedFrame<'_>, index: u32) -> Prepared {
         let (w, h) = (self.width, self.height);
-        let (cn, cp, _, ce) = self.channels();
+        let (cn, cp, cd, ce) = self.channels();
         let extras = self.m - 3;
         // positions relative to the first finite sample (large offsets cancel)
         let (mut p0, mut psum, mut psq, mut pcount) = (None::<[f64; 3]>, [0f64; 3], 0f64, 0u64);
@@ -81,8 +81,10 @@ impl Walr {
                         nsum[c] += n[c] as f64;
                     }
                 }
-                let pos = [0, 1, 2].map(|c| get(cp + c, x, y, &mut row).unwrap_or(f32::NAN) as f64);
-                if pos.iter().all(|v| v.is_finite()) {
+                // the positions' spread: only without depth does anything read it
+                let pos = [0, 1, 2].map(|c| if cd.is_none() { get(cp + c, x, y, &mut row) } else { None });
+                if let [Some(a), Some(b), Some(c)] = pos.map(|v| v.map(f64::from).filter(|v| v.is_finite())) {
+                    let pos = [a, b, c];
                     let r = *p0.get_or_insert(pos);
                     for c in 0..3 {
                         psum[c] += pos[c] - r[c];
