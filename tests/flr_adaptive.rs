@@ -10,35 +10,127 @@ use proptest::prelude::*;
 
 const L: [f64; 3] = [0.2126, 0.7152, 0.0722];
 
-/// The adaptive estimator written out per pixel in f64: each window's model
-/// from [`reference_models`]; its residual variance measured directly over the
+/// One window of the reference: a model and a variance per cell (pixels, or
+/// 2×2-pixel cells when pooled), and for each pixel the cells it reads with
+/// their weights (one cell, or the bilinear corners on the pooled grid).
+struct WindowFit {
+    models: Vec<Option<PixelModel>>,
+    variances: Vec<f64>,
+    corners: Vec<Vec<(usize, f64)>>,
+}
+
+/// Pixel `p` sits at `p/2 − 1/4` on a grid of `n` 2-pixel cells (cell centres),
+/// clamped to the grid: its two neighbours and bilinear weights.
+fn lerp_corners(p: usize, n: usize) -> [(usize, f64); 2] {
+    let at = (p as f64 / 2.0 - 0.25).clamp(0.0, (n - 1) as f64);
+    let lo = at.floor() as usize;
+    let t = at - lo as f64;
+    [(lo, 1.0 - t), ((lo + 1).min(n - 1), t)]
+}
+
+/// Window `sigma` of the adaptive reference at B = 1, pooled (cells of 2×2
+/// pixels, the Gaussian over cell offsets with σ/2 and ⌈3σ/2⌉ cells) or not.
+fn window_fit(cfg: &FlrConfig, sigma: f32, pooled: bool, (w, h): (usize, usize), guides: &[Vec<f64>], y: &[f32]) -> WindowFit {
+    let q = guides.len();
+    let valid = valid_pixels(w, h, guides, y);
+    let scales = frame_scales(w, h, guides, &valid);
+    let g = |i: usize| (0..q).map(|a| guides[a][i]).collect::<Vec<_>>();
+    let luma = |m: &PixelModel, i: usize| (0..3).map(|c| L[c] * m.predict(&g(i), c)).sum::<f64>();
+    let light = |i: usize| (0..3).map(|c| L[c] * y[3 * i + c] as f64).sum::<f64>();
+    let one = FlrConfig { blur: Blur::Gaussian { sigma, radius: None }, ..*cfg };
+    let area = 4.0 * std::f64::consts::PI * (sigma as f64).powi(2);
+    let (factor, blur) = if pooled {
+        let r = (3.0 * sigma / 2.0 - 1e-4).ceil();
+        (2, Blur::Gaussian { sigma: sigma / 2.0, radius: Some(r) })
+    } else {
+        (1, one.blur)
+    };
+    let (kern, r) = window_kernel(blur);
+    let (cw, ch) = (w.div_ceil(factor), h.div_ceil(factor));
+    let cell_valid: Vec<bool> = (0..cw * ch).map(|_| true).collect();
+    let mut models = vec![];
+    let mut variances = vec![];
+    for cy in 0..ch as isize {
+        for cx in 0..cw as isize {
+            // the window's cells, then their valid pixels
+            let mut taps = vec![];
+            for (c, wt) in window_taps(&kern, r, (cw, ch), &cell_valid, (cx, cy)) {
+                let (x0, y0) = ((c % cw) * factor, (c / cw) * factor);
+                for yy in y0..(y0 + factor).min(h) {
+                    for xx in x0..(x0 + factor).min(w) {
+                        if valid[yy * w + xx] {
+                            taps.push((yy * w + xx, wt));
+                        }
+                    }
+                }
+            }
+            let m = fit_taps(&one, guides, y, &taps, &scales);
+            let n: f64 = taps.iter().map(|t| t.1).sum();
+            let v = match &m {
+                Some(m) => {
+                    let resid = taps.iter().map(|&(i, wt)| wt * (light(i) - luma(m, i)).powi(2)).sum::<f64>() / n;
+                    resid * (q + 1) as f64 / (area * (n / (factor * factor) as f64).min(1.0)).max(1.0)
+                }
+                None => f64::INFINITY,
+            };
+            models.push(m);
+            variances.push(v);
+        }
+    }
+    let corners = (0..w * h)
+        .map(|k| {
+            let (px, py) = (k % w, k / w);
+            if !pooled {
+                return vec![(k, 1.0)];
+            }
+            let mut c = vec![];
+            for (yy, wy) in lerp_corners(py, ch) {
+                for (xx, wx) in lerp_corners(px, cw) {
+                    if wy * wx > 0.0 {
+                        c.push((yy * cw + xx, wy * wx));
+                    }
+                }
+            }
+            c
+        })
+        .collect();
+    WindowFit { models, variances, corners }
+}
+
+/// The adaptive estimator written out per pixel in f64: each window's models
+/// fitted directly (on 2×2-pixel cells for the windows the library pools, and
+/// interpolated to the pixel); residual variances measured directly over the
 /// window; the bias term from the predictions' squared difference over the
 /// smallest window; weights 1 / (bias² + variance).
 fn adaptive_reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
     let Blur::Adaptive { sigmas } = cfg.blur else { panic!("adaptive only") };
+    assert_eq!(cfg.block, 1);
     let q = guides.len();
-    let one = |s: f32| FlrConfig { blur: Blur::Gaussian { sigma: s, radius: None }, ..*cfg };
-    let models: Vec<_> = sigmas.iter().map(|&s| reference_models(&one(s), w, h, guides, y)).collect();
-    let kernels: Vec<_> = sigmas.iter().map(|&s| window_kernel(one(s).blur)).collect();
+    let pooled = |s: usize| s > 0 && lrdenoise::flr::adaptive::pooled(sigmas[s], 1);
+    let fits: Vec<_> = (0..3).map(|s| window_fit(cfg, sigmas[s], pooled(s), (w, h), guides, y)).collect();
+    let first = window_kernel(Blur::Gaussian { sigma: sigmas[0], radius: None });
     let valid = valid_pixels(w, h, guides, y);
     let g = |i: usize| (0..q).map(|a| guides[a][i]).collect::<Vec<_>>();
-    let luma = |m: &PixelModel, i: usize| (0..3).map(|c| L[c] * m.predict(&g(i), c)).sum::<f64>();
-    let light = |i: usize| (0..3).map(|c| L[c] * y[3 * i + c] as f64).sum::<f64>();
+    // window `s`'s prediction of channel `c` at pixel `i` with pixel `k`'s model
+    let predict = |s: usize, k: usize, i: usize, c: usize| -> Option<f64> {
+        let f = &fits[s];
+        f.corners[k].iter().map(|&(cell, wt)| f.models[cell].as_ref().map(|m| wt * m.predict(&g(i), c))).sum()
+    };
+    let luma = |s: usize, k: usize, i: usize| (0..3).map(|c| predict(s, k, i, c).map(|p| L[c] * p)).sum::<Option<f64>>();
     let mut out = vec![0.0; 3 * w * h];
     for k in 0..w * h {
         let (px, py) = ((k % w) as isize, (k / w) as isize);
-        let taps: Vec<_> = kernels.iter().map(|(kern, r)| window_taps(kern, *r, (w, h), &valid, (px, py))).collect();
+        let taps0 = window_taps(&first.0, first.1, (w, h), &valid, (px, py));
+        let n0: f64 = taps0.iter().map(|t| t.1).sum();
         let mut v = [f64::INFINITY; 3];
         let mut gap = [0.0; 3];
         for s in 0..3 {
-            let Some(m) = &models[s][k] else { continue };
-            let n: f64 = taps[s].iter().map(|t| t.1).sum();
-            let resid = taps[s].iter().map(|&(i, wt)| wt * (light(i) - luma(m, i)).powi(2)).sum::<f64>() / n;
-            let area = 4.0 * std::f64::consts::PI * (sigmas[s] as f64).powi(2);
-            v[s] = resid * (q + 1) as f64 / (area * n.min(1.0)).max(1.0);
-            if let (Some(m0), true) = (&models[0][k], s > 0) {
-                let n0: f64 = taps[0].iter().map(|t| t.1).sum();
-                gap[s] = taps[0].iter().map(|&(i, wt)| wt * (luma(m, i) - luma(m0, i)).powi(2)).sum::<f64>() / n0;
+            if luma(s, k, k).is_none() {
+                continue;
+            }
+            v[s] = fits[s].corners[k].iter().map(|&(cell, wt)| wt * fits[s].variances[cell]).sum();
+            if s > 0 && luma(0, k, k).is_some() {
+                gap[s] = taps0.iter().map(|&(i, wt)| wt * (luma(s, k, i).unwrap() - luma(0, k, i).unwrap()).powi(2)).sum::<f64>() / n0;
             }
         }
         let mut wts = [0.0; 3];
@@ -48,7 +140,7 @@ fn adaptive_reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], 
         }
         let total: f64 = wts.iter().sum();
         for c in 0..3 {
-            out[3 * k + c] = (0..3).filter_map(|s| models[s][k].as_ref().map(|m| wts[s] * m.predict(&g(k), c))).sum::<f64>() / total;
+            out[3 * k + c] = (0..3).filter(|&s| wts[s] > 0.0).map(|s| wts[s] * predict(s, k, k, c).unwrap()).sum::<f64>() / total;
         }
     }
     out
@@ -69,19 +161,24 @@ fn adaptive_plain(set: GuideSet, sigmas: [f32; 3]) -> FlrConfig {
 /// tolerance, so a wrong weight would show.
 #[test]
 fn block1_matches_reference() {
-    for (seed, set) in [(1, GuideSet::NORMAL_DEPTH_AO), (2, GuideSet::NORMAL_DEPTH), (3, GuideSet::NONE)] {
-        let f = Owned::synthetic(29, 23, seed, 0.6);
-        let c = adaptive_plain(set, [1.0, 2.0, 3.5]);
-        let (out, _) = run(c, &f);
-        let ch = f.channels(set);
-        let want = adaptive_reference(&c, f.w, f.h, &ch, &f.noisy);
-        let (max, mean) = diff(&out, &want);
-        assert!(max < 1e-3 && mean < 1e-5, "{set:?}: max {max} mean {mean}");
-        // sensitivity: each single window is far from the blend
-        for s in [1.0, 3.5] {
-            let single = reference(&FlrConfig { blur: Blur::Gaussian { sigma: s, radius: None }, ..c }, f.w, f.h, &ch, &f.noisy);
-            let (m, _) = diff(&out, &single);
-            assert!(m > 20.0 * max, "{set:?} sigma {s}: blend only {m} from the single window");
+    // [1, 2, 3.5]: windows 1 and 2 on the pooled grid; [0.6, 1, 1.4]: none pooled.
+    for (sigmas, pooled) in [([1.0, 2.0, 3.5], true), ([1.0, 1.2, 1.4], false)] {
+        for (seed, set) in [(1, GuideSet::NORMAL_DEPTH_AO), (2, GuideSet::NORMAL_DEPTH), (3, GuideSet::NONE)] {
+            let f = Owned::synthetic(29, 23, seed, 0.6);
+            let c = adaptive_plain(set, sigmas);
+            let flr = Flr::new(c, f.w, f.h).unwrap();
+            assert_eq!((flr.window_pooled(0), flr.window_pooled(1), flr.window_pooled(2)), (false, pooled, pooled));
+            let (out, _) = run(c, &f);
+            let ch = f.channels(set);
+            let want = adaptive_reference(&c, f.w, f.h, &ch, &f.noisy);
+            let (max, mean) = diff(&out, &want);
+            assert!(max < 1e-3 && mean < 1e-5, "{sigmas:?} {set:?}: max {max} mean {mean}");
+            // sensitivity: each single window is far from the blend
+            for s in [sigmas[0], sigmas[2]] {
+                let single = reference(&FlrConfig { blur: Blur::Gaussian { sigma: s, radius: None }, ..c }, f.w, f.h, &ch, &f.noisy);
+                let (m, _) = diff(&out, &single);
+                assert!(m > 20.0 * max, "{sigmas:?} {set:?} sigma {s}: blend only {m} from the single window");
+            }
         }
     }
 }
@@ -122,10 +219,13 @@ fn shadow_and_flat_regions_choose_their_window() {
 /// to `denoise`, and so is the scalar kernel within rounding.
 #[test]
 fn tiled_equals_whole_frame() {
-    for (w, h, block) in [(61, 45, 8), (33, 70, 4), (7, 3, 1)] {
+    // (61, 45, 8) with σ 3/6/11 fits every window on the block grid; the others pool.
+    for (w, h, block, sigmas) in
+        [(61, 45, 8, [3.0, 6.0, 11.0]), (75, 53, 8, [6.0, 12.0, 20.0]), (33, 70, 4, [3.0, 6.0, 11.0]), (7, 3, 1, [3.0, 6.0, 11.0])]
+    {
         let f = Owned::synthetic(w, h, 5, 0.5);
         let set = GuideSet::NORMAL_DEPTH_AO;
-        let c = adaptive(set, block, [3.0, 6.0, 11.0]);
+        let c = adaptive(set, block, sigmas);
         let (whole, _) = run(c, &f);
         let flr = Flr::new(c, w, h).unwrap();
         let frame = f.frame(set);
@@ -139,14 +239,23 @@ fn tiled_equals_whole_frame() {
         }
         flr.finish_stats(p.cells, &mut stats).unwrap();
         assert_eq!(flr.scale_count(), 3);
-        for s in 0..3 {
+        assert_eq!(flr.window_pooled(1), block < 8 || sigmas[1] >= 12.0, "{w}x{h} B={block}");
+        if let Some(s) = (1..3).find(|&s| flr.window_pooled(s)) {
             for t in (0..nt).rev() {
-                flr.blur_rows_tile_at(s, t, p.cells, &mut p.tmp[flr.cells_tile_range(t).unwrap()]).unwrap();
+                let r = flr.window_cells_tile_range(s, t).unwrap();
+                flr.pool_tile(t, &p.cells[flr.cells_tile_range(t).unwrap()], &mut p.pooled[r]).unwrap();
             }
-            let dst: &mut [f64] = if s == 0 { p.first } else { p.blurred };
+        }
+        for s in 0..3 {
+            let n = flr.window_cells_tile_range(s, nt - 1).unwrap().end;
+            let src: &[f64] = if flr.window_pooled(s) { p.pooled } else { p.cells };
             for t in (0..nt).rev() {
-                let r = flr.cells_tile_range(t).unwrap();
-                flr.blur_cols_tiles_at(s, t..t + 1, p.tmp, &mut dst[r.clone()]).unwrap();
+                flr.blur_rows_tile_at(s, t, src, &mut p.tmp[flr.window_cells_tile_range(s, t).unwrap()]).unwrap();
+            }
+            let dst: &mut [f64] = if s == 0 { p.first } else { &mut p.blurred[..n] };
+            for t in (0..nt).rev() {
+                let r = flr.window_cells_tile_range(s, t).unwrap();
+                flr.blur_cols_tiles_at(s, t..t + 1, &p.tmp[..n], &mut dst[r.clone()]).unwrap();
                 let (m, v) = (flr.scale_models_tile_range(s, t).unwrap(), flr.scale_variances_tile_range(s, t).unwrap());
                 flr.solve_tile_at(s, &stats, t, &dst[r], &mut p.scale_models[m], &mut p.variances[v]).unwrap();
             }
@@ -216,6 +325,14 @@ fn configuration_errors() {
     let cells = vec![0f64; flr.cells_tile_len(0).unwrap()];
     let mut tmp = cells.clone();
     assert!(matches!(flr.blur_rows_tile_at(3, 0, &vec![0f64; 64 * 1000], &mut tmp), Err(Error::InvalidTile { .. })));
+    // window 1 is pooled: it reads the pooled grid, not the block grid
+    assert!(flr.window_pooled(1));
+    assert!(matches!(flr.blur_rows_tile_at(1, 0, &vec![0f64; cells.len() * 8 * 8 / 4], &mut tmp), Err(Error::InvalidTile { .. })));
+    let mut pooled = vec![0f64; flr.window_cells_tile_range(1, 0).unwrap().len()];
+    assert!(matches!(flr.pool_tile(0, &cells[1..], &mut pooled), Err(Error::InvalidTile { .. })));
+    assert!(matches!(flr.pool_tile(9, &cells, &mut pooled), Err(Error::InvalidTile { .. })));
+    let unpooled = Flr::new(adaptive(GuideSet::NORMAL_DEPTH_AO, 8, [3.0, 6.0, 11.0]), 64, 64).unwrap();
+    assert!(matches!(unpooled.pool_tile(0, &cells, &mut pooled), Err(Error::InvalidTile { .. })));
     let single = Flr::new(FlrConfig::default(), 64, 64).unwrap();
     let mut m = vec![0f32; single.models_tile_len(0).unwrap()];
     assert!(matches!(single.blend_tile(0, &cells, &[], &[], &mut m), Err(Error::InvalidTile { .. })));

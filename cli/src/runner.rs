@@ -247,18 +247,31 @@ pub fn denoise_parallel(
     flr.finish_stats(p.cells, &mut stats)?;
     let st = stats;
     if flr.scale_count() > 1 {
-        // The adaptive window: blur and solve each window, then blend.
-        let vl: Vec<usize> = (0..nt).map(|t| flr.variances_tile_range(t).map(|r| r.len())).collect::<Result<_, _>>()?;
-        let (mlen, vlen) = (ml.iter().sum::<usize>(), vl.iter().sum::<usize>());
-        for s in 0..flr.scale_count() {
+        // The adaptive window: pool, blur and solve each window on its grid, then blend.
+        let lens = |range: &dyn Fn(usize) -> Result<std::ops::Range<usize>, Error>| -> Result<Vec<usize>, Error> {
+            (0..nt).map(|t| range(t).map(|r| r.len())).collect()
+        };
+        if let Some(s) = (1..flr.scale_count()).find(|&s| flr.window_pooled(s)) {
+            let pl = lens(&|t| flr.window_cells_tile_range(s, t))?;
             let cells: &[f64] = p.cells;
-            let items: Vec<_> = split_lens(&mut *p.tmp, &cl).into_iter().enumerate().collect();
-            par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile_at(s, t, cells, d).map(|_| Report::default()))?;
-            let tmp: &[f64] = p.tmp;
-            let dst = if s == 0 { &mut *p.first } else { &mut *p.blurred };
-            let grids = split_lens(dst, &cl);
-            let models = split_lens(&mut p.scale_models[s * mlen..(s + 1) * mlen], &ml);
-            let vars = split_lens(&mut p.variances[s * vlen..(s + 1) * vlen], &vl);
+            let items: Vec<_> = split_lens(&mut *p.pooled, &pl).into_iter().enumerate().collect();
+            par_groups(pool, items, &mut units, &|(t, d), _| {
+                flr.pool_tile(t, &cells[flr.cells_tile_range(t)?], d).map(|_| Report::default())
+            })?;
+        }
+        for s in 0..flr.scale_count() {
+            let wl = lens(&|t| flr.window_cells_tile_range(s, t))?;
+            let n: usize = wl.iter().sum();
+            let src: &[f64] = if flr.window_pooled(s) { p.pooled } else { p.cells };
+            let items: Vec<_> = split_lens(&mut p.tmp[..n], &wl).into_iter().enumerate().collect();
+            par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile_at(s, t, src, d).map(|_| Report::default()))?;
+            let tmp: &[f64] = &p.tmp[..n];
+            let dst = if s == 0 { &mut *p.first } else { &mut p.blurred[..n] };
+            let grids = split_lens(dst, &wl);
+            let (m0, v0) = (flr.scale_models_tile_range(s, 0)?.start, flr.scale_variances_tile_range(s, 0)?.start);
+            let (mls, vls) = (lens(&|t| flr.scale_models_tile_range(s, t))?, lens(&|t| flr.scale_variances_tile_range(s, t))?);
+            let models = split_lens(&mut p.scale_models[m0..m0 + mls.iter().sum::<usize>()], &mls);
+            let vars = split_lens(&mut p.variances[v0..v0 + vls.iter().sum::<usize>()], &vls);
             let items: Vec<_> = grids.into_iter().zip(models).zip(vars).enumerate().collect();
             rep += par_groups(pool, items, &mut units, &|(t, ((c, m), v)), _| {
                 flr.blur_cols_tiles_at(s, t..t + 1, tmp, c)?;

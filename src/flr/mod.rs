@@ -19,7 +19,9 @@
 //! and solve stages run once per window `s` (`*_at(s, ..)`, the blurred grid of
 //! window 0 into `first`, the others into `blurred`; each window's models and
 //! variances into `scale_models` / `variances`), and [`Flr::blend_tile`] then
-//! writes `models` from them. See [`adaptive`].
+//! writes `models` from them. The larger windows are fitted on the moment grid
+//! pooled 2×2 ([`Flr::pool_tile`]: `cells` band → `pooled` band, after stage 1;
+//! [`Flr::window_pooled`], [`Flr::window_grid`]). See [`adaptive`].
 
 pub mod adaptive;
 
@@ -37,8 +39,32 @@ use crate::kernels::{dispatch_q, model_len, CellLayout};
 pub const MAX_SCALES: usize = 3;
 
 /// Cell rows per tile. Small enough for parallelism at 720p, large enough to
-/// amortise the vertical box-window initialisation.
+/// amortise the vertical box-window initialisation. Even, so that a tile is
+/// also whole rows of the pooled grid.
 pub const TILE_CELL_ROWS: usize = 4;
+
+/// The cell grid one window is fitted on: the block grid, or (the larger
+/// windows of [`Blur::Adaptive`], see [`adaptive::POOL_MIN_SIGMA`]) its 2×2
+/// pooling, cells of 2B × 2B pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Grid {
+    /// Cells per row and per column.
+    pub cells_x: usize,
+    pub cells_y: usize,
+    /// Block cells per cell side: 1 (the block grid) or 2 (pooled).
+    pub factor: usize,
+}
+
+impl Grid {
+    /// Cell rows `[start, end)` of tile `t` (the caller checked `t`).
+    fn tile_rows(&self, t: usize) -> (usize, usize) {
+        let r = TILE_CELL_ROWS / self.factor;
+        ((t * r).min(self.cells_y), ((t + 1) * r).min(self.cells_y))
+    }
+    fn cell_count(&self) -> usize {
+        self.cells_x * self.cells_y
+    }
+}
 
 /// What happened during a run (summed over tiles).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -144,9 +170,13 @@ pub struct Parts<'s> {
     pub first: &'s mut [f64],
     /// Adaptive window only: the blurred grid of windows 1 and 2 (in turn).
     pub blurred: &'s mut [f64],
-    /// Adaptive window only: each window's model grid (window-major).
+    /// Adaptive window with pooled windows only: the moment grid pooled 2×2.
+    pub pooled: &'s mut [f64],
+    /// Adaptive window only: each window's model grid on its own grid
+    /// (window-major, [`Flr::scale_models_tile_range`]).
     pub scale_models: &'s mut [f32],
-    /// Adaptive window only: each window's per-cell variance estimate (window-major).
+    /// Adaptive window only: each window's per-cell variance estimate on its
+    /// own grid (window-major, [`Flr::scale_variances_tile_range`]).
     pub variances: &'s mut [f64],
 }
 
@@ -167,6 +197,8 @@ pub struct Flr {
     ml: usize,
     /// One set of taps per window (only `scale_count()` are used).
     taps: [Taps; MAX_SCALES],
+    /// The grid each window is fitted on.
+    grids: [Grid; MAX_SCALES],
 }
 
 impl Flr {
@@ -183,10 +215,22 @@ impl Flr {
         let b = cfg.block;
         let r = cfg.radius_cells();
         let one = |t: Taps| [t; MAX_SCALES];
+        let fine = Grid { cells_x: width.div_ceil(b), cells_y: height.div_ceil(b), factor: 1 };
+        let mut grids = [fine; MAX_SCALES];
         let taps = match cfg.blur {
             Blur::Gaussian { sigma, .. } => one(Taps::gaussian(sigma as f64 / b as f64, r)),
             Blur::Box { .. } => one(Taps::boxed(r)),
-            Blur::Adaptive { sigmas } => sigmas.map(|s| Taps::gaussian(s as f64 / b as f64, crate::config::radius_to_cells(3.0 * s, b))),
+            Blur::Adaptive { sigmas } => {
+                let mut taps = [Taps::boxed(0); MAX_SCALES];
+                for (s, &sigma) in sigmas.iter().enumerate() {
+                    if s > 0 && adaptive::pooled(sigma, b) {
+                        grids[s] = Grid { cells_x: fine.cells_x.div_ceil(2), cells_y: fine.cells_y.div_ceil(2), factor: 2 };
+                    }
+                    let cell = b * grids[s].factor;
+                    taps[s] = Taps::gaussian(sigma as f64 / cell as f64, crate::config::radius_to_cells(3.0 * sigma, cell));
+                }
+                taps
+            }
         };
         Ok(Flr {
             cfg,
@@ -201,6 +245,7 @@ impl Flr {
             lay: CellLayout::new(q),
             ml: model_len(q),
             taps,
+            grids,
         })
     }
 
@@ -277,32 +322,68 @@ impl Flr {
     fn grid_len(&self) -> usize {
         self.cells_x * self.cells_y * self.lay.k
     }
-    fn cell_count(&self) -> usize {
-        self.cells_x * self.cells_y
+    /// The grid window `s` is fitted on (the block grid, or its 2×2 pooling).
+    pub fn window_grid(&self, s: usize) -> Result<Grid, Error> {
+        Ok(self.grids[self.scale(s)?])
     }
-    /// Where tile `t` of window `s` lies in `scale_models`.
+    /// Whether window `s` is fitted on the pooled grid: its blur then reads
+    /// `pooled` (written by [`Flr::pool_tile`]) instead of `cells`.
+    pub fn window_pooled(&self, s: usize) -> bool {
+        s < self.scale_count() && self.grids[s].factor > 1
+    }
+    /// Cell rows of tile `t` on window `s`'s grid.
+    fn window_tile_rows(&self, s: usize, t: usize) -> Result<(usize, usize), Error> {
+        let g = self.window_grid(s)?;
+        self.tile_rows(t)?;
+        Ok(g.tile_rows(t))
+    }
+    /// Where tile `t` lies in window `s`'s moment grids (`cells` or `pooled`,
+    /// `tmp`, `first` / `blurred`): [`Flr::cells_tile_range`] on the block grid.
+    pub fn window_cells_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
+        let (a, b) = self.window_tile_rows(s, t)?;
+        let row = self.grids[s].cells_x * self.lay.k;
+        Ok(a * row..b * row)
+    }
+    /// f64 values of window `s`'s moment grid.
+    fn window_grid_len(&self, s: usize) -> usize {
+        self.grids[s].cell_count() * self.lay.k
+    }
+    /// Where tile `t` of window `s` lies in `scale_models` (windows one after another).
     pub fn scale_models_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
-        let r = self.models_tile_range(t)?;
-        let o = s * self.models_len();
-        Ok(o + r.start..o + r.end)
+        let (a, b) = self.window_tile_rows(s, t)?;
+        let row = self.grids[s].cells_x * self.ml;
+        let o: usize = (0..s).map(|u| self.grids[u].cell_count() * self.ml).sum();
+        Ok(o + a * row..o + b * row)
     }
-    /// Where tile `t`'s cells lie in one window's `variances` (one f64 per cell).
+    /// Where tile `t`'s cells lie in the block grid (one value per cell).
     pub fn variances_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.tile_rows(t)?;
         Ok(a * self.cells_x..b * self.cells_x)
     }
-    /// Where tile `t` of window `s` lies in `variances`.
+    /// Where tile `t` of window `s` lies in `variances` (one f64 per cell of
+    /// the window's grid, windows one after another).
     pub fn scale_variances_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
-        let r = self.variances_tile_range(t)?;
-        let o = s * self.cell_count();
-        Ok(o + r.start..o + r.end)
+        let (a, b) = self.window_tile_rows(s, t)?;
+        let row = self.grids[s].cells_x;
+        let o: usize = (0..s).map(|u| self.grids[u].cell_count()).sum();
+        Ok(o + a * row..o + b * row)
+    }
+    /// Lengths of the adaptive window's regions: `first`, `blurred`, `pooled`
+    /// (f64), `scale_models` (f32), `variances` (f64); all 0 for one window.
+    fn adaptive_lens(&self) -> [usize; 5] {
+        let n = self.scale_count();
+        if n == 1 {
+            return [0; 5];
+        }
+        let blurred = (1..n).map(|s| self.window_grid_len(s)).max().unwrap_or(0);
+        let pooled = (1..n).filter(|&s| self.window_pooled(s)).map(|s| self.window_grid_len(s)).max().unwrap_or(0);
+        let cells: usize = (0..n).map(|s| self.grids[s].cell_count()).sum();
+        [self.grid_len(), blurred, pooled, cells * self.ml, cells]
     }
     /// f64 values of the adaptive window's extra regions (0 for one window).
     fn adaptive_len(&self) -> usize {
-        if self.scale_count() == 1 {
-            return 0;
-        }
-        2 * self.grid_len() + (self.scale_count() * self.models_len()).div_ceil(2) + self.scale_count() * self.cell_count()
+        let [first, blurred, pooled, models, variances] = self.adaptive_lens();
+        first + blurred + pooled + models.div_ceil(2) + variances
     }
     fn models_len(&self) -> usize {
         self.cells_x * self.cells_y * self.ml
@@ -339,17 +420,14 @@ impl Flr {
         let wl = workers.max(1) * self.worker_len();
         let (workers, rest) = rest.split_at_mut(wl.div_ceil(2));
         let workers = &mut bytemuck::cast_slice_mut::<f64, f32>(workers)[..wl];
-        let (ng, nm, nv) = if self.scale_count() == 1 {
-            (0, 0, 0)
-        } else {
-            (self.grid_len(), self.scale_count() * self.models_len(), self.scale_count() * self.cell_count())
-        };
-        let (first, rest) = rest.split_at_mut(ng);
-        let (blurred, rest) = rest.split_at_mut(ng);
+        let [nf, nb, np, nm, nv] = self.adaptive_lens();
+        let (first, rest) = rest.split_at_mut(nf);
+        let (blurred, rest) = rest.split_at_mut(nb);
+        let (pooled, rest) = rest.split_at_mut(np);
         let (scale_models, rest) = rest.split_at_mut(nm.div_ceil(2));
         let scale_models = &mut bytemuck::cast_slice_mut::<f64, f32>(scale_models)[..nm];
         let variances = &mut rest[..nv];
-        Ok(Parts { cells, tmp, models, workers, first, blurred, scale_models, variances })
+        Ok(Parts { cells, tmp, models, workers, first, blurred, pooled, scale_models, variances })
     }
 
     /// Checks a frame against the plan (sizes, channels, guide set).
@@ -619,17 +697,47 @@ impl Flr {
         }
     }
 
-    /// Stage 3 for window `s` (`s < scale_count()`).
-    pub fn blur_rows_tile_at(&self, s: usize, t: usize, cells: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
+    /// Adaptive window, after stage 1: sums tile `t`'s band of `cells`
+    /// (`cells_tile_range(t)`) 2×2 into its band of `pooled`
+    /// (`window_cells_tile_range(s, t)` of a pooled window `s`). Moments are
+    /// sums, so a pooled cell is exactly the moments of its 2B × 2B pixels.
+    pub fn pool_tile(&self, t: usize, cells_tile: &[f64], pooled_tile: &mut [f64]) -> Result<(), Error> {
+        let bad = Error::InvalidTile { index: t, count: self.tile_count() };
+        let s = (1..self.scale_count()).find(|&s| self.window_pooled(s)).ok_or(bad)?;
+        let (k, cx) = (self.lay.k, self.cells_x);
+        let (fine, coarse) = (self.tile_rows(t)?, self.window_tile_rows(s, t)?);
+        let pcx = self.grids[s].cells_x;
+        if cells_tile.len() != self.cells_tile_len(t)? || pooled_tile.len() != (coarse.1 - coarse.0) * pcx * k {
+            return Err(bad);
+        }
+        let rows = fine.1 - fine.0;
+        for (r, dst_row) in pooled_tile.chunks_exact_mut(pcx * k).enumerate() {
+            dst_row.fill(0.0);
+            for fr in (2 * r..(2 * r + 2).min(rows)).map(|fr| &cells_tile[fr * cx * k..(fr + 1) * cx * k]) {
+                for (c, src) in fr.chunks_exact(k).enumerate() {
+                    let d = &mut dst_row[(c / 2) * k..(c / 2 + 1) * k];
+                    for (a, b) in d.iter_mut().zip(src) {
+                        *a += b;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Stage 3 for window `s` (`s < scale_count()`): `src` is `cells`, or
+    /// `pooled` for a pooled window ([`Flr::window_pooled`]); `tmp_tile` is
+    /// `window_cells_tile_range(s, t)` of `tmp`.
+    pub fn blur_rows_tile_at(&self, s: usize, t: usize, src: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
         let taps = &self.taps[self.scale(s)?];
-        let (r0, _) = self.tile_rows(t)?;
-        if cells.len() != self.grid_len() || tmp_tile.len() != self.cells_tile_len(t)? {
+        let (r0, r1) = self.window_tile_rows(s, t)?;
+        let row_len = self.grids[s].cells_x * self.lay.k;
+        if src.len() != self.window_grid_len(s) || tmp_tile.len() != (r1 - r0) * row_len {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
         }
-        let row_len = self.cells_x * self.lay.k;
         for (b, dst) in tmp_tile.chunks_exact_mut(row_len).enumerate() {
             let j = r0 + b;
-            blur_row(taps, self.lay.k, &cells[j * row_len..(j + 1) * row_len], dst);
+            blur_row(taps, self.lay.k, &src[j * row_len..(j + 1) * row_len], dst);
         }
         Ok(())
     }
@@ -647,8 +755,9 @@ impl Flr {
         self.blur_cols_tiles_at(0, tiles, tmp, cells_band)
     }
 
-    /// [`Flr::blur_cols_tiles`] for window `s`; `out_band` is the band of the
-    /// grid that window's solve reads (`cells`, or `first` / `blurred`).
+    /// [`Flr::blur_cols_tiles`] for window `s` on its grid; `tmp` is that
+    /// window's whole row-blurred grid, `out_band` the band of the grid its
+    /// solve reads (`cells`, or `first` / `blurred`).
     pub fn blur_cols_tiles_at(&self, s: usize, tiles: core::ops::Range<usize>, tmp: &[f64], out_band: &mut [f64]) -> Result<(), Error> {
         let taps = &self.taps[self.scale(s)?];
         let cells_band = out_band;
@@ -656,10 +765,11 @@ impl Flr {
         if tiles.is_empty() {
             return Err(bad);
         }
-        let (r0, _) = self.tile_rows(tiles.start)?;
-        let (_, r1) = self.tile_rows(tiles.end - 1)?;
-        let row_len = self.cells_x * self.lay.k;
-        if tmp.len() != self.grid_len() || cells_band.len() != (r1 - r0) * row_len {
+        let (r0, _) = self.window_tile_rows(s, tiles.start)?;
+        let (_, r1) = self.window_tile_rows(s, tiles.end - 1)?;
+        let g = self.grids[s];
+        let row_len = g.cells_x * self.lay.k;
+        if tmp.len() != self.window_grid_len(s) || cells_band.len() != (r1 - r0) * row_len {
             return Err(bad);
         }
         if taps.is_box {
@@ -667,21 +777,23 @@ impl Flr {
             // differently from a fresh sum), so the box blur goes tile by tile.
             let mut rest = cells_band;
             for t in tiles {
-                let (a, b) = self.tile_rows(t)?;
+                let (a, b) = g.tile_rows(t);
                 let (band, tail) = rest.split_at_mut((b - a) * row_len);
-                blur_cols_band(taps, row_len, self.cells_y, a, tmp, band);
+                blur_cols_band(taps, row_len, g.cells_y, a, tmp, band);
                 rest = tail;
             }
         } else {
-            blur_cols_band(taps, row_len, self.cells_y, r0, tmp, cells_band);
+            blur_cols_band(taps, row_len, g.cells_y, r0, tmp, cells_band);
         }
         Ok(())
     }
 
-    /// Total window weight of window `s` (the sum of its 2-D kernel over B×B pixels).
+    /// Total window weight of window `s` (the sum of its 2-D kernel over the
+    /// pixels of its cells).
     fn window_weight(&self, s: usize) -> f64 {
         let taps = &self.taps[s];
-        (self.bin * self.bin) as f64 * taps.sum() * taps.sum()
+        let side = (self.bin * self.grids[s].factor) as f64;
+        side * side * taps.sum() * taps.sum()
     }
 
     /// A cell of window `s` whose window weight is at most this is empty.
@@ -722,9 +834,9 @@ impl Flr {
         variances_tile: &mut [f64],
     ) -> Result<Report, Error> {
         let s = self.scale(s)?;
-        let cells_n = self.variances_tile_range(t)?.len();
-        if cells_tile.len() != self.cells_tile_len(t)?
-            || models_tile.len() != self.models_tile_len(t)?
+        let cells_n = self.scale_variances_tile_range(s, t)?.len();
+        if cells_tile.len() != cells_n * self.lay.k
+            || models_tile.len() != cells_n * self.ml
             || !(variances_tile.is_empty() || variances_tile.len() == cells_n)
         {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
@@ -754,7 +866,8 @@ impl Flr {
 
     /// Adaptive window: blends the three windows' models of tile `t` into
     /// `models_tile`. `first_tile` is window 0's blurred band, `scale_models`
-    /// and `variances` the whole window-major grids.
+    /// and `variances` the whole window-major grids (a pooled window's model
+    /// and variance are interpolated bilinearly to each block-grid cell).
     pub fn blend_tile(
         &self,
         t: usize,
@@ -764,28 +877,25 @@ impl Flr {
         models_tile: &mut [f32],
     ) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: t, count: self.tile_count() };
+        let cells: usize = self.grids.iter().map(|g| g.cell_count()).sum();
         if self.scale_count() != MAX_SCALES
             || first_tile.len() != self.cells_tile_len(t)?
-            || scale_models.len() != self.scale_count() * self.models_len()
-            || variances.len() != self.scale_count() * self.cell_count()
+            || scale_models.len() != cells * self.ml
+            || variances.len() != cells
             || models_tile.len() != self.models_tile_len(t)?
         {
             return Err(bad);
         }
-        let m: [&[f32]; MAX_SCALES] = [0, 1, 2].map(|s| &scale_models[s * self.models_len()..(s + 1) * self.models_len()]);
-        let v: [&[f64]; MAX_SCALES] = [0, 1, 2].map(|s| &variances[s * self.cell_count()..(s + 1) * self.cell_count()]);
-        let (mr, vr) = (self.models_tile_range(t)?, self.variances_tile_range(t)?);
-        let min_weight = self.min_weight(0);
-        dispatch_q!(
-            self.q,
-            blend_band(
-                first_tile,
-                [&m[0][mr.clone()], &m[1][mr.clone()], &m[2][mr]],
-                [&v[0][vr.clone()], &v[1][vr.clone()], &v[2][vr]],
-                min_weight,
-                models_tile
-            )
-        );
+        let mut windows = [WindowModels { models: &[], variances: &[], grid: self.grids[0] }; MAX_SCALES];
+        let (mut mo, mut vo) = (0, 0);
+        for (w, g) in windows.iter_mut().zip(&self.grids) {
+            let n = g.cell_count();
+            *w = WindowModels { models: &scale_models[mo..mo + n * self.ml], variances: &variances[vo..vo + n], grid: *g };
+            mo += n * self.ml;
+            vo += n;
+        }
+        let (r0, _) = self.tile_rows(t)?;
+        dispatch_q!(self.q, blend_band(first_tile, windows, r0, self.min_weight(0), models_tile));
         Ok(())
     }
 
@@ -855,12 +965,16 @@ impl Flr {
         if out.width() != self.width || out.height() != self.height || out.channel_count() < 3 {
             return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, self.height), got: (out.width(), out.height()) });
         }
-        let parts = self.split_scratch(scratch, 1)?;
+        let mut parts = self.split_scratch(scratch, 1)?;
         let mut stats = self.prepare(&f);
         let mut rep = Report::default();
         let tiles = self.tile_count();
         for t in 0..tiles {
             rep += self.moments_tile(&f, &stats, t, &mut parts.cells[self.cells_tile_range(t)?], parts.workers)?;
+            if let Some(s) = (1..self.scale_count()).find(|&s| self.window_pooled(s)) {
+                // Pool while the band is in cache.
+                self.pool_tile(t, &parts.cells[self.cells_tile_range(t)?], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
+            }
             if self.scale_count() == 1 {
                 // The horizontal blur reads only its own band: run it while the band is in cache.
                 self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
@@ -868,7 +982,7 @@ impl Flr {
         }
         self.finish_stats(parts.cells, &mut stats)?;
         if self.scale_count() > 1 {
-            rep += self.fit_windows(&stats, parts.cells, parts.tmp, parts.first, parts.blurred, parts.scale_models, parts.variances)?;
+            rep += self.fit_windows(&stats, &mut parts)?;
             for t in 0..tiles {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
                 self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
@@ -894,28 +1008,22 @@ impl Flr {
     }
 
     /// Adaptive window, on the calling thread: blur and solve every window.
-    #[allow(clippy::too_many_arguments)]
-    fn fit_windows(
-        &self,
-        stats: &Stats,
-        cells: &[f64],
-        tmp: &mut [f64],
-        first: &mut [f64],
-        blurred: &mut [f64],
-        scale_models: &mut [f32],
-        variances: &mut [f64],
-    ) -> Result<Report, Error> {
+    fn fit_windows(&self, stats: &Stats, parts: &mut Parts<'_>) -> Result<Report, Error> {
         let tiles = self.tile_count();
         let mut rep = Report::default();
         for s in 0..self.scale_count() {
+            let n = self.window_grid_len(s);
+            let src: &[f64] = if self.window_pooled(s) { parts.pooled } else { parts.cells };
+            let tmp = &mut parts.tmp[..n];
             for t in 0..tiles {
-                self.blur_rows_tile_at(s, t, cells, &mut tmp[self.cells_tile_range(t)?])?;
+                self.blur_rows_tile_at(s, t, src, &mut tmp[self.window_cells_tile_range(s, t)?])?;
             }
-            let dst = if s == 0 { &mut *first } else { &mut *blurred };
+            let dst = if s == 0 { &mut *parts.first } else { &mut parts.blurred[..n] };
             self.blur_cols_tiles_at(s, 0..tiles, tmp, dst)?;
             for t in 0..tiles {
-                let (c, m, v) = (self.cells_tile_range(t)?, self.scale_models_tile_range(s, t)?, self.scale_variances_tile_range(s, t)?);
-                rep += self.solve_tile_at(s, stats, t, &dst[c], &mut scale_models[m], &mut variances[v])?;
+                let c = self.window_cells_tile_range(s, t)?;
+                let (m, v) = (self.scale_models_tile_range(s, t)?, self.scale_variances_tile_range(s, t)?);
+                rep += self.solve_tile_at(s, stats, t, &dst[c], &mut parts.scale_models[m], &mut parts.variances[v])?;
             }
         }
         Ok(rep)
@@ -930,13 +1038,56 @@ fn variances_of<const Q: usize>(cells: &[f64], models: &[f32], p: &SolveParams, 
     }
 }
 
-/// Blends one band of cells ([`adaptive::blend`]).
-fn blend_band<const Q: usize>(first: &[f64], models: [&[f32]; 3], variances: [&[f64]; 3], min_weight: f64, out: &mut [f32]) {
+/// One window's whole model and variance grids, as the blend reads them.
+#[derive(Clone, Copy)]
+struct WindowModels<'a> {
+    models: &'a [f32],
+    variances: &'a [f64],
+    grid: Grid,
+}
+
+impl WindowModels<'_> {
+    /// The model (into `out`) and variance of this window at block-grid cell
+    /// `(i, j)`: read, or on a pooled grid interpolated bilinearly
+    /// ([`adaptive::pooled_taps`]; an empty neighbour's infinite variance
+    /// makes the interpolated one infinite).
+    #[inline]
+    fn at<const Q: usize>(&self, (i, j): (usize, usize), out: &mut [f32]) -> f64 {
+        let (g, ml) = (self.grid, model_len(Q));
+        let out = &mut out[..ml];
+        if g.factor == 1 {
+            let c = i * g.cells_x + j;
+            out.copy_from_slice(&self.models[c * ml..(c + 1) * ml]);
+            return self.variances[c];
+        }
+        let (ys, xs) = (adaptive::pooled_taps(i, g.cells_y), adaptive::pooled_taps(j, g.cells_x));
+        let corner = |(y, wy): (usize, f64), (x, wx): (usize, f64)| (y * g.cells_x + x, wy * wx);
+        let c = [corner(ys[0], xs[0]), corner(ys[0], xs[1]), corner(ys[1], xs[0]), corner(ys[1], xs[1])];
+        // Variance: corners with weight 0 are skipped (0 · ∞ would be NaN).
+        let v = c.iter().filter(|(_, w)| *w != 0.0).map(|&(at, w)| w * self.variances[at]).sum();
+        // Models are finite: one pass over all four corners (vectorises).
+        let m = c.map(|(at, _)| &self.models[at * ml..(at + 1) * ml]);
+        let w = c.map(|(_, w)| w as f32);
+        for (e, o) in out.iter_mut().enumerate() {
+            *o = w[0] * m[0][e] + w[1] * m[1][e] + w[2] * m[2][e] + w[3] * m[3][e];
+        }
+        v
+    }
+}
+
+/// Blends one band of cells, whose first row is block-grid row `r0` ([`adaptive::blend`]).
+fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0: usize, min_weight: f64, out: &mut [f32]) {
     let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
-    for (i, (cell, o)) in first.chunks_exact(k).zip(out.chunks_exact_mut(ml)).enumerate() {
-        let m = models.map(|g| &g[i * ml..(i + 1) * ml]);
-        let gaps =
-            [0.0, adaptive::prediction_gap::<Q>(cell, m[0], m[1], min_weight), adaptive::prediction_gap::<Q>(cell, m[0], m[2], min_weight)];
-        adaptive::blend(m, variances.map(|v| v[i]), gaps, o);
+    let cx = windows[0].grid.cells_x;
+    let mut buf = [[0f32; model_len(MAX_GUIDES)]; MAX_SCALES];
+    for (idx, (cell, o)) in first.chunks_exact(k).zip(out.chunks_exact_mut(ml)).enumerate() {
+        let ij = (r0 + idx / cx, idx % cx);
+        let mut v = [0f64; MAX_SCALES];
+        for ((w, b), v) in windows.iter().zip(buf.iter_mut()).zip(v.iter_mut()) {
+            *v = w.at::<Q>(ij, b);
+        }
+        let m = [&buf[0][..ml], &buf[1][..ml], &buf[2][..ml]];
+        let gaps = adaptive::prediction_gaps::<Q>(cell, m, min_weight);
+        adaptive::blend(m, v, gaps, o);
     }
 }

@@ -272,10 +272,23 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
 
 /// Each pixel's model of [`reference`] (`None` where its window is empty).
 pub fn reference_models(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<Option<PixelModel>> {
-    let q = guides.len();
     let (kern, r) = window_kernel(cfg.blur);
     let valid = valid_pixels(w, h, guides, y);
-    // Frame statistics over valid pixels (two-pass).
+    let scales = frame_scales(w, h, guides, &valid);
+    let mut out = vec![None; w * h];
+    for py in 0..h as isize {
+        for px in 0..w as isize {
+            let idx = window_taps(&kern, r, (w, h), &valid, (px, py));
+            out[(py as usize) * w + px as usize] = fit_taps(cfg, guides, y, &idx, &scales);
+        }
+    }
+    out
+}
+
+/// Frame mean and scale of each guide over the valid pixels (two-pass): the
+/// normalized solve's standardisation.
+pub fn frame_scales(w: usize, h: usize, guides: &[Vec<f64>], valid: &[bool]) -> (Vec<f64>, Vec<f64>) {
+    let q = guides.len();
     let nv = valid.iter().filter(|v| **v).count().max(1) as f64;
     let mut fmean = vec![0.0; q];
     let mut fscale = vec![1.0; q];
@@ -286,93 +299,98 @@ pub fn reference_models(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>]
         let sd = v.sqrt().max(1e-6 * m.abs());
         fscale[a] = if sd > 0.0 { sd } else { 1.0 };
     }
-    let mut out = vec![None; w * h];
-    for py in 0..h as isize {
-        for px in 0..w as isize {
-            let idx = window_taps(&kern, r, (w, h), &valid, (px, py));
-            let n: f64 = idx.iter().map(|t| t.1).sum();
-            let mut sx = vec![0.0; q];
-            let mut sy = [0.0; 3];
-            for &(i, wt) in &idx {
-                for a in 0..q {
-                    sx[a] += wt * guides[a][i];
-                }
-                for c in 0..3 {
-                    sy[c] += wt * y[3 * i + c] as f64;
-                }
-            }
-            let k = (py as usize) * w + px as usize;
-            if n <= 0.0 {
-                continue;
-            }
-            match cfg.regularization {
-                Regularization::Normalized { eps_mul, eps_add } => {
-                    let mu: Vec<f64> = sx.iter().map(|s| s / n).collect();
-                    let muy: Vec<f64> = sy.iter().map(|s| s / n).collect();
-                    // centred covariance (two-pass), standardised by the frame scale
-                    let mut wm = vec![0.0; q * q];
-                    let mut cxy = vec![0.0; q * 3];
-                    for &(i, wt) in &idx {
-                        for a in 0..q {
-                            let ea = (guides[a][i] - mu[a]) / fscale[a];
-                            for b in 0..q {
-                                wm[a * q + b] += wt * ea * (guides[b][i] - mu[b]) / fscale[b];
-                            }
-                            for c in 0..3 {
-                                cxy[a * 3 + c] += wt * ea * (y[3 * i + c] as f64 - muy[c]);
-                            }
-                        }
-                    }
-                    let muz: Vec<f64> = (0..q).map(|a| (mu[a] - fmean[a]) / fscale[a]).collect();
-                    // eq. 18
-                    for a in 0..q {
-                        for b in 0..q {
-                            wm[a * q + b] = wm[a * q + b] / n + eps_mul * muz[a] * muz[b];
-                        }
-                        wm[a * q + a] += eps_mul * muz[a] * muz[a] + eps_add;
-                    }
-                    let sig: Vec<f64> = (0..q).map(|a| wm[a * q + a].max(1e-300).sqrt()).collect();
-                    let mut c = vec![0.0; q * q];
-                    let mut bh = vec![0.0; q * 3];
-                    for a in 0..q {
-                        for b in 0..q {
-                            c[a * q + b] = wm[a * q + b] / (sig[a] * sig[b]) + if a == b { eps_add } else { 0.0 };
-                        }
-                        for ch in 0..3 {
-                            bh[a * 3 + ch] = cxy[a * 3 + ch] / n / sig[a];
-                        }
-                    }
-                    let ah = gauss(c, q, bh, 3);
-                    let beta = (0..q).map(|a| [0, 1, 2].map(|ch| ah[a * 3 + ch] / sig[a] / fscale[a])).collect();
-                    out[k] = Some(PixelModel { mu, muy: [muy[0], muy[1], muy[2]], beta });
-                }
-                Regularization::Tikhonov { eps } => {
-                    let d = q + 1;
-                    let mut xx = vec![0.0; d * d];
-                    let mut xy = vec![0.0; d * 3];
-                    for &(i, wt) in &idx {
-                        let mut x = vec![1.0];
-                        x.extend((0..q).map(|a| guides[a][i]));
-                        for a in 0..d {
-                            for b in 0..d {
-                                xx[a * d + b] += wt * x[a] * x[b];
-                            }
-                            for c in 0..3 {
-                                xy[a * 3 + c] += wt * x[a] * y[3 * i + c] as f64;
-                            }
-                        }
-                    }
-                    for a in 0..d {
-                        xx[a * d + a] += eps;
-                    }
-                    let coef = gauss(xx, d, xy, 3);
-                    let beta = (0..q).map(|a| [0, 1, 2].map(|c| coef[(a + 1) * 3 + c])).collect();
-                    out[k] = Some(PixelModel { mu: vec![0.0; q], muy: [coef[0], coef[1], coef[2]], beta });
-                }
-            }
+    (fmean, fscale)
+}
+
+/// The weighted least-squares model of the pixels `idx` (index, weight):
+/// the regulariser equations written out plainly. `None` for an empty window.
+pub fn fit_taps(
+    cfg: &FlrConfig,
+    guides: &[Vec<f64>],
+    y: &[f32],
+    idx: &[(usize, f64)],
+    (fmean, fscale): &(Vec<f64>, Vec<f64>),
+) -> Option<PixelModel> {
+    let q = guides.len();
+    let n: f64 = idx.iter().map(|t| t.1).sum();
+    let mut sx = vec![0.0; q];
+    let mut sy = [0.0; 3];
+    for &(i, wt) in idx {
+        for a in 0..q {
+            sx[a] += wt * guides[a][i];
+        }
+        for c in 0..3 {
+            sy[c] += wt * y[3 * i + c] as f64;
         }
     }
-    out
+    if n <= 0.0 {
+        return None;
+    }
+    match cfg.regularization {
+        Regularization::Normalized { eps_mul, eps_add } => {
+            let mu: Vec<f64> = sx.iter().map(|s| s / n).collect();
+            let muy: Vec<f64> = sy.iter().map(|s| s / n).collect();
+            // centred covariance (two-pass), standardised by the frame scale
+            let mut wm = vec![0.0; q * q];
+            let mut cxy = vec![0.0; q * 3];
+            for &(i, wt) in idx {
+                for a in 0..q {
+                    let ea = (guides[a][i] - mu[a]) / fscale[a];
+                    for b in 0..q {
+                        wm[a * q + b] += wt * ea * (guides[b][i] - mu[b]) / fscale[b];
+                    }
+                    for c in 0..3 {
+                        cxy[a * 3 + c] += wt * ea * (y[3 * i + c] as f64 - muy[c]);
+                    }
+                }
+            }
+            let muz: Vec<f64> = (0..q).map(|a| (mu[a] - fmean[a]) / fscale[a]).collect();
+            // eq. 18
+            for a in 0..q {
+                for b in 0..q {
+                    wm[a * q + b] = wm[a * q + b] / n + eps_mul * muz[a] * muz[b];
+                }
+                wm[a * q + a] += eps_mul * muz[a] * muz[a] + eps_add;
+            }
+            let sig: Vec<f64> = (0..q).map(|a| wm[a * q + a].max(1e-300).sqrt()).collect();
+            let mut c = vec![0.0; q * q];
+            let mut bh = vec![0.0; q * 3];
+            for a in 0..q {
+                for b in 0..q {
+                    c[a * q + b] = wm[a * q + b] / (sig[a] * sig[b]) + if a == b { eps_add } else { 0.0 };
+                }
+                for ch in 0..3 {
+                    bh[a * 3 + ch] = cxy[a * 3 + ch] / n / sig[a];
+                }
+            }
+            let ah = gauss(c, q, bh, 3);
+            let beta = (0..q).map(|a| [0, 1, 2].map(|ch| ah[a * 3 + ch] / sig[a] / fscale[a])).collect();
+            Some(PixelModel { mu, muy: [muy[0], muy[1], muy[2]], beta })
+        }
+        Regularization::Tikhonov { eps } => {
+            let d = q + 1;
+            let mut xx = vec![0.0; d * d];
+            let mut xy = vec![0.0; d * 3];
+            for &(i, wt) in idx {
+                let mut x = vec![1.0];
+                x.extend((0..q).map(|a| guides[a][i]));
+                for a in 0..d {
+                    for b in 0..d {
+                        xx[a * d + b] += wt * x[a] * x[b];
+                    }
+                    for c in 0..3 {
+                        xy[a * 3 + c] += wt * x[a] * y[3 * i + c] as f64;
+                    }
+                }
+            }
+            for a in 0..d {
+                xx[a * d + a] += eps;
+            }
+            let coef = gauss(xx, d, xy, 3);
+            let beta = (0..q).map(|a| [0, 1, 2].map(|c| coef[(a + 1) * 3 + c])).collect();
+            Some(PixelModel { mu: vec![0.0; q], muy: [coef[0], coef[1], coef[2]], beta })
+        }
+    }
 }
 
 /// Largest absolute difference, and the mean absolute difference.
