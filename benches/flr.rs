@@ -165,5 +165,29 @@ fn bench_stages(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_frames, bench_stages);
+/// The adaptive window (σ = 6/12/20 px, two of them on the pooled grid) next
+/// to the default σ = 12 px in the same run (normal+depth+ao, f32, 1920×1080).
+fn bench_adaptive(c: &mut Criterion) {
+    let (w, h, q) = (1920, 1080, 5);
+    let d = data(w, h);
+    let fr = frame(&d, q, false);
+    let mut g = c.benchmark_group(format!("window_{w}x{h}_f32_q{q}"));
+    g.sample_size(10).measurement_time(Duration::from_secs(3)).warm_up_time(Duration::from_millis(500));
+    let single = FlrConfig::with_guides(set(q));
+    let adaptive = FlrConfig { blur: Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] }, ..single };
+    for (name, cfg) in [("sigma12", single), ("sigma6_12_20", adaptive)] {
+        let flr = Flr::new(cfg, w, h).unwrap();
+        let mut scratch = vec![0f64; flr.scratch_len()];
+        let mut out = vec![0f32; 3 * w * h];
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+                black_box(flr.denoise(&fr, &mut scratch, &mut ov).unwrap())
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench_frames, bench_stages, bench_adaptive);
 criterion_main!(benches);
