@@ -240,7 +240,7 @@ fn tiled_equals_whole_frame() {
         flr.finish_stats(p.cells, &mut stats).unwrap();
         assert_eq!(flr.scale_count(), 3);
         assert_eq!(flr.window_pooled(1), block < 8 || sigmas[1] >= 12.0, "{w}x{h} B={block}");
-        if let Some(s) = (1..3).find(|&s| flr.window_pooled(s)) {
+        if let Some(s) = flr.pooled_window() {
             for t in (0..nt).rev() {
                 let r = flr.window_cells_tile_range(s, t).unwrap();
                 flr.pool_tile(t, &p.cells[flr.cells_tile_range(t).unwrap()], &mut p.pooled[r]).unwrap();

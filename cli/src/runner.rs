@@ -251,7 +251,7 @@ pub fn denoise_parallel(
         let lens = |range: &dyn Fn(usize) -> Result<std::ops::Range<usize>, Error>| -> Result<Vec<usize>, Error> {
             (0..nt).map(|t| range(t).map(|r| r.len())).collect()
         };
-        if let Some(s) = (1..flr.scale_count()).find(|&s| flr.window_pooled(s)) {
+        if let Some(s) = flr.pooled_window() {
             let pl = lens(&|t| flr.window_cells_tile_range(s, t))?;
             let cells: &[f64] = p.cells;
             let items: Vec<_> = split_lens(&mut *p.pooled, &pl).into_iter().enumerate().collect();

@@ -22,6 +22,20 @@ fn depth_frame(noisy: &[f32], depth: &[f32], w: u32, h: u32) -> LrdFrame {
     frame
 }
 
+/// A depth guide that rises row by row.
+fn depth_ramp(w: u32, h: u32) -> Vec<f32> {
+    (0..(w * h) as usize).map(|i| 1.0 + (i / w as usize) as f32 * 0.1).collect()
+}
+
+/// Scratch for `cfg` at `w`×`h` (sized by `lrd_flr_scratch_size`, which must
+/// succeed) and its size in bytes.
+fn flr_scratch(cfg: &LrdFlrConfig, w: u32, h: u32) -> (Vec<f64>, usize) {
+    let mut bytes = 0usize;
+    // SAFETY: `cfg` and `bytes` are valid references for the duration of the call.
+    assert_eq!(unsafe { lrd_flr_scratch_size(cfg, w, h, &mut bytes) }, LrdStatus::LRD_STATUS_OK);
+    (vec![0f64; bytes / 8 + 1], bytes)
+}
+
 /// A packed f32 RGB output over `out`.
 fn packed_out(out: &mut [f32], w: u32, h: u32) -> LrdImageMut {
     LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 }
@@ -32,16 +46,14 @@ fn entry_points_validate_everything() {
     let (w, h) = (37u32, 21u32);
     let n = (w * h) as usize;
     let noisy: Vec<f32> = (0..3 * n).map(|i| (i % 7) as f32 * 0.1).collect();
-    let depth: Vec<f32> = (0..n).map(|i| 1.0 + (i / w as usize) as f32 * 0.1).collect();
+    let depth = depth_ramp(w, h);
     let mut cfg = lrd_flr_config_default();
     cfg.guides = LRD_GUIDE_DEPTH;
     let frame = depth_frame(&noisy, &depth, w, h);
     let mut out = vec![0f32; 3 * n];
     let o = packed_out(&mut out, w, h);
-    let mut bytes = 0usize;
+    let (mut scratch, mut bytes) = flr_scratch(&cfg, w, h);
     unsafe {
-        assert_eq!(lrd_flr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
-        let mut scratch = vec![0f64; bytes / 8 + 1];
         let sp = scratch.as_mut_ptr() as *mut _;
         let mut rep = LrdReport::default();
         assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, &mut rep), LrdStatus::LRD_STATUS_OK);
@@ -377,7 +389,7 @@ fn adaptive_window_whole_frame_only() {
     let (w, h) = (45u32, 33u32);
     let n = (w * h) as usize;
     let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 13) as f32 * 0.1).collect();
-    let depth: Vec<f32> = (0..n).map(|i| 1.0 + (i / w as usize) as f32 * 0.1).collect();
+    let depth = depth_ramp(w, h);
     let mut cfg = lrd_flr_config_default();
     cfg.guides = LRD_GUIDE_DEPTH;
     cfg.blur = LrdBlur::LRD_BLUR_ADAPTIVE as u32;
@@ -385,10 +397,8 @@ fn adaptive_window_whole_frame_only() {
     let frame = depth_frame(&noisy, &depth, w, h);
     let mut out = vec![0f32; 3 * n];
     let o = packed_out(&mut out, w, h);
-    let mut bytes = 0usize;
+    let (mut scratch, bytes) = flr_scratch(&cfg, w, h);
     unsafe {
-        assert_eq!(lrd_flr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
-        let mut scratch = vec![0f64; bytes / 8 + 1];
         let sp = scratch.as_mut_ptr() as *mut _;
         assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_OK);
         let st = lrd_flr_run_tile(&cfg, &frame, &o, sp, bytes, 1, 0, 0, 0, null_mut());

@@ -331,6 +331,11 @@ impl Flr {
     pub fn window_pooled(&self, s: usize) -> bool {
         s < self.scale_count() && self.grids[s].factor > 1
     }
+    /// The first window fitted on the pooled grid (its tile ranges are those
+    /// of `pooled`), if any.
+    pub fn pooled_window(&self) -> Option<usize> {
+        (1..self.scale_count()).find(|&s| self.window_pooled(s))
+    }
     /// Cell rows of tile `t` on window `s`'s grid.
     fn window_tile_rows(&self, s: usize, t: usize) -> Result<(usize, usize), Error> {
         let g = self.window_grid(s)?;
@@ -354,11 +359,6 @@ impl Flr {
         let row = self.grids[s].cells_x * self.ml;
         let o: usize = (0..s).map(|u| self.grids[u].cell_count() * self.ml).sum();
         Ok(o + a * row..o + b * row)
-    }
-    /// Where tile `t`'s cells lie in the block grid (one value per cell).
-    pub fn variances_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
-        let (a, b) = self.tile_rows(t)?;
-        Ok(a * self.cells_x..b * self.cells_x)
     }
     /// Where tile `t` of window `s` lies in `variances` (one f64 per cell of
     /// the window's grid, windows one after another).
@@ -703,7 +703,7 @@ impl Flr {
     /// sums, so a pooled cell is exactly the moments of its 2B × 2B pixels.
     pub fn pool_tile(&self, t: usize, cells_tile: &[f64], pooled_tile: &mut [f64]) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: t, count: self.tile_count() };
-        let s = (1..self.scale_count()).find(|&s| self.window_pooled(s)).ok_or(bad)?;
+        let s = self.pooled_window().ok_or(bad)?;
         let (k, cx) = (self.lay.k, self.cells_x);
         let (fine, coarse) = (self.tile_rows(t)?, self.window_tile_rows(s, t)?);
         let pcx = self.grids[s].cells_x;
@@ -971,7 +971,7 @@ impl Flr {
         let tiles = self.tile_count();
         for t in 0..tiles {
             rep += self.moments_tile(&f, &stats, t, &mut parts.cells[self.cells_tile_range(t)?], parts.workers)?;
-            if let Some(s) = (1..self.scale_count()).find(|&s| self.window_pooled(s)) {
+            if let Some(s) = self.pooled_window() {
                 // Pool while the band is in cache.
                 self.pool_tile(t, &parts.cells[self.cells_tile_range(t)?], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
             }
