@@ -11,6 +11,7 @@
 //! | [`Flr::moments_tile`] | frame rows of the band | `cells` band |
 //! | [`Flr::blur_rows_tile`] | `cells` band | `tmp` band |
 //! | [`Flr::finish_stats`] (once) | all `cells` | `Stats` mean/scale |
+//! | or [`Flr::stats_tile`] | `cells` band | `StatsSums` (in tile order) |
 //! | [`Flr::blur_cols_tile`] | all `tmp` | `cells` band |
 //! | [`Flr::solve_tile`] | `cells` band | `models` band |
 //! | [`Flr::apply_tile`] | all `models`, frame rows | output rows |
@@ -137,6 +138,15 @@ pub struct Stats {
     pub reference: [f32; MAX_GUIDES],
     pub mean: [f64; MAX_GUIDES],
     pub scale: [f64; MAX_GUIDES],
+}
+
+/// Running sums of the cells' weights, guide sums and guide squares
+/// ([`Flr::stats_tile`]), turned into [`Stats`] by [`Flr::finish_stats_sums`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StatsSums {
+    pub n: f64,
+    pub s: [f64; MAX_GUIDES],
+    pub ss: [f64; MAX_GUIDES],
 }
 
 impl Default for Stats {
@@ -655,23 +665,46 @@ impl Flr {
     }
 
     /// Stage 2: frame mean and standard deviation of each guide, from all cells.
+    /// (The same as [`Flr::stats_tile`] over every tile in order, then
+    /// [`Flr::finish_stats_sums`].)
     pub fn finish_stats(&self, cells: &[f64], stats: &mut Stats) -> Result<(), Error> {
         if cells.len() != self.grid_len() {
             return Err(Error::InvalidTile { index: 0, count: 1 });
         }
+        let mut sums = StatsSums::default();
+        self.add_stats(cells, &mut sums);
+        self.finish_stats_sums(&sums, stats);
+        Ok(())
+    }
+
+    /// Stage 2 split by tile: adds tile `t`'s cells (its `cells` band, before
+    /// the vertical blur overwrites it) to `sums`. Tiles added in order
+    /// 0, 1, … give exactly [`Flr::finish_stats`]'s sums.
+    pub fn stats_tile(&self, t: usize, cells_tile: &[f64], sums: &mut StatsSums) -> Result<(), Error> {
+        if cells_tile.len() != self.cells_tile_len(t)? {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        self.add_stats(cells_tile, sums);
+        Ok(())
+    }
+
+    fn add_stats(&self, cells: &[f64], sums: &mut StatsSums) {
         let l = &self.lay;
-        let mut n = 0f64;
-        let mut s = [0f64; MAX_GUIDES];
-        let mut ss = [0f64; MAX_GUIDES];
         for cell in cells.chunks_exact(l.k) {
-            n += cell[0];
+            sums.n += cell[0];
             let mut p = l.ss;
             for a in 0..self.q {
-                s[a] += cell[l.s + a];
-                ss[a] += cell[p];
+                sums.s[a] += cell[l.s + a];
+                sums.ss[a] += cell[p];
                 p += self.q - a;
             }
         }
+    }
+
+    /// Stage 2's end: the mean and standard deviation of each guide from the
+    /// sums of every cell.
+    pub fn finish_stats_sums(&self, sums: &StatsSums, stats: &mut Stats) {
+        let (n, s, ss) = (sums.n, &sums.s, &sums.ss);
         for a in 0..self.q {
             let (mean, var) = if n > 0.0 { (s[a] / n, ss[a] / n - (s[a] / n) * (s[a] / n)) } else { (0.0, 0.0) };
             // A guide cannot vary by less than f32 resolution of its magnitude.
@@ -680,7 +713,6 @@ impl Flr {
             stats.mean[a] = if mean.is_finite() { mean } else { 0.0 };
             stats.scale[a] = if sd.is_finite() && sd > 0.0 { sd } else { 1.0 };
         }
-        Ok(())
     }
 
     /// Stage 3: horizontal blur of tile `t`: `cells` band → `tmp_tile`.
@@ -969,34 +1001,43 @@ impl Flr {
         let mut stats = self.prepare(&f);
         let mut rep = Report::default();
         let tiles = self.tile_count();
-        for t in 0..tiles {
-            rep += self.moments_tile(&f, &stats, t, &mut parts.cells[self.cells_tile_range(t)?], parts.workers)?;
-            if let Some(s) = self.pooled_window() {
-                // Pool while the band is in cache.
-                self.pool_tile(t, &parts.cells[self.cells_tile_range(t)?], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
+        let single = self.scale_count() == 1;
+        // One window: the vertical blur of tile u needs the horizontally
+        // blurred rows up to `radius` cell rows below it, i.e. tile u + lag.
+        // It runs as soon as those exist, while they are still in cache, and
+        // overwrites the band's raw moments, whose stats were taken first.
+        let lag = self.taps[0].radius.div_ceil(TILE_CELL_ROWS);
+        let mut sums = StatsSums::default();
+        for t in 0..tiles + if single { lag } else { 0 } {
+            if t < tiles {
+                let c = self.cells_tile_range(t)?;
+                rep += self.moments_tile(&f, &stats, t, &mut parts.cells[c.clone()], parts.workers)?;
+                self.stats_tile(t, &parts.cells[c.clone()], &mut sums)?;
+                if let Some(s) = self.pooled_window() {
+                    // Pool while the band is in cache.
+                    self.pool_tile(t, &parts.cells[c.clone()], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
+                }
+                if single {
+                    // The horizontal blur reads only its own band.
+                    self.blur_rows_tile(t, parts.cells, &mut parts.tmp[c])?;
+                }
             }
-            if self.scale_count() == 1 {
-                // The horizontal blur reads only its own band: run it while the band is in cache.
-                self.blur_rows_tile(t, parts.cells, &mut parts.tmp[self.cells_tile_range(t)?])?;
+            if single && t >= lag {
+                let u = t - lag;
+                self.blur_cols_tiles(u..u + 1, parts.tmp, &mut parts.cells[self.cells_tile_range(u)?])?;
             }
         }
-        self.finish_stats(parts.cells, &mut stats)?;
-        if self.scale_count() > 1 {
+        self.finish_stats_sums(&sums, &mut stats);
+        if !single {
             rep += self.fit_windows(&stats, &mut parts)?;
             for t in 0..tiles {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
                 self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
             }
         } else {
-            // Vertical blur four tiles at a time (fewer re-reads of `tmp`), then their solves.
-            for t0 in (0..tiles).step_by(4) {
-                let t1 = (t0 + 4).min(tiles);
-                let band = self.cells_tile_range(t0)?.start..self.cells_tile_range(t1 - 1)?.end;
-                self.blur_cols_tiles(t0..t1, parts.tmp, &mut parts.cells[band])?;
-                for t in t0..t1 {
-                    let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
-                    rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
-                }
+            for t in 0..tiles {
+                let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
+                rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
             }
         }
         for t in 0..tiles {

@@ -43,11 +43,15 @@ impl BandPlanes<'_> {
 #[derive(Clone, Debug)]
 pub struct BlockScratch {
     groups: [[f32x8; VW]; MAX_GROUPS],
+    /// A block's moments as 8 partial sums each, before the reduction. Kept
+    /// here rather than on the stack: at `MAX_K` vectors (4 KiB) a fresh
+    /// zeroed array per block was a `memset` costing ~1 ms per 1080p frame.
+    sums: [f32x8; MAX_K],
 }
 
 impl Default for BlockScratch {
     fn default() -> Self {
-        BlockScratch { groups: [[f32x8::ZERO; VW]; MAX_GROUPS] }
+        BlockScratch { groups: [[f32x8::ZERO; VW]; MAX_GROUPS], sums: [f32x8::ZERO; MAX_K] }
     }
 }
 
@@ -99,7 +103,7 @@ pub fn moments_band<const Q: usize>(
             continue;
         }
         if simd && block % 8 == 0 && band.rows * block / 8 <= MAX_GROUPS {
-            block_simd::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc, &mut scratch.groups);
+            block_simd::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc, scratch);
         } else {
             acc[..k].fill(0.0);
             block_scalar::<Q>(&band, x0, block, w, &y, &g, &r, &lay, &mut acc);
@@ -174,7 +178,7 @@ pub fn moments_rows<const Q: usize>(band: &BandRows<'_>, block: usize, cells: &m
         let ng = groups_plain::<Q>(band, x0, block, &r, &mut scratch.groups);
         // every lane of every group has weight 1
         let wsum = f32x8::splat(ng as f32);
-        if !accumulate::<Q>(&scratch.groups[..ng], wsum, &lay, &mut acc, true) {
+        if !accumulate::<Q>(&scratch.groups[..ng], &mut scratch.sums, wsum, &lay, &mut acc, true) {
             // Some value is NaN/Inf: count, pick the first valid pixel, mask.
             let Some(r2) = first_valid::<Q>(band, x0, block, &mut counts) else {
                 cell.fill(0.0);
@@ -183,7 +187,7 @@ pub fn moments_rows<const Q: usize>(band: &BandRows<'_>, block: usize, cells: &m
             };
             r = r2;
             let (ng, wsum) = groups_masked::<Q>(band, x0, block, &r, &mut scratch.groups);
-            accumulate::<Q>(&scratch.groups[..ng], wsum, &lay, &mut acc, false);
+            accumulate::<Q>(&scratch.groups[..ng], &mut scratch.sums, wsum, &lay, &mut acc, false);
         }
         store_shifted::<Q>(&acc, &r, &lay, cell);
     }
@@ -376,7 +380,7 @@ fn block_simd<const Q: usize>(
     r: &[f32; MAX_GUIDES],
     lay: &CellLayout,
     acc: &mut [f32; MAX_K],
-    v: &mut [[f32x8; VW]; MAX_GROUPS],
+    scratch: &mut BlockScratch,
 ) {
     #[inline(always)]
     fn load(s: &[f32], i: usize) -> f32x8 {
@@ -391,6 +395,7 @@ fn block_simd<const Q: usize>(
     }
     let mut wsum = f32x8::ZERO;
     let mut ng = 0;
+    let v = &mut scratch.groups;
     for row in 0..band.rows {
         let base = row * band.width;
         let mut i = base + x0;
@@ -408,7 +413,7 @@ fn block_simd<const Q: usize>(
             i += 8;
         }
     }
-    accumulate::<Q>(&v[..ng], wsum, lay, acc, false);
+    accumulate::<Q>(&scratch.groups[..ng], &mut scratch.sums, wsum, lay, acc, false);
 }
 
 /// Block sums of the group vectors `v = [e_0..e_Q, y_0, y_1, y_2]` into
@@ -418,10 +423,16 @@ fn block_simd<const Q: usize>(
 /// product, reduced eight at a time. With `check`, returns `false` (and
 /// leaves `acc` unspecified) as soon as a plain sum is not finite.
 #[inline(always)]
-fn accumulate<const Q: usize>(groups: &[[f32x8; VW]], wsum: f32x8, lay: &CellLayout, acc: &mut [f32; MAX_K], check: bool) -> bool {
-    // Block sums as vectors (8 column partial sums each), in the cell layout,
-    // then reduced eight at a time.
-    let mut sums = [f32x8::ZERO; MAX_K];
+fn accumulate<const Q: usize>(
+    groups: &[[f32x8; VW]],
+    sums: &mut [f32x8; MAX_K],
+    wsum: f32x8,
+    lay: &CellLayout,
+    acc: &mut [f32; MAX_K],
+    check: bool,
+) -> bool {
+    // Block sums as vectors (8 column partial sums each), in the cell layout
+    // (every one of `sums[..k]` is written below), then reduced eight at a time.
     sums[0] = wsum;
     // s and t: plain sums of the vectors.
     let mut plain = [f32x8::ZERO; VW];
