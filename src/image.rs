@@ -163,6 +163,17 @@ impl<'a> ImageView<'a> {
             Samples::F32(s) => {
                 if ps == 1 {
                     dst.copy_from_slice(&s[start..start + dst.len()]);
+                } else if ps == 3 || ps == 4 {
+                    // One channel of interleaved RGB / RGBA (normals, positions): a
+                    // constant stride lets the compiler vectorise the extraction
+                    // (the generic stride below is one scalar load per value).
+                    let n = dst.len();
+                    let src = s.get(start..start + (n - 1) * ps + 1)?;
+                    if ps == 3 {
+                        extract_strided::<3>(src, dst);
+                    } else {
+                        extract_strided::<4>(src, dst);
+                    }
                 } else {
                     for (i, d) in dst.iter_mut().enumerate() {
                         // SAFETY: validated at construction: every (x, y, c) inside the
@@ -476,5 +487,18 @@ impl<'a> ImageViewMut<'a> {
         let top = ImageViewMut::new(top, w, rows, c, top_layout)?;
         let bottom = ImageViewMut::new(bottom, w, h - rows, c, bottom_layout)?;
         Ok((top, Some(bottom)))
+    }
+}
+
+/// `dst[i] = src[i · P]` for every `i` (`src` holds at least `(len − 1)·P + 1` values).
+#[inline(always)]
+fn extract_strided<const P: usize>(src: &[f32], dst: &mut [f32]) {
+    let n = dst.len();
+    let whole = (src.len() / P).min(n);
+    for (d, px) in dst[..whole].iter_mut().zip(src.chunks_exact(P)) {
+        *d = px[0];
+    }
+    for (i, d) in dst.iter_mut().enumerate().skip(whole) {
+        *d = src[i * P];
     }
 }

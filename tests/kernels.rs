@@ -162,12 +162,19 @@ fn row_access_matches_element_reads() {
         let len = extra + (h - 1) * layout.row_stride + (w - 1) * ps + 2 * cs + 1;
         let data: Vec<f32> = (0..len).map(|i| i as f32 * 0.5 - 3.0).collect();
         let v = ImageView::f32(&data, w, h, 3, layout).unwrap();
-        for (y, x0, n) in [(0, 0, w), (4, 3, 30), (2, 36, 1)] {
+        for (y, x0, n) in [(0, 0, w), (4, 3, 30), (2, 36, 1), (1, 1, 9)] {
             let (mut a, mut b, mut c) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
             v.read_row_n(y, x0, [&mut a, &mut b, &mut c]).unwrap();
             for i in 0..n {
                 let e = |ch| v.get(x0 + i, y, ch).unwrap();
                 assert_eq!((a[i], b[i], c[i]), (e(0), e(1), e(2)), "layout {layout:?} y {y} x {}", x0 + i);
+            }
+            // one channel at a time (interleaved RGB / RGBA: constant-stride
+            // extraction; other strides per value)
+            for ch in 0..3 {
+                let mut r = vec![12345f32; n];
+                v.read_row(y, ch, x0, &mut r).unwrap();
+                assert!((0..n).all(|i| r[i] == v.get(x0 + i, y, ch).unwrap()), "read_row {layout:?} y {y} ch {ch}");
             }
             match v.row_f32(y, 1, x0, n) {
                 Some(r) => {
