@@ -1034,18 +1034,38 @@ impl Flr {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
                 self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
             }
+            for t in (0..tiles).rev() {
+                rep += self.apply_band(&f, &stats, t, parts.models, parts.workers, out)?;
+            }
         } else {
-            for t in 0..tiles {
+            // Bottom to top: the frame rows the moments stage read last are
+            // the likeliest still in cache. Tile u's rows interpolate the
+            // models of tiles u − 1 ..= u + 1, so it is applied once tile
+            // u − 1 is solved.
+            for t in (0..tiles).rev() {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
                 rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
+                if t + 1 < tiles {
+                    rep += self.apply_band(&f, &stats, t + 1, parts.models, parts.workers, out)?;
+                }
             }
-        }
-        for t in 0..tiles {
-            let (y0, y1) = self.tile_pixel_rows(t)?;
-            let mut band = out.rows(y0, y1 - y0)?;
-            rep += self.apply_tile(&f, &stats, t, parts.models, parts.workers, &mut band)?;
+            rep += self.apply_band(&f, &stats, 0, parts.models, parts.workers, out)?;
         }
         Ok(rep)
+    }
+
+    /// [`Flr::apply_tile`] on tile `t`'s rows of the whole output `out`.
+    fn apply_band(
+        &self,
+        f: &CheckedFrame<'_>,
+        stats: &Stats,
+        t: usize,
+        models: &[f32],
+        worker: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        let (y0, y1) = self.tile_pixel_rows(t)?;
+        self.apply_tile(f, stats, t, models, worker, &mut out.rows(y0, y1 - y0)?)
     }
 
     /// Adaptive window, on the calling thread: blur and solve every window.
