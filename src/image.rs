@@ -197,6 +197,30 @@ impl<'a> ImageView<'a> {
         Some(())
     }
 
+    /// The three single-channel views `v` as one 3-channel view, when they are
+    /// consecutive channels of one pixel-interleaved f32 image (interleaved
+    /// RGB/RGBA normals or positions, split by [`ImageView::channels`]), so a
+    /// row of all three is read in one de-interleaving pass
+    /// ([`ImageView::read_row_n`]) instead of three strided ones. `None`
+    /// otherwise. (Every access of the merged view is an access one of the
+    /// three validated views makes: same slice, same strides, channel `c` at
+    /// view `c`'s offset.)
+    pub fn merged3(v: [&ImageView<'a>; 3]) -> Option<ImageView<'a>> {
+        let (a, l) = (v[0], v[0].layout);
+        let Samples::F32(s) = a.samples else { return None };
+        let interleaved = l.channel_stride == 1 && (l.pixel_stride == 3 || l.pixel_stride == 4);
+        let sibling = |c: usize| {
+            let (b, m) = (v[c], v[c].layout);
+            let same_slice = matches!(b.samples, Samples::F32(t) if core::ptr::eq(t, s));
+            same_slice
+                && b.channels == 1
+                && (b.width, b.height) == (a.width, a.height)
+                && (m.pixel_stride, m.row_stride, m.channel_stride) == (l.pixel_stride, l.row_stride, l.channel_stride)
+                && m.offset == l.offset + c
+        };
+        (a.channels == 1 && interleaved && sibling(1) && sibling(2)).then_some(ImageView { channels: 3, ..*a })
+    }
+
     /// Channel `c` of row `y`, pixels `x0..x0 + len`, borrowed without a copy
     /// when the samples are f32 with pixel stride 1 (planar); `None` otherwise
     /// or when out of range (then use [`ImageView::read_row`]).

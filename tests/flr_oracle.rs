@@ -231,6 +231,47 @@ fn awkward_sizes() {
     }
 }
 
+/// Normals in an RGBA buffer and positions interleaved RGB (each read in one
+/// de-interleaving pass, `ImageView::merged3`), depth and AO between and after
+/// them: bit-identical to the same guides planar, at sizes with a partial
+/// right-edge block and an odd block row count.
+#[test]
+fn interleaved_triples_equal_planar() {
+    let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
+    for (w, h, b) in [(75, 41, 8), (64, 40, 16), (33, 17, 4)] {
+        let f = Owned::synthetic(w, h, 9, 0.5);
+        let c = cfg(set, b);
+        let n = w * h;
+        let mut normal4 = vec![0f32; 4 * n];
+        let (mut normal_p, mut position_p) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
+        for i in 0..n {
+            for ch in 0..3 {
+                normal4[4 * i + ch] = f.normal[3 * i + ch];
+                normal_p[ch * n + i] = f.normal[3 * i + ch];
+                position_p[ch * n + i] = f.position[3 * i + ch];
+            }
+        }
+        let noisy = ImageView::interleaved(&f.noisy, w, h, 3).unwrap();
+        let interleaved = Guides {
+            normal: Some(ImageView::f32(&normal4, w, h, 3, Layout::interleaved(w, 4)).unwrap()),
+            depth: Some(ImageView::interleaved(&f.depth, w, h, 1).unwrap()),
+            position: Some(ImageView::interleaved(&f.position, w, h, 3).unwrap()),
+            ao: Some(ImageView::interleaved(&f.ao, w, h, 1).unwrap()),
+            ..Default::default()
+        };
+        let pl = Layout::planar(w, h);
+        let planar = Guides {
+            normal: Some(ImageView::f32(&normal_p, w, h, 3, pl).unwrap()),
+            position: Some(ImageView::f32(&position_p, w, h, 3, pl).unwrap()),
+            ..interleaved
+        };
+        let (a, ra) = run_frame(c, w, h, &Frame::new(noisy, interleaved));
+        let (p, rp) = run_frame(c, w, h, &Frame::new(noisy, planar));
+        assert_eq!(ra, rp);
+        assert!(a.iter().zip(&p).all(|(x, y)| x.to_bits() == y.to_bits()), "{w}x{h} B{b}");
+    }
+}
+
 #[test]
 fn interleaved_planar_and_f16_agree() {
     let f = Owned::synthetic(40, 24, 4, 0.5);

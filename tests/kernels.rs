@@ -303,3 +303,41 @@ fn moments_in_place_whole_block_invalid() {
     assert_eq!((c.empty_blocks, c.nonfinite_noisy, c.nonfinite_guides), (2, 128, 128));
     assert!(cells.iter().all(|v| *v == 0.0));
 }
+
+/// `ImageView::merged3` joins exactly three consecutive channels of one
+/// interleaved f32 RGB/RGBA image (and reading the merged view equals reading
+/// each channel), and refuses everything else.
+#[test]
+fn merged3_joins_only_interleaved_siblings() {
+    let (w, h) = (9, 4);
+    let data: Vec<f32> = (0..4 * w * h + 1).map(|i| i as f32 * 0.25).collect();
+    for (ps, offset) in [(3, 0), (4, 0), (4, 1)] {
+        let v = ImageView::f32(&data, w, h, 3, Layout { offset, ..Layout::interleaved(w, ps) }).unwrap();
+        let ch = |c| v.channels(c, 1).unwrap();
+        let (c0, c1, c2) = (ch(0), ch(1), ch(2));
+        let m = ImageView::merged3([&c0, &c1, &c2]).expect("siblings");
+        assert_eq!(m.channel_count(), 3);
+        for y in 0..h {
+            let (mut a, mut b, mut c) = (vec![0f32; w - 2], vec![0f32; w - 2], vec![0f32; w - 2]);
+            m.read_row_n(y, 2, [&mut a, &mut b, &mut c]).unwrap();
+            for (k, row) in [a, b, c].iter().enumerate() {
+                assert!((0..w - 2).all(|i| row[i] == v.get(2 + i, y, k).unwrap()), "ps {ps} y {y} ch {k}");
+            }
+        }
+        assert!(ImageView::merged3([&c1, &c0, &c2]).is_none(), "order");
+        assert!(ImageView::merged3([&c0, &c1, &c1]).is_none(), "repeat");
+        let copy = data.clone();
+        let other = ImageView::f32(&copy, w, h, 3, Layout { offset, ..Layout::interleaved(w, ps) }).unwrap().channels(2, 1).unwrap();
+        assert!(ImageView::merged3([&c0, &c1, &other]).is_none(), "another buffer");
+        assert!(ImageView::merged3([&v, &c1, &c2]).is_none(), "a 3-channel view");
+    }
+    // planar channels are read in place, not merged
+    let p = ImageView::f32(&data[..3 * w * h], w, h, 3, Layout::planar(w, h)).unwrap();
+    let pc = |c| p.channels(c, 1).unwrap();
+    assert!(ImageView::merged3([&pc(0), &pc(1), &pc(2)]).is_none());
+    // f16 is not merged (its strided read converts per value)
+    let d16: Vec<half::f16> = data.iter().map(|x| half::f16::from_f32(*x)).collect();
+    let v16 = ImageView::f16(&d16, w, h, 3, Layout::interleaved(w, 3)).unwrap();
+    let hc = |c| v16.channels(c, 1).unwrap();
+    assert!(ImageView::merged3([&hc(0), &hc(1), &hc(2)]).is_none());
+}

@@ -547,13 +547,30 @@ impl Flr {
             frame.noisy.read_row_n(y0 + r, 0, [p0, p1, p2]).ok_or(bad)?;
         }
         let mut borrowed = [false; MAX_GUIDES];
-        for (g, dst) in gathered.chunks_exact_mut(bin * w).enumerate() {
-            let v = frame.fit[g].ok_or(Error::GuideMismatch)?;
-            borrowed[g] = v.row_f32(y0, 0, 0, w).is_some();
-            if !borrowed[g] {
-                for (r, row) in dst.chunks_exact_mut(w).enumerate() {
+        for (g, b) in borrowed.iter_mut().enumerate().take(q) {
+            *b = frame.fit[g].ok_or(Error::GuideMismatch)?.row_f32(y0, 0, 0, w).is_some();
+        }
+        let mut g = 0;
+        while g < q {
+            if borrowed[g] {
+                g += 1;
+                continue;
+            }
+            let band = &mut gathered[g * bin * w..];
+            if let Some(m) = merged3(&frame.fit, g, q) {
+                // interleaved RGB/RGBA channels g..g + 3: one de-interleaving pass
+                let (a, rest) = band.split_at_mut(bin * w);
+                let (b, c) = rest.split_at_mut(bin * w);
+                for ((a, b), (r, c)) in a.chunks_exact_mut(w).zip(b.chunks_exact_mut(w)).zip(c.chunks_exact_mut(w).enumerate()) {
+                    m.read_row_n(y0 + r, 0, [a, b, c]).ok_or(bad)?;
+                }
+                g += 3;
+            } else {
+                let v = frame.fit[g].ok_or(Error::GuideMismatch)?;
+                for (r, row) in band[..bin * w].chunks_exact_mut(w).enumerate() {
                     v.read_row(y0 + r, 0, 0, row).ok_or(bad)?;
                 }
+                g += 1;
             }
         }
         let mut band = BandRows { planes: [[&[][..]; 3 + MAX_GUIDES]; MAX_ROWS], rows: bin, width: w, reference: stats.reference };
@@ -962,19 +979,27 @@ impl Flr {
         let simd = self.kernel_simd();
         let bad = Error::InvalidTile { index: t, count: 0 };
         for y in y0..y1 {
-            // Guide rows: borrowed from planar f32 images, else gathered.
+            // Guide rows: borrowed from planar f32 images, else gathered
+            // (three interleaved channels in one pass).
             let mut rows: [&[f32]; MAX_GUIDES] = [&[]; MAX_GUIDES];
             let mut gathered = gbuf.chunks_exact_mut(w);
-            for (row, view) in rows.iter_mut().zip(&frame.map).take(self.q) {
-                let v = view.ok_or(Error::GuideMismatch)?;
+            let mut g = 0;
+            while g < self.q {
+                let v = frame.map[g].ok_or(Error::GuideMismatch)?;
                 let dst = gathered.next().ok_or(bad)?;
-                *row = match v.row_f32(y, 0, 0, w) {
-                    Some(r) => r,
-                    None => {
-                        v.read_row(y, 0, 0, dst).ok_or(bad)?;
-                        dst
-                    }
-                };
+                if let Some(r) = v.row_f32(y, 0, 0, w) {
+                    rows[g] = r;
+                    g += 1;
+                } else if let Some(m) = merged3(&frame.map, g, self.q) {
+                    let (b, c) = (gathered.next().ok_or(bad)?, gathered.next().ok_or(bad)?);
+                    m.read_row_n(y, 0, [&mut *dst, &mut *b, &mut *c]).ok_or(bad)?;
+                    (rows[g], rows[g + 1], rows[g + 2]) = (dst, b, c);
+                    g += 3;
+                } else {
+                    v.read_row(y, 0, 0, dst).ok_or(bad)?;
+                    rows[g] = dst;
+                    g += 1;
+                }
             }
             lerp_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y, row_models, row_slopes);
             let guides = RowGuides { rows, reference: stats.reference, width: w };
@@ -1089,6 +1114,16 @@ impl Flr {
         }
         Ok(rep)
     }
+}
+
+/// Guide channels `g..g + 3` of `views` as one view when they are three
+/// channels of one interleaved f32 image that is not planar ([`ImageView::merged3`]).
+fn merged3<'a>(views: &[Option<ImageView<'a>>; MAX_GUIDES], g: usize, q: usize) -> Option<ImageView<'a>> {
+    if g + 3 > q {
+        return None;
+    }
+    let (a, b, c) = (views[g].as_ref()?, views[g + 1].as_ref()?, views[g + 2].as_ref()?);
+    ImageView::merged3([a, b, c])
 }
 
 /// Each cell's variance estimate ([`adaptive::variance`]).
