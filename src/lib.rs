@@ -63,7 +63,7 @@ pub use bmfr::{Bmfr, BmfrConfig};
 pub use config::{Blur, FlrConfig, Kernel, Regularization};
 pub use error::{Arg, Error};
 #[cfg(feature = "flr")]
-pub use flr::{CheckedFrame, Flr, Parts, Report, Stats, StatsSums};
+pub use flr::{CheckedFrame, Flr, Parts, Report, ScratchLayout, Stats, StatsSums};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 pub use history::History;

@@ -83,9 +83,11 @@ typedef struct {
 
 static void *run_tiles(void *arg) {
     Job *j = (Job *)arg;
+    /* BLEND only does work with the adaptive window; it is cheap to always run it. */
     const uint32_t stages[] = {LRD_STAGE_PREPARE, LRD_STAGE_MOMENTS, LRD_STAGE_STATS,
-                               LRD_STAGE_BLUR_ROWS, LRD_STAGE_BLUR_COLS_SOLVE, LRD_STAGE_APPLY};
-    for (int s = 0; s < 6; s++) {
+                               LRD_STAGE_BLUR_ROWS, LRD_STAGE_BLUR_COLS_SOLVE,
+                               LRD_STAGE_BLEND, LRD_STAGE_APPLY};
+    for (int s = 0; s < (int)(sizeof stages / sizeof stages[0]); s++) {
         uint32_t st = stages[s];
         uint32_t n = (st == LRD_STAGE_PREPARE || st == LRD_STAGE_STATS) ? 1 : j->tiles;
         for (uint32_t t = j->worker; t < n; t += 2) {

@@ -131,6 +131,11 @@ enum LrdStage
    * `tile_count` tiles: apply the models to the output rows (uses a worker buffer).
    */
   LRD_STAGE_APPLY = 5,
+  /**
+   * `tile_count` tiles, after BLUR_COLS_SOLVE and before APPLY: blends the
+   * adaptive window's models (LRD_BLUR_ADAPTIVE); with one window it does nothing.
+   */
+  LRD_STAGE_BLEND = 6,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L
@@ -569,7 +574,7 @@ LrdStatus lrd_flr_tiled_scratch_size(const struct LrdFlrConfig *config,
                                      size_t *bytes);
 
 /**
- * Number of tiles of each tiled stage (MOMENTS, BLUR_ROWS, BLUR_COLS_SOLVE, APPLY).
+ * Number of tiles of each tiled stage (MOMENTS, BLUR_ROWS, BLUR_COLS_SOLVE, BLEND, APPLY).
  */
 LrdStatus lrd_flr_tile_count(const struct LrdFlrConfig *config,
                              uint32_t width,
@@ -596,7 +601,11 @@ LrdStatus lrd_flr_denoise(const struct LrdFlrConfig *config,
  * - every call of a frame passes the same config, frame, out, scratch (8-byte
  *   aligned, at least `lrd_flr_tiled_scratch_size(.., workers, ..)` bytes) and `workers`;
  * - stages run in order PREPARE, MOMENTS, STATS, BLUR_ROWS, BLUR_COLS_SOLVE,
- *   APPLY; every tile of a stage finishes before the next stage starts (a barrier);
+ *   BLEND, APPLY; every tile of a stage finishes before the next stage starts
+ *   (a barrier). BLEND matters only with the adaptive window
+ *   (LRD_BLUR_ADAPTIVE: each BLUR_ROWS / BLUR_COLS_SOLVE tile then does all
+ *   three windows of its rows); with one window it returns at once, and
+ *   skipping it is allowed;
  * - PREPARE and STATS have one tile (0); the others have `lrd_flr_tile_count` tiles;
  * - tiles of one stage may run concurrently if each concurrent call passes a
  *   different `worker` in [0, workers);

@@ -196,6 +196,9 @@ pub enum LrdStage {
     LRD_STAGE_BLUR_COLS_SOLVE = 4,
     /// `tile_count` tiles: apply the models to the output rows (uses a worker buffer).
     LRD_STAGE_APPLY = 5,
+    /// `tile_count` tiles, after BLUR_COLS_SOLVE and before APPLY: blends the
+    /// adaptive window's models (LRD_BLUR_ADAPTIVE); with one window it does nothing.
+    LRD_STAGE_BLEND = 6,
 }
 
 /// Feature bits returned by `lrd_features()`.
@@ -383,6 +386,19 @@ fn scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
     flr.scratch_len_for(workers).checked_mul(8).and_then(|b| b.checked_add(HEADER)).ok_or(LRD_STATUS_INVALID_ARGUMENT)
 }
 
+/// f64 values a tiled run needs beyond `Flr::scratch_len_for`: with the
+/// adaptive window, each window after the first gets its own horizontal-blur
+/// grid and blurred grid (`lrd_flr_denoise` reuses one of each, window after
+/// window; tiled stages run every window of a tile in one call).
+fn tiled_extra(flr: &Flr) -> usize {
+    (1..flr.scale_count()).map(|s| 2 * flr.window_grid_len(s)).sum()
+}
+
+fn tiled_scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
+    let extra = tiled_extra(flr).checked_mul(8).ok_or(LRD_STATUS_INVALID_ARGUMENT)?;
+    scratch_bytes(flr, workers)?.checked_add(extra).ok_or(LRD_STATUS_INVALID_ARGUMENT)
+}
+
 fn write_report(report: *mut LrdReport, r: Report) {
     // SAFETY: NULL is allowed; otherwise the caller passes a valid, exclusive pointer.
     if let Some(out) = unsafe { report.as_mut() } {
@@ -470,14 +486,14 @@ pub unsafe extern "C" fn lrd_flr_tiled_scratch_size(
         if workers == 0 {
             return Err(LRD_STATUS_INVALID_ARGUMENT);
         }
-        let b = scratch_bytes(&flr, workers as usize)?;
+        let b = tiled_scratch_bytes(&flr, workers as usize)?;
         // SAFETY: checked for NULL; caller passes a valid pointer.
         *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
         Ok(())
     })
 }
 
-/// Number of tiles of each tiled stage (MOMENTS, BLUR_ROWS, BLUR_COLS_SOLVE, APPLY).
+/// Number of tiles of each tiled stage (MOMENTS, BLUR_ROWS, BLUR_COLS_SOLVE, BLEND, APPLY).
 #[no_mangle]
 pub unsafe extern "C" fn lrd_flr_tile_count(config: *const LrdFlrConfig, width: u32, height: u32, count: *mut u32) -> LrdStatus {
     guard(|| {
@@ -490,45 +506,74 @@ pub unsafe extern "C" fn lrd_flr_tile_count(config: *const LrdFlrConfig, width: 
 
 /// The scratch buffer split for one call. Regions are built only for what the
 /// stage touches, so concurrent calls never hold overlapping mutable slices.
+/// The regions are `Flr::scratch_layout`'s (after the stats header), then,
+/// with the adaptive window, each later window's horizontal-blur and blurred
+/// grids ([`tiled_extra`]).
 struct Raw {
     stats: *mut lrdenoise_core::Stats,
-    cells: *mut f64,
-    tmp: *mut f64,
-    models: *mut f32,
-    workers: *mut f32,
+    base: *mut f64,
+    layout: lrdenoise_core::ScratchLayout,
+    /// Window `s ≥ 1`'s horizontal-blur grid starts at `extra[2 s − 2]`, its
+    /// blurred grid at `extra[2 s − 1]` (f64 offsets from `base`).
+    extra: [usize; 2 * (lrdenoise_core::flr::MAX_SCALES - 1)],
+}
+
+impl Raw {
+    /// `len` f64 at `offset` of the scratch, shared.
+    ///
+    /// # Safety
+    /// `offset + len` is inside the scratch and nothing writes it meanwhile.
+    unsafe fn f64s(&self, offset: usize, len: usize) -> &[f64] {
+        // SAFETY: the caller's contract.
+        unsafe { core::slice::from_raw_parts(self.base.add(offset), len) }
+    }
+    /// `len` f64 at `offset`, exclusively this call's.
+    ///
+    /// # Safety
+    /// `offset + len` is inside the scratch and no other call touches it meanwhile.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn f64s_mut(&self, offset: usize, len: usize) -> &mut [f64] {
+        // SAFETY: the caller's contract.
+        unsafe { core::slice::from_raw_parts_mut(self.base.add(offset), len) }
+    }
+    /// `len` f32 starting `index` f32 into the f64 region that starts at `region`.
+    ///
+    /// # Safety
+    /// As for [`Raw::f64s`].
+    unsafe fn f32s(&self, region: usize, index: usize, len: usize) -> &[f32] {
+        // SAFETY: the caller's contract.
+        unsafe { core::slice::from_raw_parts((self.base.add(region) as *const f32).add(index), len) }
+    }
+    /// # Safety
+    /// As for [`Raw::f64s_mut`].
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn f32s_mut(&self, region: usize, index: usize, len: usize) -> &mut [f32] {
+        // SAFETY: the caller's contract.
+        unsafe { core::slice::from_raw_parts_mut((self.base.add(region) as *mut f32).add(index), len) }
+    }
 }
 
 fn split_raw(flr: &Flr, scratch: *mut c_void, bytes: usize, workers: usize) -> Result<Raw, LrdStatus> {
-    if flr.scale_count() > 1 {
-        return Err(LRD_STATUS_UNSUPPORTED); // the adaptive window: lrd_flr_denoise only
-    }
     if scratch.is_null() {
         return Err(LRD_STATUS_NULL_POINTER);
     }
     if (scratch as usize) % 8 != 0 {
         return Err(LRD_STATUS_INVALID_ARGUMENT);
     }
-    if bytes < scratch_bytes(flr, workers)? {
+    if bytes < tiled_scratch_bytes(flr, workers)? {
         return Err(LRD_STATUS_BUFFER_TOO_SMALL);
     }
-    let (cx, cy) = flr.cells();
-    let k = lrdenoise_core::kernels::moment_count(flr.guide_channels());
-    let ml = lrdenoise_core::kernels::model_len(flr.guide_channels());
-    let grid = cx * cy * k;
-    let models = (cx * cy * ml).div_ceil(2);
-    let base = scratch as *mut u8;
-    // SAFETY: all offsets are inside the buffer (size checked above against the
-    // same layout as `Flr::split_scratch`: header, cells, tmp, models, workers).
-    unsafe {
-        let f = base.add(HEADER) as *mut f64;
-        Ok(Raw {
-            stats: base as *mut lrdenoise_core::Stats,
-            cells: f,
-            tmp: f.add(grid),
-            models: f.add(2 * grid) as *mut f32,
-            workers: f.add(2 * grid + models) as *mut f32,
-        })
+    let layout = flr.scratch_layout(workers);
+    let mut extra = [0; 2 * (lrdenoise_core::flr::MAX_SCALES - 1)];
+    let mut at = flr.scratch_len_for(workers);
+    for s in 1..flr.scale_count() {
+        extra[2 * s - 2] = at;
+        extra[2 * s - 1] = at + flr.window_grid_len(s);
+        at += 2 * flr.window_grid_len(s);
     }
+    let base = scratch as *mut u8;
+    // SAFETY: HEADER < bytes (checked above), so both pointers are inside the buffer.
+    Ok(unsafe { Raw { stats: base as *mut lrdenoise_core::Stats, base: base.add(HEADER) as *mut f64, layout, extra } })
 }
 
 /// Denoises one frame on the calling thread. `out` (3 channels) sets the
@@ -577,7 +622,11 @@ pub unsafe extern "C" fn lrd_flr_denoise(
 /// - every call of a frame passes the same config, frame, out, scratch (8-byte
 ///   aligned, at least `lrd_flr_tiled_scratch_size(.., workers, ..)` bytes) and `workers`;
 /// - stages run in order PREPARE, MOMENTS, STATS, BLUR_ROWS, BLUR_COLS_SOLVE,
-///   APPLY; every tile of a stage finishes before the next stage starts (a barrier);
+///   BLEND, APPLY; every tile of a stage finishes before the next stage starts
+///   (a barrier). BLEND matters only with the adaptive window
+///   (LRD_BLUR_ADAPTIVE: each BLUR_ROWS / BLUR_COLS_SOLVE tile then does all
+///   three windows of its rows); with one window it returns at once, and
+///   skipping it is allowed;
 /// - PREPARE and STATS have one tile (0); the others have `lrd_flr_tile_count` tiles;
 /// - tiles of one stage may run concurrently if each concurrent call passes a
 ///   different `worker` in [0, workers);
@@ -610,26 +659,32 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
         let raw = split_raw(&flr, scratch, scratch_bytes, workers)?;
         let nt = flr.tile_count();
         let single = matches!(stage, 0 | 2);
-        if stage > 5 || (single && tile != 0) || (!single && tile >= nt) {
+        if stage > 6 || (single && tile != 0) || (!single && tile >= nt) {
             return Err(LRD_STATUS_INVALID_TILE);
         }
         let (cx, cy) = flr.cells();
-        let k = lrdenoise_core::kernels::moment_count(flr.guide_channels());
         let ml = lrdenoise_core::kernels::model_len(flr.guide_channels());
-        let grid = cx * cy * k;
-        let off = |t: usize| flr.cells_tile_range(t).map(|r| r.start).map_err(status_of);
-        let moff = |t: usize| flr.models_tile_range(t).map(|r| r.start).map_err(status_of);
-        // SAFETY: the images satisfy the LrdImage contract (caller). Scratch regions
-        // are inside the buffer (size checked by split_raw). Under the documented
-        // rules, the mutable slices built here (this tile's cells/tmp/models band,
-        // this worker's buffer, the stats header in single-tile stages, this tile's
-        // output rows) are not accessed by any concurrent call, and the shared
-        // slices are only read during this stage.
+        let windows = flr.scale_count();
+        let l = &raw.layout;
+        let st = status_of;
+        // SAFETY: the images satisfy the LrdImage contract (caller). Every region
+        // is inside the buffer (split_raw checked its size against this layout).
+        // Under the documented rules, the mutable slices built here (this tile's
+        // bands of cells/pooled/tmp/first/blurred/models/scale models/variances,
+        // this worker's buffer, the stats header in single-tile stages, this
+        // tile's output rows) are not accessed by any concurrent call, and the
+        // shared slices are only read during this stage.
         let rep = unsafe {
             let f = frame_views(frame, true)?;
-            let cf = flr.check_frame(&f).map_err(status_of)?;
+            let cf = flr.check_frame(&f).map_err(st)?;
             let wl = flr.worker_len();
-            let worker_buf = || core::slice::from_raw_parts_mut(raw.workers.add(worker * wl), wl);
+            let worker_buf = || raw.f32s_mut(l.workers.start, worker * wl, wl);
+            let band = |region: usize, r: core::ops::Range<usize>| raw.f64s_mut(region + r.start, r.len());
+            // window s's moment grid source (cells or pooled), its horizontal-blur
+            // grid and its blurred grid (offsets)
+            let src = |s: usize| if flr.window_pooled(s) { l.pooled.start } else { l.cells.start };
+            let tmp = |s: usize| if s == 0 { l.tmp.start } else { raw.extra[2 * s - 2] };
+            let blurred = |s: usize| if s == 0 { l.first.start } else { raw.extra[2 * s - 1] };
             match stage {
                 0 => {
                     raw.stats.write(flr.prepare(&cf));
@@ -637,39 +692,72 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
                 }
                 1 => {
                     let stats = raw.stats.read();
-                    let cells = core::slice::from_raw_parts_mut(raw.cells.add(off(tile)?), flr.cells_tile_len(tile).map_err(status_of)?);
-                    flr.moments_tile(&cf, &stats, tile, cells, worker_buf()).map_err(status_of)?
+                    let c = flr.cells_tile_range(tile).map_err(st)?;
+                    let cells = band(l.cells.start, c.clone());
+                    let rep = flr.moments_tile(&cf, &stats, tile, cells, worker_buf()).map_err(st)?;
+                    if let Some(s) = flr.pooled_window() {
+                        let p = flr.window_cells_tile_range(s, tile).map_err(st)?;
+                        flr.pool_tile(tile, cells, band(l.pooled.start, p)).map_err(st)?;
+                    }
+                    rep
                 }
                 2 => {
                     let mut stats = raw.stats.read();
-                    flr.finish_stats(core::slice::from_raw_parts(raw.cells, grid), &mut stats).map_err(status_of)?;
+                    flr.finish_stats(raw.f64s(l.cells.start, l.cells.len()), &mut stats).map_err(st)?;
                     raw.stats.write(stats);
                     Report::default()
                 }
                 3 => {
-                    let cells = core::slice::from_raw_parts(raw.cells, grid);
-                    let tmp = core::slice::from_raw_parts_mut(raw.tmp.add(off(tile)?), flr.cells_tile_len(tile).map_err(status_of)?);
-                    flr.blur_rows_tile(tile, cells, tmp).map_err(status_of)?;
+                    for s in 0..windows {
+                        let grid = raw.f64s(src(s), flr.window_grid_len(s));
+                        let out = band(tmp(s), flr.window_cells_tile_range(s, tile).map_err(st)?);
+                        flr.blur_rows_tile_at(s, tile, grid, out).map_err(st)?;
+                    }
                     Report::default()
+                }
+                4 if windows == 1 => {
+                    let stats = raw.stats.read();
+                    let c = flr.cells_tile_range(tile).map_err(st)?;
+                    let cells = band(l.cells.start, c);
+                    let m = flr.models_tile_range(tile).map_err(st)?;
+                    let models = raw.f32s_mut(l.models.start, m.start, m.len());
+                    flr.blur_cols_tile(tile, raw.f64s(l.tmp.start, l.tmp.len()), cells).map_err(st)?;
+                    flr.solve_tile(&stats, tile, cells, models).map_err(st)?
                 }
                 4 => {
                     let stats = raw.stats.read();
-                    let tmp = core::slice::from_raw_parts(raw.tmp, grid);
-                    let cells = core::slice::from_raw_parts_mut(raw.cells.add(off(tile)?), flr.cells_tile_len(tile).map_err(status_of)?);
-                    let models =
-                        core::slice::from_raw_parts_mut(raw.models.add(moff(tile)?), flr.models_tile_len(tile).map_err(status_of)?);
-                    flr.blur_cols_tile(tile, tmp, cells).map_err(status_of)?;
-                    flr.solve_tile(&stats, tile, cells, models).map_err(status_of)?
+                    let mut rep = Report::default();
+                    for s in 0..windows {
+                        let out = band(blurred(s), flr.window_cells_tile_range(s, tile).map_err(st)?);
+                        flr.blur_cols_tiles_at(s, tile..tile + 1, raw.f64s(tmp(s), flr.window_grid_len(s)), out).map_err(st)?;
+                        let m = flr.scale_models_tile_range(s, tile).map_err(st)?;
+                        let v = flr.scale_variances_tile_range(s, tile).map_err(st)?;
+                        let (models, variances) = (raw.f32s_mut(l.scale_models.start, m.start, m.len()), band(l.variances.start, v));
+                        rep += flr.solve_tile_at(s, &stats, tile, out, models, variances).map_err(st)?;
+                    }
+                    rep
+                }
+                6 if windows == 1 => Report::default(),
+                6 => {
+                    let first =
+                        raw.f64s(l.first.start + flr.cells_tile_range(tile).map_err(st)?.start, flr.cells_tile_len(tile).map_err(st)?);
+                    let nm = flr.scale_models_tile_range(windows - 1, nt - 1).map_err(st)?.end;
+                    let nv = flr.scale_variances_tile_range(windows - 1, nt - 1).map_err(st)?.end;
+                    let m = flr.models_tile_range(tile).map_err(st)?;
+                    let models = raw.f32s_mut(l.models.start, m.start, m.len());
+                    flr.blend_tile(tile, first, raw.f32s(l.scale_models.start, 0, nm), raw.f64s(l.variances.start, nv), models)
+                        .map_err(st)?;
+                    Report::default()
                 }
                 _ => {
                     let stats = raw.stats.read();
-                    let models = core::slice::from_raw_parts(raw.models, cx * cy * ml);
-                    let (y0, y1) = flr.tile_pixel_rows(tile).map_err(status_of)?;
+                    let models = raw.f32s(l.models.start, 0, cx * cy * ml);
+                    let (y0, y1) = flr.tile_pixel_rows(tile).map_err(st)?;
                     let mut band = view_mut(out, y0, y1 - y0)?;
                     if !band.rows_are_separable() {
                         return Err(LRD_STATUS_UNSUPPORTED);
                     }
-                    flr.apply_tile(&cf, &stats, tile, models, worker_buf(), &mut band).map_err(status_of)?
+                    flr.apply_tile(&cf, &stats, tile, models, worker_buf(), &mut band).map_err(st)?
                 }
             }
         };

@@ -94,7 +94,7 @@ fn entry_points_validate_everything() {
         // tiles: bad stage / tile / worker
         let mut tb = 0;
         assert_eq!(lrd_flr_tiled_scratch_size(&cfg, w, h, 1, &mut tb), LrdStatus::LRD_STATUS_OK);
-        for (stage, tile, worker) in [(6, 0, 0), (0, 1, 0), (1, 99, 0), (1, 0, 1)] {
+        for (stage, tile, worker) in [(7, 0, 0), (0, 1, 0), (1, 99, 0), (1, 0, 1), (6, 99, 0)] {
             assert_eq!(lrd_flr_run_tile(&cfg, &frame, &o, sp, tb, 1, stage, tile, worker, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         }
         // f16 noisy + planar f32 output give the same result as f32 interleaved
@@ -382,32 +382,59 @@ fn walr_matches_the_rust_api() {
 }
 
 /// LRD_BLUR_ADAPTIVE runs through lrd_flr_denoise (same output as the Rust
-/// API); the tiled entry point refuses it.
+/// API) and through the tiled stages (BLEND included; tiles in reverse order
+/// on two alternating workers), bit-identical, with and without pooled windows.
 #[test]
-fn adaptive_window_whole_frame_only() {
+fn adaptive_window_whole_frame_and_tiled() {
+    // σ 6/12/20 px at B = 8: windows 1 and 2 on the pooled grid; 3/6/10: none pooled
+    for (w, h, sigmas) in [(101u32, 75u32, [6.0, 12.0, 20.0]), (45, 33, [3.0, 6.0, 10.0])] {
+        adaptive_case(w, h, sigmas);
+    }
+}
+
+fn adaptive_case(w: u32, h: u32, sigmas: [f32; 3]) {
     use lrdenoise_core::{Blur, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut};
-    let (w, h) = (45u32, 33u32);
     let n = (w * h) as usize;
     let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 13) as f32 * 0.1).collect();
     let depth = depth_ramp(w, h);
     let mut cfg = lrd_flr_config_default();
     cfg.guides = LRD_GUIDE_DEPTH;
     cfg.blur = LrdBlur::LRD_BLUR_ADAPTIVE as u32;
-    cfg.sigmas = [3.0, 6.0, 10.0];
+    cfg.sigmas = sigmas;
     let frame = depth_frame(&noisy, &depth, w, h);
     let mut out = vec![0f32; 3 * n];
     let o = packed_out(&mut out, w, h);
     let (mut scratch, bytes) = flr_scratch(&cfg, w, h);
+    let mut tiled = vec![0f32; 3 * n];
+    let ot = packed_out(&mut tiled, w, h);
+    let mut tb = 0;
+    assert_eq!(unsafe { lrd_flr_tiled_scratch_size(&cfg, w, h, 2, &mut tb) }, LrdStatus::LRD_STATUS_OK);
+    assert!(tb > bytes, "the tiled run keeps every window's grids");
+    let mut tscratch = vec![0f64; tb / 8];
+    let mut nt = 0u32;
+    assert_eq!(unsafe { lrd_flr_tile_count(&cfg, w, h, &mut nt) }, LrdStatus::LRD_STATUS_OK);
+    assert!(nt >= 2, "several tiles");
     unsafe {
         let sp = scratch.as_mut_ptr() as *mut _;
         assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_OK);
-        let st = lrd_flr_run_tile(&cfg, &frame, &o, sp, bytes, 1, 0, 0, 0, null_mut());
-        assert_eq!(st, LrdStatus::LRD_STATUS_UNSUPPORTED);
-        cfg.sigmas = [6.0, 3.0, 10.0];
+        let tp = tscratch.as_mut_ptr() as *mut _;
+        assert_eq!(lrd_flr_run_tile(&cfg, &frame, &ot, tp, tb - 8, 2, 0, 0, 0, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
+        let (mut r_whole, mut r_tiled) = (LrdReport::default(), LrdReport::default());
+        assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, &mut r_whole), LrdStatus::LRD_STATUS_OK);
+        for stage in [0u32, 1, 2, 3, 4, 6, 5] {
+            let tiles = if stage == 0 || stage == 2 { 1 } else { nt };
+            for t in (0..tiles).rev() {
+                let st = lrd_flr_run_tile(&cfg, &frame, &ot, tp, tb, 2, stage, t, t % 2, &mut r_tiled);
+                assert_eq!(st, LrdStatus::LRD_STATUS_OK, "stage {stage} tile {t}");
+            }
+        }
+        assert_eq!(format!("{r_whole:?}"), format!("{r_tiled:?}"));
+        cfg.sigmas = [sigmas[1], sigmas[0], sigmas[2]];
         assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
     }
+    assert!(out.iter().zip(&tiled).all(|(a, b)| a.to_bits() == b.to_bits()), "{w}x{h} tiled != whole");
     let set = GuideSet { depth: true, ..GuideSet::NONE };
-    let c = FlrConfig { blur: Blur::Adaptive { sigmas: [3.0, 6.0, 10.0] }, ..FlrConfig::with_guides(set) };
+    let c = FlrConfig { blur: Blur::Adaptive { sigmas }, ..FlrConfig::with_guides(set) };
     let flr = Flr::new(c, w as usize, h as usize).unwrap();
     let guides = Guides { depth: Some(ImageView::interleaved(&depth, w as usize, h as usize, 1).unwrap()), ..Guides::default() };
     let f = Frame::new(ImageView::interleaved(&noisy, w as usize, h as usize, 3).unwrap(), guides);

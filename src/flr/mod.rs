@@ -190,6 +190,20 @@ pub struct Parts<'s> {
     pub variances: &'s mut [f64],
 }
 
+/// [`Flr::scratch_layout`]: each region's f64 range in the scratch.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ScratchLayout {
+    pub cells: core::ops::Range<usize>,
+    pub tmp: core::ops::Range<usize>,
+    pub models: core::ops::Range<usize>,
+    pub workers: core::ops::Range<usize>,
+    pub first: core::ops::Range<usize>,
+    pub blurred: core::ops::Range<usize>,
+    pub pooled: core::ops::Range<usize>,
+    pub scale_models: core::ops::Range<usize>,
+    pub variances: core::ops::Range<usize>,
+}
+
 /// Fast Local Regression for one frame size and configuration.
 #[derive(Clone, Copy, Debug)]
 pub struct Flr {
@@ -359,8 +373,11 @@ impl Flr {
         let row = self.grids[s].cells_x * self.lay.k;
         Ok(a * row..b * row)
     }
-    /// f64 values of window `s`'s moment grid.
-    fn window_grid_len(&self, s: usize) -> usize {
+    /// f64 values of window `s`'s moment grid (0 past the last window).
+    pub fn window_grid_len(&self, s: usize) -> usize {
+        if s >= self.scale_count() {
+            return 0;
+        }
         self.grids[s].cell_count() * self.lay.k
     }
     /// Where tile `t` of window `s` lies in `scale_models` (windows one after another).
@@ -417,26 +434,49 @@ impl Flr {
         self.scratch_len_for(1)
     }
 
+    /// Where each region of a `scratch_len_for(workers)` scratch lies, in f64
+    /// elements ([`Flr::split_scratch`]'s layout; the f32 regions `models`,
+    /// `workers` and `scale_models` are packed two per f64). For callers that
+    /// hand regions to concurrent workers through raw pointers (the C API).
+    pub fn scratch_layout(&self, workers: usize) -> ScratchLayout {
+        let mut at = 0;
+        let mut next = |len: usize| {
+            let r = at..at + len;
+            at += len;
+            r
+        };
+        let cells = next(self.grid_len());
+        let tmp = next(self.grid_len());
+        let models = next(self.models_len().div_ceil(2));
+        let workers = next((workers.max(1) * self.worker_len()).div_ceil(2));
+        let [nf, nb, np, nm, nv] = self.adaptive_lens();
+        let first = next(nf);
+        let blurred = next(nb);
+        let pooled = next(np);
+        let scale_models = next(nm.div_ceil(2));
+        let variances = next(nv);
+        ScratchLayout { cells, tmp, models, workers, first, blurred, pooled, scale_models, variances }
+    }
+
     /// Splits `scratch` (at least `scratch_len_for(workers)` long) into its regions.
     pub fn split_scratch<'s>(&self, scratch: &'s mut [f64], workers: usize) -> Result<Parts<'s>, Error> {
         let needed = self.scratch_len_for(workers);
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let (cells, rest) = scratch.split_at_mut(self.grid_len());
-        let (tmp, rest) = rest.split_at_mut(self.grid_len());
-        let (models, rest) = rest.split_at_mut(self.models_len().div_ceil(2));
+        let l = self.scratch_layout(workers);
+        let (cells, rest) = scratch.split_at_mut(l.cells.len());
+        let (tmp, rest) = rest.split_at_mut(l.tmp.len());
+        let (models, rest) = rest.split_at_mut(l.models.len());
         let models = &mut bytemuck::cast_slice_mut::<f64, f32>(models)[..self.models_len()];
-        let wl = workers.max(1) * self.worker_len();
-        let (workers, rest) = rest.split_at_mut(wl.div_ceil(2));
-        let workers = &mut bytemuck::cast_slice_mut::<f64, f32>(workers)[..wl];
-        let [nf, nb, np, nm, nv] = self.adaptive_lens();
-        let (first, rest) = rest.split_at_mut(nf);
-        let (blurred, rest) = rest.split_at_mut(nb);
-        let (pooled, rest) = rest.split_at_mut(np);
-        let (scale_models, rest) = rest.split_at_mut(nm.div_ceil(2));
-        let scale_models = &mut bytemuck::cast_slice_mut::<f64, f32>(scale_models)[..nm];
-        let variances = &mut rest[..nv];
+        let (workers_buf, rest) = rest.split_at_mut(l.workers.len());
+        let workers = &mut bytemuck::cast_slice_mut::<f64, f32>(workers_buf)[..workers.max(1) * self.worker_len()];
+        let (first, rest) = rest.split_at_mut(l.first.len());
+        let (blurred, rest) = rest.split_at_mut(l.blurred.len());
+        let (pooled, rest) = rest.split_at_mut(l.pooled.len());
+        let (scale_models, rest) = rest.split_at_mut(l.scale_models.len());
+        let scale_models = &mut bytemuck::cast_slice_mut::<f64, f32>(scale_models)[..self.adaptive_lens()[3]];
+        let variances = &mut rest[..l.variances.len()];
         Ok(Parts { cells, tmp, models, workers, first, blurred, pooled, scale_models, variances })
     }
 
