@@ -1067,13 +1067,16 @@ impl Flr {
         let mut rep = Report::default();
         let tiles = self.tile_count();
         let single = self.scale_count() == 1;
-        // One window: the vertical blur of tile u needs the horizontally
-        // blurred rows up to `radius` cell rows below it, i.e. tile u + lag.
-        // It runs as soon as those exist, while they are still in cache, and
-        // overwrites the band's raw moments, whose stats were taken first.
+        // Window 0 (the only one, or the adaptive window's smallest, always on
+        // the block grid): its vertical blur of tile u needs the horizontally
+        // blurred rows up to `radius` cell rows below it, i.e. tile u + lag. It
+        // runs as soon as those exist, while they are still in cache: over the
+        // band's raw moments with one window (their stats were taken first),
+        // into `first` with the adaptive window (whose other windows still
+        // read the raw moments).
         let lag = self.taps[0].radius.div_ceil(TILE_CELL_ROWS);
         let mut sums = StatsSums::default();
-        for t in 0..tiles + if single { lag } else { 0 } {
+        for t in 0..tiles + lag {
             if t < tiles {
                 let c = self.cells_tile_range(t)?;
                 rep += self.moments_tile(&f, &stats, t, &mut parts.cells[c.clone()], parts.workers)?;
@@ -1082,14 +1085,14 @@ impl Flr {
                     // Pool while the band is in cache.
                     self.pool_tile(t, &parts.cells[c.clone()], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
                 }
-                if single {
-                    // The horizontal blur reads only its own band.
-                    self.blur_rows_tile(t, parts.cells, &mut parts.tmp[c])?;
-                }
+                // The horizontal blur reads only its own band.
+                self.blur_rows_tile(t, parts.cells, &mut parts.tmp[c])?;
             }
-            if single && t >= lag {
+            if t >= lag {
                 let u = t - lag;
-                self.blur_cols_tiles(u..u + 1, parts.tmp, &mut parts.cells[self.cells_tile_range(u)?])?;
+                let c = self.cells_tile_range(u)?;
+                let dst = if single { &mut parts.cells[c] } else { &mut parts.first[c] };
+                self.blur_cols_tiles(u..u + 1, parts.tmp, dst)?;
             }
         }
         self.finish_stats_sums(&sums, &mut stats);
@@ -1133,19 +1136,24 @@ impl Flr {
         self.apply_tile(f, stats, t, models, worker, &mut out.rows(y0, y1 - y0)?)
     }
 
-    /// Adaptive window, on the calling thread: blur and solve every window.
+    /// Adaptive window, on the calling thread: blur and solve every window
+    /// (window 0 arrives blurred in `first`, see [`Flr::denoise`]).
     fn fit_windows(&self, stats: &Stats, parts: &mut Parts<'_>) -> Result<Report, Error> {
         let tiles = self.tile_count();
         let mut rep = Report::default();
         for s in 0..self.scale_count() {
             let n = self.window_grid_len(s);
-            let src: &[f64] = if self.window_pooled(s) { parts.pooled } else { parts.cells };
-            let tmp = &mut parts.tmp[..n];
-            for t in 0..tiles {
-                self.blur_rows_tile_at(s, t, src, &mut tmp[self.window_cells_tile_range(s, t)?])?;
-            }
-            let dst = if s == 0 { &mut *parts.first } else { &mut parts.blurred[..n] };
-            self.blur_cols_tiles_at(s, 0..tiles, tmp, dst)?;
+            let dst = if s == 0 {
+                &mut *parts.first
+            } else {
+                let src: &[f64] = if self.window_pooled(s) { parts.pooled } else { parts.cells };
+                let tmp = &mut parts.tmp[..n];
+                for t in 0..tiles {
+                    self.blur_rows_tile_at(s, t, src, &mut tmp[self.window_cells_tile_range(s, t)?])?;
+                }
+                self.blur_cols_tiles_at(s, 0..tiles, tmp, &mut parts.blurred[..n])?;
+                &mut parts.blurred[..n]
+            };
             for t in 0..tiles {
                 let c = self.window_cells_tile_range(s, t)?;
                 let (m, v) = (self.scale_models_tile_range(s, t)?, self.scale_variances_tile_range(s, t)?);
