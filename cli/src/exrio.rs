@@ -39,6 +39,12 @@ pub struct ExrFrame {
 /// 16K×16K with one channel or 8K×4K with 8 channels.
 pub const MAX_SAMPLES: usize = 1 << 28;
 
+/// Most bytes of samples a file may declare per byte of file. Deflate (ZIP)
+/// cannot exceed ~1032:1, RLE 64:1, PIZ, PXR24 and B44 less; 2^16 leaves
+/// room for any codec on flat images. A tiny file declaring hundreds of MB
+/// (a corrupt or hostile header) is refused before the decoder allocates them.
+pub const MAX_EXPANSION: usize = 1 << 16;
+
 const ORDER: [&str; 8] = ["R", "G", "B", "X", "Y", "Z", "A", "W"];
 
 fn comp_rank(c: &str) -> usize {
@@ -62,6 +68,7 @@ impl ExrFrame {
         // allocated (a corrupt or hostile header must not exhaust memory).
         let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
             .map_err(|e| format!("{name}: not a readable OpenEXR file ({e})"))?;
+        let mut declared_bytes = 0usize;
         for h in meta.headers.iter() {
             let samples = h.layer_size.0.checked_mul(h.layer_size.1).and_then(|n| n.checked_mul(h.channels.list.len().max(1)));
             if samples.is_none_or(|n| n > MAX_SAMPLES) {
@@ -72,6 +79,16 @@ impl ExrFrame {
                     h.channels.list.len()
                 ));
             }
+            let pixels = h.layer_size.0 * h.layer_size.1;
+            for c in h.channels.list.iter() {
+                declared_bytes = declared_bytes.saturating_add(pixels.saturating_mul(c.sample_type.bytes_per_sample()));
+            }
+        }
+        if declared_bytes > bytes.len().saturating_mul(MAX_EXPANSION).max(1 << 20) {
+            return Err(format!(
+                "{name}: the header declares {declared_bytes} bytes of samples, more than a {}-byte file can hold",
+                bytes.len()
+            ));
         }
         let img = read()
             .no_deep_data()

@@ -13,3 +13,14 @@ fn fuzz_regressions_read_cleanly() {
     }
     assert!(n >= 1);
 }
+
+/// A 722-byte file whose header declares ~400 MB of samples (it made the
+/// decoder allocate them and the fuzz run exceed its memory limit) is refused
+/// from its header, before any sample memory is allocated.
+#[test]
+fn tiny_file_declaring_a_huge_image_is_refused_early() {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/regressions/exr_tiny_file_huge_window.exr");
+    let bytes = std::fs::read(&p).unwrap();
+    let e = lrdenoise_cli::exrio::ExrFrame::read_bytes(&bytes, "tiny.exr").unwrap_err();
+    assert!(e.contains("bytes of samples"), "{e}");
+}
