@@ -119,8 +119,8 @@ pub const LRD_GUIDE_AO: u32 = 8;
 pub enum LrdBlur {
     LRD_BLUR_GAUSSIAN = 0,
     LRD_BLUR_BOX = 1,
-    /// Three Gaussian windows (`sigmas`) blended per cell; `lrd_flr_denoise`
-    /// only (the tiled API returns LRD_STATUS_UNSUPPORTED).
+    /// Three Gaussian windows (`sigmas`) blended per cell; whole frame or
+    /// tiled (the tiled run then needs LRD_STAGE_BLEND).
     LRD_BLUR_ADAPTIVE = 2,
 }
 
