@@ -388,10 +388,12 @@ fn scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
 
 /// f64 values a tiled run needs beyond `Flr::scratch_len_for`: with the
 /// adaptive window, each window after the first gets its own horizontal-blur
-/// grid and blurred grid (`lrd_flr_denoise` reuses one of each, window after
-/// window; tiled stages run every window of a tile in one call).
+/// grid, and each after the second its own blurred grid (window 1 uses the
+/// layout's `blurred`). `lrd_flr_denoise` reuses one of each, window after
+/// window; tiled stages run every window of a tile in one call.
 fn tiled_extra(flr: &Flr) -> usize {
-    (1..flr.scale_count()).map(|s| 2 * flr.window_grid_len(s)).sum()
+    let n = flr.scale_count();
+    (1..n).chain(2..n).map(|s| flr.window_grid_len(s)).sum()
 }
 
 fn tiled_scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
@@ -507,15 +509,17 @@ pub unsafe extern "C" fn lrd_flr_tile_count(config: *const LrdFlrConfig, width: 
 /// The scratch buffer split for one call. Regions are built only for what the
 /// stage touches, so concurrent calls never hold overlapping mutable slices.
 /// The regions are `Flr::scratch_layout`'s (after the stats header), then,
-/// with the adaptive window, each later window's horizontal-blur and blurred
-/// grids ([`tiled_extra`]).
+/// with the adaptive window, the later windows' horizontal-blur grids and
+/// blurred grids ([`tiled_extra`]).
 struct Raw {
     stats: *mut lrdenoise_core::Stats,
     base: *mut f64,
     layout: lrdenoise_core::ScratchLayout,
-    /// Window `s ≥ 1`'s horizontal-blur grid starts at `extra[2 s − 2]`, its
-    /// blurred grid at `extra[2 s − 1]` (f64 offsets from `base`).
-    extra: [usize; 2 * (lrdenoise_core::flr::MAX_SCALES - 1)],
+    /// Window `s`'s horizontal-blur grid (f64 offset from `base`; the
+    /// layout's `tmp` for window 0).
+    tmp: [usize; lrdenoise_core::flr::MAX_SCALES],
+    /// Window `s`'s blurred grid (`first` for window 0, `blurred` for window 1).
+    blurred: [usize; lrdenoise_core::flr::MAX_SCALES],
 }
 
 impl Raw {
@@ -564,16 +568,24 @@ fn split_raw(flr: &Flr, scratch: *mut c_void, bytes: usize, workers: usize) -> R
         return Err(LRD_STATUS_BUFFER_TOO_SMALL);
     }
     let layout = flr.scratch_layout(workers);
-    let mut extra = [0; 2 * (lrdenoise_core::flr::MAX_SCALES - 1)];
     let mut at = flr.scratch_len_for(workers);
-    for s in 1..flr.scale_count() {
-        extra[2 * s - 2] = at;
-        extra[2 * s - 1] = at + flr.window_grid_len(s);
-        at += 2 * flr.window_grid_len(s);
+    let mut next = |s: usize| {
+        let o = at;
+        at += flr.window_grid_len(s);
+        o
+    };
+    const { assert!(lrdenoise_core::flr::MAX_SCALES == 3) };
+    let (mut tmp, mut blurred) = ([layout.tmp.start; 3], [layout.first.start, layout.blurred.start, 0]);
+    let n = flr.scale_count();
+    for (s, t) in tmp.iter_mut().enumerate().take(n).skip(1) {
+        *t = next(s);
+    }
+    for (s, b) in blurred.iter_mut().enumerate().take(n).skip(2) {
+        *b = next(s);
     }
     let base = scratch as *mut u8;
     // SAFETY: HEADER < bytes (checked above), so both pointers are inside the buffer.
-    Ok(unsafe { Raw { stats: base as *mut lrdenoise_core::Stats, base: base.add(HEADER) as *mut f64, layout, extra } })
+    Ok(unsafe { Raw { stats: base as *mut lrdenoise_core::Stats, base: base.add(HEADER) as *mut f64, layout, tmp, blurred } })
 }
 
 /// Denoises one frame on the calling thread. `out` (3 channels) sets the
@@ -680,11 +692,9 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
             let wl = flr.worker_len();
             let worker_buf = || raw.f32s_mut(l.workers.start, worker * wl, wl);
             let band = |region: usize, r: core::ops::Range<usize>| raw.f64s_mut(region + r.start, r.len());
-            // window s's moment grid source (cells or pooled), its horizontal-blur
-            // grid and its blurred grid (offsets)
+            // window s's moment grid source (cells or pooled); its horizontal-blur
+            // and blurred grids are at raw.tmp[s] and raw.blurred[s]
             let src = |s: usize| if flr.window_pooled(s) { l.pooled.start } else { l.cells.start };
-            let tmp = |s: usize| if s == 0 { l.tmp.start } else { raw.extra[2 * s - 2] };
-            let blurred = |s: usize| if s == 0 { l.first.start } else { raw.extra[2 * s - 1] };
             match stage {
                 0 => {
                     raw.stats.write(flr.prepare(&cf));
@@ -710,7 +720,7 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
                 3 => {
                     for s in 0..windows {
                         let grid = raw.f64s(src(s), flr.window_grid_len(s));
-                        let out = band(tmp(s), flr.window_cells_tile_range(s, tile).map_err(st)?);
+                        let out = band(raw.tmp[s], flr.window_cells_tile_range(s, tile).map_err(st)?);
                         flr.blur_rows_tile_at(s, tile, grid, out).map_err(st)?;
                     }
                     Report::default()
@@ -728,8 +738,8 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
                     let stats = raw.stats.read();
                     let mut rep = Report::default();
                     for s in 0..windows {
-                        let out = band(blurred(s), flr.window_cells_tile_range(s, tile).map_err(st)?);
-                        flr.blur_cols_tiles_at(s, tile..tile + 1, raw.f64s(tmp(s), flr.window_grid_len(s)), out).map_err(st)?;
+                        let out = band(raw.blurred[s], flr.window_cells_tile_range(s, tile).map_err(st)?);
+                        flr.blur_cols_tiles_at(s, tile..tile + 1, raw.f64s(raw.tmp[s], flr.window_grid_len(s)), out).map_err(st)?;
                         let m = flr.scale_models_tile_range(s, tile).map_err(st)?;
                         let v = flr.scale_variances_tile_range(s, tile).map_err(st)?;
                         let (models, variances) = (raw.f32s_mut(l.scale_models.start, m.start, m.len()), band(l.variances.start, v));
