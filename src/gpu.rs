@@ -10,8 +10,9 @@
 //! 2. Create the buffers of [`GpuPlan::buffers`] once; every entry point uses
 //!    the same bind group: binding `i` = buffer `i` of that list.
 //! 3. Each frame: upload the [`GpuParams`] of [`GpuPlan::params`] (only when a
-//!    layout changes), the noisy image and the guides; dispatch the seven
-//!    [`GpuPlan::passes`] in order, with a storage barrier between them.
+//!    layout changes), the noisy image and the guides; dispatch the
+//!    [`GpuPlan::passes`] in order (7, or up to 15 with the adaptive window),
+//!    with a storage barrier between them.
 //! 4. Read the output buffer; optionally the stats buffer for the [`Report`]
 //!    ([`GpuPlan::report`]).
 //!
@@ -21,9 +22,9 @@
 //! accuracy drops, as for any f32 implementation, for guides whose offset
 //! from the frame's reference sample dwarfs their local variation.
 
-use crate::config::{Blur, FlrConfig, Regularization};
+use crate::config::{FlrConfig, Regularization};
 use crate::error::Error;
-use crate::flr::Report;
+use crate::flr::{Grid, Report, MAX_SCALES};
 use crate::image::Layout;
 use crate::kernels::blur::Taps;
 use crate::kernels::{model_len, moment_count};
@@ -75,14 +76,57 @@ pub struct GpuParams {
     /// The same for the guides the moments are taken from (noisy resolution).
     pub guide_fit: [[u32; 4]; GPU_MAX_GUIDES],
     pub taps: [f32; TAPS],
+    /// 1, or 3 with the adaptive window.
+    pub windows: u32,
+    /// The 2×2-pooled moment grid in `tmp` (element offset, `u32::MAX`
+    /// without) and its size.
+    pub pooled_off: u32,
+    pub pooled_x: u32,
+    pub pooled_y: u32,
+    pub win: [GpuWindow; 3],
+    /// Taps of windows 1 and 2.
+    pub taps_12: [[f32; TAPS]; 2],
+}
+
+/// One window of the fit in the parameter block, laid out as the WGSL
+/// `Window`: its grid and where its stages read and write (buffer 0 = cells,
+/// 1 = tmp; element offsets).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GpuWindow {
+    pub cells_x: u32,
+    pub cells_y: u32,
+    /// Block cells per cell side: 1, or 2 on the pooled grid.
+    pub factor: u32,
+    pub radius: u32,
+    pub src_buf: u32,
+    pub src_off: u32,
+    pub out_buf: u32,
+    pub out_off: u32,
+    pub tmp_off: u32,
+    pub model_off: u32,
+    /// `u32::MAX`: no variance estimates (one window).
+    pub var_off: u32,
+    pub weight_norm: f32,
+    pub min_weight: f32,
+    /// 4πσ² in input pixels.
+    pub area: f32,
+    pub pad: [u32; 2],
 }
 
 // SAFETY: `repr(C)`, only u32/f32 fields and arrays of them, 4-byte aligned
-// throughout with no padding (640 bytes: checked below); any bit pattern is valid.
+// throughout with no padding (1392 bytes: checked below); any bit pattern is valid.
 unsafe impl bytemuck::Zeroable for GpuParams {}
 // SAFETY: as above.
 unsafe impl bytemuck::Pod for GpuParams {}
-const _: () = assert!(core::mem::size_of::<GpuParams>() == 640);
+// SAFETY: `repr(C)`, 16 four-byte fields, no padding (checked below).
+unsafe impl bytemuck::Zeroable for GpuWindow {}
+// SAFETY: as above.
+unsafe impl bytemuck::Pod for GpuWindow {}
+const _: () = assert!(core::mem::size_of::<GpuWindow>() == 64);
+/// Bytes of the parameter block.
+pub const PARAMS_BYTES: usize = 1392;
+const _: () = assert!(core::mem::size_of::<GpuParams>() == PARAMS_BYTES);
 
 impl GpuParams {
     /// The block's bytes, as the uniform buffer holds them.
@@ -215,7 +259,60 @@ pub struct GpuPlan {
     cells_x: usize,
     cells_y: usize,
     q: usize,
-    taps: Taps,
+    /// Windows fitted: 1, or 3 with the adaptive window.
+    windows: usize,
+    /// Per window: its grid, taps, total window weight and `4πσ²`.
+    grids: [Grid; MAX_SCALES],
+    taps: [Taps; MAX_SCALES],
+    weights: [f64; MAX_SCALES],
+    areas: [f64; MAX_SCALES],
+}
+
+/// Most dispatches per frame (the adaptive window with a pooled grid).
+pub const MAX_PASSES: usize = 15;
+
+/// The dispatches of one frame, in order ([`GpuPlan::passes`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Passes {
+    list: [Pass; MAX_PASSES],
+    len: usize,
+}
+
+impl Passes {
+    fn push(&mut self, entry: &'static str, workgroups: [u32; 3]) {
+        self.list[self.len] = Pass { entry, workgroups };
+        self.len += 1;
+    }
+}
+
+impl core::ops::Deref for Passes {
+    type Target = [Pass];
+    fn deref(&self) -> &[Pass] {
+        &self.list[..self.len]
+    }
+}
+
+impl IntoIterator for Passes {
+    type Item = Pass;
+    type IntoIter = core::iter::Take<core::array::IntoIter<Pass, MAX_PASSES>>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.list.into_iter().take(self.len)
+    }
+}
+
+/// Where each window's grids live in `tmp` and `models` (element offsets).
+struct Regions {
+    /// `tmp` and `models` lengths (f32 elements).
+    tmp_len: usize,
+    models_len: usize,
+    pooled_off: Option<usize>,
+    /// Per window: blur source (buffer, offset), blurred grid (buffer,
+    /// offset), row-blurred grid in `tmp`, models, variances.
+    src: [(u32, usize); MAX_SCALES],
+    out: [(u32, usize); MAX_SCALES],
+    tmp: [usize; MAX_SCALES],
+    model: [usize; MAX_SCALES],
+    var: [Option<usize>; MAX_SCALES],
 }
 
 /// Elements a layout addresses for `channels` channels (one past the last), if it fits u32.
@@ -239,23 +336,91 @@ impl GpuPlan {
         if q > GPU_MAX_GUIDES {
             return Err(Error::TooManyGuides { got: q });
         }
-        let r = cfg.radius_cells();
-        if r >= TAPS {
-            return Err(Error::Unsupported("the GPU path blurs at most 67 cells wide"));
-        }
-        let taps = match cfg.blur {
-            Blur::Gaussian { sigma, .. } => Taps::gaussian(sigma as f64 / cfg.block as f64, r),
-            Blur::Box { .. } => Taps::boxed(r),
-            Blur::Adaptive { .. } => return Err(Error::Unsupported("the GPU path fits one window size (no adaptive window)")),
+        let windows = flr.scale_count();
+        let mut plan = GpuPlan {
+            cfg,
+            width,
+            height,
+            in_width: flr.input_size().0,
+            in_height: flr.input_size().1,
+            cells_x: flr.cells().0,
+            cells_y: flr.cells().1,
+            q,
+            windows,
+            grids: [flr.window_grid(0)?; MAX_SCALES],
+            taps: [*flr.window_taps(0)?; MAX_SCALES],
+            weights: [0.0; MAX_SCALES],
+            areas: [0.0; MAX_SCALES],
         };
-        let (cells_x, cells_y) = flr.cells();
-        let (in_width, in_height) = flr.input_size();
-        let plan = GpuPlan { cfg, width, height, in_width, in_height, cells_x, cells_y, q, taps };
+        for s in 0..windows {
+            plan.grids[s] = flr.window_grid(s)?;
+            plan.taps[s] = *flr.window_taps(s)?;
+            plan.weights[s] = flr.window_weight(s);
+            plan.areas[s] = flr.window_area(s);
+            if plan.taps[s].radius >= TAPS {
+                return Err(Error::Unsupported("the GPU path blurs at most 67 cells wide"));
+            }
+        }
         let too_many = plan.passes().iter().any(|p| p.workgroups.iter().any(|&g| g as usize > MAX_GROUPS));
-        if too_many || width * height * 3 >= u32::MAX as usize || cells_x * cells_y * moment_count(q) >= u32::MAX as usize {
+        let r = plan.regions();
+        if too_many
+            || width * height * 3 >= u32::MAX as usize
+            || r.tmp_len >= u32::MAX as usize
+            || r.models_len >= u32::MAX as usize
+            || plan.cells_x * plan.cells_y * moment_count(q) >= u32::MAX as usize
+        {
             return Err(Error::Unsupported("frame too large for one GPU dispatch"));
         }
         Ok(plan)
+    }
+
+    /// Where each window's grids live. One window: blurred in place in
+    /// `cells`, models straight into the output models. Adaptive: `tmp` holds
+    /// the row-blurred grid (shared, the windows run one after another),
+    /// window 0's blurred grid, the pooled grid and windows 1 and 2's blurred
+    /// grids; `models` the blended models, then each window's models, then
+    /// each window's variances.
+    fn regions(&self) -> Regions {
+        let k = moment_count(self.q);
+        let ml = model_len(self.q);
+        let fine = self.cells_x * self.cells_y;
+        let mut r = Regions {
+            tmp_len: fine * k,
+            models_len: fine * ml,
+            pooled_off: None,
+            src: [(0, 0); MAX_SCALES],
+            out: [(0, 0); MAX_SCALES],
+            tmp: [0; MAX_SCALES],
+            model: [0; MAX_SCALES],
+            var: [None; MAX_SCALES],
+        };
+        if self.windows == 1 {
+            return r;
+        }
+        r.out[0] = (1, r.tmp_len);
+        r.tmp_len += fine * k;
+        if let Some(g) = self.grids[1..self.windows].iter().find(|g| g.factor > 1) {
+            r.pooled_off = Some(r.tmp_len);
+            r.tmp_len += g.cells_x * g.cells_y * k;
+        }
+        for s in 0..self.windows {
+            let cells = self.grids[s].cells_x * self.grids[s].cells_y;
+            if s > 0 {
+                r.src[s] = match (self.grids[s].factor, r.pooled_off) {
+                    (2, Some(o)) => (1, o),
+                    _ => (0, 0),
+                };
+                r.out[s] = (1, r.tmp_len);
+                r.tmp_len += cells * k;
+            }
+            r.model[s] = r.models_len;
+            r.models_len += cells * ml;
+        }
+        for s in 0..self.windows {
+            r.var[s] = Some(r.models_len);
+            r.models_len += self.grids[s].cells_x * self.grids[s].cells_y;
+        }
+        r
     }
 
     /// Output size.
@@ -274,20 +439,33 @@ impl GpuPlan {
         &self.cfg
     }
 
-    /// The seven dispatches of one frame, in order.
-    pub fn passes(&self) -> [Pass; 7] {
+    /// The dispatches of one frame, in order: seven with one window, up to
+    /// [`MAX_PASSES`] with the adaptive window (see the shader's header).
+    pub fn passes(&self) -> Passes {
         let k = moment_count(self.q);
         let g = |n: usize, d: usize| n.div_ceil(d) as u32;
         let (cx, cy) = (self.cells_x as u32, self.cells_y as u32);
-        [
-            Pass { entry: "reference", workgroups: [1, 1, 1] },
-            Pass { entry: "moments", workgroups: [cx, cy, 1] },
-            Pass { entry: "finish_stats", workgroups: [1, 1, 1] },
-            Pass { entry: "blur_rows", workgroups: [g(self.cells_x * k, 64), cy, 1] },
-            Pass { entry: "blur_cols", workgroups: [g(self.cells_x * k, 64), cy, 1] },
-            Pass { entry: "solve", workgroups: [g(self.cells_x, 64), cy, 1] },
-            Pass { entry: "apply", workgroups: [g(self.width, 8), g(self.height, 8), 1] },
-        ]
+        let grid = |s: usize| [g(self.grids[s].cells_x * k, 64), self.grids[s].cells_y as u32, 1];
+        let solve = |s: usize| [g(self.grids[s].cells_x, 64), self.grids[s].cells_y as u32, 1];
+        let mut p = Passes { list: [Pass { entry: "", workgroups: [0; 3] }; MAX_PASSES], len: 0 };
+        p.push("reference", [1, 1, 1]);
+        p.push("moments", [cx, cy, 1]);
+        p.push("finish_stats", [1, 1, 1]);
+        if let Some(s) = (1..self.windows).find(|&s| self.grids[s].factor > 1) {
+            p.push("pool", grid(s));
+        }
+        const NAMES: [[&str; 3]; MAX_SCALES] =
+            [["blur_rows", "blur_cols", "solve"], ["blur_rows_1", "blur_cols_1", "solve_1"], ["blur_rows_2", "blur_cols_2", "solve_2"]];
+        for (s, [rows, cols, solve_s]) in NAMES.iter().enumerate().take(self.windows) {
+            p.push(rows, grid(s));
+            p.push(cols, grid(s));
+            p.push(solve_s, solve(s));
+        }
+        if self.windows > 1 {
+            p.push("blend", [g(self.cells_x, 64), cy, 1]);
+        }
+        p.push("apply", [g(self.width, 8), g(self.height, 8), 1]);
+        p
     }
 
     /// The parameter block for these layouts; checks that every index fits u32.
@@ -301,11 +479,37 @@ impl GpuPlan {
         };
         let b = self.cfg.block;
         let bin = b / self.cfg.upsample;
-        let total = (bin * bin) as f64 * self.taps.sum() * self.taps.sum();
-        let mut taps = [0f32; TAPS];
-        for (t, w) in taps.iter_mut().zip(&self.taps.w[..=self.taps.radius]) {
-            *t = *w as f32;
+        let total = self.weights[0];
+        let taps_of = |s: usize| {
+            let mut taps = [0f32; TAPS];
+            for (t, w) in taps.iter_mut().zip(&self.taps[s].w[..=self.taps[s].radius]) {
+                *t = *w as f32;
+            }
+            taps
+        };
+        let r = self.regions();
+        let mut win = [GpuWindow::default(); 3];
+        for (s, w) in win.iter_mut().enumerate().take(self.windows) {
+            let g = self.grids[s];
+            *w = GpuWindow {
+                cells_x: g.cells_x as u32,
+                cells_y: g.cells_y as u32,
+                factor: g.factor as u32,
+                radius: self.taps[s].radius as u32,
+                src_buf: r.src[s].0,
+                src_off: r.src[s].1 as u32,
+                out_buf: r.out[s].0,
+                out_off: r.out[s].1 as u32,
+                tmp_off: r.tmp[s] as u32,
+                model_off: r.model[s] as u32,
+                var_off: r.var[s].map_or(u32::MAX, |o| o as u32),
+                weight_norm: (1.0 / self.weights[s]) as f32,
+                min_weight: (1e-12 * self.weights[s]) as f32,
+                area: self.areas[s] as f32,
+                pad: [0; 2],
+            };
         }
+        let pooled = r.pooled_off.and_then(|_| self.grids[1..self.windows].iter().find(|g| g.factor > 1));
         let guide_words = |ls: &[Layout; GPU_MAX_GUIDES]| {
             let mut g = [[0u32; 4]; GPU_MAX_GUIDES];
             for (g, l) in g.iter_mut().zip(ls).take(self.q) {
@@ -322,7 +526,7 @@ impl GpuPlan {
             q: self.q as u32,
             k: moment_count(self.q) as u32,
             ml: model_len(self.q) as u32,
-            radius: self.taps.radius as u32,
+            radius: self.taps[0].radius as u32,
             clamp_negative: self.cfg.clamp_negative as u32,
             tikhonov,
             input_f16: (layouts.input == InputFormat::F16) as u32,
@@ -338,7 +542,13 @@ impl GpuPlan {
             output: v(&layouts.output),
             guide: guide_words(&layouts.guides),
             guide_fit: guide_words(&layouts.guides_fit),
-            taps,
+            taps: taps_of(0),
+            windows: self.windows as u32,
+            pooled_off: r.pooled_off.map_or(u32::MAX, |o| o as u32),
+            pooled_x: pooled.map_or(0, |g| g.cells_x as u32),
+            pooled_y: pooled.map_or(0, |g| g.cells_y as u32),
+            win,
+            taps_12: [if self.windows > 1 { taps_of(1) } else { [0.0; TAPS] }, if self.windows > 2 { taps_of(2) } else { [0.0; TAPS] }],
         })
     }
 
@@ -355,8 +565,8 @@ impl GpuPlan {
         }
         // input bytes, rounded up to whole 32-bit words
         let input = |elements: u64| (elements * layouts.input.bytes()).next_multiple_of(4);
-        let cells = (self.cells_x * self.cells_y) as u64;
-        let grid = cells * moment_count(self.q) as u64 * 4;
+        let grid = (self.cells_x * self.cells_y * moment_count(self.q)) as u64 * 4;
+        let r = self.regions();
         let d = |buffer, binding, access, bytes| BufferDesc { buffer, binding, access, bytes };
         use Access::*;
         Ok([
@@ -365,8 +575,8 @@ impl GpuPlan {
             d(GpuBuffer::Guides, 2, ReadOnlyStorage, input(guides)),
             d(GpuBuffer::Stats, 3, ReadWriteStorage, STATS_BYTES),
             d(GpuBuffer::Cells, 4, ReadWriteStorage, grid),
-            d(GpuBuffer::Tmp, 5, ReadWriteStorage, grid),
-            d(GpuBuffer::Models, 6, ReadWriteStorage, cells * model_len(self.q) as u64 * 4),
+            d(GpuBuffer::Tmp, 5, ReadWriteStorage, r.tmp_len as u64 * 4),
+            d(GpuBuffer::Models, 6, ReadWriteStorage, r.models_len as u64 * 4),
             d(GpuBuffer::Output, 7, ReadWriteStorage, output * 4),
         ])
     }

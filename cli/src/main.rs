@@ -410,10 +410,10 @@ fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Result<()
         md += &format!("| {} | {:?} | {:?} | {} |\n", b.binding, b.buffer, b.access, b.bytes);
     }
     md += "\nPasses, in order (a storage barrier between consecutive passes):\n\n| entry point | workgroups |\n|---|---|\n";
-    for p in plan.passes() {
+    for p in plan.passes().iter() {
         md += &format!("| `{}` | {} x {} x {} |\n", p.entry, p.workgroups[0], p.workgroups[1], p.workgroups[2]);
     }
-    md += "\nThe parameter block (binding 0, 640 bytes) for these layouts is `params.bin`.\n";
+    md += &format!("\nThe parameter block (binding 0, {} bytes) for these layouts is `params.bin`.\n", lrdenoise::gpu::PARAMS_BYTES);
     write("dispatch.md", md.as_bytes())?;
     write("params.bin", params.as_bytes())?;
     println!("wrote flr.wgsl, flr.spv, flr.metal, flr.hlsl, dispatch.md and params.bin to {}", out.display());
@@ -459,7 +459,11 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
 
 /// Prints the shader time alone (timestamp queries: median per pass over `runs` frames).
 fn gpu_pass_times(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize) -> Result<(), String> {
-    let mut per_pass: Vec<Vec<f64>> = vec![Vec::new(); 7];
+    let names: Vec<&str> = match &*m {
+        Method::FlrGpu { gpu, .. } => gpu.plan().passes().iter().map(|p| p.entry).collect(),
+        _ => return Ok(()),
+    };
+    let mut per_pass: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     for _ in 0..runs {
         m.run(inputs, out)?;
         let Method::FlrGpu { gpu, .. } = &*m else { return Ok(()) };
@@ -468,11 +472,10 @@ fn gpu_pass_times(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize)
             return Ok(());
         };
         for (v, t) in per_pass.iter_mut().zip(t) {
-            v.push(t);
+            v.push(*t);
         }
     }
     let med: Vec<f64> = per_pass.iter_mut().map(|v| evaluate::median(v)).collect();
-    let names = ["reference", "moments", "finish_stats", "blur_rows", "blur_cols", "solve", "apply"];
     let parts: Vec<String> = names.iter().zip(&med).map(|(n, t)| format!("{n} {t:.3}")).collect();
     println!("GPU time (timestamps, median of {runs}): {:.3} ms = {} ms", med.iter().sum::<f64>(), parts.join(" + "));
     Ok(())

@@ -301,13 +301,18 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
     assert!(ok, "{e}");
     let spv = std::fs::read(dir.join("flr.spv")).unwrap();
     assert_eq!(&spv[..4], &0x0723_0203u32.to_le_bytes());
-    assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), 640);
+    assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), lrdenoise::gpu::PARAMS_BYTES as u64);
     let md = std::fs::read_to_string(dir.join("dispatch.md")).unwrap();
     assert!(md.contains("640x360") && md.contains("| `moments` | 80 x 45 x 1 |") && md.contains("(4 guide channels)"), "{md}");
     let dir16 = tmp("shaders16");
     let (ok, _, e) = lrd(&["shaders", "--out", dir16.to_str().unwrap(), "--f16-inputs"]);
     assert!(ok, "{e}");
     assert!(std::fs::read_to_string(dir16.join("dispatch.md")).unwrap().contains("F16 inputs"));
+    let dira = tmp("shaders_adaptive");
+    let (ok, _, e) = lrd(&["shaders", "--out", dira.to_str().unwrap(), "--size", "640x360", "--sigma", "6,12,20"]);
+    assert!(ok, "{e}");
+    let md = std::fs::read_to_string(dira.join("dispatch.md")).unwrap();
+    assert!(md.contains("| `pool` |") && md.contains("| `solve_2` |") && md.contains("| `blend` | 2 x 45 x 1 |"), "{md}");
     for f in ["flr.wgsl", "flr.metal", "flr.hlsl"] {
         assert!(std::fs::read_to_string(dir.join(f)).unwrap().contains("apply"), "{f}");
     }
@@ -340,6 +345,14 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
     let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
     let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
     assert!(mean < 1e-4, "upsample 2: mean relative difference {mean:.2e}");
+    // the adaptive window on the GPU: the same as on the CPU
+    let (cpu, gpu) = (tmp("cpu_adaptive.exr"), tmp("gpu_adaptive.exr"));
+    assert!(lrd(&["denoise", &room, "-o", cpu.to_str().unwrap(), "--only-output", "--sigma", "6,12,20"]).0);
+    assert!(lrd(&["denoise", &room, "-o", gpu.to_str().unwrap(), "--only-output", "--sigma", "6,12,20", "--device", "gpu"]).0);
+    let (a, b) = (denoised(&cpu), denoised(&gpu));
+    let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
+    let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
+    assert!(mean < 1e-4, "adaptive: mean relative difference {mean:.2e}");
     let (ok, so, e) = lrd(&["bench", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
     assert!(ok && so.contains("GPU adapter") && so.contains("median") && so.contains("GPU time"), "{so}{e}");
 }

@@ -228,7 +228,7 @@ int main(int argc, char **argv) {
     LrdGpuDispatch gpu;
     CHECK(lrd_gpu_dispatch(&cfg, W, H, LRD_FORMAT_F32, &gpu));
     printf("GPU: %zu bytes of WGSL; passes:", strlen(lrd_gpu_wgsl()));
-    for (int i = 0; i < 7; i++)
+    for (uint32_t i = 0; i < gpu.pass_count; i++)
         printf(" %s %ux%u", gpu.passes[i].entry, gpu.passes[i].workgroups[0], gpu.passes[i].workgroups[1]);
     printf("; output buffer %llu bytes\n", (unsigned long long)gpu.buffer_bytes[7]);
 

@@ -532,11 +532,13 @@ typedef struct LrdGpuPass {
  * channels at the low resolution (what the moments are taken from). Every pass uses
  * one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
  * noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
- * output (read-write storage). Run the seven passes in order with a storage
- * barrier between them.
+ * output (read-write storage). Run the first `pass_count` passes in order
+ * with a storage barrier between them: 7 with one window, up to 15 with the
+ * adaptive window (`LRD_BLUR_ADAPTIVE`).
  */
 typedef struct LrdGpuDispatch {
-  struct LrdGpuPass passes[7];
+  struct LrdGpuPass passes[15];
+  uint32_t pass_count;
   /**
    * Minimum size of each buffer in bytes, in binding order.
    */
@@ -544,7 +546,7 @@ typedef struct LrdGpuDispatch {
   /**
    * Contents of the uniform parameter block (binding 0).
    */
-  uint8_t params[640];
+  uint8_t params[1392];
 } LrdGpuDispatch;
 
 #ifdef __cplusplus

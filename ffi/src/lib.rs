@@ -1344,16 +1344,44 @@ pub struct LrdGpuPass {
 /// channels at the low resolution (what the moments are taken from). Every pass uses
 /// one bind group, binding `i` = buffer `i`: 0 the uniform `params` block, 1
 /// noisy, 2 guides (read-only storage), 3 stats, 4 cells, 5 tmp, 6 models, 7
-/// output (read-write storage). Run the seven passes in order with a storage
-/// barrier between them.
+/// output (read-write storage). Run the first `pass_count` passes in order
+/// with a storage barrier between them: 7 with one window, up to 15 with the
+/// adaptive window (`LRD_BLUR_ADAPTIVE`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdGpuDispatch {
-    pub passes: [LrdGpuPass; 7],
+    pub passes: [LrdGpuPass; 15],
+    pub pass_count: u32,
     /// Minimum size of each buffer in bytes, in binding order.
     pub buffer_bytes: [u64; 8],
     /// Contents of the uniform parameter block (binding 0).
-    pub params: [u8; 640],
+    pub params: [u8; 1392],
+}
+
+#[cfg(feature = "flr")]
+const _: () = assert!(lrdenoise_core::gpu::MAX_PASSES == 15 && lrdenoise_core::gpu::PARAMS_BYTES == 1392);
+
+/// The static C string of a shader entry point named by [`GpuPlan::passes`].
+#[cfg(feature = "flr")]
+fn entry_name(entry: &str) -> &'static core::ffi::CStr {
+    const NAMES: [&core::ffi::CStr; 15] = [
+        c"reference",
+        c"moments",
+        c"finish_stats",
+        c"pool",
+        c"blur_rows",
+        c"blur_cols",
+        c"solve",
+        c"blur_rows_1",
+        c"blur_cols_1",
+        c"solve_1",
+        c"blur_rows_2",
+        c"blur_cols_2",
+        c"solve_2",
+        c"blend",
+        c"apply",
+    ];
+    NAMES.iter().find(|n| n.to_bytes() == entry.as_bytes()).copied().unwrap_or(c"")
 }
 
 /// Fills `out` with the GPU dispatch description of `config` for
@@ -1387,15 +1415,15 @@ pub unsafe extern "C" fn lrd_gpu_dispatch(
         };
         let params = plan.params(&layouts).map_err(status_of)?;
         let buffers = plan.buffers(&layouts).map_err(status_of)?;
-        let names = [c"reference", c"moments", c"finish_stats", c"blur_rows", c"blur_cols", c"solve", c"apply"];
+        let passes = plan.passes();
         let mut d = LrdGpuDispatch {
-            passes: [LrdGpuPass { entry: core::ptr::null(), workgroups: [0; 3] }; 7],
+            passes: [LrdGpuPass { entry: core::ptr::null(), workgroups: [0; 3] }; 15],
+            pass_count: passes.len() as u32,
             buffer_bytes: [0; 8],
-            params: [0; 640],
+            params: [0; 1392],
         };
-        for ((dst, p), name) in d.passes.iter_mut().zip(plan.passes()).zip(names) {
-            debug_assert_eq!(name.to_bytes(), p.entry.as_bytes());
-            *dst = LrdGpuPass { entry: name.as_ptr(), workgroups: p.workgroups };
+        for (dst, p) in d.passes.iter_mut().zip(passes.iter()) {
+            *dst = LrdGpuPass { entry: entry_name(p.entry).as_ptr(), workgroups: p.workgroups };
         }
         for (dst, b) in d.buffer_bytes.iter_mut().zip(&buffers) {
             *dst = b.bytes;

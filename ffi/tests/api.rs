@@ -152,7 +152,8 @@ fn gpu_dispatch_description() {
     let d = unsafe { d.assume_init() };
     let plan = GpuPlan::new(lrdenoise_core::FlrConfig::default(), 100, 70).unwrap();
     let layouts = GpuLayouts::planar(100, 70, lrdenoise_core::gpu::InputFormat::F32);
-    for (c, r) in d.passes.iter().zip(plan.passes()) {
+    assert_eq!(d.pass_count as usize, plan.passes().len());
+    for (c, r) in d.passes.iter().zip(plan.passes().iter()) {
         assert_eq!(unsafe { CStr::from_ptr(c.entry) }.to_str().unwrap(), r.entry);
         assert_eq!(c.workgroups, r.workgroups);
     }
@@ -179,6 +180,18 @@ fn gpu_dispatch_description() {
     let up = unsafe { out.assume_init() };
     assert_eq!(up.buffer_bytes[1], 50 * 35 * 3 * 4);
     assert_eq!(up.buffer_bytes[2], 5 * (100 * 70 + 50 * 35) * 4);
+    // the adaptive window: 15 passes (σ 6/12/20 at B = 8 pools windows 1 and 2)
+    let mut ad = cfg;
+    ad.blur = LrdBlur::LRD_BLUR_ADAPTIVE as u32;
+    ad.sigmas = [6.0, 12.0, 20.0];
+    let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_dispatch(&ad, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let ad = unsafe { out.assume_init() };
+    assert_eq!(ad.pass_count, 15);
+    let names: Vec<&str> = ad.passes.iter().map(|p| unsafe { CStr::from_ptr(p.entry) }.to_str().unwrap()).collect();
+    assert_eq!(names[3], "pool");
+    assert_eq!(names[13..], ["blend", "apply"]);
+    assert!(ad.buffer_bytes[5] > d.buffer_bytes[5] && ad.buffer_bytes[6] > d.buffer_bytes[6], "adaptive needs more tmp and models");
     let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
     let mut many = cfg;
     many.guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION | LRD_GUIDE_AO;

@@ -84,15 +84,15 @@ pub struct GpuFlr {
     /// Timestamp queries (two per pass) and their resolve buffer, when the device has them.
     timer: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     /// GPU milliseconds of each pass of the last `denoise`.
-    pass_ms: Option<[f64; 7]>,
+    pass_ms: Option<Vec<f64>>,
     /// Host staging of the planar inputs (reused); converted to f16 when `input` is.
     noisy: Vec<f32>,
     guides: Vec<f32>,
     half: Vec<half::f16>,
 }
 
-/// Timestamps written per frame: the beginning and end of each pass.
-const TIMESTAMPS: u32 = 14;
+/// Most timestamps written per frame: the beginning and end of each pass.
+const TIMESTAMPS: u32 = 2 * lrdenoise::gpu::MAX_PASSES as u32;
 
 /// Requests the default adapter and a device with default limits.
 pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError> {
@@ -253,11 +253,12 @@ impl GpuFlr {
         })
     }
 
-    /// GPU time of each of the seven passes of the last [`GpuFlr::denoise`], in
-    /// milliseconds (timestamp queries; `None` where the device has none). Their
-    /// sum is the shader time alone, without upload, readback or submission.
-    pub fn pass_times_ms(&self) -> Option<[f64; 7]> {
-        self.pass_ms
+    /// GPU time of each pass of the last [`GpuFlr::denoise`] (in the order of
+    /// [`GpuPlan::passes`]), in milliseconds (timestamp queries; `None` where
+    /// the device has none). Their sum is the shader time alone, without
+    /// upload, readback or submission.
+    pub fn pass_times_ms(&self) -> Option<&[f64]> {
+        self.pass_ms.as_deref()
     }
 
     /// The adapter's name, type and backend.
@@ -270,7 +271,7 @@ impl GpuFlr {
         &self.plan
     }
 
-    /// Records the seven passes (on this executor's buffers) into `encoder`:
+    /// Records the passes (on this executor's buffers) into `encoder`:
     /// for callers that fill the input buffers themselves ([`GpuFlr::buffer`]).
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         for (i, (pipe, [x, y, z])) in self.pipelines.iter().enumerate() {
@@ -410,7 +411,8 @@ impl GpuFlr {
                 let ticks: &[u8] = &data[ts_at as usize..ts_at as usize + TIMESTAMPS as usize * 8];
                 let tick = |j: usize| u64::from_le_bytes(ticks[8 * j..8 * j + 8].try_into().unwrap_or([0; 8]));
                 let period = self.queue.get_timestamp_period() as f64; // ns per tick
-                self.pass_ms = Some(core::array::from_fn(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period * 1e-6));
+                let passes = self.pipelines.len();
+                self.pass_ms = Some((0..passes).map(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period * 1e-6).collect());
             }
             self.plan.report(&data[out_bytes as usize..])
         };

@@ -104,6 +104,30 @@ fn regularizations_and_box_blur() {
     }
 }
 
+/// The adaptive window (three windows blended per cell): windows 1 and 2
+/// pooled (σ 6/12/20 at B = 8), not pooled (B = 16), one of each (σ 6/8/20);
+/// sizes odd and tiny; the degenerate and NaN/Inf frames.
+#[test]
+fn adaptive_window() {
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let adaptive = |sigmas: [f32; 3], block: usize| FlrConfig { blur: Blur::Adaptive { sigmas }, ..cfg(set, block) };
+    for (w, h, seed) in [(96, 64, 7), (75, 61, 2), (7, 3, 4), (1, 1, 5), (33, 70, 6)] {
+        let f = Owned::synthetic(w, h, seed, 0.6);
+        for (sigmas, block) in [([6.0, 12.0, 20.0], 8), ([6.0, 12.0, 20.0], 16), ([6.0, 8.0, 20.0], 8), ([3.0, 6.0, 10.0], 4)] {
+            if check(&format!("adaptive {sigmas:?} B{block}"), adaptive(sigmas, block), &f, set).is_none() {
+                return;
+            }
+        }
+    }
+    let mut f = Owned::synthetic(64, 48, 2, 0.6);
+    f.noisy[3 * 7] = f32::NAN;
+    f.depth[900] = f32::INFINITY;
+    for v in &mut f.ao[..64 * 20] {
+        *v = 0.25; // a constant guide over the top rows
+    }
+    check("adaptive nan/inf", adaptive([6.0, 12.0, 20.0], 8), &f, set);
+}
+
 #[test]
 fn degenerate_guides_and_nonfinite_inputs() {
     let base = Owned::synthetic(64, 48, 2, 0.6);

@@ -299,7 +299,7 @@ impl Flr {
     }
     /// `4πσ²` of window `s` in input pixels: its sample count when full
     /// (the adaptive variance estimate).
-    fn window_area(&self, s: usize) -> f64 {
+    pub(crate) fn window_area(&self, s: usize) -> f64 {
         let Blur::Adaptive { sigmas } = self.cfg.blur else { return 0.0 };
         let sigma = sigmas[s] as f64 / self.cfg.upsample as f64;
         4.0 * core::f64::consts::PI * sigma * sigma
@@ -349,6 +349,10 @@ impl Flr {
     /// The grid window `s` is fitted on (the block grid, or its 2×2 pooling).
     pub fn window_grid(&self, s: usize) -> Result<Grid, Error> {
         Ok(self.grids[self.scale(s)?])
+    }
+    /// Blur taps of window `s` (in cells of its grid).
+    pub(crate) fn window_taps(&self, s: usize) -> Result<&Taps, Error> {
+        Ok(&self.taps[self.scale(s)?])
     }
     /// Whether window `s` is fitted on the pooled grid: its blur then reads
     /// `pooled` (written by [`Flr::pool_tile`]) instead of `cells`.
@@ -879,7 +883,7 @@ impl Flr {
 
     /// Total window weight of window `s` (the sum of its 2-D kernel over the
     /// pixels of its cells).
-    fn window_weight(&self, s: usize) -> f64 {
+    pub(crate) fn window_weight(&self, s: usize) -> f64 {
         let taps = &self.taps[s];
         let side = (self.bin * self.grids[s].factor) as f64;
         side * side * taps.sum() * taps.sum()

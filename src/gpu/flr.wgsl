@@ -5,6 +5,15 @@
 //
 //   reference → moments → finish_stats → blur_rows → blur_cols → solve → apply
 //
+// With the adaptive window (three windows blended per cell) window 0's
+// blurred grid goes to `tmp` instead of `cells`, its solve also writes
+// variance estimates, and the other windows and the blend run before apply:
+//
+//   … finish_stats → [pool] → blur_rows → blur_cols → solve → blur_rows_1 →
+//   blur_cols_1 → solve_1 → blur_rows_2 → blur_cols_2 → solve_2 → blend → apply
+//
+// (`pool` when a window is fitted on the 2×2-pooled grid). Regions of `tmp`
+// and `models` are given by `Params::win`.
 // Equation numbers are those of the FLR paper's appendix (eqs. 12–23).
 // Differences from the CPU path, all from f32 (WGSL has no f64): moments are
 // shifted to the frame reference and blurred in f32; the pivot floors are
@@ -54,8 +63,38 @@ struct Params {
     // upsampling or a separate fit set)
     guide: array<vec4<u32>, 8>,
     guide_fit: array<vec4<u32>, 8>,
-    // blur taps w[0..=radius], four per vector
+    // blur taps w[0..=radius], four per vector (window 0)
     taps: array<vec4<f32>, 17>,
+    // 1, or 3 with the adaptive window (Blur::Adaptive: three windows blended)
+    windows: u32,
+    // the 2×2-pooled moment grid in `tmp` (element offset; NONE without) and its size
+    pooled_off: u32,
+    pooled_x: u32,
+    pooled_y: u32,
+    win: array<Window, 3>,
+    // taps of windows 1 and 2, 17 vectors each
+    taps_12: array<vec4<f32>, 34>,
+}
+
+// One window of the fit: its grid, where its blur reads and writes, where its
+// models (and, adaptive, its variance estimates) go. Buffers: 0 `cells`, 1 `tmp`.
+struct Window {
+    cells_x: u32,
+    cells_y: u32,
+    factor: u32, // block cells per cell side: 1, or 2 (pooled)
+    radius: u32,
+    src_buf: u32,
+    src_off: u32, // the moments its blur reads
+    out_buf: u32,
+    out_off: u32, // its blurred grid (what its solve reads)
+    tmp_off: u32, // its row-blurred grid, in `tmp`
+    model_off: u32, // its models, in `models`
+    var_off: u32, // its variance estimates, in `models` (NONE: not wanted)
+    weight_norm: f32,
+    min_weight: f32,
+    area: f32, // 4πσ² in input pixels
+    pad0: u32,
+    pad1: u32,
 }
 
 struct Stats {
@@ -116,8 +155,34 @@ fn noisy_at(c: u32, x: u32, y: u32) -> f32 {
     return sample(noisy[word(i)], i);
 }
 
+// The window the running entry point works on (set first thing by each).
+var<private> W: u32;
+
 fn tap(o: u32) -> f32 {
-    return P.taps[o / 4u][o % 4u];
+    if W == 0u {
+        return P.taps[o / 4u][o % 4u];
+    }
+    return P.taps_12[(W - 1u) * 17u + o / 4u][o % 4u];
+}
+
+fn grid_get(buf: u32, i: u32) -> f32 {
+    if buf == 0u {
+        return cells[i];
+    }
+    return tmp[i];
+}
+
+fn grid_set(buf: u32, i: u32, v: f32) {
+    if buf == 0u {
+        cells[i] = v;
+    } else {
+        tmp[i] = v;
+    }
+}
+
+// Element `i` of the running window's blurred grid (what its solve reads).
+fn blurred(i: u32) -> f32 {
+    return grid_get(P.win[W].out_buf, P.win[W].out_off + i);
 }
 
 // Cell layout offsets (src/kernels/mod.rs): n, s[Q], S (packed upper), t[3], P[Q][3].
@@ -381,48 +446,107 @@ fn finish_stats(@builtin(local_invocation_index) lid: u32) {
 
 // ---------------------------------------------------------------------------
 // Stages 3–4: separable blur of the moment grid (zero outside the grid).
-// One invocation per (cell, moment): x = cell column × k + moment, y = cell row.
-@compute @workgroup_size(64)
-fn blur_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
+// One invocation per (cell, moment): x = cell column × k + moment, y = cell
+// row. `blur_rows` / `blur_cols` blur window 0; `_1` and `_2` the adaptive
+// window's others, on their grids.
+fn blur_rows_at(gid: vec3<u32>) {
+    let g = P.win[W];
     let k = P.k;
     let cx = gid.x / k;
     let m = gid.x % k;
     let cy = gid.y;
-    if cx >= P.cells_x || cy >= P.cells_y {
+    if cx >= g.cells_x || cy >= g.cells_y {
         return;
     }
-    let row = cy * P.cells_x;
-    var acc = tap(0u) * cells[(row + cx) * k + m];
-    for (var o = 1u; o <= P.radius; o++) {
+    let row = cy * g.cells_x;
+    var acc = tap(0u) * grid_get(g.src_buf, g.src_off + (row + cx) * k + m);
+    for (var o = 1u; o <= g.radius; o++) {
         if cx >= o {
-            acc += tap(o) * cells[(row + cx - o) * k + m];
+            acc += tap(o) * grid_get(g.src_buf, g.src_off + (row + cx - o) * k + m);
         }
-        if cx + o < P.cells_x {
-            acc += tap(o) * cells[(row + cx + o) * k + m];
+        if cx + o < g.cells_x {
+            acc += tap(o) * grid_get(g.src_buf, g.src_off + (row + cx + o) * k + m);
         }
     }
-    tmp[(row + cx) * k + m] = acc;
+    tmp[g.tmp_off + (row + cx) * k + m] = acc;
+}
+
+fn blur_cols_at(gid: vec3<u32>) {
+    let g = P.win[W];
+    let k = P.k;
+    let cx = gid.x / k;
+    let m = gid.x % k;
+    let cy = gid.y;
+    if cx >= g.cells_x || cy >= g.cells_y {
+        return;
+    }
+    let t = g.tmp_off;
+    var acc = tap(0u) * tmp[t + (cy * g.cells_x + cx) * k + m];
+    for (var o = 1u; o <= g.radius; o++) {
+        if cy >= o {
+            acc += tap(o) * tmp[t + ((cy - o) * g.cells_x + cx) * k + m];
+        }
+        if cy + o < g.cells_y {
+            acc += tap(o) * tmp[t + ((cy + o) * g.cells_x + cx) * k + m];
+        }
+    }
+    grid_set(g.out_buf, g.out_off + (cy * g.cells_x + cx) * k + m, acc);
+}
+
+@compute @workgroup_size(64)
+fn blur_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 0u;
+    blur_rows_at(gid);
 }
 
 @compute @workgroup_size(64)
 fn blur_cols(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 0u;
+    blur_cols_at(gid);
+}
+
+@compute @workgroup_size(64)
+fn blur_rows_1(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 1u;
+    blur_rows_at(gid);
+}
+
+@compute @workgroup_size(64)
+fn blur_cols_1(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 1u;
+    blur_cols_at(gid);
+}
+
+@compute @workgroup_size(64)
+fn blur_rows_2(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 2u;
+    blur_rows_at(gid);
+}
+
+@compute @workgroup_size(64)
+fn blur_cols_2(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 2u;
+    blur_cols_at(gid);
+}
+
+// Adaptive window: sums the block grid 2×2 into the pooled grid in `tmp`
+// (`Flr::pool_tile`; a pooled cell is exactly the moments of its 2B × 2B pixels).
+@compute @workgroup_size(64)
+fn pool(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k = P.k;
     let cx = gid.x / k;
     let m = gid.x % k;
     let cy = gid.y;
-    if cx >= P.cells_x || cy >= P.cells_y {
+    if cx >= P.pooled_x || cy >= P.pooled_y {
         return;
     }
-    var acc = tap(0u) * tmp[(cy * P.cells_x + cx) * k + m];
-    for (var o = 1u; o <= P.radius; o++) {
-        if cy >= o {
-            acc += tap(o) * tmp[((cy - o) * P.cells_x + cx) * k + m];
-        }
-        if cy + o < P.cells_y {
-            acc += tap(o) * tmp[((cy + o) * P.cells_x + cx) * k + m];
+    var acc = 0.0;
+    for (var y = 2u * cy; y < min(2u * cy + 2u, P.cells_y); y++) {
+        for (var x = 2u * cx; x < min(2u * cx + 2u, P.cells_x); x++) {
+            acc += cells[(y * P.cells_x + x) * k + m];
         }
     }
-    cells[(cy * P.cells_x + cx) * k + m] = acc;
+    tmp[P.pooled_off + (cy * P.pooled_x + cx) * k + m] = acc;
 }
 
 // ---------------------------------------------------------------------------
@@ -490,20 +614,23 @@ fn vec_finite(v: vec3<f32>) -> bool {
     return finite(v.x) && finite(v.y) && finite(v.z);
 }
 
-@compute @workgroup_size(64)
-fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn solve_at(gid: vec3<u32>) {
+    let g = P.win[W];
     let cx = gid.x;
     let cy = gid.y;
-    if cx >= P.cells_x || cy >= P.cells_y {
+    if cx >= g.cells_x || cy >= g.cells_y {
         return;
     }
     let q = P.q;
-    let cell = (cy * P.cells_x + cx) * P.k;
-    let model = (cy * P.cells_x + cx) * P.ml;
-    let n = cells[cell];
-    if !(n > P.min_weight) || !finite(n) {
+    let cell = (cy * g.cells_x + cx) * P.k;
+    let model = g.model_off + (cy * g.cells_x + cx) * P.ml;
+    let n = blurred(cell);
+    if !(n > g.min_weight) || !finite(n) {
         for (var j = 0u; j < P.ml; j++) {
             models[model + j] = 0.0;
+        }
+        if g.var_off != NONE {
+            models[g.var_off + cy * g.cells_x + cx] = inf();
         }
         atomicAdd(&stats.empty_cells, 1u);
         return;
@@ -513,7 +640,7 @@ fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t = off_t();
     let p = off_p();
     let inv_n = 1.0 / n;
-    let muy = vec3<f32>(cells[cell + t], cells[cell + t + 1u], cells[cell + t + 2u]) * inv_n;
+    let muy = vec3<f32>(blurred(cell + t), blurred(cell + t + 1u), blurred(cell + t + 2u)) * inv_n;
     var c0 = muy;
     var coef: array<vec3<f32>, 9>;
     var a: array<array<f32, 9>, 9>;
@@ -526,13 +653,13 @@ fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
         var inv_scale: array<f32, 8>;
         for (var i = 0u; i < q; i++) {
             inv_scale[i] = 1.0 / stats.scale[i];
-            mu[i] = cells[cell + s + i] * inv_n;
+            mu[i] = blurred(cell + s + i) * inv_n;
             muz[i] = (mu[i] - stats.mean[i]) * inv_scale[i];
         }
         var idx = ss;
         for (var i = 0u; i < q; i++) {
             for (var j = i; j < q; j++) {
-                let w = (cells[cell + idx] * inv_n - mu[i] * mu[j]) * (inv_scale[i] * inv_scale[j]);
+                let w = (blurred(cell + idx) * inv_n - mu[i] * mu[j]) * (inv_scale[i] * inv_scale[j]);
                 var v = w + P.eps_mul * muz[i] * muz[j];
                 if i == j {
                     v += P.eps_mul * muz[i] * muz[i] + P.eps_add; // eq. 18
@@ -552,7 +679,7 @@ fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
                 a[i][j] *= isig[i] * isig[j]; // eq. 20
             }
             a[i][i] += P.eps_add; // eq. 22
-            let pv = vec3<f32>(cells[cell + p + 3u * i], cells[cell + p + 3u * i + 1u], cells[cell + p + 3u * i + 2u]);
+            let pv = vec3<f32>(blurred(cell + p + 3u * i), blurred(cell + p + 3u * i + 1u), blurred(cell + p + 3u * i + 2u));
             bh[i] = (pv * inv_n - mu[i] * muy) * (isig[i] * inv_scale[i]); // eq. 21
         }
         dropped = cholesky(&a, &inv, q, FLOOR_NORMALIZED);
@@ -564,19 +691,19 @@ fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     } else {
         // Tikhonov (eq. 11) on the raw guides: variables [1, g_0 .. g_Q).
-        let wn = P.weight_norm;
+        let wn = g.weight_norm;
         var b: array<vec3<f32>, 9>;
         a[0][0] = n * wn + P.eps_tikhonov;
         var idx = ss;
         for (var i = 0u; i < q; i++) {
             let mi = stats.reference[i];
-            let s_i = cells[cell + s + i];
+            let s_i = blurred(cell + s + i);
             let raw_s = (s_i + n * mi) * wn;
             a[0][i + 1u] = raw_s;
             a[i + 1u][0] = raw_s;
             for (var j = i; j < q; j++) {
                 let mj = stats.reference[j];
-                let raw = cells[cell + idx] + mi * cells[cell + s + j] + s_i * mj + n * mi * mj;
+                let raw = blurred(cell + idx) + mi * blurred(cell + s + j) + s_i * mj + n * mi * mj;
                 var v = raw * wn;
                 if i == j {
                     v += P.eps_tikhonov;
@@ -586,10 +713,10 @@ fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
                 idx++;
             }
         }
-        let tv = vec3<f32>(cells[cell + t], cells[cell + t + 1u], cells[cell + t + 2u]);
+        let tv = vec3<f32>(blurred(cell + t), blurred(cell + t + 1u), blurred(cell + t + 2u));
         b[0] = tv * wn;
         for (var i = 0u; i < q; i++) {
-            let pv = vec3<f32>(cells[cell + p + 3u * i], cells[cell + p + 3u * i + 1u], cells[cell + p + 3u * i + 2u]);
+            let pv = vec3<f32>(blurred(cell + p + 3u * i), blurred(cell + p + 3u * i + 1u), blurred(cell + p + 3u * i + 2u));
             b[i + 1u] = (pv + stats.reference[i] * tv) * wn;
         }
         dropped = cholesky(&a, &inv, q + 1u, FLOOR_TIKHONOV);
@@ -631,6 +758,199 @@ fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     for (var c = 0u; c < 3u; c++) {
         models[model + 3u + 3u * q + c] = m[c];
+    }
+    if g.var_off != NONE {
+        models[g.var_off + cy * g.cells_x + cx] = variance(cell, model, g);
+    }
+}
+
+@compute @workgroup_size(64)
+fn solve(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 0u;
+    solve_at(gid);
+}
+
+@compute @workgroup_size(64)
+fn solve_1(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 1u;
+    solve_at(gid);
+}
+
+@compute @workgroup_size(64)
+fn solve_2(@builtin(global_invocation_id) gid: vec3<u32>) {
+    W = 2u;
+    solve_at(gid);
+}
+
+// ---------------------------------------------------------------------------
+// Adaptive window (src/flr/adaptive.rs): each window's estimated prediction
+// variance, then a per-cell blend of the three windows' models weighted by
+// 1 / (bias² + variance). "Infinite" (an empty window) is the INF bit pattern,
+// always tested with `finite` and never computed with.
+
+const BIAS_DISCOUNT: f32 = 0.5;
+
+fn inf() -> f32 {
+    return bitcast<f32>(0x7f800000u);
+}
+
+fn luma3(v: vec3<f32>) -> f32 {
+    return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
+}
+
+// v_s = r_s (Q + 1) / N_s of the model just written at `model` (`adaptive::variance`).
+fn variance(cell: u32, model: u32, g: Window) -> f32 {
+    let q = P.q;
+    let n = blurred(cell);
+    let inv = 1.0 / n;
+    let t = off_t();
+    let p = off_p();
+    let mean = luma3(vec3<f32>(blurred(cell + t), blurred(cell + t + 1u), blurred(cell + t + 2u))) * inv;
+    var explained = 0.0;
+    for (var a = 0u; a < q; a++) {
+        let pa = cell + p + 3u * a;
+        let cov = luma3(vec3<f32>(blurred(pa), blurred(pa + 1u), blurred(pa + 2u))) * inv - blurred(cell + off_s() + a) * inv * mean;
+        let j = model + 3u + 3u * a;
+        explained += luma3(vec3<f32>(models[j], models[j + 1u], models[j + 2u])) * cov;
+    }
+    let residual = max(blurred(cell + off_e()) * inv - mean * mean - explained, 0.0);
+    let samples = max(g.area * min(n * g.weight_norm, 1.0), 1.0);
+    let v = residual * f32(q + 1u) / samples;
+    if finite(v) {
+        return v;
+    }
+    return inf();
+}
+
+// Block-grid row (or column) `i` on a pooled grid of `n`: two neighbours
+// (x, y) with weights (z, w) (`adaptive::pooled_taps`).
+fn pooled_taps(i: u32, n: u32) -> vec4<f32> {
+    let c = min(i / 2u, max(n, 1u) - 1u);
+    if i % 2u == 0u {
+        if c == 0u {
+            return vec4<f32>(0.0, 0.0, 1.0, 0.0);
+        }
+        return vec4<f32>(f32(c - 1u), f32(c), 0.25, 0.75);
+    }
+    if c + 1u >= n {
+        return vec4<f32>(f32(c), f32(c), 1.0, 0.0);
+    }
+    return vec4<f32>(f32(c), f32(c + 1u), 0.75, 0.25);
+}
+
+@compute @workgroup_size(64)
+fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let cx = gid.x;
+    let cy = gid.y;
+    if cx >= P.cells_x || cy >= P.cells_y {
+        return;
+    }
+    let q = P.q;
+    let ml = P.ml;
+    // each window's model and variance at this cell (a pooled window's
+    // interpolated bilinearly; an empty neighbour makes the variance INF)
+    var ms: array<array<f32, 30>, 3>;
+    var vs: array<f32, 3>;
+    for (var s = 0u; s < 3u; s++) {
+        let g = P.win[s];
+        if g.factor == 1u {
+            let c = cy * g.cells_x + cx;
+            for (var j = 0u; j < ml; j++) {
+                ms[s][j] = models[g.model_off + c * ml + j];
+            }
+            vs[s] = models[g.var_off + c];
+            continue;
+        }
+        let ty = pooled_taps(cy, g.cells_y);
+        let tx = pooled_taps(cx, g.cells_x);
+        var at: array<u32, 4>;
+        var w: array<f32, 4>;
+        for (var c = 0u; c < 4u; c++) {
+            let yy = select(ty.x, ty.y, c >= 2u);
+            let xx = select(tx.x, tx.y, c % 2u == 1u);
+            at[c] = u32(yy) * g.cells_x + u32(xx);
+            w[c] = select(ty.z, ty.w, c >= 2u) * select(tx.z, tx.w, c % 2u == 1u);
+        }
+        var v = 0.0;
+        var v_finite = true;
+        for (var c = 0u; c < 4u; c++) {
+            if w[c] != 0.0 {
+                let vc = models[g.var_off + at[c]];
+                v_finite = v_finite && finite(vc);
+                v += w[c] * vc;
+            }
+        }
+        vs[s] = select(inf(), v, v_finite && finite(v));
+        for (var j = 0u; j < ml; j++) {
+            var m = 0.0;
+            for (var c = 0u; c < 4u; c++) {
+                m += w[c] * models[g.model_off + at[c] * ml + j];
+            }
+            ms[s][j] = m;
+        }
+    }
+    // prediction gaps d_s² of windows 1 and 2 against window 0, over window
+    // 0's blurred moments (`adaptive::prediction_gaps`)
+    W = 0u;
+    let cell = (cy * P.cells_x + cx) * P.k;
+    let n = blurred(cell);
+    var gaps = vec3<f32>(0.0);
+    if n > P.win[0].min_weight && finite(n) {
+        let inv = 1.0 / n;
+        var mu: array<f32, 8>;
+        for (var a = 0u; a < q; a++) {
+            mu[a] = blurred(cell + off_s() + a) * inv;
+        }
+        for (var s = 1u; s < 3u; s++) {
+            var dc: array<f32, 8>;
+            var at_mean = luma3(vec3<f32>(ms[s][0] - ms[0][0], ms[s][1] - ms[0][1], ms[s][2] - ms[0][2]));
+            for (var a = 0u; a < q; a++) {
+                let j = 3u + 3u * a;
+                dc[a] = luma3(vec3<f32>(ms[s][j] - ms[0][j], ms[s][j + 1u] - ms[0][j + 1u], ms[s][j + 2u] - ms[0][j + 2u]));
+                at_mean += dc[a] * mu[a];
+            }
+            var spread = 0.0;
+            var idx = off_ss();
+            for (var a = 0u; a < q; a++) {
+                for (var b = a; b < q; b++) {
+                    let cov = blurred(cell + idx) * inv - mu[a] * mu[b];
+                    spread += select(2.0, 1.0, a == b) * dc[a] * dc[b] * cov;
+                    idx++;
+                }
+            }
+            let d2 = at_mean * at_mean + max(spread, 0.0);
+            gaps[s] = select(inf(), d2, finite(d2));
+        }
+    }
+    // weights 1 / (b_s² + v_s) (`adaptive::blend`); a larger window next to
+    // an empty smallest one is taken at its variance alone
+    var w = vec3<f32>(0.0);
+    for (var s = 0u; s < 3u; s++) {
+        var mse = vs[s];
+        if s > 0u && finite(vs[s]) && finite(vs[0]) {
+            // the variance difference d_s² holds: max(v₀ − v_s, 0)
+            var seen = 0.0;
+            if vs[0] > vs[s] {
+                seen = vs[0] - vs[s];
+            }
+            if finite(gaps[s]) {
+                mse = max(gaps[s] - BIAS_DISCOUNT * seen, 0.0) + vs[s];
+            } else {
+                mse = inf();
+            }
+        }
+        if finite(mse) {
+            w[s] = 1.0 / max(mse, 1e-30);
+        }
+    }
+    let total = w.x + w.y + w.z;
+    let out = (cy * P.cells_x + cx) * ml;
+    for (var j = 0u; j < ml; j++) {
+        if total > 0.0 && finite(total) {
+            models[out + j] = (w.x * ms[0][j] + w.y * ms[1][j] + w.z * ms[2][j]) / total;
+        } else {
+            models[out + j] = ms[1][j];
+        }
     }
 }
 
