@@ -72,6 +72,11 @@ fn bytes(w: usize, h: usize, q: usize, elem: usize) -> u64 {
     ((w * h) * (elem * (3 + 2 * q) + 4 * 3)) as u64
 }
 
+/// One Gaussian window of σ = 12 px (not the default adaptive window).
+fn single(q: usize) -> FlrConfig {
+    FlrConfig { blur: Blur::Gaussian { sigma: lrdenoise::config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::with_guides(set(q)) }
+}
+
 fn bench_frames(c: &mut Criterion) {
     for (w, h) in [(1280, 720), (1920, 1080)] {
         let d = data(w, h);
@@ -81,16 +86,19 @@ fn bench_frames(c: &mut Criterion) {
             for q in [3, 5, 8] {
                 let nbytes = bytes(w, h, q, if f16in { 2 } else { 4 });
                 g.throughput(Throughput::Bytes(nbytes));
-                let flr = Flr::new(FlrConfig::with_guides(set(q)), w, h).unwrap();
-                let mut scratch = vec![0f64; flr.scratch_len()];
-                let mut out = vec![0f32; 3 * w * h];
                 let fr = frame(&d, q, f16in);
-                g.bench_function(BenchmarkId::new("flr", format!("q{q}")), |b| {
-                    b.iter(|| {
-                        let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-                        black_box(flr.denoise(&fr, &mut scratch, &mut ov).unwrap())
-                    })
-                });
+                // the defaults (the adaptive window), and one σ = 12 px window (the fast path)
+                for (name, cfg) in [("flr", FlrConfig::with_guides(set(q))), ("flr_sigma12", single(q))] {
+                    let flr = Flr::new(cfg, w, h).unwrap();
+                    let mut scratch = vec![0f64; flr.scratch_len()];
+                    let mut out = vec![0f32; 3 * w * h];
+                    g.bench_function(BenchmarkId::new(name, format!("q{q}")), |b| {
+                        b.iter(|| {
+                            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+                            black_box(flr.denoise(&fr, &mut scratch, &mut ov).unwrap())
+                        })
+                    });
+                }
                 // baseline: copy the same number of bytes (read + write half each)
                 let src = vec![1u8; nbytes as usize / 2];
                 let mut dst = vec![0u8; nbytes as usize / 2];
@@ -106,11 +114,11 @@ fn bench_frames(c: &mut Criterion) {
     }
 }
 
-/// Each stage alone (normal+depth+ao, f32, 1920×1080).
+/// Each stage alone (normal+depth+ao, f32, 1920×1080, one σ = 12 px window).
 fn bench_stages(c: &mut Criterion) {
     let (w, h, q) = (1920, 1080, 5);
     let d = data(w, h);
-    let flr = Flr::new(FlrConfig::with_guides(set(q)), w, h).unwrap();
+    let flr = Flr::new(single(q), w, h).unwrap();
     let fr = frame(&d, q, false);
     let f = flr.check_frame(&fr).unwrap();
     let mut scratch = vec![0f64; flr.scratch_len()];
@@ -165,17 +173,17 @@ fn bench_stages(c: &mut Criterion) {
     g.finish();
 }
 
-/// The adaptive window (σ = 6/12/20 px, two of them on the pooled grid) next
-/// to the default σ = 12 px in the same run (normal+depth+ao, f32, 1920×1080).
+/// The adaptive window (σ = 6/12/20 px, two of them on the pooled grid; the
+/// default) next to one σ = 12 px window in the same run (normal+depth+ao,
+/// f32, 1920×1080).
 fn bench_adaptive(c: &mut Criterion) {
     let (w, h, q) = (1920, 1080, 5);
     let d = data(w, h);
     let fr = frame(&d, q, false);
     let mut g = c.benchmark_group(format!("window_{w}x{h}_f32_q{q}"));
     g.sample_size(10).measurement_time(Duration::from_secs(3)).warm_up_time(Duration::from_millis(500));
-    let single = FlrConfig::with_guides(set(q));
-    let adaptive = FlrConfig { blur: Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] }, ..single };
-    for (name, cfg) in [("sigma12", single), ("sigma6_12_20", adaptive)] {
+    let adaptive = FlrConfig { blur: Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] }, ..single(q) };
+    for (name, cfg) in [("sigma12", single(q)), ("sigma6_12_20", adaptive)] {
         let flr = Flr::new(cfg, w, h).unwrap();
         let mut scratch = vec![0f64; flr.scratch_len()];
         let mut out = vec![0f32; 3 * w * h];

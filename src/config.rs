@@ -80,8 +80,14 @@ pub struct FlrConfig {
 // larger than the paper's learned 1e-5–1e-4 because guides are standardised per
 // frame here (unit variance), not used in their raw units.
 
-/// Default Gaussian σ in full-resolution pixels.
+/// Gaussian σ in full-resolution pixels of the single window (`Blur::Gaussian`
+/// when only a radius is given; the fastest configuration).
 pub const DEFAULT_SIGMA: f32 = 12.0;
+/// The default window: the adaptive window's three σ in full-resolution
+/// pixels. Chosen on the training scenes (+0.29 dB over σ = 12 alone there,
+/// +0.42 dB on the held-out test scenes) for ~20–30 % more time than one
+/// window; `Blur::Gaussian { sigma: DEFAULT_SIGMA, .. }` is the fast choice.
+pub const DEFAULT_SIGMAS: [f32; 3] = [6.0, 12.0, 20.0];
 /// Default ε (multiplicative regulariser).
 pub const DEFAULT_EPS_MUL: f64 = 1e-3;
 /// Default ϵ (additive regulariser).
@@ -92,7 +98,7 @@ impl Default for FlrConfig {
         FlrConfig {
             guides: GuideSet::NORMAL_DEPTH_AO,
             block: 8,
-            blur: Blur::Gaussian { sigma: DEFAULT_SIGMA, radius: None },
+            blur: Blur::Adaptive { sigmas: DEFAULT_SIGMAS },
             regularization: Regularization::Normalized { eps_mul: DEFAULT_EPS_MUL, eps_add: DEFAULT_EPS_ADD },
             upsample: 1,
             clamp_negative: true,

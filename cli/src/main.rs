@@ -233,7 +233,7 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(FlrArgs { block: Some(16), ..Default::default() }),
         Variant::flr(FlrArgs { sigma: Some("6".into()), ..Default::default() }),
         Variant::flr(FlrArgs { sigma: Some("24".into()), ..Default::default() }),
-        Variant::flr(FlrArgs { sigma: Some("6,12,20".into()), ..Default::default() }),
+        Variant::flr(FlrArgs { sigma: Some("12".into()), ..Default::default() }),
         Variant::flr(FlrArgs { box_radius: Some(16.0), ..Default::default() }),
         Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
         Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),

@@ -3,6 +3,9 @@
 //! `--block B`, `--sigma S`, `--radius R` (full-resolution pixels; default 3σ),
 //! or `--sigma S0,S1,S2` (the adaptive window: three sizes blended per cell),
 //! `--regularization normalized:EPS_MUL,EPS_ADD | tikhonov:EPS`, `--upsample 2|4`.
+//! The default window is the adaptive one (σ 6/12/20): it meets the quality
+//! the issue asks of the defaults more nearly, for ~20–30 % more time; one
+//! `--sigma` value (or `--radius` alone, σ = 12) is the single, faster window.
 //!
 //! BMFR (`--method bmfr`, single frame; `bmfr-temporal`, the pipeline over a
 //! sequence) reads `--guides` (default: normal and position, or normal and
@@ -27,10 +30,10 @@ pub struct FlrArgs {
     /// Block size B: one affine model per BxB pixels (1, 2, 4, 8, 16)
     #[arg(long)]
     pub block: Option<usize>,
-    /// Gaussian window sigma in full-resolution pixels; three increasing values (6,12,20) fit all three and blend them per cell (the adaptive window)
+    /// Gaussian window sigma in full-resolution pixels: one value fits one window (fastest; e.g. 12); three increasing values fit all three and blend them per cell (the adaptive window; default 6,12,20)
     #[arg(long)]
     pub sigma: Option<String>,
-    /// Window truncation radius in full-resolution pixels (default 3*sigma)
+    /// Window truncation radius in full-resolution pixels (default 3*sigma); with no --sigma, a single sigma = 12 window
     #[arg(long)]
     pub radius: Option<f32>,
     /// Use a box window of this radius instead of the Gaussian (the guided filter's window)

@@ -357,9 +357,11 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
     assert!(ok && so.contains("GPU adapter") && so.contains("median") && so.contains("GPU time"), "{so}{e}");
 }
 
-/// `--sigma 6,12,20` is the adaptive window: labelled, better than the single
-/// window on room_7 (+0.56 dB measured), the same on 1 and 2 threads; wrong
-/// counts and `--radius` with it are refused with a one-line reason.
+/// `--sigma 6,12,20` is the adaptive window, and the default: labelled,
+/// better than the single window (`--sigma 12`) on room_7 (+0.56 dB
+/// measured), the same on 1 and 2 threads; `--radius` alone means the single
+/// window; wrong counts and `--radius` with three sigmas are refused with a
+/// one-line reason.
 #[test]
 fn adaptive_window_flag() {
     let room = data("room_7.exr");
@@ -377,8 +379,13 @@ fn adaptive_window_flag() {
     assert!(label.contains("s6/12/20"), "{label}");
     let (_, two) = psnr(&["--threads", "2", "--sigma", "6,12,20"]);
     assert_eq!(one, two, "threads change the result");
-    let (_, single) = psnr(&["--threads", "1"]);
+    let (label_single, single) = psnr(&["--threads", "1", "--sigma", "12"]);
+    assert!(label_single.contains("s12") && !label_single.contains('/'), "{label_single}");
     assert!(one > single + 0.2, "adaptive {one} vs single {single}");
+    let (label_default, default) = psnr(&["--threads", "1"]);
+    assert_eq!((label_default.as_str(), default), (label.as_str(), one), "the default is the adaptive window");
+    let (label_radius, _) = psnr(&["--threads", "1", "--radius", "30"]);
+    assert!(label_radius.contains("s12") && !label_radius.contains("s6/12/20"), "{label_radius}");
     let out = tmp("adaptive.exr");
     let o = out.to_str().unwrap();
     fails_with(&["denoise", &room, "-o", o, "--sigma", "6,12"], &["three increasing"]);

@@ -85,6 +85,10 @@ fn entry_points_validate_everything() {
         bf.guides.ao = img(depth.as_ptr(), w, h, 1);
         assert_eq!(lrd_flr_denoise(&cfg, &bf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_GUIDE_MISMATCH);
         let mut bc = cfg;
+        bc.sigmas[1] = f32::NAN; // the default blur is the adaptive window
+        assert_eq!(lrd_flr_scratch_size(&bc, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        bc = cfg;
+        bc.blur = LrdBlur::LRD_BLUR_GAUSSIAN as u32;
         bc.sigma = f32::NAN;
         assert_eq!(lrd_flr_scratch_size(&bc, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
         bc = cfg;
@@ -94,6 +98,9 @@ fn entry_points_validate_everything() {
         // tiles: bad stage / tile / worker
         let mut tb = 0;
         assert_eq!(lrd_flr_tiled_scratch_size(&cfg, w, h, 1, &mut tb), LrdStatus::LRD_STATUS_OK);
+        // the tiled scratch is larger than the whole-frame one with the adaptive window
+        let mut tiled_scratch = vec![0f64; tb / 8 + 1];
+        let sp = tiled_scratch.as_mut_ptr() as *mut _;
         for (stage, tile, worker) in [(7, 0, 0), (0, 1, 0), (1, 99, 0), (1, 0, 1), (6, 99, 0)] {
             assert_eq!(lrd_flr_run_tile(&cfg, &frame, &o, sp, tb, 1, stage, tile, worker, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         }
@@ -180,18 +187,20 @@ fn gpu_dispatch_description() {
     let up = unsafe { out.assume_init() };
     assert_eq!(up.buffer_bytes[1], 50 * 35 * 3 * 4);
     assert_eq!(up.buffer_bytes[2], 5 * (100 * 70 + 50 * 35) * 4);
-    // the adaptive window: 15 passes (σ 6/12/20 at B = 8 pools windows 1 and 2)
-    let mut ad = cfg;
-    ad.blur = LrdBlur::LRD_BLUR_ADAPTIVE as u32;
-    ad.sigmas = [6.0, 12.0, 20.0];
-    let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
-    assert_eq!(unsafe { lrd_gpu_dispatch(&ad, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
-    let ad = unsafe { out.assume_init() };
-    assert_eq!(ad.pass_count, 15);
-    let names: Vec<&str> = ad.passes.iter().map(|p| unsafe { CStr::from_ptr(p.entry) }.to_str().unwrap()).collect();
+    // the default is the adaptive window: 15 passes (σ 6/12/20 at B = 8 pools
+    // windows 1 and 2); one Gaussian window: 7, and smaller tmp and models
+    assert_eq!((cfg.blur, cfg.sigmas), (LrdBlur::LRD_BLUR_ADAPTIVE as u32, [6.0, 12.0, 20.0]));
+    assert_eq!(d.pass_count, 15);
+    let names: Vec<&str> = d.passes.iter().map(|p| unsafe { CStr::from_ptr(p.entry) }.to_str().unwrap()).collect();
     assert_eq!(names[3], "pool");
     assert_eq!(names[13..], ["blend", "apply"]);
-    assert!(ad.buffer_bytes[5] > d.buffer_bytes[5] && ad.buffer_bytes[6] > d.buffer_bytes[6], "adaptive needs more tmp and models");
+    let mut single = cfg;
+    single.blur = LrdBlur::LRD_BLUR_GAUSSIAN as u32;
+    let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_dispatch(&single, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let single = unsafe { out.assume_init() };
+    assert_eq!(single.pass_count, 7);
+    assert!(d.buffer_bytes[5] > single.buffer_bytes[5] && d.buffer_bytes[6] > single.buffer_bytes[6], "adaptive needs more tmp and models");
     let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
     let mut many = cfg;
     many.guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION | LRD_GUIDE_AO;

@@ -405,7 +405,9 @@ pub fn diff(a: &[f32], b: &[f64]) -> (f64, f64) {
     (max, sum / a.len() as f64)
 }
 
-/// The paper's defaults with `block` and clamping off (the reference does not clamp).
+/// The defaults with one Gaussian window of the default σ (what the f64
+/// reference computes), `block`, and clamping off (the reference does not clamp).
 pub fn cfg(set: GuideSet, block: usize) -> FlrConfig {
-    FlrConfig { guides: set, block, clamp_negative: false, ..FlrConfig::default() }
+    let blur = Blur::Gaussian { sigma: lrdenoise::config::DEFAULT_SIGMA, radius: None };
+    FlrConfig { guides: set, block, blur, clamp_negative: false, ..FlrConfig::default() }
 }
