@@ -317,6 +317,10 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
         assert!(std::fs::read_to_string(dir.join(f)).unwrap().contains("apply"), "{f}");
     }
     // every bundled frame: the GPU's output equals the CPU's within f32 rounding
+    let rel_diff = |a: &[f32], b: &[f32]| -> f64 {
+        let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
+        a.iter().zip(b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale
+    };
     let denoised = |p: &Path| -> Vec<f32> {
         let f = ExrFrame::read(p).unwrap();
         f.layers["denoised"].planes.concat()
@@ -331,9 +335,7 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
             return;
         }
         assert!(ok && so.contains("gpu"), "{e}");
-        let (a, b) = (denoised(&cpu), denoised(&gpu));
-        let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
-        let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
+        let mean = rel_diff(&denoised(&cpu), &denoised(&gpu));
         assert!(mean < 1e-4, "{name}: mean relative difference {mean:.2e}");
     }
     // joint upsampling on the GPU: the same as on the CPU
@@ -341,17 +343,13 @@ fn gpu_device_matches_cpu_and_writes_shaders() {
     let room = data("room_7.exr");
     assert!(lrd(&["denoise", &room, "-o", cpu.to_str().unwrap(), "--only-output", "--upsample", "2"]).0);
     assert!(lrd(&["denoise", &room, "-o", gpu.to_str().unwrap(), "--only-output", "--upsample", "2", "--device", "gpu"]).0);
-    let (a, b) = (denoised(&cpu), denoised(&gpu));
-    let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
-    let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
+    let mean = rel_diff(&denoised(&cpu), &denoised(&gpu));
     assert!(mean < 1e-4, "upsample 2: mean relative difference {mean:.2e}");
     // the adaptive window on the GPU: the same as on the CPU
     let (cpu, gpu) = (tmp("cpu_adaptive.exr"), tmp("gpu_adaptive.exr"));
     assert!(lrd(&["denoise", &room, "-o", cpu.to_str().unwrap(), "--only-output", "--sigma", "6,12,20"]).0);
     assert!(lrd(&["denoise", &room, "-o", gpu.to_str().unwrap(), "--only-output", "--sigma", "6,12,20", "--device", "gpu"]).0);
-    let (a, b) = (denoised(&cpu), denoised(&gpu));
-    let scale = a.iter().map(|v| v.abs() as f64).sum::<f64>() / a.len() as f64;
-    let mean = a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.len() as f64 / scale;
+    let mean = rel_diff(&denoised(&cpu), &denoised(&gpu));
     assert!(mean < 1e-4, "adaptive: mean relative difference {mean:.2e}");
     let (ok, so, e) = lrd(&["bench", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
     assert!(ok && so.contains("GPU adapter") && so.contains("median") && so.contains("GPU time"), "{so}{e}");

@@ -1101,14 +1101,21 @@ impl Flr {
         }
         self.finish_stats_sums(&sums, &mut stats);
         if !single {
+            // The larger windows first (mostly on the pooled grid: small);
+            // then, as with one window, bottom to top: window 0's solve and
+            // variances, the blend and the apply of each band while its
+            // blurred moments and guide rows are still in cache.
             rep += self.fit_windows(&stats, &mut parts)?;
-            for t in 0..tiles {
-                let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
-                self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
-            }
             for t in (0..tiles).rev() {
-                rep += self.apply_band(&f, &stats, t, parts.models, parts.workers, out)?;
+                let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
+                let (m0, v0) = (self.scale_models_tile_range(0, t)?, self.scale_variances_tile_range(0, t)?);
+                rep += self.solve_tile_at(0, &stats, t, &parts.first[c.clone()], &mut parts.scale_models[m0], &mut parts.variances[v0])?;
+                self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
+                if t + 1 < tiles {
+                    rep += self.apply_band(&f, &stats, t + 1, parts.models, parts.workers, out)?;
+                }
             }
+            rep += self.apply_band(&f, &stats, 0, parts.models, parts.workers, out)?;
         } else {
             // Bottom to top: the frame rows the moments stage read last are
             // the likeliest still in cache. Tile u's rows interpolate the
@@ -1142,22 +1149,20 @@ impl Flr {
 
     /// Adaptive window, on the calling thread: blur and solve every window
     /// (window 0 arrives blurred in `first`, see [`Flr::denoise`]).
+    /// Blur and solve of windows 1 and 2 (window 0 is blurred in the moments
+    /// loop and solved band by band before its blend).
     fn fit_windows(&self, stats: &Stats, parts: &mut Parts<'_>) -> Result<Report, Error> {
         let tiles = self.tile_count();
         let mut rep = Report::default();
-        for s in 0..self.scale_count() {
+        for s in 1..self.scale_count() {
             let n = self.window_grid_len(s);
-            let dst = if s == 0 {
-                &mut *parts.first
-            } else {
-                let src: &[f64] = if self.window_pooled(s) { parts.pooled } else { parts.cells };
-                let tmp = &mut parts.tmp[..n];
-                for t in 0..tiles {
-                    self.blur_rows_tile_at(s, t, src, &mut tmp[self.window_cells_tile_range(s, t)?])?;
-                }
-                self.blur_cols_tiles_at(s, 0..tiles, tmp, &mut parts.blurred[..n])?;
-                &mut parts.blurred[..n]
-            };
+            let src: &[f64] = if self.window_pooled(s) { parts.pooled } else { parts.cells };
+            let tmp = &mut parts.tmp[..n];
+            for t in 0..tiles {
+                self.blur_rows_tile_at(s, t, src, &mut tmp[self.window_cells_tile_range(s, t)?])?;
+            }
+            let dst = &mut parts.blurred[..n];
+            self.blur_cols_tiles_at(s, 0..tiles, tmp, dst)?;
             for t in 0..tiles {
                 let c = self.window_cells_tile_range(s, t)?;
                 let (m, v) = (self.scale_models_tile_range(s, t)?, self.scale_variances_tile_range(s, t)?);
