@@ -85,7 +85,7 @@ pub struct FlrConfig {
 pub const DEFAULT_SIGMA: f32 = 12.0;
 /// The default window: the adaptive window's three σ in full-resolution
 /// pixels. Chosen on the training scenes (+0.29 dB over σ = 12 alone there,
-/// +0.42 dB on the held-out test scenes) for ~20–30 % more time than one
+/// +0.42 dB on the held-out test scenes) for ~40 % more time than one
 /// window; `Blur::Gaussian { sigma: DEFAULT_SIGMA, .. }` is the fast choice.
 pub const DEFAULT_SIGMAS: [f32; 3] = [6.0, 12.0, 20.0];
 /// Default ε (multiplicative regulariser).

@@ -4,7 +4,7 @@
 //! or `--sigma S0,S1,S2` (the adaptive window: three sizes blended per cell),
 //! `--regularization normalized:EPS_MUL,EPS_ADD | tikhonov:EPS`, `--upsample 2|4`.
 //! The default window is the adaptive one (σ 6/12/20): it meets the quality
-//! the issue asks of the defaults more nearly, for ~20–30 % more time; one
+//! the issue asks of the defaults more nearly, for ~40 % more time; one
 //! `--sigma` value (or `--radius` alone, σ = 12) is the single, faster window.
 //!
 //! BMFR (`--method bmfr`, single frame; `bmfr-temporal`, the pipeline over a
