@@ -103,35 +103,37 @@ pub fn prediction_gaps<const Q: usize>(cell: &[f64], models: [&[f32]; 3], min_we
     for a in 0..Q {
         mu[a] = cell[lay.s + a] * inv;
     }
-    // Σ of the smallest window (packed upper triangle), shared by both gaps.
-    let mut cov = [0f64; crate::kernels::packed_len(crate::MAX_GUIDES)];
+    // Windows 1 and 2 side by side (two independent chains; the sums are
+    // the same, in the same order, as one window at a time).
+    let first = models[0];
+    let dl = |model: &[f32], j: usize| {
+        let d = |c: usize| L[c] * (model[j + c] as f64 - first[j + c] as f64);
+        0.0 + d(0) + d(1) + d(2)
+    };
+    let mut at_mean = [dl(models[1], 0), dl(models[2], 0)];
+    let mut dc = [[0f64; crate::MAX_GUIDES]; 2];
+    for a in 0..Q {
+        for w in 0..2 {
+            dc[w][a] = dl(models[w + 1], 3 + 3 * a);
+            at_mean[w] += dc[w][a] * mu[a];
+        }
+    }
+    // Δcᵀ Σ Δc with Σ (packed upper triangle) formed on the fly.
+    let mut spread = [0f64; 2];
     let mut p = 0;
     for a in 0..Q {
         for b in a..Q {
-            cov[p] = cell[lay.ss + p] * inv - mu[a] * mu[b];
+            let cov = cell[lay.ss + p] * inv - mu[a] * mu[b];
+            for w in 0..2 {
+                spread[w] += if a == b { dc[w][a] * dc[w][a] * cov } else { 2.0 * dc[w][a] * dc[w][b] * cov };
+            }
             p += 1;
         }
     }
     let mut gaps = [0f64; 3];
-    for (s, gap) in gaps.iter_mut().enumerate().skip(1) {
-        let (first, model) = (models[0], models[s]);
-        let dl = |j: usize| (0..3).map(|c| L[c] * (model[j + c] as f64 - first[j + c] as f64)).sum::<f64>();
-        let mut dc = [0f64; crate::MAX_GUIDES];
-        let mut at_mean = dl(0);
-        for a in 0..Q {
-            dc[a] = dl(3 + 3 * a);
-            at_mean += dc[a] * mu[a];
-        }
-        let mut spread = 0.0;
-        let mut p = 0;
-        for a in 0..Q {
-            for b in a..Q {
-                spread += if a == b { dc[a] * dc[a] * cov[p] } else { 2.0 * dc[a] * dc[b] * cov[p] };
-                p += 1;
-            }
-        }
-        let d2 = at_mean * at_mean + spread.max(0.0);
-        *gap = if d2.is_finite() { d2 } else { f64::INFINITY };
+    for w in 0..2 {
+        let d2 = at_mean[w] * at_mean[w] + spread[w].max(0.0);
+        gaps[w + 1] = if d2.is_finite() { d2 } else { f64::INFINITY };
     }
     gaps
 }
@@ -156,8 +158,8 @@ pub fn blend(models: [&[f32]; 3], variances: [f64; 3], gaps: [f64; 3], out: &mut
         out.copy_from_slice(models[1]);
         return;
     }
-    for (j, o) in out.iter_mut().enumerate() {
-        let v = (w[0] * models[0][j] as f64 + w[1] * models[1][j] as f64 + w[2] * models[2][j] as f64) / total;
-        *o = v as f32;
+    // zipped (no bounds checks), so it vectorises
+    for (((o, a), b), c) in out.iter_mut().zip(models[0]).zip(models[1]).zip(models[2]) {
+        *o = ((w[0] * *a as f64 + w[1] * *b as f64 + w[2] * *c as f64) / total) as f32;
     }
 }

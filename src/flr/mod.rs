@@ -1221,8 +1221,8 @@ impl WindowModels<'_> {
         // Models are finite: one pass over all four corners (vectorises).
         let m = c.map(|(at, _)| &self.models[at * ml..(at + 1) * ml]);
         let w = c.map(|(_, w)| w as f32);
-        for (e, o) in out.iter_mut().enumerate() {
-            *o = w[0] * m[0][e] + w[1] * m[1][e] + w[2] * m[2][e] + w[3] * m[3][e];
+        for ((((o, a), b), c), d) in out.iter_mut().zip(m[0]).zip(m[1]).zip(m[2]).zip(m[3]) {
+            *o = w[0] * a + w[1] * b + w[2] * c + w[3] * d;
         }
         v
     }
