@@ -554,7 +554,8 @@ extern "C" {
 #endif // __cplusplus
 
 /**
- * The default FLR configuration (normal + depth + AO, B = 8, σ = 12, normalized 1e-3/1e-2).
+ * The default FLR configuration (normal + depth + AO, B = 8, the adaptive window
+ * LRD_BLUR_ADAPTIVE with sigmas 6/12/20 (`sigma` = 12 for LRD_BLUR_GAUSSIAN), normalized 1e-3/1e-2).
  */
 struct LrdFlrConfig lrd_flr_config_default(void);
 

@@ -432,7 +432,8 @@ unsafe fn frame_views<'a>(frame: &LrdFrame, low_ok: bool) -> Result<Frame<'a>, L
     }
 }
 
-/// The default FLR configuration (normal + depth + AO, B = 8, σ = 12, normalized 1e-3/1e-2).
+/// The default FLR configuration (normal + depth + AO, B = 8, the adaptive window
+/// LRD_BLUR_ADAPTIVE with sigmas 6/12/20 (`sigma` = 12 for LRD_BLUR_GAUSSIAN), normalized 1e-3/1e-2).
 #[no_mangle]
 pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
     let d = FlrConfig::default();
