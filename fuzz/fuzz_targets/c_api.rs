@@ -47,6 +47,19 @@ fuzz_target!(|d: &[u8]| {
     cfg.radius = d[12] as f32 - 8.0;
     cfg.regularization = d[13] as u32 % 3;
     cfg.upsample = [1, 1, 2, 4, 3][d[14] as usize % 5];
+    // the adaptive window's sigmas (equal ones are invalid)
+    let s0 = 0.5 + d[23] as f32 / 16.0;
+    cfg.sigmas = [s0, 2.0 * s0, if d[23] % 5 == 0 { s0 } else { 3.5 * s0 }];
+    // the GPU dispatch description of the same config (no device needed)
+    {
+        let mut g = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
+        let r = unsafe { lrd_gpu_dispatch(&cfg, w, h, d[20] as u32 % 3, g.as_mut_ptr()) };
+        assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
+        if r == LrdStatus::LRD_STATUS_OK {
+            let g = unsafe { g.assume_init() };
+            assert!((7..=15).contains(&g.pass_count), "{} passes", g.pass_count);
+        }
+    }
     let (lw, lh) = (w.div_ceil(cfg.upsample.max(1)), h.div_ceil(cfg.upsample.max(1)));
     let mut bufs: Vec<Vec<u32>> = (0..13).map(|_| Vec::new()).collect();
     let none = LrdImage { data: null(), format: 0, width: 0, height: 0, pixel_stride: 0, row_stride: 0, channel_stride: 0 };
