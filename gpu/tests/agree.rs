@@ -193,10 +193,20 @@ fn large_offsets() {
 /// f16 input buffers: the GPU reads the halves the CPU reads from f16 views.
 #[test]
 fn f16_inputs() {
-    use half::f16;
     let f = Owned::synthetic(75, 61, 11, 0.5);
     let set = GuideSet::NORMAL_DEPTH_AO;
-    let c = cfg(set, 8);
+    for c in [cfg(set, 8), adaptive(cfg(set, 8))] {
+        f16_case(&f, c);
+    }
+}
+
+/// The adaptive window (the library's default) on top of `c`.
+fn adaptive(c: FlrConfig) -> FlrConfig {
+    FlrConfig { blur: Blur::Adaptive { sigmas: lrdenoise::config::DEFAULT_SIGMAS }, ..c }
+}
+
+fn f16_case(f: &Owned, c: FlrConfig) {
+    use half::f16;
     let Some(mut g) = (match GpuFlr::with_input(c, f.w, f.h, gpu::InputFormat::F16) {
         Err(GpuError::NoAdapter(_)) if std::env::var("LRD_REQUIRE_GPU").is_err() => None,
         r => Some(r.unwrap()),
@@ -221,8 +231,8 @@ fn f16_inputs() {
     let mut out = vec![0f32; 3 * w * h];
     g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
     let (mean, _) = rel_diff(&out, &cpu);
-    eprintln!("f16 inputs: mean {mean:.2e}");
-    assert!(mean < MEAN_TOL, "f16 inputs: {mean:.2e}");
+    eprintln!("f16 inputs, {:?}: mean {mean:.2e}", c.blur);
+    assert!(mean < MEAN_TOL, "f16 inputs, {:?}: {mean:.2e}", c.blur);
 }
 
 /// Joint denoise + upsample (noisy and fit guides at 1/2 and 1/4 resolution)
@@ -256,13 +266,17 @@ fn upsampling_and_separate_fit_guides() {
         };
         let frame = Frame { noisy: iv(&noisy, lw, lh, 3), guides: f.guides(set), guides_low: Some(low) };
         let c = FlrConfig { upsample: u, ..cfg(set, 8) };
-        let (cpu, _) = run_frame(c, w, h, &frame);
+        for c in [adaptive(c), c] {
+            let (cpu, _) = run_frame(c, w, h, &frame);
+            let Some(mut g) = gpu(c, w, h) else { return };
+            let mut out = vec![0f32; 3 * w * h];
+            g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+            let (mean, _) = rel_diff(&out, &cpu);
+            eprintln!("upsample {u}, {:?}: mean {mean:.2e}", c.blur);
+            assert!(mean < MEAN_TOL, "upsample {u}, {:?}: {mean:.2e}", c.blur);
+        }
         let Some(mut g) = gpu(c, w, h) else { return };
         let mut out = vec![0f32; 3 * w * h];
-        g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
-        let (mean, _) = rel_diff(&out, &cpu);
-        eprintln!("upsample {u}: mean {mean:.2e}");
-        assert!(mean < MEAN_TOL, "upsample {u}: {mean:.2e}");
         // and the same executor still runs frames without a separate set at upsample 1
         if u == 1 {
             let plain = f.frame(set);
