@@ -119,6 +119,15 @@ fn adaptive_window() {
             }
         }
     }
+    // no guides (a blend of three blurs), every guide, and B = 1 (pooled cells of 2×2 pixels)
+    let f = Owned::synthetic(40, 29, 9, 0.6);
+    let all = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
+    for (set, block) in [(GuideSet::NONE, 8), (all, 8), (set, 1)] {
+        let c = FlrConfig { guides: set, ..adaptive([6.0, 12.0, 20.0], block) };
+        if check(&format!("adaptive {set:?} B{block}"), c, &f, set).is_none() {
+            return;
+        }
+    }
     let mut f = Owned::synthetic(64, 48, 2, 0.6);
     f.noisy[3 * 7] = f32::NAN;
     f.depth[900] = f32::INFINITY;
