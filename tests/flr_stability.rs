@@ -123,15 +123,19 @@ proptest! {
         let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
         let a = 10f32.powf(log_a) * if neg { -1.0 } else { 1.0 };
         let g = transformed(&f, a, b, which);
-        let c = cfg(set, block);
-        let (o1, _) = run(c, &f);
-        let (o2, _) = run(c, &g);
-        prop_assert!(all_finite(&o2));
-        // Rounding of a·g + b in f32 itself perturbs the guide by ~|b|·6e-8, i.e.
-        // relative to the guide's spread by |b|/(|a|·spread)·6e-8.
-        let tol = 2e-3 + 1e-6 * (b.abs() / a.abs()) as f64;
-        let d = o1.iter().zip(&o2).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / o1.len() as f64;
-        prop_assert!(d < tol, "mean diff {} (tol {})", d, tol);
+        // one window, and the default adaptive window (its bias and variance
+        // estimates are differences of predictions: invariant as well)
+        let adaptive = FlrConfig { blur: Blur::Adaptive { sigmas: lrdenoise::config::DEFAULT_SIGMAS }, ..cfg(set, block) };
+        for c in [cfg(set, block), adaptive] {
+            let (o1, _) = run(c, &f);
+            let (o2, _) = run(c, &g);
+            prop_assert!(all_finite(&o2));
+            // Rounding of a·g + b in f32 itself perturbs the guide by ~|b|·6e-8, i.e.
+            // relative to the guide's spread by |b|/(|a|·spread)·6e-8.
+            let tol = 2e-3 + 1e-6 * (b.abs() / a.abs()) as f64;
+            let d = o1.iter().zip(&o2).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / o1.len() as f64;
+            prop_assert!(d < tol, "{:?}: mean diff {} (tol {})", c.blur, d, tol);
+        }
     }
 
     /// Ill-conditioned windows: guides that are nearly collinear, tiny or huge,
