@@ -220,9 +220,18 @@ fn shadow_and_flat_regions_choose_their_window() {
 #[test]
 fn tiled_equals_whole_frame() {
     // (61, 45, 8) with σ 3/6/11 fits every window on the block grid; the others pool.
-    for (w, h, block, sigmas) in
-        [(61, 45, 8, [3.0, 6.0, 11.0]), (75, 53, 8, [6.0, 12.0, 20.0]), (33, 70, 4, [3.0, 6.0, 11.0]), (7, 3, 1, [3.0, 6.0, 11.0])]
-    {
+    // The awkward sizes run the default sigmas (the default window).
+    let d = lrdenoise::config::DEFAULT_SIGMAS;
+    for (w, h, block, sigmas) in [
+        (61, 45, 8, [3.0, 6.0, 11.0]),
+        (75, 53, 8, [6.0, 12.0, 20.0]),
+        (33, 70, 4, [3.0, 6.0, 11.0]),
+        (7, 3, 1, [3.0, 6.0, 11.0]),
+        (1, 1, 8, d),
+        (255, 9, 8, d),
+        (256, 9, 8, d),
+        (257, 9, 8, d),
+    ] {
         let f = Owned::synthetic(w, h, 5, 0.5);
         let set = GuideSet::NORMAL_DEPTH_AO;
         let c = adaptive(set, block, sigmas);
