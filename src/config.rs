@@ -18,7 +18,7 @@ pub enum Blur {
     /// truncated at 3σ), fitted side by side and blended per cell with weights
     /// 1 / (estimated squared error): small windows where the light changes
     /// faster than the guides explain, large ones where it does not
-    /// (`flr::adaptive`).
+    /// (`flr::adaptive`). The default, with [`DEFAULT_SIGMAS`].
     Adaptive { sigmas: [f32; 3] },
 }
 
@@ -62,7 +62,8 @@ pub struct FlrConfig {
     pub guides: GuideSet,
     /// Block size B ∈ {1, 2, 4, 8, 16}: one affine model per B×B pixels.
     pub block: usize,
-    /// The regression window.
+    /// The regression window (default: the adaptive window, σ 6/12/20 px;
+    /// `Blur::Gaussian { sigma: 12.0, radius: None }` is the faster single window).
     pub blur: Blur,
     /// The regulariser.
     pub regularization: Regularization,
