@@ -279,9 +279,12 @@ pub struct Passes {
 }
 
 impl Passes {
+    /// Appends a pass ([`GpuPlan::passes`] never makes more than [`MAX_PASSES`]).
     fn push(&mut self, entry: &'static str, workgroups: [u32; 3]) {
-        self.list[self.len] = Pass { entry, workgroups };
-        self.len += 1;
+        if let Some(slot) = self.list.get_mut(self.len) {
+            *slot = Pass { entry, workgroups };
+            self.len += 1;
+        }
     }
 }
 
@@ -307,10 +310,10 @@ struct Regions {
     models_len: usize,
     pooled_off: Option<usize>,
     /// Per window: blur source (buffer, offset), blurred grid (buffer,
-    /// offset), row-blurred grid in `tmp`, models, variances.
+    /// offset), models, variances. Every window's row-blurred grid is at the
+    /// start of `tmp` (the windows run one after another).
     src: [(u32, usize); MAX_SCALES],
     out: [(u32, usize); MAX_SCALES],
-    tmp: [usize; MAX_SCALES],
     model: [usize; MAX_SCALES],
     var: [Option<usize>; MAX_SCALES],
 }
@@ -390,7 +393,6 @@ impl GpuPlan {
             pooled_off: None,
             src: [(0, 0); MAX_SCALES],
             out: [(0, 0); MAX_SCALES],
-            tmp: [0; MAX_SCALES],
             model: [0; MAX_SCALES],
             var: [None; MAX_SCALES],
         };
@@ -500,7 +502,7 @@ impl GpuPlan {
                 src_off: r.src[s].1 as u32,
                 out_buf: r.out[s].0,
                 out_off: r.out[s].1 as u32,
-                tmp_off: r.tmp[s] as u32,
+                tmp_off: 0,
                 model_off: r.model[s] as u32,
                 var_off: r.var[s].map_or(u32::MAX, |o| o as u32),
                 weight_norm: (1.0 / self.weights[s]) as f32,
