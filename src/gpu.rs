@@ -24,7 +24,7 @@
 
 use crate::config::{FlrConfig, Regularization};
 use crate::error::Error;
-use crate::flr::{Grid, Report, MAX_SCALES};
+use crate::flr::{Flr, Grid, Report, MAX_SCALES};
 use crate::image::Layout;
 use crate::kernels::blur::Taps;
 use crate::kernels::{model_len, moment_count};
@@ -261,11 +261,8 @@ pub struct GpuPlan {
     q: usize,
     /// Windows fitted: 1, or 3 with the adaptive window.
     windows: usize,
-    /// Per window: its grid, taps, total window weight and `4πσ²`.
-    grids: [Grid; MAX_SCALES],
-    taps: [Taps; MAX_SCALES],
-    weights: [f64; MAX_SCALES],
-    areas: [f64; MAX_SCALES],
+    /// The CPU plan: each window's grid, taps, weight and area.
+    flr: Flr,
 }
 
 /// Most dispatches per frame (the adaptive window with a pooled grid).
@@ -334,13 +331,13 @@ impl GpuPlan {
     /// guide channels.
     pub fn new(cfg: FlrConfig, width: usize, height: usize) -> Result<Self, Error> {
         // The CPU plan validates the configuration and the size.
-        let flr = crate::flr::Flr::new(cfg, width, height)?;
+        let flr = Flr::new(cfg, width, height)?;
         let q = flr.guide_channels();
         if q > GPU_MAX_GUIDES {
             return Err(Error::TooManyGuides { got: q });
         }
         let windows = flr.scale_count();
-        let mut plan = GpuPlan {
+        let plan = GpuPlan {
             cfg,
             width,
             height,
@@ -350,19 +347,10 @@ impl GpuPlan {
             cells_y: flr.cells().1,
             q,
             windows,
-            grids: [flr.window_grid(0)?; MAX_SCALES],
-            taps: [*flr.window_taps(0)?; MAX_SCALES],
-            weights: [0.0; MAX_SCALES],
-            areas: [0.0; MAX_SCALES],
+            flr,
         };
-        for s in 0..windows {
-            plan.grids[s] = flr.window_grid(s)?;
-            plan.taps[s] = *flr.window_taps(s)?;
-            plan.weights[s] = flr.window_weight(s);
-            plan.areas[s] = flr.window_area(s);
-            if plan.taps[s].radius >= TAPS {
-                return Err(Error::Unsupported("the GPU path blurs at most 67 cells wide"));
-            }
+        if (0..windows).any(|s| plan.taps(s).radius >= TAPS) {
+            return Err(Error::Unsupported("the GPU path blurs at most 67 cells wide"));
         }
         let too_many = plan.passes().iter().any(|p| p.workgroups.iter().any(|&g| g as usize > MAX_GROUPS));
         let r = plan.regions();
@@ -375,6 +363,15 @@ impl GpuPlan {
             return Err(Error::Unsupported("frame too large for one GPU dispatch"));
         }
         Ok(plan)
+    }
+
+    /// Window `s`'s grid.
+    fn grid(&self, s: usize) -> Grid {
+        self.flr.window_grid_taps(s).0
+    }
+    /// Window `s`'s blur taps.
+    fn taps(&self, s: usize) -> &Taps {
+        self.flr.window_grid_taps(s).1
     }
 
     /// Where each window's grids live. One window: blurred in place in
@@ -401,14 +398,14 @@ impl GpuPlan {
         }
         r.out[0] = (1, r.tmp_len);
         r.tmp_len += fine * k;
-        if let Some(g) = self.grids[1..self.windows].iter().find(|g| g.factor > 1) {
+        if let Some(g) = (1..self.windows).map(|s| self.grid(s)).find(|g| g.factor > 1) {
             r.pooled_off = Some(r.tmp_len);
             r.tmp_len += g.cells_x * g.cells_y * k;
         }
         for s in 0..self.windows {
-            let cells = self.grids[s].cells_x * self.grids[s].cells_y;
+            let cells = self.grid(s).cells_x * self.grid(s).cells_y;
             if s > 0 {
-                r.src[s] = match (self.grids[s].factor, r.pooled_off) {
+                r.src[s] = match (self.grid(s).factor, r.pooled_off) {
                     (2, Some(o)) => (1, o),
                     _ => (0, 0),
                 };
@@ -420,7 +417,7 @@ impl GpuPlan {
         }
         for s in 0..self.windows {
             r.var[s] = Some(r.models_len);
-            r.models_len += self.grids[s].cells_x * self.grids[s].cells_y;
+            r.models_len += self.grid(s).cells_x * self.grid(s).cells_y;
         }
         r
     }
@@ -447,13 +444,13 @@ impl GpuPlan {
         let k = moment_count(self.q);
         let g = |n: usize, d: usize| n.div_ceil(d) as u32;
         let (cx, cy) = (self.cells_x as u32, self.cells_y as u32);
-        let grid = |s: usize| [g(self.grids[s].cells_x * k, 64), self.grids[s].cells_y as u32, 1];
-        let solve = |s: usize| [g(self.grids[s].cells_x, 64), self.grids[s].cells_y as u32, 1];
+        let grid = |s: usize| [g(self.grid(s).cells_x * k, 64), self.grid(s).cells_y as u32, 1];
+        let solve = |s: usize| [g(self.grid(s).cells_x, 64), self.grid(s).cells_y as u32, 1];
         let mut p = Passes { list: [Pass { entry: "", workgroups: [0; 3] }; MAX_PASSES], len: 0 };
         p.push("reference", [1, 1, 1]);
         p.push("moments", [cx, cy, 1]);
         p.push("finish_stats", [1, 1, 1]);
-        if let Some(s) = (1..self.windows).find(|&s| self.grids[s].factor > 1) {
+        if let Some(s) = (1..self.windows).find(|&s| self.grid(s).factor > 1) {
             p.push("pool", grid(s));
         }
         const NAMES: [[&str; 3]; MAX_SCALES] =
@@ -481,10 +478,10 @@ impl GpuPlan {
         };
         let b = self.cfg.block;
         let bin = b / self.cfg.upsample;
-        let total = self.weights[0];
+        let total = self.flr.window_weight(0);
         let taps_of = |s: usize| {
             let mut taps = [0f32; TAPS];
-            for (t, w) in taps.iter_mut().zip(&self.taps[s].w[..=self.taps[s].radius]) {
+            for (t, w) in taps.iter_mut().zip(&self.taps(s).w[..=self.taps(s).radius]) {
                 *t = *w as f32;
             }
             taps
@@ -492,12 +489,12 @@ impl GpuPlan {
         let r = self.regions();
         let mut win = [GpuWindow::default(); 3];
         for (s, w) in win.iter_mut().enumerate().take(self.windows) {
-            let g = self.grids[s];
+            let g = self.grid(s);
             *w = GpuWindow {
                 cells_x: g.cells_x as u32,
                 cells_y: g.cells_y as u32,
                 factor: g.factor as u32,
-                radius: self.taps[s].radius as u32,
+                radius: self.taps(s).radius as u32,
                 src_buf: r.src[s].0,
                 src_off: r.src[s].1 as u32,
                 out_buf: r.out[s].0,
@@ -505,13 +502,13 @@ impl GpuPlan {
                 tmp_off: 0,
                 model_off: r.model[s] as u32,
                 var_off: r.var[s].map_or(u32::MAX, |o| o as u32),
-                weight_norm: (1.0 / self.weights[s]) as f32,
-                min_weight: (1e-12 * self.weights[s]) as f32,
-                area: self.areas[s] as f32,
+                weight_norm: (1.0 / self.flr.window_weight(s)) as f32,
+                min_weight: (1e-12 * self.flr.window_weight(s)) as f32,
+                area: self.flr.window_area(s) as f32,
                 pad: [0; 2],
             };
         }
-        let pooled = r.pooled_off.and_then(|_| self.grids[1..self.windows].iter().find(|g| g.factor > 1));
+        let pooled = r.pooled_off.and_then(|_| (1..self.windows).map(|s| self.grid(s)).find(|g| g.factor > 1));
         let guide_words = |ls: &[Layout; GPU_MAX_GUIDES]| {
             let mut g = [[0u32; 4]; GPU_MAX_GUIDES];
             for (g, l) in g.iter_mut().zip(ls).take(self.q) {
@@ -528,7 +525,7 @@ impl GpuPlan {
             q: self.q as u32,
             k: moment_count(self.q) as u32,
             ml: model_len(self.q) as u32,
-            radius: self.taps[0].radius as u32,
+            radius: self.taps(0).radius as u32,
             clamp_negative: self.cfg.clamp_negative as u32,
             tikhonov,
             input_f16: (layouts.input == InputFormat::F16) as u32,

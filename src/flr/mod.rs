@@ -350,9 +350,11 @@ impl Flr {
     pub fn window_grid(&self, s: usize) -> Result<Grid, Error> {
         Ok(self.grids[self.scale(s)?])
     }
-    /// Blur taps of window `s` (in cells of its grid).
-    pub(crate) fn window_taps(&self, s: usize) -> Result<&Taps, Error> {
-        Ok(&self.taps[self.scale(s)?])
+    /// Grid and blur taps (in cells of that grid) of window `s < MAX_SCALES`
+    /// (for `s ≥ scale_count()`: window 0's).
+    pub(crate) fn window_grid_taps(&self, s: usize) -> (Grid, &Taps) {
+        let s = if s < self.scale_count() { s } else { 0 };
+        (self.grids[s], &self.taps[s])
     }
     /// Whether window `s` is fitted on the pooled grid: its blur then reads
     /// `pooled` (written by [`Flr::pool_tile`]) instead of `cells`.
