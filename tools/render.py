@@ -17,7 +17,7 @@ cosine-weighted direction is sampled and Mitsuba's `path` integrator
 (hide_emitters, max_depth 3) is evaluated along it; with the cosine pdf and a
 Lambertian BRDF, albedo * mean(L) is the outgoing indirect radiance.
 """
-import argparse, math, os, sys
+import argparse, math, os, sys, zlib
 
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so")
 import numpy as np
@@ -72,7 +72,9 @@ def color(rng, lo=0.2, hi=0.85):
 
 def scene_dict(family, seed):
     """Returns (shapes dict, camera (origin, target, fov), ao distance, offset, scale)."""
-    rng = np.random.default_rng(seed * 1000 + hash(family) % 997)
+    # zlib.crc32, not hash(): Python salts str hashes per process
+    # (PYTHONHASHSEED), which made every run build different scenes.
+    rng = np.random.default_rng(seed * 1000 + zlib.crc32(family.encode()) % 997)
     S = {}
     off, sc = np.zeros(3), 1.0
     if family in ("room", "box"):
@@ -218,7 +220,7 @@ def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_ra
         return (acc / spp).reshape(h, w, 3)
 
     for name, spp in spps.items():
-        out[name] = indirect(spp, seed + hash(name) % 1000)
+        out[name] = indirect(spp, seed + zlib.crc32(name.encode()) % 1000)
     out["reference"] = indirect(ref_spp, seed + 99991)
 
     # ambient occlusion: fraction of cosine rays unoccluded within ao_dist
