@@ -177,8 +177,17 @@ pub struct BufferDesc {
 /// One dispatch: the entry point and its workgroup counts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Pass {
-    pub entry: &'static str,
+    /// The entry point's name, NUL-terminated (the C API hands it out as is).
+    pub entry: &'static core::ffi::CStr,
     pub workgroups: [u32; 3],
+}
+
+impl Pass {
+    /// The entry point's name.
+    pub fn name(&self) -> &'static str {
+        // the names are ASCII literals (see `GpuPlan::passes`)
+        self.entry.to_str().unwrap_or("")
+    }
 }
 
 /// Sample format of the noisy and guide buffers (the output is always f32).
@@ -277,7 +286,7 @@ pub struct Passes {
 
 impl Passes {
     /// Appends a pass ([`GpuPlan::passes`] never makes more than [`MAX_PASSES`]).
-    fn push(&mut self, entry: &'static str, workgroups: [u32; 3]) {
+    fn push(&mut self, entry: &'static core::ffi::CStr, workgroups: [u32; 3]) {
         if let Some(slot) = self.list.get_mut(self.len) {
             *slot = Pass { entry, workgroups };
             self.len += 1;
@@ -446,24 +455,27 @@ impl GpuPlan {
         let (cx, cy) = (self.cells_x as u32, self.cells_y as u32);
         let grid = |s: usize| [g(self.grid(s).cells_x * k, 64), self.grid(s).cells_y as u32, 1];
         let solve = |s: usize| [g(self.grid(s).cells_x, 64), self.grid(s).cells_y as u32, 1];
-        let mut p = Passes { list: [Pass { entry: "", workgroups: [0; 3] }; MAX_PASSES], len: 0 };
-        p.push("reference", [1, 1, 1]);
-        p.push("moments", [cx, cy, 1]);
-        p.push("finish_stats", [1, 1, 1]);
+        let mut p = Passes { list: [Pass { entry: c"", workgroups: [0; 3] }; MAX_PASSES], len: 0 };
+        p.push(c"reference", [1, 1, 1]);
+        p.push(c"moments", [cx, cy, 1]);
+        p.push(c"finish_stats", [1, 1, 1]);
         if let Some(s) = (1..self.windows).find(|&s| self.grid(s).factor > 1) {
-            p.push("pool", grid(s));
+            p.push(c"pool", grid(s));
         }
-        const NAMES: [[&str; 3]; MAX_SCALES] =
-            [["blur_rows", "blur_cols", "solve"], ["blur_rows_1", "blur_cols_1", "solve_1"], ["blur_rows_2", "blur_cols_2", "solve_2"]];
+        const NAMES: [[&core::ffi::CStr; 3]; MAX_SCALES] = [
+            [c"blur_rows", c"blur_cols", c"solve"],
+            [c"blur_rows_1", c"blur_cols_1", c"solve_1"],
+            [c"blur_rows_2", c"blur_cols_2", c"solve_2"],
+        ];
         for (s, [rows, cols, solve_s]) in NAMES.iter().enumerate().take(self.windows) {
             p.push(rows, grid(s));
             p.push(cols, grid(s));
             p.push(solve_s, solve(s));
         }
         if self.windows > 1 {
-            p.push("blend", [g(self.cells_x, 64), cy, 1]);
+            p.push(c"blend", [g(self.cells_x, 64), cy, 1]);
         }
-        p.push("apply", [g(self.width, 8), g(self.height, 8), 1]);
+        p.push(c"apply", [g(self.width, 8), g(self.height, 8), 1]);
         p
     }
 

@@ -411,7 +411,7 @@ fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Result<()
     }
     md += "\nPasses, in order (a storage barrier between consecutive passes):\n\n| entry point | workgroups |\n|---|---|\n";
     for p in plan.passes().iter() {
-        md += &format!("| `{}` | {} x {} x {} |\n", p.entry, p.workgroups[0], p.workgroups[1], p.workgroups[2]);
+        md += &format!("| `{}` | {} x {} x {} |\n", p.name(), p.workgroups[0], p.workgroups[1], p.workgroups[2]);
     }
     md += &format!("\nThe parameter block (binding 0, {} bytes) for these layouts is `params.bin`.\n", lrdenoise::gpu::PARAMS_BYTES);
     write("dispatch.md", md.as_bytes())?;
@@ -460,7 +460,7 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
 /// Prints the shader time alone (timestamp queries: median per pass over `runs` frames).
 fn gpu_pass_times(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize) -> Result<(), String> {
     let names: Vec<&str> = match &*m {
-        Method::FlrGpu { gpu, .. } => gpu.plan().passes().iter().map(|p| p.entry).collect(),
+        Method::FlrGpu { gpu, .. } => gpu.plan().passes().iter().map(|p| p.name()).collect(),
         _ => return Ok(()),
     };
     let mut per_pass: Vec<Vec<f64>> = vec![Vec::new(); names.len()];

@@ -1362,29 +1362,6 @@ pub struct LrdGpuDispatch {
 #[cfg(feature = "flr")]
 const _: () = assert!(lrdenoise_core::gpu::MAX_PASSES == 15 && lrdenoise_core::gpu::PARAMS_BYTES == 1392);
 
-/// The static C string of a shader entry point named by [`GpuPlan::passes`].
-#[cfg(feature = "flr")]
-fn entry_name(entry: &str) -> &'static core::ffi::CStr {
-    const NAMES: [&core::ffi::CStr; 15] = [
-        c"reference",
-        c"moments",
-        c"finish_stats",
-        c"pool",
-        c"blur_rows",
-        c"blur_cols",
-        c"solve",
-        c"blur_rows_1",
-        c"blur_cols_1",
-        c"solve_1",
-        c"blur_rows_2",
-        c"blur_cols_2",
-        c"solve_2",
-        c"blend",
-        c"apply",
-    ];
-    NAMES.iter().find(|n| n.to_bytes() == entry.as_bytes()).copied().unwrap_or(c"")
-}
-
 /// Fills `out` with the GPU dispatch description of `config` for
 /// `width`×`height` output frames (at most 8 guide channels), with
 /// noisy and guide buffers in `input_format` (LRD_FORMAT_F32 or LRD_FORMAT_F16).
@@ -1424,7 +1401,7 @@ pub unsafe extern "C" fn lrd_gpu_dispatch(
             params: [0; 1392],
         };
         for (dst, p) in d.passes.iter_mut().zip(passes.iter()) {
-            *dst = LrdGpuPass { entry: entry_name(p.entry).as_ptr(), workgroups: p.workgroups };
+            *dst = LrdGpuPass { entry: p.entry.as_ptr(), workgroups: p.workgroups };
         }
         for (dst, b) in d.buffer_bytes.iter_mut().zip(&buffers) {
             *dst = b.bytes;

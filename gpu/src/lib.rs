@@ -171,10 +171,10 @@ impl GpuFlr {
             .iter()
             .map(|p| {
                 let pipe = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(p.entry),
+                    label: Some(p.name()),
                     layout: Some(&layout),
                     module: &module,
-                    entry_point: Some(p.entry),
+                    entry_point: Some(p.name()),
                     compilation_options: Default::default(),
                     cache: None,
                 });
