@@ -260,17 +260,8 @@ impl GpuLayouts {
 /// FLR's GPU dispatch description for one frame size and configuration.
 #[derive(Clone, Copy, Debug)]
 pub struct GpuPlan {
-    cfg: FlrConfig,
-    width: usize,
-    height: usize,
-    in_width: usize,
-    in_height: usize,
-    cells_x: usize,
-    cells_y: usize,
-    q: usize,
-    /// Windows fitted: 1, or 3 with the adaptive window.
-    windows: usize,
-    /// The CPU plan: each window's grid, taps, weight and area.
+    /// The CPU plan: sizes, configuration and each window's grid, taps,
+    /// weight and area.
     flr: Flr,
 }
 
@@ -345,20 +336,8 @@ impl GpuPlan {
         if q > GPU_MAX_GUIDES {
             return Err(Error::TooManyGuides { got: q });
         }
-        let windows = flr.scale_count();
-        let plan = GpuPlan {
-            cfg,
-            width,
-            height,
-            in_width: flr.input_size().0,
-            in_height: flr.input_size().1,
-            cells_x: flr.cells().0,
-            cells_y: flr.cells().1,
-            q,
-            windows,
-            flr,
-        };
-        if (0..windows).any(|s| plan.taps(s).radius >= TAPS) {
+        let plan = GpuPlan { flr };
+        if (0..plan.windows()).any(|s| plan.taps(s).radius >= TAPS) {
             return Err(Error::Unsupported("the GPU path blurs at most 67 cells wide"));
         }
         let too_many = plan.passes().iter().any(|p| p.workgroups.iter().any(|&g| g as usize > MAX_GROUPS));
@@ -367,13 +346,27 @@ impl GpuPlan {
             || width * height * 3 >= u32::MAX as usize
             || r.tmp_len >= u32::MAX as usize
             || r.models_len >= u32::MAX as usize
-            || plan.cells_x * plan.cells_y * moment_count(q) >= u32::MAX as usize
+            || plan.cells_x() * plan.cells_y() * moment_count(q) >= u32::MAX as usize
         {
             return Err(Error::Unsupported("frame too large for one GPU dispatch"));
         }
         Ok(plan)
     }
 
+    /// Windows fitted: 1, or 3 with the adaptive window.
+    fn windows(&self) -> usize {
+        self.flr.scale_count()
+    }
+    fn cells_x(&self) -> usize {
+        self.flr.cells().0
+    }
+    fn cells_y(&self) -> usize {
+        self.flr.cells().1
+    }
+    /// The larger window fitted on the 2×2-pooled grid, if any.
+    fn pooled_grid(&self) -> Option<Grid> {
+        self.flr.pooled_window().map(|s| self.grid(s))
+    }
     /// Window `s`'s grid.
     fn grid(&self, s: usize) -> Grid {
         self.flr.window_grid_taps(s).0
@@ -390,9 +383,9 @@ impl GpuPlan {
     /// grids; `models` the blended models, then each window's models, then
     /// each window's variances.
     fn regions(&self) -> Regions {
-        let k = moment_count(self.q);
-        let ml = model_len(self.q);
-        let fine = self.cells_x * self.cells_y;
+        let k = moment_count(self.guide_channels());
+        let ml = model_len(self.guide_channels());
+        let fine = self.cells_x() * self.cells_y();
         let mut r = Regions {
             tmp_len: fine * k,
             models_len: fine * ml,
@@ -402,16 +395,16 @@ impl GpuPlan {
             model: [0; MAX_SCALES],
             var: [None; MAX_SCALES],
         };
-        if self.windows == 1 {
+        if self.windows() == 1 {
             return r;
         }
         r.out[0] = (1, r.tmp_len);
         r.tmp_len += fine * k;
-        if let Some(g) = (1..self.windows).map(|s| self.grid(s)).find(|g| g.factor > 1) {
+        if let Some(g) = self.pooled_grid() {
             r.pooled_off = Some(r.tmp_len);
             r.tmp_len += g.cells_x * g.cells_y * k;
         }
-        for s in 0..self.windows {
+        for s in 0..self.windows() {
             let cells = self.grid(s).cells_x * self.grid(s).cells_y;
             if s > 0 {
                 r.src[s] = match (self.grid(s).factor, r.pooled_off) {
@@ -424,7 +417,7 @@ impl GpuPlan {
             r.model[s] = r.models_len;
             r.models_len += cells * ml;
         }
-        for s in 0..self.windows {
+        for s in 0..self.windows() {
             r.var[s] = Some(r.models_len);
             r.models_len += self.grid(s).cells_x * self.grid(s).cells_y;
         }
@@ -433,33 +426,33 @@ impl GpuPlan {
 
     /// Output size.
     pub fn size(&self) -> (usize, usize) {
-        (self.width, self.height)
+        self.flr.size()
     }
     /// Size of the noisy input and of the fit guides (output size / upsample, rounded up).
     pub fn input_size(&self) -> (usize, usize) {
-        (self.in_width, self.in_height)
+        self.flr.input_size()
     }
     /// Guide channel count Q.
     pub fn guide_channels(&self) -> usize {
-        self.q
+        self.flr.guide_channels()
     }
     pub fn config(&self) -> &FlrConfig {
-        &self.cfg
+        self.flr.config()
     }
 
     /// The dispatches of one frame, in order: seven with one window, up to
     /// [`MAX_PASSES`] with the adaptive window (see the shader's header).
     pub fn passes(&self) -> Passes {
-        let k = moment_count(self.q);
+        let k = moment_count(self.guide_channels());
         let g = |n: usize, d: usize| n.div_ceil(d) as u32;
-        let (cx, cy) = (self.cells_x as u32, self.cells_y as u32);
+        let (cx, cy) = (self.cells_x() as u32, self.cells_y() as u32);
         let grid = |s: usize| [g(self.grid(s).cells_x * k, 64), self.grid(s).cells_y as u32, 1];
         let solve = |s: usize| [g(self.grid(s).cells_x, 64), self.grid(s).cells_y as u32, 1];
         let mut p = Passes { list: [Pass { entry: c"", workgroups: [0; 3] }; MAX_PASSES], len: 0 };
         p.push(c"reference", [1, 1, 1]);
         p.push(c"moments", [cx, cy, 1]);
         p.push(c"finish_stats", [1, 1, 1]);
-        if let Some(s) = (1..self.windows).find(|&s| self.grid(s).factor > 1) {
+        if let Some(s) = self.flr.pooled_window() {
             p.push(c"pool", grid(s));
         }
         const NAMES: [[&core::ffi::CStr; 3]; MAX_SCALES] = [
@@ -467,29 +460,29 @@ impl GpuPlan {
             [c"blur_rows_1", c"blur_cols_1", c"solve_1"],
             [c"blur_rows_2", c"blur_cols_2", c"solve_2"],
         ];
-        for (s, [rows, cols, solve_s]) in NAMES.iter().enumerate().take(self.windows) {
+        for (s, [rows, cols, solve_s]) in NAMES.iter().enumerate().take(self.windows()) {
             p.push(rows, grid(s));
             p.push(cols, grid(s));
             p.push(solve_s, solve(s));
         }
-        if self.windows > 1 {
-            p.push(c"blend", [g(self.cells_x, 64), cy, 1]);
+        if self.windows() > 1 {
+            p.push(c"blend", [g(self.cells_x(), 64), cy, 1]);
         }
-        p.push(c"apply", [g(self.width, 8), g(self.height, 8), 1]);
+        p.push(c"apply", [g(self.size().0, 8), g(self.size().1, 8), 1]);
         p
     }
 
     /// The parameter block for these layouts; checks that every index fits u32.
     pub fn params(&self, layouts: &GpuLayouts) -> Result<GpuParams, Error> {
-        let (w, h) = (self.width, self.height);
+        let (w, h) = self.size();
         self.buffers(layouts)?; // every layout fits u32
         let v = |l: &Layout| [l.offset as u32, l.pixel_stride as u32, l.row_stride as u32, l.channel_stride as u32];
-        let (tikhonov, eps_mul, eps_add, eps_t) = match self.cfg.regularization {
+        let (tikhonov, eps_mul, eps_add, eps_t) = match self.config().regularization {
             Regularization::Normalized { eps_mul, eps_add } => (0, eps_mul, eps_add, 0.0),
             Regularization::Tikhonov { eps } => (1, 0.0, 0.0, eps),
         };
-        let b = self.cfg.block;
-        let bin = b / self.cfg.upsample;
+        let b = self.config().block;
+        let bin = b / self.config().upsample;
         let total = self.flr.window_weight(0);
         let taps_of = |s: usize| {
             let mut taps = [0f32; TAPS];
@@ -500,7 +493,7 @@ impl GpuPlan {
         };
         let r = self.regions();
         let mut win = [GpuWindow::default(); 3];
-        for (s, w) in win.iter_mut().enumerate().take(self.windows) {
+        for (s, w) in win.iter_mut().enumerate().take(self.windows()) {
             let g = self.grid(s);
             *w = GpuWindow {
                 cells_x: g.cells_x as u32,
@@ -515,15 +508,15 @@ impl GpuPlan {
                 model_off: r.model[s] as u32,
                 var_off: r.var[s].map_or(u32::MAX, |o| o as u32),
                 weight_norm: (1.0 / self.flr.window_weight(s)) as f32,
-                min_weight: (1e-12 * self.flr.window_weight(s)) as f32,
+                min_weight: self.flr.min_weight(s) as f32,
                 area: self.flr.window_area(s) as f32,
                 pad: [0; 2],
             };
         }
-        let pooled = r.pooled_off.and_then(|_| (1..self.windows).map(|s| self.grid(s)).find(|g| g.factor > 1));
+        let pooled = r.pooled_off.and(self.pooled_grid());
         let guide_words = |ls: &[Layout; GPU_MAX_GUIDES]| {
             let mut g = [[0u32; 4]; GPU_MAX_GUIDES];
-            for (g, l) in g.iter_mut().zip(ls).take(self.q) {
+            for (g, l) in g.iter_mut().zip(ls).take(self.guide_channels()) {
                 *g = [l.offset as u32, l.pixel_stride as u32, l.row_stride as u32, 0];
             }
             g
@@ -531,14 +524,14 @@ impl GpuPlan {
         Ok(GpuParams {
             width: w as u32,
             height: h as u32,
-            cells_x: self.cells_x as u32,
-            cells_y: self.cells_y as u32,
+            cells_x: self.cells_x() as u32,
+            cells_y: self.cells_y() as u32,
             block: b as u32,
-            q: self.q as u32,
-            k: moment_count(self.q) as u32,
-            ml: model_len(self.q) as u32,
+            q: self.guide_channels() as u32,
+            k: moment_count(self.guide_channels()) as u32,
+            ml: model_len(self.guide_channels()) as u32,
             radius: self.taps(0).radius as u32,
-            clamp_negative: self.cfg.clamp_negative as u32,
+            clamp_negative: self.config().clamp_negative as u32,
             tikhonov,
             input_f16: (layouts.input == InputFormat::F16) as u32,
             eps_mul: eps_mul as f32,
@@ -546,37 +539,37 @@ impl GpuPlan {
             eps_tikhonov: eps_t as f32,
             weight_norm: (1.0 / total) as f32,
             min_weight: (1e-12 * total) as f32,
-            in_width: self.in_width as u32,
-            in_height: self.in_height as u32,
+            in_width: self.input_size().0 as u32,
+            in_height: self.input_size().1 as u32,
             fit_block: bin as u32,
             noisy: v(&layouts.noisy),
             output: v(&layouts.output),
             guide: guide_words(&layouts.guides),
             guide_fit: guide_words(&layouts.guides_fit),
             taps: taps_of(0),
-            windows: self.windows as u32,
+            windows: self.windows() as u32,
             pooled_off: r.pooled_off.map_or(u32::MAX, |o| o as u32),
             pooled_x: pooled.map_or(0, |g| g.cells_x as u32),
             pooled_y: pooled.map_or(0, |g| g.cells_y as u32),
             win,
-            taps_12: [if self.windows > 1 { taps_of(1) } else { [0.0; TAPS] }, if self.windows > 2 { taps_of(2) } else { [0.0; TAPS] }],
+            taps_12: [if self.windows() > 1 { taps_of(1) } else { [0.0; TAPS] }, if self.windows() > 2 { taps_of(2) } else { [0.0; TAPS] }],
         })
     }
 
     /// The eight buffers of the bind group, in binding order, sized for `layouts`.
     pub fn buffers(&self, layouts: &GpuLayouts) -> Result<[BufferDesc; 8], Error> {
-        let (w, h) = (self.width, self.height);
+        let (w, h) = self.size();
         let bad = Error::Unsupported("a layout addresses more than 2^32 elements");
-        let (iw, ih) = (self.in_width, self.in_height);
+        let (iw, ih) = self.input_size();
         let noisy = extent(&layouts.noisy, iw, ih, 3).ok_or(bad)?;
         let output = extent(&layouts.output, w, h, 3).ok_or(bad)?;
         let mut guides = 2; // a zero-sized binding is not allowed: at least one word
-        for (map, fit) in layouts.guides.iter().zip(&layouts.guides_fit).take(self.q) {
+        for (map, fit) in layouts.guides.iter().zip(&layouts.guides_fit).take(self.guide_channels()) {
             guides = guides.max(extent(map, w, h, 1).ok_or(bad)?).max(extent(fit, iw, ih, 1).ok_or(bad)?);
         }
         // input bytes, rounded up to whole 32-bit words
         let input = |elements: u64| (elements * layouts.input.bytes()).next_multiple_of(4);
-        let grid = (self.cells_x * self.cells_y * moment_count(self.q)) as u64 * 4;
+        let grid = (self.cells_x() * self.cells_y() * moment_count(self.guide_channels())) as u64 * 4;
         let r = self.regions();
         let d = |buffer, binding, access, bytes| BufferDesc { buffer, binding, access, bytes };
         use Access::*;

@@ -892,7 +892,7 @@ impl Flr {
     }
 
     /// A cell of window `s` whose window weight is at most this is empty.
-    fn min_weight(&self, s: usize) -> f64 {
+    pub(crate) fn min_weight(&self, s: usize) -> f64 {
         1e-12 * self.window_weight(s)
     }
 
