@@ -96,3 +96,80 @@ fn random_weights_run_finite_and_errors_are_typed() {
     let r = fl.denoise(&f.frame(INPUT_GUIDES), &mut scratch[..10], &mut fs, &mut ImageViewMut::interleaved(&mut out, 16, 16, 3).unwrap());
     assert!(matches!(r, Err(Error::ScratchTooSmall { .. })));
 }
+
+/// FLNR with the network in tiles of `tile` pixels (`usize::MAX`: whole frame).
+fn run_tiled(blob: &[u8], f: &Owned, tile: usize) -> (Vec<f32>, usize) {
+    let fl = Flnr::new(blob, f.w, f.h).unwrap().with_tile(tile).unwrap();
+    let mut scratch = vec![f32::NAN; fl.scratch_len()];
+    let mut fs = vec![0f64; fl.flr_scratch_len()];
+    let mut out = vec![f32::NAN; 3 * f.w * f.h];
+    fl.denoise(&f.frame(INPUT_GUIDES), &mut scratch, &mut fs, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap()).unwrap();
+    let (nx, ny) = fl.tile_grid();
+    (out, nx * ny)
+}
+
+#[test]
+fn tiles_with_halos_equal_the_whole_frame_bit_for_bit() {
+    // 0, 1, 2 and 3 levels; frames from one tile to 5×4 tiles, odd sizes,
+    // tiles cut at rows and columns that are not multiples of the block
+    for (widths, sizes) in [
+        (&[4usize][..], &[(150usize, 70usize)][..]),
+        (&[4, 6][..], &[(201, 133)][..]),
+        (&[4, 6, 8][..], &[(300, 200), (257, 131), (70, 330), (129, 64)][..]),
+        (&[3, 4, 5, 6][..], &[(260, 150)][..]),
+    ] {
+        let blob = random_blob(2, widths);
+        for &(w, h) in sizes {
+            let mut f = Owned::synthetic(w, h, (w * h) as u64, 0.5);
+            f.noisy[7] = f32::INFINITY;
+            f.normal[3 * (w * h / 3)] = f32::NAN;
+            let (whole, one) = run_tiled(&blob, &f, usize::MAX);
+            assert_eq!(one, 1);
+            assert!(whole.iter().all(|v| v.is_finite()));
+            for tile in [64, 100, 128] {
+                let (tiled, count) = run_tiled(&blob, &f, tile);
+                assert!(count > 1, "{w}x{h} tile {tile}");
+                let bad = whole.iter().zip(&tiled).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+                assert_eq!(bad, 0, "{widths:?} {w}x{h} tile {tile}: {bad} values differ");
+            }
+        }
+    }
+    // the halo matters: a tile cut without it would differ (checked by the
+    // receptive-radius test below), and tiles below the minimum are refused
+    let blob = random_blob(2, &[4, 6, 8]);
+    assert!(matches!(Flnr::new(&blob, 300, 200).unwrap().with_tile(63), Err(Error::InvalidConfig(_))));
+}
+
+#[test]
+fn receptive_radius_is_what_one_input_pixel_reaches() {
+    // perturb one input value and find the farthest output that changes: the
+    // halo is built from this radius, so it must not be an underestimate
+    for (widths, expect) in [(&[4usize][..], 2usize), (&[4, 6][..], 7), (&[4, 6, 8][..], 17)] {
+        let blob = random_blob(2, widths);
+        let fl = Flnr::new(&blob, 96, 96).unwrap();
+        let net = fl.network();
+        assert_eq!(net.receptive_radius(), expect);
+        let (w, h) = (96, 96);
+        let mut rng = Rng(3);
+        let input: Vec<f32> = (0..8 * w * h).map(|_| rng.f32()).collect();
+        let mut scratch = vec![0f32; net.scratch_len(w, h)];
+        let mut base = vec![0f32; net.out_channels() * w * h];
+        net.forward(&input, w, h, &mut scratch, &mut base).unwrap();
+        let mut reach = 0;
+        for (px, py) in [(44, 44), (45, 45), (46, 47), (47, 46)] {
+            let mut inp = input.clone();
+            for c in 0..8 {
+                inp[c * w * h + py * w + px] += 1.0;
+            }
+            let mut out = vec![0f32; base.len()];
+            net.forward(&inp, w, h, &mut scratch, &mut out).unwrap();
+            for (i, (a, b)) in base.iter().zip(&out).enumerate() {
+                if a != b {
+                    let (x, y) = ((i % (w * h)) % w, (i % (w * h)) / w);
+                    reach = reach.max(x.abs_diff(px)).max(y.abs_diff(py));
+                }
+            }
+        }
+        assert_eq!(reach, expect, "{widths:?}");
+    }
+}

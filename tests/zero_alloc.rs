@@ -110,16 +110,19 @@ fn walr_single_frame_and_temporal_allocate_nothing() {
 fn flnr_allocates_nothing() {
     use lrdenoise::flnr::{Flnr, INPUT_GUIDES};
     let blob = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/train/flnr.bin")).unwrap();
-    let f = Owned::synthetic(67, 41, 2, 0.5);
-    let fl = Flnr::new(&blob, f.w, f.h).unwrap();
-    let mut scratch = vec![0f32; fl.scratch_len()];
-    let mut fs = vec![0f64; fl.flr_scratch_len()];
-    let mut out = vec![0f32; f.w * f.h * 3];
-    let frame = f.frame(INPUT_GUIDES);
-    let before = mine();
-    for _ in 0..2 {
-        let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
-        fl.denoise(&frame, &mut scratch, &mut fs, &mut ov).unwrap();
+    let f = Owned::synthetic(150, 91, 2, 0.5);
+    // one tile (the default for this size) and 3×2 tiles with halos
+    for tile in [lrdenoise::flnr::DEFAULT_TILE, 64] {
+        let fl = Flnr::new(&blob, f.w, f.h).unwrap().with_tile(tile).unwrap();
+        let mut scratch = vec![0f32; fl.scratch_len()];
+        let mut fs = vec![0f64; fl.flr_scratch_len()];
+        let mut out = vec![0f32; f.w * f.h * 3];
+        let frame = f.frame(INPUT_GUIDES);
+        let before = mine();
+        for _ in 0..2 {
+            let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
+            fl.denoise(&frame, &mut scratch, &mut fs, &mut ov).unwrap();
+        }
+        assert_eq!(mine() - before, 0, "tile {tile}");
     }
-    assert_eq!(mine() - before, 0);
 }

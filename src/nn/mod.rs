@@ -42,6 +42,27 @@ pub const fn level_size(w: usize, h: usize, l: usize) -> (usize, usize) {
 }
 
 impl UNet<'_> {
+    /// How far (in input pixels, per axis) an output value can see: the
+    /// receptive radius. Each 3×3 layer at level `l` adds `2^l`, a stride-2
+    /// layer from level `l − 1` adds `2^(l−1)`, and a nearest ×2 upsampling
+    /// from level `l` adds `2^(l−1)` (the other half of the low-resolution
+    /// pixel); the skip branches see less than the path through the bottom.
+    /// 17 for two levels. A tile computed on its input grown by this much on
+    /// every side is exact (see [`crate::flnr`]).
+    pub fn receptive_radius(&self) -> usize {
+        let l = self.levels();
+        let mut r = 1; // input 3×3 (the 1×1 adds nothing)
+        for lv in 1..=l {
+            r += 1 << (lv - 1); // 3×3 at level lv − 1
+            r += 1 << (lv - 1); // stride 2 from level lv − 1
+        }
+        for lv in (1..=l).rev() {
+            r += 1 << (lv - 1); // upsampling to level lv − 1
+            r += 2 << (lv - 1); // two 3×3 at level lv − 1
+        }
+        r + 1 // output 3×3
+    }
+
     /// f32 of scratch [`UNet::forward`] needs for a `w × h` input: the skip
     /// tensors of every level plus two work tensors of the largest layer.
     pub fn scratch_len(&self, w: usize, h: usize) -> usize {
