@@ -109,18 +109,24 @@ pub struct Flnr<'w> {
 
 impl<'w> Flnr<'w> {
     /// Parses `weights` (a blob from `train/flnr.py`) and plans FLR with the
-    /// trained σ, ε, ϵ (block 8), and the network in [`DEFAULT_TILE`] tiles.
+    /// window(s) and ε, ϵ it was trained with (block 8; three windows: the
+    /// adaptive window), and the network in [`DEFAULT_TILE`] tiles.
     pub fn new(weights: &'w [u8], width: usize, height: usize) -> Result<Self, Error> {
         let net = UNet::parse(weights)?;
         let q = net.out_channels() / 2;
         if net.in_channels() != IN_CHANNELS || net.out_channels() % 2 != 0 || !(1..=MAX_USER_GUIDES).contains(&q) {
             return Err(Error::InvalidConfig("weights: FLNR needs 8 input channels and 2·Q' outputs, Q' ≤ 4"));
         }
-        let [sigma, eps_mul, eps_add] = net.flr_params();
+        let [eps_mul, eps_add] = net.flr_eps();
+        let blur = match *net.flr_sigmas() {
+            [a, b, c] => Blur::Adaptive { sigmas: [a, b, c] },
+            [sigma, ..] => Blur::Gaussian { sigma, radius: None },
+            [] => return Err(Error::InvalidConfig("weights: no FLR window")),
+        };
         let cfg = FlrConfig {
             guides: GuideSet { user: q as u8, ..INPUT_GUIDES },
             block: 8,
-            blur: Blur::Gaussian { sigma, radius: None },
+            blur,
             regularization: Regularization::Normalized { eps_mul: eps_mul as f64, eps_add: eps_add as f64 },
             ..FlrConfig::default()
         };

@@ -7,7 +7,7 @@
 mod common;
 use common::Rng;
 use lrdenoise::nn::{level_size, UNet};
-use lrdenoise::Error;
+use lrdenoise::{Blur, Error};
 
 const BLOB: &[u8] = include_bytes!("data/nn_parity.bin");
 const VECTOR: &[u8] = include_bytes!("data/nn_parity.vec");
@@ -182,7 +182,8 @@ fn bad_blobs_and_buffers_are_typed_errors() {
         UNet::parse(&b).map(|_| ())
     };
     assert!(matches!(bad(&|b| b[0] = b'X'), Err(Error::InvalidConfig(_))));
-    assert!(matches!(bad(&|b| b[4] = 2), Err(Error::InvalidConfig(_))));
+    assert!(matches!(bad(&|b| b[4] = 3), Err(Error::InvalidConfig(_))));
+    assert!(matches!(bad(&|b| b[4] = 0), Err(Error::InvalidConfig(_))));
     assert!(matches!(bad(&|b| b.truncate(b.len() - 1)), Err(Error::InvalidConfig(_))));
     assert!(matches!(bad(&|b| b.push(0)), Err(Error::InvalidConfig(_))));
     assert!(matches!(bad(&|b| b[16] = 9), Err(Error::InvalidConfig(_))));
@@ -205,4 +206,43 @@ fn bad_blobs_and_buffers_are_typed_errors() {
     let mut scratch = vec![0f32; net.scratch_len(4, 4)];
     assert!(matches!(net.forward(&input[..10], 4, 4, &mut scratch, &mut out), Err(Error::BufferTooSmall { .. })));
     assert!(matches!(net.forward(&input, 0, 4, &mut scratch, &mut out), Err(Error::InvalidSize { .. })));
+}
+
+/// `b` (a version-1 blob with `levels`) rewritten as version 2 with these
+/// FLR windows and ε, ϵ.
+fn as_v2(b: &[u8], levels: usize, sigmas: &[f32], eps: [f32; 2]) -> Vec<u8> {
+    let at = 20 + 4 * (levels + 1);
+    let mut v = b[..at].to_vec();
+    v[4] = 2;
+    v.extend_from_slice(&(sigmas.len() as u32).to_le_bytes());
+    for x in sigmas.iter().chain(&eps) {
+        v.extend_from_slice(&x.to_le_bytes());
+    }
+    v.extend_from_slice(&b[at + 12..]);
+    v
+}
+
+#[test]
+fn version_2_blobs_carry_the_adaptive_window() {
+    let v1 = blob(8, 8, &[3, 5], 1);
+    let net = UNet::parse(&v1).unwrap();
+    assert_eq!((net.flr_sigmas(), net.flr_eps()), (&[12f32][..], [1e-3, 1e-2]));
+    let v2 = as_v2(&v1, 1, &[6.0, 12.0, 20.0], [2e-3, 3e-2]);
+    let net = UNet::parse(&v2).unwrap();
+    assert_eq!((net.flr_sigmas(), net.flr_eps()), (&[6f32, 12.0, 20.0][..], [2e-3, 3e-2]));
+    // FLNR plans the FLR it was trained with
+    let fl = lrdenoise::flnr::Flnr::new(&v2, 40, 30).unwrap();
+    assert_eq!(fl.flr().config().blur, Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] });
+    let one = as_v2(&v1, 1, &[10.0], [1e-3, 1e-2]);
+    let fl = lrdenoise::flnr::Flnr::new(&one, 40, 30).unwrap();
+    assert_eq!(fl.flr().config().blur, Blur::Gaussian { sigma: 10.0, radius: None });
+    for (sigmas, eps) in
+        [(&[6.0, 12.0][..], [1e-3, 1e-2]), (&[6.0, 6.0, 20.0][..], [1e-3, 1e-2]), (&[12.0][..], [0.0, 1e-2]), (&[][..], [1e-3, 1e-2])]
+    {
+        let b = as_v2(&v1, 1, sigmas, eps);
+        assert!(matches!(UNet::parse(&b), Err(Error::InvalidConfig(_))), "{sigmas:?} {eps:?}");
+    }
+    for n in 0..v2.len() {
+        let _ = UNet::parse(&v2[..n]); // no panic on any truncation
+    }
 }

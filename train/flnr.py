@@ -1,18 +1,26 @@
 """Train FLNR's guide network end to end through a differentiable FLR.
 
-    python3 train/flnr.py --frames /tmp/frames/train/*.exr --out train/flnr.bin [--steps 1500]
+    python3 train/flnr.py --frames frames/train/*.exr frames/train2/*.exr --out train/flnr.bin \
+        [--steps 2500] [--init train/flnr.bin] [--sigmas 6,12,20]
+    python3 train/flnr.py --frames frames/train/*.exr --out /dev/null --check
 
 Data recipe: frames from `tools/render.py --split train` (and more train-family seeds,
-e.g. `--scenes box:3,clutter:3,room:2,colonnade:2,box:4,clutter:4 --ref-spp 512`),
-never the test split nor `data/`. Network input (must match `src/flnr.rs`): the guides
-normal (3), depth / frame-mean depth (1), AO (1), and log1p(max(noisy, 0) / s) (3),
-s = the frame's mean noisy value; output: 2·Q' sigmoid channels, X'_model then X'_map
-(Q' = 4). FLR is fitted on [normal, depth, AO, X'_model] and applied to [normal,
-depth, AO, X'_map]: the network *adds* guides rather than replacing them (the paper
-replaces them), so FLNR starts out as FLR and a short CPU training can only improve on it. FLR (B = 8, Gaussian σ, normalized ε, ϵ — all three learned) is rebuilt here
-op for op like the library's: block moments, separable blur of the block grid, the
-normalized-correlation regularized inverse (appendix eqs. 12–23) per cell, bilinear
-interpolation of the per-cell affine models. Loss: SMAPE against the reference.
+see train/README.md), never the test split nor `data/`. Network input (must match
+`src/flnr.rs`): the guides normal (3), depth / frame-mean depth (1), AO (1), and
+log1p(max(noisy, 0) / s) (3), s = the frame's mean noisy value; output: 2·Q' sigmoid
+channels, X'_model then X'_map (Q' = 4). FLR is fitted on [normal, depth, AO, X'_model]
+and applied to [normal, depth, AO, X'_map]: the network *adds* guides rather than
+replacing them (the paper replaces them), so FLNR starts out as FLR and a short CPU
+training can only improve on it.
+
+FLR (B = 8, normalized ε, ϵ learned) is rebuilt here op for op like the library's:
+block moments, separable Gaussian blur of the block grid, the normalized-correlation
+regularized inverse (appendix eqs. 12–23) per cell, bilinear interpolation of the
+per-cell models. By default it is the library's default, the adaptive window (σ 6/12/20
+px, the larger two on the 2×2-pooled grid, blended per cell by 1 / (bias² + variance):
+src/flr/adaptive.rs); `--sigmas 12` trains on one window. `--check` prints plain FLR's
+PSNR per frame, to compare with `lrd eval` (on the train scenes: equal to the last digit
+for both). Loss: SMAPE against the reference.
 """
 import argparse
 import math
@@ -24,7 +32,7 @@ import OpenEXR
 import torch
 import torch.nn.functional as F
 
-from unet import UNet, export
+from unet import UNet, export, load_blob
 
 B = 8
 QP = 4  # enhanced guides per set
@@ -60,52 +68,125 @@ def net_input(fr):
     return np.nan_to_num(x, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
 
 
-def gauss_kernel(sigma_cells, radius):
-    t = torch.arange(-radius, radius + 1, dtype=torch.float32)
-    k = torch.exp(-0.5 * (t / sigma_cells) ** 2)
-    return k / k.sum()
+LUMA = (0.2126, 0.7152, 0.0722)
+# the library's adaptive window (src/flr/adaptive.rs): its σ set and bias discount K
+ADAPTIVE_SIGMAS = (6.0, 12.0, 20.0)
+BIAS_DISCOUNT = 0.5
+POOL_MIN_SIGMA = 1.5  # larger windows with σ ≥ 1.5 B are fitted on the 2×2-pooled grid
 
 
-def flr(y, gm, gmap, sigma, eps_mul, eps_add):
-    """Differentiable FLR. y: (N,3,H,W), gm/gmap: (N,Q,H,W), H, W multiples of B."""
-    n_, q, h, w = gm.shape
+def moments(y, z):
+    """Block sums of [1, z, z⊗z, y, z⊗y, ℓ²] (ℓ = luminance of y): (N, C, H/B, W/B)."""
+    n_, q, h, w = z.shape
     ones = torch.ones_like(y[:, :1])
-    # standardise the model guides by their frame mean / std (the library's normalized mode)
-    mean = gm.mean(dim=(2, 3), keepdim=True)
-    std = gm.std(dim=(2, 3), keepdim=True).clamp_min(1e-6)
-    z = (gm - mean) / std
-    feats = [ones, z, (z.unsqueeze(2) * z.unsqueeze(1)).reshape(n_, q * q, h, w), y, (z.unsqueeze(2) * y.unsqueeze(1)).reshape(n_, q * 3, h, w)]
-    m = torch.cat(feats, 1)
-    m = F.avg_pool2d(m, B) * (B * B)  # block sums
-    # Gaussian blur of the block grid, σ in pixels → σ/B cells, truncated at 3σ
+    luma = sum(LUMA[c] * y[:, c : c + 1] for c in range(3))
+    feats = [ones, z, (z.unsqueeze(2) * z.unsqueeze(1)).reshape(n_, q * q, h, w), y, (z.unsqueeze(2) * y.unsqueeze(1)).reshape(n_, q * 3, h, w), luma * luma]
+    return F.avg_pool2d(torch.cat(feats, 1), B) * (B * B)
+
+
+def blur(m, sigma):
+    """Gaussian blur of the block grid: σ in pixels → σ/B cells, truncated at 3σ, weights summing to 1."""
     sc = sigma / B
-    radius = max(1, int(math.ceil(3 * float(sc.detach()))))
-    t = torch.arange(-radius, radius + 1, dtype=torch.float32)
+    radius = max(1, int(math.ceil(3 * float(sc))))
+    t = torch.arange(-radius, radius + 1, dtype=m.dtype)
     k = torch.exp(-0.5 * (t / sc) ** 2)
     k = k / k.sum()
     c = m.shape[1]
     m = F.conv2d(m, k.view(1, 1, 1, -1).repeat(c, 1, 1, 1), padding=(0, radius), groups=c)
-    m = F.conv2d(m, k.view(1, 1, -1, 1).repeat(c, 1, 1, 1), padding=(radius, 0), groups=c)
-    # per cell solve
-    gh, gw = m.shape[2], m.shape[3]
+    return F.conv2d(m, k.view(1, 1, -1, 1).repeat(c, 1, 1, 1), padding=(radius, 0), groups=c)
+
+
+def solve(m, q, eps_mul, eps_add):
+    """Per-cell normalized regularized solve (appendix eqs. 12–23) of blurred moments
+    m (N, C, gh, gw) → dict: intercept c0 (N gh gw 3), slopes beta (N gh gw q 3), and
+    the window statistics the adaptive blend needs."""
+    n_, _, gh, gw = m.shape
     m = m.permute(0, 2, 3, 1)  # N, gh, gw, C
     nn_ = m[..., 0:1].clamp_min(1e-6)
     mu = m[..., 1 : 1 + q] / nn_
     ss = m[..., 1 + q : 1 + q + q * q].reshape(n_, gh, gw, q, q) / nn_.unsqueeze(-1)
     muy = m[..., 1 + q + q * q : 4 + q + q * q] / nn_
-    p = m[..., 4 + q + q * q :].reshape(n_, gh, gw, q, 3) / nn_.unsqueeze(-1)
+    p = m[..., 4 + q + q * q : 4 + 4 * q + q * q].reshape(n_, gh, gw, q, 3) / nn_.unsqueeze(-1)
+    e = m[..., 4 + 4 * q + q * q] / nn_[..., 0]
     cov = ss - mu.unsqueeze(-1) * mu.unsqueeze(-2)  # guides are already standardised
-    muz = mu  # mean of standardised guides relative to the frame mean (0)
-    wh = cov + eps_mul * muz.unsqueeze(-1) * muz.unsqueeze(-2)
-    eye = torch.eye(q)
-    wh = wh + eye * (eps_mul * muz * muz + eps_add).unsqueeze(-1)
+    wh = cov + eps_mul * mu.unsqueeze(-1) * mu.unsqueeze(-2)
+    eye = torch.eye(q, dtype=m.dtype)
+    wh = wh + eye * (eps_mul * mu * mu + eps_add).unsqueeze(-1)
     isig = 1.0 / torch.sqrt(torch.diagonal(wh, dim1=-2, dim2=-1).clamp_min(1e-30))
     wh = wh * isig.unsqueeze(-1) * isig.unsqueeze(-2) + eye * eps_add
     cxy = p - mu.unsqueeze(-1) * muy.unsqueeze(-2)
-    bh = cxy * isig.unsqueeze(-1)
-    beta = torch.linalg.solve(wh, bh) * isig.unsqueeze(-1)  # N gh gw q 3, per standardised guide
+    beta = torch.linalg.solve(wh, cxy * isig.unsqueeze(-1)) * isig.unsqueeze(-1)
     c0 = muy - (beta * mu.unsqueeze(-1)).sum(-2)
-    model = torch.cat([c0, beta.reshape(n_, gh, gw, q * 3)], -1).permute(0, 3, 1, 2)
+    return dict(c0=c0, beta=beta, n=m[..., 0], mu=mu, cov=cov, muy=muy, cxy=cxy, e=e)
+
+
+def luma(v):
+    return v[..., 0] * LUMA[0] + v[..., 1] * LUMA[1] + v[..., 2] * LUMA[2]
+
+
+def variance(s, q, sigma, cell=B * B):
+    """v_s = r_s (Q + 1) / N_s (src/flr/adaptive.rs `variance`); `cell`: pixels per cell."""
+    mean = luma(s["muy"])
+    explained = (luma(s["beta"]) * luma(s["cxy"])).sum(-1)
+    residual = (s["e"] - mean * mean - explained).clamp_min(0.0)
+    area = 4 * math.pi * sigma * sigma
+    samples = (area * (s["n"] / cell).clamp(max=1.0)).clamp_min(1.0)
+    return residual * (q + 1) / samples
+
+
+def gap(s, first):
+    """d_s²: mean squared luminance-prediction difference from the smallest window over it."""
+    dc = luma(s["c0"] - first["c0"])
+    db = luma(s["beta"] - first["beta"])  # N gh gw q
+    at_mean = dc + (db * first["mu"]).sum(-1)
+    spread = (db.unsqueeze(-1) * first["cov"] * db.unsqueeze(-2)).sum((-1, -2)).clamp_min(0.0)
+    return at_mean * at_mean + spread
+
+
+def flr(y, gm, gmap, sigmas, eps_mul, eps_add):
+    """Differentiable FLR. y: (N,3,H,W), gm/gmap: (N,Q,H,W), H, W multiples of B.
+    `sigmas`: one σ (one Gaussian window) or three (the adaptive window, the larger
+    windows with σ ≥ 1.5 B on the 2×2-pooled grid, as the library fits them)."""
+    n_, q, h, w = gm.shape
+    # standardise the model guides by their frame mean / std (the library's normalized mode)
+    mean = gm.mean(dim=(2, 3), keepdim=True)
+    std = gm.std(dim=(2, 3), keepdim=True).clamp_min(1e-6)
+    z = (gm - mean) / std
+    m = moments(y, z).double()
+    if len(sigmas) == 1:
+        fit = solve(blur(m, sigmas[0]), q, eps_mul, eps_add)
+        c0, beta = fit["c0"], fit["beta"]
+    else:
+        fits, v = [], []
+        for k, sg in enumerate(sigmas):
+            pooled = k > 0 and sg >= POOL_MIN_SIGMA * B
+            if not pooled:
+                f = solve(blur(m, sg), q, eps_mul, eps_add)
+                fits.append(f)
+                v.append(variance(f, q, float(sg)))
+                continue
+            # the library's pooled grid: moments summed 2×2 (cells of 2B), σ in those
+            # cells, the model and variance interpolated back to the block grid
+            # (bilinear at i/2 − 1/4: weights ¼, ¾, one tap at the border)
+            gh, gw = m.shape[2], m.shape[3]
+            mp = F.avg_pool2d(m, 2, ceil_mode=True) * 4
+            f = solve(blur(mp, sg / 2), q, eps_mul, eps_add)
+            vp = variance(f, q, float(sg), cell=4 * B * B)
+            up = lambda t: F.interpolate(t, scale_factor=2, mode="bilinear", align_corners=False)[:, :, :gh, :gw]
+            cb = torch.cat([f["c0"], f["beta"].reshape(*f["beta"].shape[:3], q * 3), vp.unsqueeze(-1)], -1).permute(0, 3, 1, 2)
+            cb = up(cb).permute(0, 2, 3, 1)
+            fits.append(dict(c0=cb[..., :3], beta=cb[..., 3 : 3 + 3 * q].reshape(*cb.shape[:3], q, 3)))
+            v.append(cb[..., -1])
+        mse = [v[0]]
+        for k in (1, 2):
+            seen = (v[0] - v[k]).clamp_min(0.0)
+            mse.append((gap(fits[k], fits[0]) - BIAS_DISCOUNT * seen).clamp_min(0.0) + v[k])
+        wts = [1.0 / x.clamp_min(1e-30) for x in mse]
+        tot = wts[0] + wts[1] + wts[2]
+        c0 = sum(wk.unsqueeze(-1) * f["c0"] for wk, f in zip(wts, fits)) / tot.unsqueeze(-1)
+        beta = sum(wk[..., None, None] * f["beta"] for wk, f in zip(wts, fits)) / tot[..., None, None]
+    gh, gw = c0.shape[1], c0.shape[2]
+    model = torch.cat([c0, beta.reshape(n_, gh, gw, q * 3)], -1).permute(0, 3, 1, 2).float()
     model = F.interpolate(model, size=(h, w), mode="bilinear", align_corners=False)
     zmap = (gmap - mean) / std
     c0 = model[:, :3]
@@ -118,10 +199,10 @@ def smape(a, b):
 
 
 class Flnr(torch.nn.Module):
-    def __init__(self, widths):
+    def __init__(self, widths, sigmas):
         super().__init__()
         self.net = UNet(8, 2 * QP, widths)
-        self.log_sigma = torch.nn.Parameter(torch.tensor(math.log(12.0)))
+        self.sigmas = tuple(sigmas)
         self.log_eps_mul = torch.nn.Parameter(torch.tensor(math.log(1e-3)))
         self.log_eps_add = torch.nn.Parameter(torch.tensor(math.log(1e-2)))
 
@@ -130,7 +211,30 @@ class Flnr(torch.nn.Module):
         base = x[:, :5]  # normal, depth, AO: FLR's own guides stay in both sets
         gm = torch.cat([base, g[:, :QP]], 1)
         gmap = torch.cat([base, g[:, QP:]], 1)
-        return flr(y, gm, gmap, self.log_sigma.exp(), self.log_eps_mul.exp(), self.log_eps_add.exp())
+        return flr(y, gm, gmap, self.sigmas, self.log_eps_mul.exp(), self.log_eps_add.exp())
+
+
+def psnr(est, fr):
+    """The DATA.md protocol: albedo-modulated, tone-mapped at the reference's mean luminance."""
+    albedo, ref = fr["albedo"].astype(np.float64), fr["reference"].astype(np.float64)
+    i, r = albedo * est, albedo * ref
+    lum = np.mean(LUMA[0] * r[0] + LUMA[1] * r[1] + LUMA[2] * r[2])
+    tm = lambda v: (np.maximum(v, 0) * 0.5 / lum / (1 + np.maximum(v, 0) * 0.5 / lum)) ** (1 / 2.2)
+    return -10 * np.log10(np.mean((np.clip(tm(i), 0, 1) - np.clip(tm(r), 0, 1)) ** 2))
+
+
+def full_frame(model, fr, plain=False):
+    """Denoises a whole frame (H, W multiples of B) with the network, or with FLR's own
+    guides only (`plain`: the library's FLR, to check this module against it)."""
+    x = torch.from_numpy(fr["x"])[None]
+    y = torch.from_numpy(fr["y"])[None]
+    with torch.no_grad():
+        if plain:
+            base = x[:, :5]
+            out = flr(y, base, base, model.sigmas, 1e-3, 1e-2)
+        else:
+            out = model(x, y)
+    return out[0].clamp_min(0).numpy()
 
 
 def crops(frames, size, batch):
@@ -163,6 +267,9 @@ def main():
     ap.add_argument("--batch", type=int, default=4)
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--log", default=None, help="write the loss curve (step, loss) here")
+    ap.add_argument("--sigmas", default="6,12,20", help="FLR windows: one σ, or three (the adaptive window, the library's default)")
+    ap.add_argument("--init", default=None, help="start from this blob's network weights (same widths)")
+    ap.add_argument("--check", action="store_true", help="only print plain FLR's PSNR per frame (compare with `lrd eval`)")
     args = ap.parse_args()
     torch.manual_seed(0)
     random.seed(0)
@@ -171,9 +278,16 @@ def main():
     for p in args.frames:
         fr = load(p)
         y = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
-        frames.append({"x": net_input(fr), "y": y, "r": fr["reference"]})
-    print(f"{len(frames)} frames; widths {args.widths}")
-    model = Flnr([int(v) for v in args.widths.split(",")])
+        frames.append({"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "reference": fr["reference"], "name": p})
+    sigmas = [float(v) for v in args.sigmas.split(",")]
+    print(f"{len(frames)} frames; widths {args.widths}; FLR windows {sigmas}")
+    model = Flnr([int(v) for v in args.widths.split(",")], sigmas)
+    if args.check:
+        for fr in frames:
+            print(f"{fr['name']}: plain FLR {psnr(full_frame(model, fr, plain=True), fr):.2f} dB")
+        return
+    if args.init:
+        load_blob(model.net, args.init)
     opt = torch.optim.Adam(model.parameters(), lr=args.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, args.steps)
     curve = []
@@ -186,17 +300,19 @@ def main():
         loss.backward()
         opt.step()
         sched.step()
-        curve.append((step, float(loss)))
+        curve.append((step, loss.item()))
         if step % 50 == 0 or step == 1:
-            print(f"step {step} loss {np.mean([c[1] for c in curve[-50:]]):.4f} sigma {float(model.log_sigma.exp()):.2f} "
+            print(f"step {step} loss {np.mean([c[1] for c in curve[-50:]]):.4f} "
                   f"eps {float(model.log_eps_mul.exp()):.2e},{float(model.log_eps_add.exp()):.2e} {time.time() - t0:.0f}s", flush=True)
     model.net.round_to_f16()
-    flr_params = (float(model.log_sigma.exp()), float(model.log_eps_mul.exp()), float(model.log_eps_add.exp()))
-    export(model.net, args.out, flr_params)
+    eps = (float(model.log_eps_mul.exp()), float(model.log_eps_add.exp()))
+    export(model.net, args.out, sigmas, eps)
     if args.log:
         with open(args.log, "w") as f:
             f.write("step,loss\n" + "".join(f"{s},{l:.5f}\n" for s, l in curve))
-    print(f"wrote {args.out}; FLR sigma {flr_params[0]:.2f} eps_mul {flr_params[1]:.2e} eps_add {flr_params[2]:.2e}")
+    print(f"wrote {args.out}; FLR windows {sigmas} eps_mul {eps[0]:.2e} eps_add {eps[1]:.2e}")
+    for fr in frames:
+        print(f"{fr['name']}: plain FLR {psnr(full_frame(model, fr, plain=True), fr):.2f} dB, FLNR {psnr(full_frame(model, fr), fr):.2f} dB")
 
 
 if __name__ == "__main__":

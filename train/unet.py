@@ -11,7 +11,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-MAGIC, VERSION = b"LRDN", 1
+MAGIC, VERSION = b"LRDN", 2
 LEAKY = 0.01
 
 
@@ -65,7 +65,10 @@ class UNet(nn.Module):
                 p.copy_(p.half().float())
 
 
-def export(model, path, flr=(12.0, 1e-3, 1e-2)):
+def export(model, path, sigmas=(12.0,), eps=(1e-3, 1e-2)):
+    """Writes the blob (version 2): the FLR trained with the network is one
+    Gaussian window (one σ) or the adaptive window (three σ), plus ε, ϵ."""
+    assert len(sigmas) in (1, 3) and list(sigmas) == sorted(sigmas)
     payload = []
     for conv in model.convs():
         payload.append(conv.weight.detach().numpy().astype(np.float16).ravel())
@@ -73,9 +76,35 @@ def export(model, path, flr=(12.0, 1e-3, 1e-2)):
     payload = np.concatenate(payload)
     c = model.widths
     head = MAGIC + struct.pack("<4I", VERSION, model.cin, model.cout, len(c) - 1)
-    head += struct.pack(f"<{len(c)}I", *c) + struct.pack("<3f", *flr) + struct.pack("<I", payload.size)
+    head += struct.pack(f"<{len(c)}I", *c) + struct.pack("<I", len(sigmas)) + struct.pack(f"<{len(sigmas)}f", *sigmas) + struct.pack("<2f", *eps) + struct.pack("<I", payload.size)
     with open(path, "wb") as f:
         f.write(head + payload.astype("<f2").tobytes())
+
+
+def load_blob(model, path):
+    """Loads a blob's weights (version 1 or 2) into `model` (same shapes); returns
+    the FLR it was trained with as (sigmas, eps)."""
+    b = open(path, "rb").read()
+    assert b[:4] == MAGIC, "not an lrdenoise network"
+    version, cin, cout, levels = struct.unpack_from("<4I", b, 4)
+    pos = 20 + 4 * (levels + 1)
+    assert list(struct.unpack_from(f"<{levels + 1}I", b, 20)) == list(model.widths), "widths differ"
+    if version == 1:
+        sigmas, pos = struct.unpack_from("<f", b, pos), pos + 4
+    else:
+        (k,) = struct.unpack_from("<I", b, pos)
+        sigmas, pos = struct.unpack_from(f"<{k}f", b, pos + 4), pos + 4 + 4 * k
+    eps, pos = struct.unpack_from("<2f", b, pos), pos + 8
+    (n,) = struct.unpack_from("<I", b, pos)
+    payload = np.frombuffer(b, dtype="<f2", count=n, offset=pos + 4).astype(np.float32)
+    at = 0
+    with torch.no_grad():
+        for conv in model.convs():
+            for t in (conv.weight, conv.bias):
+                t.copy_(torch.from_numpy(payload[at : at + t.numel()].reshape(t.shape)))
+                at += t.numel()
+    assert at == n, "payload size differs"
+    return sigmas, eps
 
 
 def write_vector(path, x, y):

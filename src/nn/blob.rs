@@ -4,12 +4,15 @@
 //! ```text
 //! offset  field
 //! 0       magic  "LRDN"
-//! 4       u32    version (1)
+//! 4       u32    version (1 or 2)
 //! 8       u32    input channels   (1..=128)
 //! 12      u32    output channels  (1..=128)
 //! 16      u32    levels L         (0..=4)
 //! 20      u32    widths c_0..c_L  (L + 1 values, 1..=128 each)
-//! ..      f32    FLR parameters learned with the network: σ (pixels), ε, ϵ
+//! ..             the FLR the network was trained with:
+//!                version 1: f32 σ (pixels), ε, ϵ (one Gaussian window);
+//!                version 2: u32 windows W (1 or 3), f32 σ_1..σ_W (pixels,
+//!                increasing; 3 = the adaptive window), f32 ε, ϵ
 //! ..      u32    payload length in f16 values
 //! ..      f16    payload: for every layer in the order of [`crate::nn`], the
 //!                weights [out][in][k][k] then the biases [out]
@@ -25,7 +28,8 @@ use half::f16;
 /// Most U-Net levels a blob may have.
 pub const MAX_LEVELS: usize = 4;
 const MAGIC: &[u8; 4] = b"LRDN";
-const VERSION: u32 = 1;
+/// The newest version written (version 1 is still read).
+const VERSION: u32 = 2;
 const MAX_LAYERS: usize = 4 * MAX_LEVELS + 4;
 
 /// A parsed network: shapes and views into the blob's payload.
@@ -35,7 +39,11 @@ pub struct UNet<'b> {
     out_ch: usize,
     levels: usize,
     widths: [usize; MAX_LEVELS + 1],
-    flr: [f32; 3],
+    /// Window σ (pixels) of the FLR trained with the network: `sigmas[..windows]`.
+    sigmas: [f32; 3],
+    windows: usize,
+    /// ε (multiplicative), ϵ (additive).
+    eps: [f32; 2],
     layers: [ConvDesc<'b>; MAX_LAYERS],
     count: usize,
 }
@@ -68,7 +76,8 @@ impl<'b> UNet<'b> {
         if r.take(4)? != MAGIC {
             return Err(Error::InvalidConfig("weights: bad magic (not an lrdenoise network)"));
         }
-        if r.u32()? != VERSION {
+        let version = r.u32()?;
+        if !(1..=VERSION).contains(&version) {
             return Err(Error::InvalidConfig("weights: unsupported version"));
         }
         let in_ch = r.u32()? as usize;
@@ -84,9 +93,20 @@ impl<'b> UNet<'b> {
                 return Err(Error::InvalidConfig("weights: layer width out of range (1..=128)"));
             }
         }
-        let flr = [r.f32()?, r.f32()?, r.f32()?];
-        if !flr.iter().all(|v| v.is_finite() && *v > 0.0) {
+        let windows = if version == 1 { 1 } else { r.u32()? as usize };
+        if windows != 1 && windows != 3 {
+            return Err(Error::InvalidConfig("weights: FLR windows must be 1 or 3"));
+        }
+        let mut sigmas = [0f32; 3];
+        for s in sigmas.iter_mut().take(windows) {
+            *s = r.f32()?;
+        }
+        let eps = [r.f32()?, r.f32()?];
+        if !sigmas[..windows].iter().chain(&eps).all(|v| v.is_finite() && *v > 0.0) {
             return Err(Error::InvalidConfig("weights: FLR parameters must be finite and positive"));
+        }
+        if sigmas[..windows].windows(2).any(|p| p[0] >= p[1]) {
+            return Err(Error::InvalidConfig("weights: FLR window sizes must increase"));
         }
         let payload_len = r.u32()? as usize;
         let payload = r.take(payload_len.checked_mul(2).ok_or(Error::InvalidConfig("weights: payload length overflows"))?)?;
@@ -127,7 +147,7 @@ impl<'b> UNet<'b> {
         if payload.chunks_exact(2).any(|p| !f16::from_le_bytes([p[0], p[1]]).is_finite()) {
             return Err(Error::InvalidConfig("weights: non-finite weight"));
         }
-        Ok(UNet { in_ch, out_ch, levels, widths, flr, layers, count: n })
+        Ok(UNet { in_ch, out_ch, levels, widths, sigmas, windows, eps, layers, count: n })
     }
 
     pub fn in_channels(&self) -> usize {
@@ -143,9 +163,14 @@ impl<'b> UNet<'b> {
     pub fn widths(&self) -> &[usize] {
         &self.widths[..=self.levels]
     }
-    /// The FLR parameters trained with the network: σ (pixels), ε, ϵ.
-    pub fn flr_params(&self) -> [f32; 3] {
-        self.flr
+    /// The window sizes σ (pixels) of the FLR trained with the network: one
+    /// Gaussian window, or three (the adaptive window).
+    pub fn flr_sigmas(&self) -> &[f32] {
+        &self.sigmas[..self.windows]
+    }
+    /// The regularisation trained with the network: ε (multiplicative), ϵ (additive).
+    pub fn flr_eps(&self) -> [f32; 2] {
+        self.eps
     }
     /// Number of convolutions.
     pub fn layer_count(&self) -> usize {
