@@ -1,8 +1,8 @@
 //! Times WALR's stages separately at 1920×1080 on one thread (a profiling
 //! aid, not a benchmark: `cargo bench --bench walr` is the benchmark).
-//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo run --release --example walr_stages`
+//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo run --release --example walr_stages [W H] [trace|notrace] [f16]`
 
-use lrdenoise::walr::{Parts, Walr, WalrConfig};
+use lrdenoise::walr::{Parts, Storage, Walr, WalrConfig};
 use lrdenoise::*;
 use std::time::Instant;
 
@@ -22,10 +22,19 @@ fn main() {
     };
     let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3).unwrap(), guides);
     let mut out = vec![0f32; 3 * n];
-    for tracing in [false, true] {
-        let wl = Walr::new(WalrConfig { tracing, ..Default::default() }, w, h).unwrap();
+    // `walr_stages W H notrace` / `trace`: only that setting (for profiling)
+    let only = std::env::args().find_map(|a| match a.as_str() {
+        "trace" => Some(true),
+        "notrace" => Some(false),
+        _ => None,
+    });
+    for tracing in [false, true].into_iter().filter(|t| only.is_none_or(|o| o == *t)) {
+        let storage = if std::env::args().any(|a| a == "f16") { Storage::F16 } else { Storage::F32 };
+        let wl = Walr::new(WalrConfig { tracing, storage, ..Default::default() }, w, h).unwrap();
         let mut scratch = vec![0f32; wl.scratch_len()];
-        for _rep in 0..if w * h < 1_000_000 { 20 } else { 2 } {
+        // fastest of the repetitions per stage: prepare, features, 4 iterations, solve, total
+        let mut best = [f64::INFINITY; 8];
+        for _rep in 0..(40_000_000 / (w * h)).clamp(5, 2000) {
             let cf = wl.check_frame(&frame).unwrap();
             let t0 = Instant::now();
             let prep = wl.prepare(&cf, 0);
@@ -48,13 +57,14 @@ fn main() {
             wl.solve_rows(&prep, 0, geo, z0, &mut ov).unwrap();
             let t4 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
-            println!(
-                "tracing {tracing}: prepare {:.1} features {:.1} iterations {:?} solve {:.1} ms",
-                ms(t0, t1),
-                ms(t1, t2),
-                its.iter().map(|v| (v * 10.0).round() / 10.0).collect::<Vec<_>>(),
-                ms(t3, t4)
-            );
+            let this = [ms(t0, t1), ms(t1, t2), its[0], its[1], its[2], its[3], ms(t3, t4), ms(t0, t4)];
+            for (b, v) in best.iter_mut().zip(this) {
+                *b = b.min(v);
+            }
         }
+        println!(
+            "tracing {tracing}: prepare {:.2} features {:.2} iterations [{:.2}, {:.2}, {:.2}, {:.2}] solve {:.2}, total {:.2} ms (fastest of the runs)",
+            best[0], best[1], best[2], best[3], best[4], best[5], best[6], best[7]
+        );
     }
 }

@@ -303,7 +303,8 @@ fn atrous_counts_every_sample_once() {
                     assert_eq!(row[(kp - 1) * wl.plane_stride() + x as usize], samples.len() as f32, "{w}x{h} T={iterations} at ({x},{y})");
                     let want = samples.iter().map(|&(sx, sy)| f.noisy[3 * (sy as usize * w + sx as usize)] as f64).sum::<f64>()
                         / samples.len() as f64;
-                    let got = row[k_y0 * wl.plane_stride() + x as usize] as f64 * ls as f64;
+                    // stored: the sum over the samples (the solve divides by W)
+                    let got = row[k_y0 * wl.plane_stride() + x as usize] as f64 * ls as f64 / samples.len() as f64;
                     assert!((got - want).abs() <= 1e-5 * want.abs().max(1e-3), "{w}x{h} T={iterations}: {got} vs {want}");
                 }
             }

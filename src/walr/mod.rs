@@ -9,7 +9,8 @@
 //! [`crate::kernels::cholesky::factor_floor`]). The averages come from an
 //! **edge-aware à-trous** transform (§3.2): iteration `t` averages a 3×3 box of
 //! taps spaced `3^t` apart, carrying the sample count `W` so that every sample
-//! is counted once (`Z_{t+1} = Σ f W_t Z_t / Σ f W_t`); 4 iterations cover
+//! is counted once (`Z_{t+1} = Σ f W_t Z_t / Σ f W_t`; stored as the sums
+//! `W_t Z_t`, divided once by the solve); 4 iterations cover
 //! 81×81 pixels. The weight `f` of a tap is the plane-distance edge-stopping
 //! function (§4.3) **traced** along the segment from the centre (§3.3): its
 //! minimum over the pixels crossed, so a thin object is never jumped over.
@@ -231,8 +232,9 @@ pub struct Prepared {
 pub struct Parts<'s> {
     /// Geometry: per row, planes p (3), n (3), 1/scale, valid, features X_1.. (m − 1).
     pub geo: &'s mut [f32],
-    /// The edge-distance fields of two consecutive iterations.
-    pub sdf: [&'s mut [f32]; 2],
+    /// The edge-distance fields (as tracing steps, a byte per pixel) of two
+    /// consecutive iterations.
+    pub sdf: [&'s mut [u8]; 2],
     /// Averages of two consecutive iterations (f32, or f16 bits packed in f32).
     pub z: [&'s mut [f32]; 2],
 }
@@ -273,8 +275,9 @@ impl Walr {
     pub fn feature_count(&self) -> usize {
         self.m
     }
-    /// Stored averages per pixel: `m(m+1)/2 − 1` of XX̄ (XX̄₀₀ = 1 is implicit)
-    /// and `3m` of YX̄ — 14 for m = 3 — plus the sample count W.
+    /// Stored values per pixel: the sums behind `m(m+1)/2 − 1` values of XX̄
+    /// (XX̄₀₀ = 1 is implicit) and `3m` of YX̄ — 14 for m = 3 — plus the
+    /// sample count (weight sum) W they are divided by.
     pub fn planes(&self) -> usize {
         self.m * (self.m + 1) / 2 - 1 + 3 * self.m + 1
     }
@@ -307,7 +310,11 @@ impl Walr {
     }
     /// f32 of scratch [`Walr::denoise`] needs.
     pub fn scratch_len(&self) -> usize {
-        self.height * (self.geo_row_len() + 2 * self.width + 2 * self.z_row_len())
+        self.height * (self.geo_row_len() + 2 * self.z_row_len()) + 2 * self.field_len()
+    }
+    /// f32 of scratch per edge-distance field (a byte per pixel).
+    fn field_len(&self) -> usize {
+        (self.width * self.height).div_ceil(4)
     }
     /// Which averages buffer iteration `t` reads (it writes the other one);
     /// [`Walr::solve_rows`] reads buffer `iterations % 2`.
@@ -322,8 +329,10 @@ impl Walr {
         }
         let h = self.height;
         let (geo, rest) = scratch.split_at_mut(h * self.geo_row_len());
-        let (s0, rest) = rest.split_at_mut(h * self.width);
-        let (s1, rest) = rest.split_at_mut(h * self.width);
+        let (s0, rest) = rest.split_at_mut(self.field_len());
+        let (s1, rest) = rest.split_at_mut(self.field_len());
+        let n = self.width * h;
+        let (s0, s1) = (&mut bytemuck::cast_slice_mut::<f32, u8>(s0)[..n], &mut bytemuck::cast_slice_mut::<f32, u8>(s1)[..n]);
         let (z0, rest) = rest.split_at_mut(h * self.z_row_len());
         let z1 = &mut rest[..h * self.z_row_len()];
         Ok(Parts { geo, sdf: [s0, s1], z: [z0, z1] })

@@ -9,7 +9,7 @@ use crate::image::ImageViewMut;
 use crate::kernels::cholesky::{factor_floor, substitute, Lane};
 use wide::f32x8;
 
-/// Solves one pixel (or 8 in lanes): `z` are the stored averages (W last),
+/// Solves one pixel (or 8 in lanes): `z` are the averages (sums over W; W last),
 /// `x` the pixel's features; returns the light (still divided by the scale).
 #[inline(always)]
 pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) -> [T; 3] {
@@ -50,7 +50,7 @@ pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) 
 
 impl Walr {
     /// Stage 3 on rows `y0..y0 + out.height()`: solves every pixel from the
-    /// final averages `z` (buffer [`Walr::buffer_of`]`(iterations)`, whole
+    /// final sums `z` (divided by their W here) (buffer [`Walr::buffer_of`]`(iterations)`, whole
     /// frame) and writes the light to `out` (those rows only).
     pub fn solve_rows(&self, p: &Prepared, y0: usize, geo: &[f32], z: &[f32], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
         let (w, h) = (self.width, self.height);
@@ -117,6 +117,12 @@ impl Walr {
                     for k in 0..kp {
                         zv[k] = S::load8(zrow, k * ps + x0);
                     }
+                    // sums → averages (eq. 6: XX̄ = Σ w X Xᵀ / Σ w)
+                    let wsum = zv[kp - 1];
+                    let inv = wsum.simd_gt(f32x8::ZERO).select(f32x8::ONE / wsum, f32x8::ZERO);
+                    for k in 0..kp - 1 {
+                        zv[k] *= inv;
+                    }
                     let mut xv = [f32x8::ONE; M];
                     // unknown geometry (NaN/Inf guides, code −1): evaluate at the
                     // window's mean features, i.e. output the weighted mean light
@@ -135,6 +141,10 @@ impl Walr {
                     let mut zs = [0f32; 64];
                     for k in 0..kp {
                         zs[k] = S::get(zrow, k * ps + x0);
+                    }
+                    let inv = if zs[kp - 1] > 0.0 { 1.0 / zs[kp - 1] } else { 0.0 };
+                    for k in 0..kp - 1 {
+                        zs[k] *= inv;
                     }
                     let mut xs = [1f32; M];
                     let unknown = grow[G_VALID * ps + x0] < 0.0;

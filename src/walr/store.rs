@@ -1,31 +1,29 @@
-//! The two storage formats of the averages: f32, or f16 bits in `u16`.
+//! The two storage formats of the sums: f32, or f16 bits in `u16`.
 
 use half::f16;
+use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
 use wide::f32x8;
 
 /// A stored sample type (f32 or f16 bits).
 pub(crate) trait Store: bytemuck::Pod {
+    /// Factor applied to an iteration's sums before they are stored: 1 for
+    /// f32; 1/9 for f16, so that `9^{−t} S_t` stays within f16's range (a
+    /// 3×3 step multiplies a sum by at most 9).
+    const STEP: f32;
     fn get(s: &[Self], i: usize) -> f32;
     fn set(s: &mut [Self], i: usize, v: f32);
-    #[inline(always)]
-    fn load8(s: &[Self], i: usize) -> f32x8 {
-        let mut a = [0f32; 8];
-        let src = &s[i..i + 8];
-        for (d, v) in a.iter_mut().zip(src) {
-            *d = Self::get(core::slice::from_ref(v), 0);
-        }
-        f32x8::from(a)
-    }
-    #[inline(always)]
-    fn store8(s: &mut [Self], i: usize, v: f32x8) {
-        let a = v.to_array();
-        for (k, x) in a.into_iter().enumerate() {
-            Self::set(s, i + k, x);
-        }
-    }
+    /// Values `i..i + 8` (bounds-checked).
+    fn load8(s: &[Self], i: usize) -> f32x8;
+    /// Values `i..i + 8`, unchecked.
+    ///
+    /// # Safety
+    /// `i + 8 ≤ s.len()`.
+    unsafe fn load8_unchecked(s: &[Self], i: usize) -> f32x8;
+    fn store8(s: &mut [Self], i: usize, v: f32x8);
 }
 
 impl Store for f32 {
+    const STEP: f32 = 1.0;
     #[inline(always)]
     fn get(s: &[Self], i: usize) -> f32 {
         s[i]
@@ -37,9 +35,15 @@ impl Store for f32 {
     #[inline(always)]
     fn load8(s: &[Self], i: usize) -> f32x8 {
         let c = &s[i..i + 8];
-        // SAFETY: `c` holds exactly 8 f32 (the slice above is bounds-checked);
-        // an unaligned read of them is a valid f32x8.
-        unsafe { core::ptr::read_unaligned(c.as_ptr() as *const f32x8) }
+        // SAFETY: `c` holds exactly 8 f32 (the slice above is bounds-checked).
+        unsafe { Self::load8_unchecked(c, 0) }
+    }
+    #[inline(always)]
+    unsafe fn load8_unchecked(s: &[Self], i: usize) -> f32x8 {
+        debug_assert!(i + 8 <= s.len());
+        // SAFETY: the caller guarantees i + 8 ≤ s.len(); an unaligned read of
+        // 8 f32 is a valid f32x8.
+        unsafe { core::ptr::read_unaligned(s.as_ptr().add(i) as *const f32x8) }
     }
     #[inline(always)]
     fn store8(s: &mut [Self], i: usize, v: f32x8) {
@@ -50,6 +54,7 @@ impl Store for f32 {
 }
 
 impl Store for u16 {
+    const STEP: f32 = 1.0 / 9.0;
     #[inline(always)]
     fn get(s: &[Self], i: usize) -> f32 {
         f16::from_bits(s[i]).to_f32()
@@ -57,5 +62,25 @@ impl Store for u16 {
     #[inline(always)]
     fn set(s: &mut [Self], i: usize, v: f32) {
         s[i] = f16::from_f32(v).to_bits();
+    }
+    #[inline(always)]
+    fn load8(s: &[Self], i: usize) -> f32x8 {
+        let mut a = [0f32; 8];
+        // `half`'s slice conversion: F16C instructions where the build has them
+        s[i..i + 8].reinterpret_cast::<f16>().convert_to_f32_slice(&mut a);
+        f32x8::from(a)
+    }
+    #[inline(always)]
+    unsafe fn load8_unchecked(s: &[Self], i: usize) -> f32x8 {
+        debug_assert!(i + 8 <= s.len());
+        // SAFETY: the caller guarantees i + 8 ≤ s.len().
+        let c = unsafe { s.get_unchecked(i..i + 8) };
+        let mut a = [0f32; 8];
+        c.reinterpret_cast::<f16>().convert_to_f32_slice(&mut a);
+        f32x8::from(a)
+    }
+    #[inline(always)]
+    fn store8(s: &mut [Self], i: usize, v: f32x8) {
+        s[i..i + 8].reinterpret_cast_mut::<f16>().convert_from_f32_slice(v.as_array());
     }
 }
