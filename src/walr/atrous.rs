@@ -356,7 +356,8 @@ const CHUNK_EXTRA: usize = 4 * MAX_EXTRA;
 /// How far ahead (values) [`sums8`] asks for the 3 rows it reads.
 const PREFETCH_AHEAD: usize = 64;
 
-/// Phase 1's results for a run of interior groups of one row.
+/// Phase 1's results for a run of interior groups of one row (~23 KiB, on
+/// the stack of [`Walr::iterate_rows`] once per call).
 struct Chunk {
     /// First pixel of the first group.
     x0: usize,
@@ -397,9 +398,10 @@ fn put<S: Store>(zo: &mut [S], o: usize, x0: usize, n: usize, acc: f32x8) {
     }
 }
 
-/// Pixels `x0..x0 + n` (n ≤ 8) of row `y` with per-lane taps: borders, and
-/// every pixel of the scalar kernel (n = 1). Same operations, in the same
-/// order, as [`group8`] (bit-identical without tracing).
+/// Pixels `x0..x0 + n` (n ≤ 8) of row `y` traced and summed per lane: the
+/// last `w mod 8` pixels of a row, and every pixel of the scalar kernel
+/// (n = 1). Same operations, in the same order, as [`weights8`] and
+/// [`sums8`] (bit-identical without tracing).
 #[allow(clippy::too_many_arguments)]
 fn gather_lanes<S: Store, const KP: usize>(
     ctx: &Ctx<'_, S>,
