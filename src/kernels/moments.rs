@@ -209,7 +209,7 @@ const PREFETCH_AHEAD: usize = 48;
 
 /// Hints that `s[i..]` will be read soon (nothing when out of range or not x86-64).
 #[inline(always)]
-pub(crate) fn prefetch<T>(s: &[T], i: usize) {
+fn prefetch(s: &[f32], i: usize) {
     #[cfg(target_arch = "x86_64")]
     if i < s.len() {
         // SAFETY: `i < s.len()`, so the pointer is inside the slice; a prefetch

@@ -353,8 +353,6 @@ impl Walr {
 const CHUNK: usize = 64;
 /// Replacement samples a chunk holds (one group adds at most [`MAX_EXTRA`]).
 const CHUNK_EXTRA: usize = 4 * MAX_EXTRA;
-/// How far ahead (values) [`sums8`] asks for the 3 rows it reads.
-const PREFETCH_AHEAD: usize = 64;
 
 /// Phase 1's results for a run of interior groups of one row (~23 KiB, on
 /// the stack of [`Walr::iterate_rows`] once per call).
@@ -647,9 +645,6 @@ fn sums8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, y: usize, s: usize, off: &
         let mut e0 = 0;
         for g in 0..ch.n {
             let c = base + 8 * g + o;
-            for d in [1, 3, 6] {
-                crate::kernels::moments::prefetch(ctx.z, c.wrapping_add_signed(off[d]) + PREFETCH_AHEAD);
-            }
             let mut acc = taps9(ld(c, 0), &ch.f[g], |d| ld(c, off[d]));
             let e1 = ch.ex_end[g];
             if e1 > e0 {
