@@ -204,6 +204,27 @@ impl<S: Store> Ctx<'_, S> {
         let (qx, qy) = ((x as i64 + i * r) as usize, (y as i64 + j * r) as usize);
         Extra { lane, at: qy * self.zl + qx, f: self.weight(&self.centre(x, y), qx, qy) }
     }
+
+    /// Tap `dir` of lane `lane` (pixel `(x, y)`) traced on its own: the
+    /// per-lane path of [`gather_lanes`] and of [`weights8`]'s directions that
+    /// leave the row. `None`: the tap lies outside the frame.
+    fn trace_lane(&self, lane: usize, x: usize, y: usize, dir: usize, s: usize) -> Option<LaneTap> {
+        let (wmin, zero_at, lt1) = self.trace_pixel(&self.centre(x, y), x, y, dir, s)?;
+        let (i, j) = DIRS[dir];
+        let at = (y as i64 + j * s as i64) as usize * self.zl + (x as i64 + i * s as i64) as usize;
+        let extra = (self.replace && zero_at > 0).then(|| self.replace_sample(lane, x, y, dir, zero_at));
+        Some(LaneTap { f: wmin, at, lt1: lt1 as f32, extra })
+    }
+}
+
+/// One lane's traced tap ([`Ctx::trace_lane`]): its weight, the z index of
+/// its sample's first plane, the distance of its first weight below 1, and
+/// its replacement sample if an edge cut it.
+struct LaneTap {
+    f: f32,
+    at: usize,
+    lt1: f32,
+    extra: Option<Extra>,
 }
 
 /// Most replacement samples of one group: one per lane and direction.
@@ -396,6 +417,30 @@ fn put<S: Store>(zo: &mut [S], o: usize, x0: usize, n: usize, acc: f32x8) {
     }
 }
 
+/// Phase 2 for one group of `n` lanes at pixel `x0`, every plane: the centre
+/// `centre(o)` plus the taps `tap(d, o)` weighted by `f` ([`taps9`]), then the
+/// lane-only samples `extra`; `o` is the plane offset. The per-lane and
+/// border paths; [`sums8`] is the same per plane over a chunk of groups.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn sums_group<S: Store, const KP: usize>(
+    ctx: &Ctx<'_, S>,
+    x0: usize,
+    n: usize,
+    f: &[f32x8; 8],
+    centre: impl Fn(usize) -> f32x8,
+    tap: impl Fn(usize, usize) -> f32x8,
+    extra: &[Extra],
+    zo: &mut [S],
+) {
+    for k in 0..KP {
+        let o = k * ctx.ps;
+        let acc = taps9(centre(o), f, |d| tap(d, o));
+        let acc = add_extra(ctx.z, extra, o, acc);
+        put(zo, o, x0, n, acc);
+    }
+}
+
 /// Pixels `x0..x0 + n` (n ≤ 8) of row `y` traced and summed per lane: the
 /// last `w mod 8` pixels of a row, and every pixel of the scalar kernel
 /// (n = 1). Same operations, in the same order, as [`weights8`] and
@@ -417,24 +462,20 @@ fn gather_lanes<S: Store, const KP: usize>(
     let mut ne = 0;
     for l in 0..n {
         let x = x0 + l;
-        let c = ctx.centre(x, y);
         let centre = y * ctx.zl + x;
         at[0][l] = centre;
         for dir in 0..8 {
             at[dir + 1][l] = centre;
-            let Some((wmin, zero_at, lt1)) = ctx.trace_pixel(&c, x, y, dir, s) else { continue };
-            sdf[l] = sdf[l].min(lt1 as f32);
-            let (i, j) = DIRS[dir];
-            at[dir + 1][l] = (y as i64 + j * s as i64) as usize * ctx.zl + (x as i64 + i * s as i64) as usize;
-            f[dir][l] = wmin;
-            if ctx.replace && zero_at > 0 {
-                extra[ne] = ctx.replace_sample(l, x, y, dir, zero_at);
+            let Some(t) = ctx.trace_lane(l, x, y, dir, s) else { continue };
+            sdf[l] = sdf[l].min(t.lt1);
+            (at[dir + 1][l], f[dir][l]) = (t.at, t.f);
+            if let Some(e) = t.extra {
+                extra[ne] = e;
                 ne += 1;
             }
         }
     }
     // per lane, the extras are in direction order (lanes were visited in turn)
-    let fv = f.map(f32x8::from);
     let gather = |k: usize, o: usize| {
         let mut a = [0f32; 8];
         for l in 0..n {
@@ -442,12 +483,7 @@ fn gather_lanes<S: Store, const KP: usize>(
         }
         f32x8::from(a)
     };
-    for k in 0..KP {
-        let o = k * ctx.ps;
-        let acc = taps9(gather(0, o), &fv, |d| gather(d + 1, o));
-        let acc = add_extra(ctx.z, &extra[..ne], o, acc);
-        put(zo, o, x0, n, acc);
-    }
+    sums_group::<S, KP>(ctx, x0, n, &f.map(f32x8::from), |o| gather(0, o), |d, o| gather(d + 1, o), &extra[..ne], zo);
     for l in 0..n {
         so[x0 + l] = ctx.step_of(sdf[l]);
     }
@@ -484,19 +520,14 @@ fn row8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, y: usize, s: usize, zo: &mu
                 so[x0 + l] = ctx.step_of(sdf[l]);
             }
             let c = y * ctx.zl + x0;
-            for k in 0..KP {
-                let o = k * ctx.ps;
-                let tap = |d: usize| {
-                    if lanewise & (1 << d) != 0 {
-                        f32x8::from(at[d].map(|i| S::get(ctx.z, i + o)))
-                    } else {
-                        S::load8(ctx.z, c.wrapping_add_signed(off[d]) + o)
-                    }
-                };
-                let acc = taps9(S::load8(ctx.z, c + o), &f, tap);
-                let acc = add_extra(ctx.z, &extra[..ne], o, acc);
-                put(zo, o, x0, 8, acc);
-            }
+            let tap = |d: usize, o: usize| {
+                if lanewise & (1 << d) != 0 {
+                    f32x8::from(at[d].map(|i| S::get(ctx.z, i + o)))
+                } else {
+                    S::load8(ctx.z, c.wrapping_add_signed(off[d]) + o)
+                }
+            };
+            sums_group::<S, KP>(ctx, x0, 8, &f, |o| S::load8(ctx.z, c + o), tap, &extra[..ne], zo);
         } else {
             if ch.n == 0 {
                 ch.x0 = x0;
@@ -569,12 +600,11 @@ fn weights8<S: Store>(
             for l in 0..8 {
                 let x = x0 + l;
                 at[dir][l] = y * ctx.zl + x;
-                let Some((wmin, zero_at, lt1)) = ctx.trace_pixel(&ctx.centre(x, y), x, y, dir, s) else { continue };
-                sl[l] = sl[l].min(lt1 as f32);
-                at[dir][l] = (y as i64 + j * s as i64) as usize * ctx.zl + (x as i64 + i * s as i64) as usize;
-                fl[l] = wmin;
-                if ctx.replace && zero_at > 0 {
-                    extra[*ne] = ctx.replace_sample(l, x, y, dir, zero_at);
+                let Some(t) = ctx.trace_lane(l, x, y, dir, s) else { continue };
+                sl[l] = sl[l].min(t.lt1);
+                (at[dir][l], fl[l]) = (t.at, t.f);
+                if let Some(e) = t.extra {
+                    extra[*ne] = e;
                     *ne += 1;
                 }
             }
