@@ -6,7 +6,7 @@
 
 mod common;
 use common::Rng;
-use lrdenoise::nn::{level_size, UNet};
+use lrdenoise::nn::{level_size, Isa, UNet};
 use lrdenoise::{Blur, Error};
 
 const BLOB: &[u8] = include_bytes!("data/nn_parity.bin");
@@ -162,14 +162,49 @@ fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
             let mut rng = Rng(9 + k as u64);
             let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
             let mut scratch = vec![0f32; net.scratch_len(w, h)];
-            let mut out = vec![0f32; 3 * w * h];
-            net.forward(&input, w, h, &mut scratch, &mut out).unwrap();
             let want = reference(&b, &input, w, h);
-            let worst = out.iter().zip(&want).map(|(a, b)| (*a as f64 - b).abs()).fold(0f64, f64::max);
-            assert!(worst < 1e-4, "{w}x{h} {widths:?}: {worst}");
+            for isa in isas() {
+                let mut out = vec![0f32; 3 * w * h];
+                net.forward_with(isa, &input, w, h, &mut scratch, &mut out).unwrap();
+                let worst = out.iter().zip(&want).map(|(a, b)| (*a as f64 - b).abs()).fold(0f64, f64::max);
+                assert!(worst < 1e-4, "{isa:?} {w}x{h} {widths:?}: {worst}");
+            }
         }
     }
     assert_eq!(level_size(7, 3, 2), (2, 1));
+}
+
+/// The instruction sets this build can run here (the AVX2 one needs the CPU,
+/// and the build's flags or the `std` feature, which `cargo test --workspace` enables).
+fn isas() -> Vec<Isa> {
+    let all: Vec<Isa> = [Isa::Portable, Isa::Avx2Fma].into_iter().filter(|i| i.available()).collect();
+    if all.len() == 1 {
+        eprintln!("note: only {:?} runs here: the AVX2 + FMA lanes are not exercised", all[0]);
+    }
+    all
+}
+
+#[test]
+fn avx2_lanes_match_the_portable_lanes() {
+    // Every 8-pixel group, the shifted last group, stride 1 and 2, OB-blocked and remaining channels.
+    for &(w, h) in &[(18, 3), (19, 9), (40, 7), (257, 5)] {
+        let b = blob(5, 3, &[4, 8, 6], w as u64);
+        let net = UNet::parse(&b).unwrap();
+        let mut rng = Rng(w as u64);
+        let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
+        let mut scratch = vec![0f32; net.scratch_len(w, h)];
+        let mut outs = Vec::new();
+        for isa in isas() {
+            let mut out = vec![f32::NAN; 3 * w * h];
+            net.forward_with(isa, &input, w, h, &mut scratch, &mut out).unwrap();
+            outs.push(out);
+        }
+        for o in &outs[1..] {
+            // fused against (in an SSE2 build) unfused multiply-adds: rounding only
+            let worst = o.iter().zip(&outs[0]).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+            assert!(worst < 1e-5, "{w}x{h}: {worst}");
+        }
+    }
 }
 
 #[test]

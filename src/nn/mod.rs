@@ -23,6 +23,7 @@ pub mod conv;
 
 use crate::error::{Arg, Error};
 pub use blob::{UNet, MAX_LEVELS};
+pub use conv::Isa;
 use conv::{concat_upsampled, conv, Act};
 
 /// Elements of one planar tensor.
@@ -82,7 +83,14 @@ impl UNet<'_> {
     /// Runs the network on `input` (`in_channels()` planes of `w × h`,
     /// plane-major) into `out` (`out_channels()` planes). `scratch`: at least
     /// [`UNet::scratch_len`] f32. Allocates nothing.
+    /// The 3×3 layers use the fastest instruction set available ([`Isa::detect`]).
     pub fn forward(&self, input: &[f32], w: usize, h: usize, scratch: &mut [f32], out: &mut [f32]) -> Result<(), Error> {
+        self.forward_with(Isa::detect(), input, w, h, scratch, out)
+    }
+
+    /// [`UNet::forward`] with the 3×3 layers' instruction set chosen by the
+    /// caller (tests compare them; one that is not available runs portable).
+    pub fn forward_with(&self, isa: Isa, input: &[f32], w: usize, h: usize, scratch: &mut [f32], out: &mut [f32]) -> Result<(), Error> {
         if w == 0 || h == 0 {
             return Err(Error::InvalidSize { arg: Arg::Noisy, width: w, height: h });
         }
@@ -111,18 +119,18 @@ impl UNet<'_> {
         let (wa, wb) = rest.split_at_mut(rest.len() / 2);
         let mut layer = 0;
         // input block → s_0
-        conv(self.conv(layer)?, input, w, h, wa, Act::Leaky, &mut [])?;
+        conv(isa, self.conv(layer)?, input, w, h, wa, Act::Leaky, &mut [])?;
         layer += 1;
-        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, skip_store[0], Act::Leaky, &mut [])?;
+        conv(isa, self.conv(layer)?, &wa[..c[0] * n], w, h, skip_store[0], Act::Leaky, &mut [])?;
         layer += 1;
         // encoder
         for l in 1..=levels {
             let (pw, ph) = level_size(w, h, l - 1);
             let (prev, cur) = skip_store.split_at_mut(l);
-            conv(self.conv(layer)?, prev[l - 1], pw, ph, wa, Act::Leaky, &mut [])?;
+            conv(isa, self.conv(layer)?, prev[l - 1], pw, ph, wa, Act::Leaky, &mut [])?;
             layer += 1;
             // stride 2: `wb` (free until the decoder) holds the even/odd split rows
-            conv(self.conv(layer)?, &wa[..c[l] * pw * ph], pw, ph, cur[0], Act::Leaky, wb)?;
+            conv(isa, self.conv(layer)?, &wa[..c[l] * pw * ph], pw, ph, cur[0], Act::Leaky, wb)?;
             layer += 1;
         }
         // decoder: the current tensor lives in `wb` (or s_L at first)
@@ -134,18 +142,18 @@ impl UNet<'_> {
                 let low: &[f32] = if l == levels { &*skip_store[l] } else { &wb[..cur_c * lw * lh] };
                 concat_upsampled(low, cur_c, lw, lh, skip_store[l - 1], c[l - 1], sw, sh, wa)?;
             }
-            conv(self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sw * sh], sw, sh, wb, Act::Leaky, &mut [])?;
+            conv(isa, self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sw * sh], sw, sh, wb, Act::Leaky, &mut [])?;
             layer += 1;
             // second conv: wb → wa, then move back to wb for the next level
-            conv(self.conv(layer)?, &wb[..c[l - 1] * sw * sh], sw, sh, wa, Act::Leaky, &mut [])?;
+            conv(isa, self.conv(layer)?, &wb[..c[l - 1] * sw * sh], sw, sh, wa, Act::Leaky, &mut [])?;
             layer += 1;
             let k = c[l - 1] * sw * sh;
             wb[..k].copy_from_slice(&wa[..k]);
         }
         let cur: &[f32] = if levels == 0 { &*skip_store[0] } else { &wb[..c[0] * n] };
-        conv(self.conv(layer)?, cur, w, h, wa, Act::Leaky, &mut [])?;
+        conv(isa, self.conv(layer)?, cur, w, h, wa, Act::Leaky, &mut [])?;
         layer += 1;
-        conv(self.conv(layer)?, &wa[..c[0] * n], w, h, out, Act::Sigmoid, &mut [])?;
+        conv(isa, self.conv(layer)?, &wa[..c[0] * n], w, h, out, Act::Sigmoid, &mut [])?;
         Ok(())
     }
 }

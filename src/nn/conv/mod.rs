@@ -1,7 +1,13 @@
 //! The network's layers on planar f32 tensors (`[c][y][x]`, row stride = width):
 //! 3×3 (stride 1 or 2, zero padding 1) and 1×1 convolutions with f16 weights,
 //! LeakyReLU (0.01) or sigmoid, and "upsample ×2 (nearest) + concat skip".
-//! Rows are accumulated with slice arithmetic the compiler vectorises.
+//! Rows are accumulated with slice arithmetic the compiler vectorises; the
+//! 3×3 layers' interior in 8-pixel lanes, with `wide` (any ISA, chosen at
+//! compile time) or, where the CPU has them, AVX2 + FMA intrinsics
+//! ([`avx2`], chosen at run time with the `std` feature: see [`Isa`]).
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 
 use crate::error::Error;
 use half::f16;
@@ -50,13 +56,77 @@ pub const MAX_TAPS: usize = 256 * 9;
 /// Output channels computed together (their accumulators share every load).
 const OB: usize = 4;
 
+/// The instruction set of the 3×3 layers' 8-pixel lanes.
+///
+/// `wide` picks SSE2/AVX/NEON at compile time, so a plain x86-64 build runs
+/// the network in SSE2 without fused multiply-adds (2.4× slower than an
+/// `x86-64-v3` build). [`Isa::detect`] therefore chooses AVX2 + FMA whenever
+/// the build enables them or, with the `std` feature, the CPU reports them at
+/// run time (`is_x86_feature_detected!`; a `no_std` build cannot ask the OS
+/// whether it saves the AVX registers, so it relies on the build flags).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Isa {
+    /// `wide`'s `f32x8` (the build's instruction set).
+    Portable,
+    /// `core::arch` AVX2 + FMA intrinsics (x86-64 only).
+    Avx2Fma,
+}
+
+impl Isa {
+    /// The fastest instruction set this build may use on this CPU.
+    pub fn detect() -> Isa {
+        if Isa::Avx2Fma.available() {
+            Isa::Avx2Fma
+        } else {
+            Isa::Portable
+        }
+    }
+
+    /// Whether this build can run `self` on this CPU.
+    pub fn available(self) -> bool {
+        match self {
+            Isa::Portable => true,
+            Isa::Avx2Fma => avx2_fma_available(),
+        }
+    }
+}
+
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2", target_feature = "fma"))]
+fn avx2_fma_available() -> bool {
+    true
+}
+
+#[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma")), feature = "std"))]
+fn avx2_fma_available() -> bool {
+    extern crate std;
+    std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+}
+
+#[cfg(not(all(target_arch = "x86_64", any(all(target_feature = "avx2", target_feature = "fma"), feature = "std"))))]
+fn avx2_fma_available() -> bool {
+    false
+}
+
 /// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `out` at
 /// least `cout` planes of the output size. Output rows are accumulated one at
 /// a time (they stay in L1) over every input channel and tap. `split`: for a
 /// stride-2 layer, room for `cin · w · h` values where the input's rows are
 /// rearranged as [even columns | odd columns], so the taps become contiguous
 /// 8-pixel loads (without it, or for narrow rows, stride 2 runs per pixel).
-pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32], act: Act, split: &mut [f32]) -> Result<(), Error> {
+/// `isa`: the lanes' instruction set; [`Isa::Portable`] where `isa` is not
+/// [`Isa::available`].
+#[allow(clippy::too_many_arguments)]
+pub fn conv(
+    isa: Isa,
+    d: ConvDesc<'_>,
+    input: &[f32],
+    w: usize,
+    h: usize,
+    out: &mut [f32],
+    act: Act,
+    split: &mut [f32],
+) -> Result<(), Error> {
+    let isa = if isa.available() { isa } else { Isa::Portable };
     let (ow, oh) = d.out_size(w, h);
     let taps = d.cin * d.k * d.k;
     if input.len() < d.cin * w * h || out.len() < d.cout * ow * oh || d.params.len() != 2 * (d.cout * taps + d.cout) || taps > MAX_TAPS {
@@ -104,7 +174,7 @@ pub fn conv(d: ConvDesc<'_>, input: &[f32], w: usize, h: usize, out: &mut [f32],
                     *r = &mut p[y * ow..(y + 1) * ow];
                     r.fill(bias[b]);
                 }
-                conv3_rows_block(&w4, d.cin, lanes_input, input, w, h, y, stride, bias, &mut rows);
+                conv3_rows_block(isa, &w4, d.cin, lanes_input, input, w, h, y, stride, bias, &mut rows);
                 for r in rows.iter_mut() {
                     activate(r, act);
                 }
@@ -204,6 +274,7 @@ fn activate(row: &mut [f32], act: Act) {
 /// cover (the padded borders) are computed per pixel from `input`.
 #[allow(clippy::too_many_arguments)]
 fn conv3_rows_block(
+    isa: Isa,
     wts: &[[f32; MAX_TAPS]; OB],
     cin: usize,
     lanes: &[f32],
@@ -215,50 +286,23 @@ fn conv3_rows_block(
     bias: [f32; OB],
     rows: &mut [&mut [f32]; OB],
 ) {
-    use wide::f32x8;
     let sy = |ky: usize| (stride * y + ky).checked_sub(1).filter(|&r| r < h);
     let src_rows: [Option<usize>; 3] = [sy(0), sy(1), sy(2)];
-    let load = |s: &[f32], x: usize| -> f32x8 {
-        let c: &[f32; 8] = s[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
-        f32x8::from(*c)
-    };
     let ow = rows[0].len();
-    let ew = w.div_ceil(2);
     // lanes cover x in 1..end: stride 1 needs x + 9 <= w, stride 2 odd[x + 7] (x + 8 <= w / 2)
     let end = if stride == 1 { w - 1 } else { w / 2 };
-    let mut x = 1;
-    let mut done = 1; // lanes have filled 1..done
-    while done < end && end >= 9 {
-        // the last group is shifted left to end at `end` (it recomputes a few
-        // pixels, bit-identically: every group starts from the bias)
-        x = x.min(end - 8);
-        let mut acc = bias.map(f32x8::splat);
-        for i in 0..cin {
-            let src = &lanes[i * w * h..(i + 1) * w * h];
-            for (ky, r) in src_rows.iter().enumerate() {
-                let Some(sy) = *r else { continue };
-                let srow = &src[sy * w..(sy + 1) * w];
-                let t = (i * 3 + ky) * 3;
-                let (v0, v1, v2) = if stride == 1 {
-                    (load(srow, x - 1), load(srow, x), load(srow, x + 1))
-                } else {
-                    let (even, odd) = srow.split_at(ew);
-                    (load(odd, x - 1), load(even, x), load(odd, x))
-                };
-                for b in 0..OB {
-                    let wb = &wts[b][t..t + 3];
-                    acc[b] = f32x8::splat(wb[0]).mul_add(v0, acc[b]);
-                    acc[b] = f32x8::splat(wb[1]).mul_add(v1, acc[b]);
-                    acc[b] = f32x8::splat(wb[2]).mul_add(v2, acc[b]);
-                }
-            }
+    let g = Lanes { wts, cin, lanes, w, h, src_rows, stride, bias, end };
+    // lanes have filled 1..done
+    let done = if end < 9 {
+        1
+    } else {
+        match isa {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `conv` runs `Isa::Avx2Fma` only where it is available (checked at its top).
+            Isa::Avx2Fma => unsafe { avx2::conv3_lanes(&g, rows) },
+            _ => conv3_lanes(&g, rows),
         }
-        for (a, r) in acc.iter().zip(rows.iter_mut()) {
-            r[x..x + 8].copy_from_slice(&a.to_array());
-        }
-        done = x + 8;
-        x += 8;
-    }
+    };
     for px in core::iter::once(0).chain(done..ow) {
         for b in 0..OB {
             let mut a = rows[b][px];
@@ -277,6 +321,71 @@ fn conv3_rows_block(
             rows[b][px] = a;
         }
     }
+}
+
+/// One output row's 8-pixel groups for [`conv3_rows_block`]: what the lanes
+/// read (see there).
+struct Lanes<'a> {
+    wts: &'a [[f32; MAX_TAPS]; OB],
+    cin: usize,
+    lanes: &'a [f32],
+    w: usize,
+    h: usize,
+    /// The 3 input rows (`None`: the zero padding).
+    src_rows: [Option<usize>; 3],
+    stride: usize,
+    bias: [f32; OB],
+    /// Groups cover `1..end` (`end ≥ 9`).
+    end: usize,
+}
+
+/// Load 8 values at `x` (zeros past the end: never reached, keeps it panic-free).
+#[inline(always)]
+fn load8(s: &[f32], x: usize) -> wide::f32x8 {
+    let c: &[f32; 8] = s.get(x..x + 8).and_then(|c| c.try_into().ok()).unwrap_or(&[0.0; 8]);
+    wide::f32x8::from(*c)
+}
+
+/// The 8-pixel groups of [`conv3_rows_block`] with `wide` (`OB` accumulators
+/// per group, 3 loads and 3·`OB` multiply-adds per input row and channel);
+/// returns the end of the pixels filled (from 1).
+fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
+    use wide::f32x8;
+    let (w, h, ew) = (g.w, g.h, g.w.div_ceil(2));
+    let mut x = 1;
+    let mut done = 1;
+    while done < g.end {
+        // the last group is shifted left to end at `end` (it recomputes a few
+        // pixels, bit-identically: every group starts from the bias)
+        x = x.min(g.end - 8);
+        let mut acc = g.bias.map(f32x8::splat);
+        for i in 0..g.cin {
+            let src = &g.lanes[i * w * h..(i + 1) * w * h];
+            for (ky, r) in g.src_rows.iter().enumerate() {
+                let Some(sy) = *r else { continue };
+                let srow = &src[sy * w..(sy + 1) * w];
+                let t = (i * 3 + ky) * 3;
+                let (v0, v1, v2) = if g.stride == 1 {
+                    (load8(srow, x - 1), load8(srow, x), load8(srow, x + 1))
+                } else {
+                    let (even, odd) = srow.split_at(ew);
+                    (load8(odd, x - 1), load8(even, x), load8(odd, x))
+                };
+                for (a, wb) in acc.iter_mut().zip(g.wts) {
+                    let wb = &wb[t..t + 3];
+                    *a = f32x8::splat(wb[0]).mul_add(v0, *a);
+                    *a = f32x8::splat(wb[1]).mul_add(v1, *a);
+                    *a = f32x8::splat(wb[2]).mul_add(v2, *a);
+                }
+            }
+        }
+        for (a, r) in acc.iter().zip(rows.iter_mut()) {
+            r[x..x + 8].copy_from_slice(&a.to_array());
+        }
+        done = x + 8;
+        x += 8;
+    }
+    done
 }
 
 /// One output row of a 3×3 stride-1 convolution (`prow` holds the bias):
