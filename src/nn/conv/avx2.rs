@@ -6,18 +6,20 @@
 //! the rounding of the unfused products (tests/nn.rs compares both with f64).
 
 use super::{Lanes, OB};
-use core::arch::x86_64::{__m256, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps};
+use core::arch::x86_64::{__m256, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_storeu_ps};
 
-/// 8 values at `x`, zeros past the end (never reached: panic-free without a check
-/// the compiler cannot remove).
+/// The 8 values `s[x..x + 8]`, zeros for those outside `s` (see [`super::load8`]).
 #[inline(always)]
-fn load8(s: &[f32], x: usize) -> __m256 {
-    match s.get(x..x + 8) {
+fn load8(s: &[f32], x: isize) -> __m256 {
+    match usize::try_from(x).ok().and_then(|x| s.get(x..x + 8)) {
         // SAFETY: `c` holds exactly 8 f32, read unaligned; the caller of
         // `conv3_lanes` guaranteed AVX.
         Some(c) => unsafe { _mm256_loadu_ps(c.as_ptr()) },
-        // SAFETY: as above (AVX).
-        None => unsafe { _mm256_setzero_ps() },
+        None => {
+            let a = super::padded8(s, x);
+            // SAFETY: as above.
+            unsafe { _mm256_loadu_ps(a.as_ptr()) }
+        }
     }
 }
 
@@ -28,11 +30,12 @@ fn load8(s: &[f32], x: usize) -> __m256 {
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
     let (w, h, ew) = (g.w, g.h, g.w.div_ceil(2));
-    let mut x = 1;
-    let mut done = 1;
+    let mut x = 0;
+    let mut done = 0;
     while done < g.end {
         // the last group is shifted left to end at `end` (see the portable version)
         x = x.min(g.end - 8);
+        let xi = x as isize;
         let mut acc = g.bias.map(|b| _mm256_set1_ps(b));
         for i in 0..g.cin {
             let src = &g.lanes[i * w * h..(i + 1) * w * h];
@@ -41,10 +44,10 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> 
                 let srow = &src[sy * w..(sy + 1) * w];
                 let t = (i * 3 + ky) * 3;
                 let (v0, v1, v2) = if g.stride == 1 {
-                    (load8(srow, x - 1), load8(srow, x), load8(srow, x + 1))
+                    (load8(srow, xi - 1), load8(srow, xi), load8(srow, xi + 1))
                 } else {
                     let (even, odd) = srow.split_at(ew);
-                    (load8(odd, x - 1), load8(even, x), load8(odd, x))
+                    (load8(odd, xi - 1), load8(even, xi), load8(odd, xi))
                 };
                 for (a, wb) in acc.iter_mut().zip(g.wts) {
                     let wb = &wb[t..t + 3];

@@ -270,8 +270,9 @@ fn activate(row: &mut [f32], act: Act) {
 /// [`conv3_row_lanes`] for `OB` output channels at once: each 8-pixel load
 /// feeds `OB` accumulators. Stride 1 reads `input`; stride 2 reads `lanes`,
 /// the input with each row split into [even | odd] columns, where the taps of
-/// output pixel x are odd[x − 1], even[x], odd[x]. Pixels the lanes do not
-/// cover (the padded borders) are computed per pixel from `input`.
+/// output pixel x are odd[x − 1], even[x], odd[x]. The lanes cover whole
+/// rows (the groups at either end load the zero padding lane by lane); rows
+/// of fewer than 8 output pixels are computed per pixel from `input`.
 #[allow(clippy::too_many_arguments)]
 fn conv3_rows_block(
     isa: Isa,
@@ -289,12 +290,11 @@ fn conv3_rows_block(
     let sy = |ky: usize| (stride * y + ky).checked_sub(1).filter(|&r| r < h);
     let src_rows: [Option<usize>; 3] = [sy(0), sy(1), sy(2)];
     let ow = rows[0].len();
-    // lanes cover x in 1..end: stride 1 needs x + 9 <= w, stride 2 odd[x + 7] (x + 8 <= w / 2)
-    let end = if stride == 1 { w - 1 } else { w / 2 };
-    let g = Lanes { wts, cin, lanes, w, h, src_rows, stride, bias, end };
-    // lanes have filled 1..done
-    let done = if end < 9 {
-        1
+    // The lanes cover the whole row (loads past either end read the zero
+    // padding); a row narrower than one group goes per pixel.
+    let g = Lanes { wts, cin, lanes, w, h, src_rows, stride, bias, end: ow };
+    let done = if ow < 8 {
+        0
     } else {
         match isa {
             #[cfg(target_arch = "x86_64")]
@@ -303,9 +303,9 @@ fn conv3_rows_block(
             _ => conv3_lanes(&g, rows),
         }
     };
-    for px in core::iter::once(0).chain(done..ow) {
-        for b in 0..OB {
-            let mut a = rows[b][px];
+    for (row, wb) in rows.iter_mut().zip(wts) {
+        for (px, out) in row.iter_mut().enumerate().skip(done) {
+            let mut a = *out;
             for i in 0..cin {
                 let src = &input[i * w * h..(i + 1) * w * h];
                 for (ky, r) in src_rows.iter().enumerate() {
@@ -313,12 +313,12 @@ fn conv3_rows_block(
                     for kx in 0..3 {
                         let sx = (stride * px + kx) as isize - 1;
                         if sx >= 0 && (sx as usize) < w {
-                            a += wts[b][(i * 3 + ky) * 3 + kx] * src[sy * w + sx as usize];
+                            a += wb[(i * 3 + ky) * 3 + kx] * src[sy * w + sx as usize];
                         }
                     }
                 }
             }
-            rows[b][px] = a;
+            *out = a;
         }
     }
 }
@@ -335,29 +335,46 @@ struct Lanes<'a> {
     src_rows: [Option<usize>; 3],
     stride: usize,
     bias: [f32; OB],
-    /// Groups cover `1..end` (`end ≥ 9`).
+    /// Groups cover `0..end` (the output row, `end ≥ 8`).
     end: usize,
 }
 
-/// Load 8 values at `x` (zeros past the end: never reached, keeps it panic-free).
+/// The 8 values `s[x..x + 8]`, zeros for those outside `s` (the zero padding:
+/// x = −1 at a row's start, x + 8 > len at its end).
 #[inline(always)]
-fn load8(s: &[f32], x: usize) -> wide::f32x8 {
-    let c: &[f32; 8] = s.get(x..x + 8).and_then(|c| c.try_into().ok()).unwrap_or(&[0.0; 8]);
-    wide::f32x8::from(*c)
+fn load8(s: &[f32], x: isize) -> wide::f32x8 {
+    let c = usize::try_from(x).ok().and_then(|x| s.get(x..x + 8)).and_then(|c| <&[f32; 8]>::try_from(c).ok());
+    wide::f32x8::from(match c {
+        Some(c) => *c,
+        None => padded8(s, x),
+    })
+}
+
+/// `s[x..x + 8]` lane by lane, zeros outside `s` (the padded loads' slow path).
+#[cold]
+fn padded8(s: &[f32], x: isize) -> [f32; 8] {
+    let mut a = [0f32; 8];
+    for (l, v) in a.iter_mut().enumerate() {
+        if let Some(e) = usize::try_from(x + l as isize).ok().and_then(|i| s.get(i)) {
+            *v = *e;
+        }
+    }
+    a
 }
 
 /// The 8-pixel groups of [`conv3_rows_block`] with `wide` (`OB` accumulators
 /// per group, 3 loads and 3·`OB` multiply-adds per input row and channel);
-/// returns the end of the pixels filled (from 1).
+/// returns the end of the pixels filled (from 0).
 fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
     use wide::f32x8;
     let (w, h, ew) = (g.w, g.h, g.w.div_ceil(2));
-    let mut x = 1;
-    let mut done = 1;
+    let mut x = 0;
+    let mut done = 0;
     while done < g.end {
         // the last group is shifted left to end at `end` (it recomputes a few
         // pixels, bit-identically: every group starts from the bias)
         x = x.min(g.end - 8);
+        let xi = x as isize;
         let mut acc = g.bias.map(f32x8::splat);
         for i in 0..g.cin {
             let src = &g.lanes[i * w * h..(i + 1) * w * h];
@@ -366,10 +383,10 @@ fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
                 let srow = &src[sy * w..(sy + 1) * w];
                 let t = (i * 3 + ky) * 3;
                 let (v0, v1, v2) = if g.stride == 1 {
-                    (load8(srow, x - 1), load8(srow, x), load8(srow, x + 1))
+                    (load8(srow, xi - 1), load8(srow, xi), load8(srow, xi + 1))
                 } else {
                     let (even, odd) = srow.split_at(ew);
-                    (load8(odd, x - 1), load8(even, x), load8(odd, x))
+                    (load8(odd, xi - 1), load8(even, xi), load8(odd, xi))
                 };
                 for (a, wb) in acc.iter_mut().zip(g.wts) {
                     let wb = &wb[t..t + 3];
