@@ -273,10 +273,11 @@ fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, 
     let mut md = String::new();
     md += "# lrdenoise report\n\n";
     md += &format!(
-        "{} frame(s), {w}x{h} (first frame); {threads} thread(s); {cpu}; SIMD level `{}`; time = median of {} runs after a warm-up, denoiser only (no I/O). \
+        "{} frame(s), {w}x{h} (first frame); {threads} thread(s); {cpu}; SIMD level `{}` (FLNR's 3×3 layers: `{:?}`, chosen at run time); time = median of {} runs after a warm-up, denoiser only (no I/O). \
          Metrics follow shared/DATA.md (albedo-modulated, tone-mapped PSNR/SSIM/LDR-FLIP, linear rMSE). Peer rows (if any) were measured by their own tools.\n\n",
         images.len(),
         lrdenoise::SIMD_LEVEL,
+        lrdenoise::nn::Isa::detect(),
         opt.runs
     );
     md += "## Mean over frames\n\n";

@@ -2,7 +2,7 @@
 //! 3×3 (stride 1 or 2, zero padding 1) and 1×1 convolutions with f16 weights,
 //! LeakyReLU (0.01) or sigmoid, and "upsample ×2 (nearest) + concat skip".
 //! Rows are accumulated with slice arithmetic the compiler vectorises; the
-//! 3×3 layers' interior in 8-pixel lanes, with `wide` (any ISA, chosen at
+//! 3×3 layers' rows in 8-pixel lanes, with `wide` (any ISA, chosen at
 //! compile time) or, where the CPU has them, AVX2 + FMA intrinsics
 //! ([`avx2`], chosen at run time with the `std` feature: see [`Isa`]).
 
