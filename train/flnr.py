@@ -20,7 +20,10 @@ per-cell models. By default it is the library's default, the adaptive window (σ
 px, the larger two on the 2×2-pooled grid, blended per cell by 1 / (bias² + variance):
 src/flr/adaptive.rs); `--sigmas 12` trains on one window. `--check` prints plain FLR's
 PSNR per frame, to compare with `lrd eval` (on the train scenes: equal to the last digit
-for both). Loss: SMAPE against the reference.
+for both). Loss: SMAPE against the reference (`--loss smape+tm` adds the DATA.md
+metric's tone-mapped error: no better on the validation frames, see train/README.md).
+`--val FRAMES` scores frames that are never trained on at the end (plain FLR and FLNR
+PSNR), to choose between runs without touching the test split.
 """
 import argparse
 import math
@@ -198,6 +201,18 @@ def smape(a, b):
     return ((a - b).abs() / (a.abs() + b.abs() + 1e-2)).mean()
 
 
+def tonemapped_mse(out, ref, albedo, lum):
+    """The DATA.md metric's error as a loss: MSE of the tone-mapped albedo-modulated
+    colour, tone-mapped at each crop's frame's reference mean luminance `lum` (N,)."""
+    k = (0.5 / lum).view(-1, 1, 1, 1)
+
+    def tm(v):
+        v = v.clamp_min(0) * k
+        return (v / (1 + v) + 1e-6) ** (1 / 2.2)
+
+    return ((tm(albedo * out) - tm(albedo * ref)) ** 2).mean()
+
+
 class Flnr(torch.nn.Module):
     def __init__(self, widths, sigmas):
         super().__init__()
@@ -238,23 +253,26 @@ def full_frame(model, fr, plain=False):
 
 
 def crops(frames, size, batch):
-    xs, ys, rs = [], [], []
+    xs, ys, rs, als, lums = [], [], [], [], []
     for _ in range(batch):
         fr = random.choice(frames)
         _, h, w = fr["x"].shape
         oy, ox = random.randrange(0, h - size + 1), random.randrange(0, w - size + 1)
         sl = (slice(None), slice(oy, oy + size), slice(ox, ox + size))
-        x, y, r = fr["x"][sl], fr["y"][sl], fr["r"][sl]
+        x, y, r, al = fr["x"][sl], fr["y"][sl], fr["r"][sl], fr["albedo"][sl]
         if random.random() < 0.5:
-            x, y, r = x[:, :, ::-1], y[:, :, ::-1], r[:, :, ::-1]
+            x, y, r, al = x[:, :, ::-1], y[:, :, ::-1], r[:, :, ::-1], al[:, :, ::-1]
             x = x.copy()
             x[0] = -x[0]  # a horizontal flip mirrors the normal's x (world axes: approximately)
         if random.random() < 0.5:
-            x, y, r = x[:, ::-1], y[:, ::-1], r[:, ::-1]
+            x, y, r, al = x[:, ::-1], y[:, ::-1], r[:, ::-1], al[:, ::-1]
         xs.append(np.ascontiguousarray(x))
         ys.append(np.ascontiguousarray(y))
         rs.append(np.ascontiguousarray(r))
-    return torch.from_numpy(np.stack(xs)), torch.from_numpy(np.stack(ys)), torch.from_numpy(np.stack(rs))
+        als.append(np.ascontiguousarray(al))
+        lums.append(fr["lum"])
+    t = lambda v: torch.from_numpy(np.stack(v))
+    return t(xs), t(ys), t(rs), t(als), torch.tensor(lums, dtype=torch.float32)
 
 
 def main():
@@ -269,16 +287,24 @@ def main():
     ap.add_argument("--log", default=None, help="write the loss curve (step, loss) here")
     ap.add_argument("--sigmas", default="6,12,20", help="FLR windows: one σ, or three (the adaptive window, the library's default)")
     ap.add_argument("--init", default=None, help="start from this blob's network weights (same widths)")
+    ap.add_argument("--loss", default="smape", choices=["smape", "smape+tm"],
+                    help="smape: the paper's; smape+tm adds the DATA.md metric's tone-mapped MSE (weight --tm-weight)")
+    ap.add_argument("--tm-weight", type=float, default=10.0)
+    ap.add_argument("--val", nargs="*", default=[], help="frames only scored (plain FLR and FLNR PSNR) at the end, never trained on")
     ap.add_argument("--check", action="store_true", help="only print plain FLR's PSNR per frame (compare with `lrd eval`)")
     args = ap.parse_args()
     torch.manual_seed(0)
     random.seed(0)
     torch.set_num_threads(2)
-    frames = []
-    for p in args.frames:
+    def prepare(p):
         fr = load(p)
         y = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
-        frames.append({"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "reference": fr["reference"], "name": p})
+        rr = fr["albedo"].astype(np.float64) * fr["reference"]
+        lum = float(np.mean(LUMA[0] * rr[0] + LUMA[1] * rr[1] + LUMA[2] * rr[2]))
+        return {"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "reference": fr["reference"], "name": p, "lum": lum}
+
+    frames = [prepare(p) for p in args.frames]
+    val = [prepare(p) for p in args.val]
     sigmas = [float(v) for v in args.sigmas.split(",")]
     print(f"{len(frames)} frames; widths {args.widths}; FLR windows {sigmas}")
     model = Flnr([int(v) for v in args.widths.split(",")], sigmas)
@@ -293,9 +319,11 @@ def main():
     curve = []
     t0 = time.time()
     for step in range(1, args.steps + 1):
-        x, y, r = crops(frames, args.crop, args.batch)
+        x, y, r, al, lum = crops(frames, args.crop, args.batch)
         out = model(x, y)
         loss = smape(out, r)
+        if args.loss == "smape+tm":
+            loss = loss + args.tm_weight * tonemapped_mse(out, r, al, lum)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -311,8 +339,13 @@ def main():
         with open(args.log, "w") as f:
             f.write("step,loss\n" + "".join(f"{s},{l:.5f}\n" for s, l in curve))
     print(f"wrote {args.out}; FLR windows {sigmas} eps_mul {eps[0]:.2e} eps_add {eps[1]:.2e}")
-    for fr in frames:
-        print(f"{fr['name']}: plain FLR {psnr(full_frame(model, fr, plain=True), fr):.2f} dB, FLNR {psnr(full_frame(model, fr), fr):.2f} dB")
+    for name, group in (("train", frames), ("val", val)):
+        pairs = [(psnr(full_frame(model, fr, plain=True), fr), psnr(full_frame(model, fr), fr)) for fr in group]
+        for fr, (a, b) in zip(group, pairs):
+            print(f"{fr['name']}: plain FLR {a:.2f} dB, FLNR {b:.2f} dB")
+        if pairs:
+            print(f"{name} mean ({len(pairs)} frames): plain FLR {np.mean([a for a, _ in pairs]):.3f} dB, "
+                  f"FLNR {np.mean([b for _, b in pairs]):.3f} dB")
 
 
 if __name__ == "__main__":
