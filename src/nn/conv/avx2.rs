@@ -1,6 +1,10 @@
 //! AVX2 + FMA version of the 3×3 layers' 8-pixel lanes ([`super::conv3_lanes`]),
 //! for builds whose `wide` is SSE2: the same loop with `core::arch` intrinsics,
-//! chosen at run time by [`super::Isa`]. Same operations in the same order as
+//! chosen at run time by [`super::Isa`]. (Written out twice on purpose, one
+//! file per instruction set as in fast_image_resize: a loop generic over the
+//! vector type would need `wide`'s compile-time choice or trait methods inlined
+//! into this `#[target_feature]` function, which Rust does not promise.)
+//! Same operations in the same order as
 //! the portable version in an `x86-64-v3` build (fused multiply-adds), so
 //! their outputs are identical there; against an SSE2 build they differ by
 //! the rounding of the unfused products (tests/nn.rs compares both with f64).
