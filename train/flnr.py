@@ -20,10 +20,10 @@ per-cell models. By default it is the library's default, the adaptive window (σ
 px, the larger two on the 2×2-pooled grid, blended per cell by 1 / (bias² + variance):
 src/flr/adaptive.rs); `--sigmas 12` trains on one window. `--check` prints plain FLR's
 PSNR per frame, to compare with `lrd eval` (on the train scenes: equal to the last digit
-for both). Loss: SMAPE against the reference (`--loss smape+tm` adds the DATA.md
-metric's tone-mapped error: no better on the validation frames, see train/README.md).
-`--val FRAMES` scores frames that are never trained on at the end (plain FLR and FLNR
-PSNR), to choose between runs without touching the test split.
+for both). Loss: SMAPE against the reference (adding the DATA.md metric's tone-mapped
+error was tried in session 17, commit 8db77fb, and scored no better on the validation
+frames: train/README.md). `--val FRAMES` scores frames that are never trained on at the
+end (plain FLR and FLNR PSNR), to choose between runs without touching the test split.
 """
 import argparse
 import math
@@ -201,18 +201,6 @@ def smape(a, b):
     return ((a - b).abs() / (a.abs() + b.abs() + 1e-2)).mean()
 
 
-def tonemapped_mse(out, ref, albedo, lum):
-    """The DATA.md metric's error as a loss: MSE of the tone-mapped albedo-modulated
-    colour, tone-mapped at each crop's frame's reference mean luminance `lum` (N,)."""
-    k = (0.5 / lum).view(-1, 1, 1, 1)
-
-    def tm(v):
-        v = v.clamp_min(0) * k
-        return (v / (1 + v) + 1e-6) ** (1 / 2.2)
-
-    return ((tm(albedo * out) - tm(albedo * ref)) ** 2).mean()
-
-
 class Flnr(torch.nn.Module):
     def __init__(self, widths, sigmas):
         super().__init__()
@@ -253,26 +241,23 @@ def full_frame(model, fr, plain=False):
 
 
 def crops(frames, size, batch):
-    xs, ys, rs, als, lums = [], [], [], [], []
+    xs, ys, rs = [], [], []
     for _ in range(batch):
         fr = random.choice(frames)
         _, h, w = fr["x"].shape
         oy, ox = random.randrange(0, h - size + 1), random.randrange(0, w - size + 1)
         sl = (slice(None), slice(oy, oy + size), slice(ox, ox + size))
-        x, y, r, al = fr["x"][sl], fr["y"][sl], fr["r"][sl], fr["albedo"][sl]
+        x, y, r = fr["x"][sl], fr["y"][sl], fr["r"][sl]
         if random.random() < 0.5:
-            x, y, r, al = x[:, :, ::-1], y[:, :, ::-1], r[:, :, ::-1], al[:, :, ::-1]
+            x, y, r = x[:, :, ::-1], y[:, :, ::-1], r[:, :, ::-1]
             x = x.copy()
             x[0] = -x[0]  # a horizontal flip mirrors the normal's x (world axes: approximately)
         if random.random() < 0.5:
-            x, y, r, al = x[:, ::-1], y[:, ::-1], r[:, ::-1], al[:, ::-1]
+            x, y, r = x[:, ::-1], y[:, ::-1], r[:, ::-1]
         xs.append(np.ascontiguousarray(x))
         ys.append(np.ascontiguousarray(y))
         rs.append(np.ascontiguousarray(r))
-        als.append(np.ascontiguousarray(al))
-        lums.append(fr["lum"])
-    t = lambda v: torch.from_numpy(np.stack(v))
-    return t(xs), t(ys), t(rs), t(als), torch.tensor(lums, dtype=torch.float32)
+    return torch.from_numpy(np.stack(xs)), torch.from_numpy(np.stack(ys)), torch.from_numpy(np.stack(rs))
 
 
 def main():
@@ -287,9 +272,6 @@ def main():
     ap.add_argument("--log", default=None, help="write the loss curve (step, loss) here")
     ap.add_argument("--sigmas", default="6,12,20", help="FLR windows: one σ, or three (the adaptive window, the library's default)")
     ap.add_argument("--init", default=None, help="start from this blob's network weights (same widths)")
-    ap.add_argument("--loss", default="smape", choices=["smape", "smape+tm"],
-                    help="smape: the paper's; smape+tm adds the DATA.md metric's tone-mapped MSE (weight --tm-weight)")
-    ap.add_argument("--tm-weight", type=float, default=10.0)
     ap.add_argument("--val", nargs="*", default=[], help="frames only scored (plain FLR and FLNR PSNR) at the end, never trained on")
     ap.add_argument("--check", action="store_true", help="only print plain FLR's PSNR per frame (compare with `lrd eval`)")
     args = ap.parse_args()
@@ -299,9 +281,7 @@ def main():
     def prepare(p):
         fr = load(p)
         y = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
-        rr = fr["albedo"].astype(np.float64) * fr["reference"]
-        lum = float(np.mean(LUMA[0] * rr[0] + LUMA[1] * rr[1] + LUMA[2] * rr[2]))
-        return {"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "reference": fr["reference"], "name": p, "lum": lum}
+        return {"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "reference": fr["reference"], "name": p}
 
     frames = [prepare(p) for p in args.frames]
     val = [prepare(p) for p in args.val]
@@ -319,11 +299,9 @@ def main():
     curve = []
     t0 = time.time()
     for step in range(1, args.steps + 1):
-        x, y, r, al, lum = crops(frames, args.crop, args.batch)
+        x, y, r = crops(frames, args.crop, args.batch)
         out = model(x, y)
         loss = smape(out, r)
-        if args.loss == "smape+tm":
-            loss = loss + args.tm_weight * tonemapped_mse(out, r, al, lum)
         opt.zero_grad()
         loss.backward()
         opt.step()
