@@ -36,9 +36,10 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> 
     let (w, h, ew) = (g.w, g.h, g.w.div_ceil(2));
     let mut x = 0;
     let mut done = 0;
-    while done < g.end {
+    let end = rows[0].len(); // the output row (≥ 8)
+    while done < end {
         // the last group is shifted left to end at `end` (see the portable version)
-        x = x.min(g.end - 8);
+        x = x.min(end - 8);
         let xi = x as isize;
         let mut acc = g.bias.map(|b| _mm256_set1_ps(b));
         for i in 0..g.cin {

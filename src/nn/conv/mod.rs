@@ -292,7 +292,7 @@ fn conv3_rows_block(
     let ow = rows[0].len();
     // The lanes cover the whole row (loads past either end read the zero
     // padding); a row narrower than one group goes per pixel.
-    let g = Lanes { wts, cin, lanes, w, h, src_rows, stride, bias, end: ow };
+    let g = Lanes { wts, cin, lanes, w, h, src_rows, stride, bias };
     let done = if ow < 8 {
         0
     } else {
@@ -335,8 +335,6 @@ struct Lanes<'a> {
     src_rows: [Option<usize>; 3],
     stride: usize,
     bias: [f32; OB],
-    /// Groups cover `0..end` (the output row, `end ≥ 8`).
-    end: usize,
 }
 
 /// The 8 values `s[x..x + 8]`, zeros for those outside `s` (the zero padding:
@@ -370,10 +368,11 @@ fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
     let (w, h, ew) = (g.w, g.h, g.w.div_ceil(2));
     let mut x = 0;
     let mut done = 0;
-    while done < g.end {
+    let end = rows[0].len(); // the output row (≥ 8)
+    while done < end {
         // the last group is shifted left to end at `end` (it recomputes a few
         // pixels, bit-identically: every group starts from the bias)
-        x = x.min(g.end - 8);
+        x = x.min(end - 8);
         let xi = x as isize;
         let mut acc = g.bias.map(f32x8::splat);
         for i in 0..g.cin {
