@@ -65,8 +65,20 @@ impl UNet<'_> {
     }
 
     /// f32 of scratch [`UNet::forward`] needs for a `w × h` input: the skip
-    /// tensors of every level plus two work tensors of the largest layer.
+    /// tensors of every level, the f32 weights of the largest layer, and two
+    /// work tensors of the largest layer.
     pub fn scratch_len(&self, w: usize, h: usize) -> usize {
+        self.tensors_len(w, h) + self.weights_len()
+    }
+
+    /// The largest layer's weights in f32 (converted from the blob's f16
+    /// once per layer and call).
+    fn weights_len(&self) -> usize {
+        (0..self.layer_count()).filter_map(|i| self.conv(i).ok()).map(|d| d.weights_len()).max().unwrap_or(0)
+    }
+
+    /// The skip and work tensors of [`UNet::scratch_len`].
+    fn tensors_len(&self, w: usize, h: usize) -> usize {
         let c = self.widths();
         let mut skips = 0;
         let mut work = 0;
@@ -116,21 +128,22 @@ impl UNet<'_> {
             skip_store[l] = a;
             rest = b;
         }
+        let (wts, rest) = rest.split_at_mut(self.weights_len());
         let (wa, wb) = rest.split_at_mut(rest.len() / 2);
         let mut layer = 0;
         // input block → s_0
-        conv(isa, self.conv(layer)?, input, w, h, wa, Act::Leaky, &mut [])?;
+        conv(isa, self.conv(layer)?, input, w, h, wa, Act::Leaky, wts, &mut [])?;
         layer += 1;
-        conv(isa, self.conv(layer)?, &wa[..c[0] * n], w, h, skip_store[0], Act::Leaky, &mut [])?;
+        conv(isa, self.conv(layer)?, &wa[..c[0] * n], w, h, skip_store[0], Act::Leaky, wts, &mut [])?;
         layer += 1;
         // encoder
         for l in 1..=levels {
             let (pw, ph) = level_size(w, h, l - 1);
             let (prev, cur) = skip_store.split_at_mut(l);
-            conv(isa, self.conv(layer)?, prev[l - 1], pw, ph, wa, Act::Leaky, &mut [])?;
+            conv(isa, self.conv(layer)?, prev[l - 1], pw, ph, wa, Act::Leaky, wts, &mut [])?;
             layer += 1;
             // stride 2: `wb` (free until the decoder) holds the even/odd split rows
-            conv(isa, self.conv(layer)?, &wa[..c[l] * pw * ph], pw, ph, cur[0], Act::Leaky, wb)?;
+            conv(isa, self.conv(layer)?, &wa[..c[l] * pw * ph], pw, ph, cur[0], Act::Leaky, wts, wb)?;
             layer += 1;
         }
         // decoder: the current tensor lives in `wb` (or s_L at first)
@@ -142,18 +155,18 @@ impl UNet<'_> {
                 let low: &[f32] = if l == levels { &*skip_store[l] } else { &wb[..cur_c * lw * lh] };
                 concat_upsampled(low, cur_c, lw, lh, skip_store[l - 1], c[l - 1], sw, sh, wa)?;
             }
-            conv(isa, self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sw * sh], sw, sh, wb, Act::Leaky, &mut [])?;
+            conv(isa, self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sw * sh], sw, sh, wb, Act::Leaky, wts, &mut [])?;
             layer += 1;
             // second conv: wb → wa, then move back to wb for the next level
-            conv(isa, self.conv(layer)?, &wb[..c[l - 1] * sw * sh], sw, sh, wa, Act::Leaky, &mut [])?;
+            conv(isa, self.conv(layer)?, &wb[..c[l - 1] * sw * sh], sw, sh, wa, Act::Leaky, wts, &mut [])?;
             layer += 1;
             let k = c[l - 1] * sw * sh;
             wb[..k].copy_from_slice(&wa[..k]);
         }
         let cur: &[f32] = if levels == 0 { &*skip_store[0] } else { &wb[..c[0] * n] };
-        conv(isa, self.conv(layer)?, cur, w, h, wa, Act::Leaky, &mut [])?;
+        conv(isa, self.conv(layer)?, cur, w, h, wa, Act::Leaky, wts, &mut [])?;
         layer += 1;
-        conv(isa, self.conv(layer)?, &wa[..c[0] * n], w, h, out, Act::Sigmoid, &mut [])?;
+        conv(isa, self.conv(layer)?, &wa[..c[0] * n], w, h, out, Act::Sigmoid, wts, &mut [])?;
         Ok(())
     }
 }

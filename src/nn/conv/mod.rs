@@ -29,6 +29,10 @@ impl ConvDesc<'_> {
         let b = &self.params[2 * i..2 * i + 2];
         f16::from_le_bytes([b[0], b[1]]).to_f32()
     }
+    /// f32 of `weights` scratch [`conv`] needs: `cout · cin · k · k`.
+    pub fn weights_len(&self) -> usize {
+        self.cout * self.cin * self.k * self.k
+    }
     fn bias(&self, o: usize) -> f32 {
         self.param(self.cout * self.cin * self.k * self.k + o)
     }
@@ -51,8 +55,6 @@ pub enum Act {
 
 const LEAKY_SLOPE: f32 = 0.01;
 
-/// Largest `cin · k · k` of a layer (a concat of two 128-wide levels × 9).
-pub const MAX_TAPS: usize = 256 * 9;
 /// Output channels computed together (their accumulators share every load).
 const OB: usize = 4;
 
@@ -108,13 +110,19 @@ fn avx2_fma_available() -> bool {
 }
 
 /// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `out` at
-/// least `cout` planes of the output size. Output rows are accumulated one at
-/// a time (they stay in L1) over every input channel and tap. `split`: for a
-/// stride-2 layer, room for `cin · w · h` values where the input's rows are
-/// rearranged as [even columns | odd columns], so the taps become contiguous
-/// 8-pixel loads (without it, or for narrow rows, stride 2 runs per pixel).
-/// `isa`: the lanes' instruction set; [`Isa::Portable`] where `isa` is not
-/// [`Isa::available`].
+/// least `cout` planes of the output size. `weights`: room for the layer's
+/// weights in f32 ([`ConvDesc::weights_len`]), converted from f16 once per
+/// call. `split`: for a stride-2 layer, room for `cin · w · h` values where
+/// the input's rows are rearranged as [even columns | odd columns], so the
+/// taps become contiguous 8-pixel loads (without it, or for narrow rows,
+/// stride 2 runs per pixel). `isa`: the lanes' instruction set;
+/// [`Isa::Portable`] where `isa` is not [`Isa::available`].
+///
+/// Output rows are the outer loop and blocks of `OB` output channels the
+/// inner one: the 3·cin input rows an output row reads are fetched into the
+/// cache once for all the blocks (blocks outermost re-streamed the whole
+/// input tensor from memory `cout / OB` times). Each output row stays in L1
+/// while it accumulates every input channel and tap.
 #[allow(clippy::too_many_arguments)]
 pub fn conv(
     isa: Isa,
@@ -124,73 +132,68 @@ pub fn conv(
     h: usize,
     out: &mut [f32],
     act: Act,
+    weights: &mut [f32],
     split: &mut [f32],
 ) -> Result<(), Error> {
     let isa = if isa.available() { isa } else { Isa::Portable };
     let (ow, oh) = d.out_size(w, h);
     let taps = d.cin * d.k * d.k;
-    if input.len() < d.cin * w * h || out.len() < d.cout * ow * oh || d.params.len() != 2 * (d.cout * taps + d.cout) || taps > MAX_TAPS {
+    if input.len() < d.cin * w * h || out.len() < d.cout * ow * oh || d.params.len() != 2 * (d.cout * taps + d.cout) {
         return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: d.cout * ow * oh, len: out.len() });
     }
-    let mut wts = [0f32; MAX_TAPS];
-    let mut o_start = 0;
+    if weights.len() < d.weights_len() {
+        return Err(Error::ScratchTooSmall { needed: d.weights_len(), got: weights.len() });
+    }
+    let wts = &mut weights[..d.weights_len()];
+    for (i, v) in wts.iter_mut().enumerate() {
+        *v = d.param(i);
+    }
+    let wts = &*wts;
     // Stride 2: the blocked lanes below run on the even/odd split rows.
     let s2 = d.k == 3 && d.stride == 2 && w / 2 >= 9 && split.len() >= d.cin * w * h;
     let (lanes_input, stride): (&[f32], usize) = if s2 {
         let ew = w.div_ceil(2);
         for (src, dst) in input[..d.cin * w * h].chunks_exact(w).zip(split.chunks_exact_mut(w)) {
             let (even, odd) = dst.split_at_mut(ew);
-            for (x, v) in src.iter().enumerate() {
-                if x % 2 == 0 {
-                    even[x / 2] = *v;
-                } else {
-                    odd[x / 2] = *v;
-                }
+            for (pair, (e, o)) in src.chunks_exact(2).zip(even.iter_mut().zip(odd.iter_mut())) {
+                *e = pair[0];
+                *o = pair[1];
+            }
+            if w % 2 == 1 {
+                even[ew - 1] = src[w - 1];
             }
         }
         (&split[..d.cin * w * h], 2)
     } else {
         (input, 1)
     };
-    if d.k == 3 && ((d.stride == 1 && w >= 18) || s2) {
-        // blocks of OB output channels in lanes
-        let mut w4 = [[0f32; MAX_TAPS]; OB];
-        while o_start + OB <= d.cout {
+    // blocks of OB output channels in lanes (3×3 on rows wide enough), the
+    // rest one channel at a time
+    let blocks = if d.k == 3 && ((d.stride == 1 && w >= 18) || s2) { d.cout / OB } else { 0 };
+    let plane = ow * oh;
+    let (blocked, rest) = out[..d.cout * plane].split_at_mut(blocks * OB * plane);
+    for y in 0..oh {
+        for (k, block) in blocked.chunks_exact_mut(OB * plane).enumerate() {
+            let mut rows: [&mut [f32]; OB] = Default::default();
             let mut bias = [0f32; OB];
-            for b in 0..OB {
-                for (t, v) in w4[b][..taps].iter_mut().enumerate() {
-                    *v = d.param((o_start + b) * taps + t);
-                }
-                bias[b] = d.bias(o_start + b);
+            let mut wb: [&[f32]; OB] = [&[]; OB];
+            for (b, (r, p)) in rows.iter_mut().zip(block.chunks_exact_mut(plane)).enumerate() {
+                let o = k * OB + b;
+                bias[b] = d.bias(o);
+                wb[b] = &wts[o * taps..(o + 1) * taps];
+                *r = &mut p[y * ow..(y + 1) * ow];
+                r.fill(bias[b]);
             }
-            let block = &mut out[o_start * ow * oh..(o_start + OB) * ow * oh];
-            let (p0, rest) = block.split_at_mut(ow * oh);
-            let (p1, rest) = rest.split_at_mut(ow * oh);
-            let (p2, p3) = rest.split_at_mut(ow * oh);
-            let mut planes = [p0, p1, p2, p3];
-            for y in 0..oh {
-                let mut rows: [&mut [f32]; OB] = Default::default();
-                for (b, (r, p)) in rows.iter_mut().zip(planes.iter_mut()).enumerate() {
-                    *r = &mut p[y * ow..(y + 1) * ow];
-                    r.fill(bias[b]);
-                }
-                conv3_rows_block(isa, &w4, d.cin, lanes_input, input, w, h, y, stride, bias, &mut rows);
-                for r in rows.iter_mut() {
-                    activate(r, act);
-                }
+            conv3_rows_block(isa, &wb, d.cin, lanes_input, input, w, h, y, stride, bias, &mut rows);
+            for r in rows.iter_mut() {
+                activate(r, act);
             }
-            o_start += OB;
         }
-    }
-    for o in o_start..d.cout {
-        for (t, v) in wts[..taps].iter_mut().enumerate() {
-            *v = d.param(o * taps + t);
-        }
-        let bias = d.bias(o);
-        let plane = &mut out[o * ow * oh..(o + 1) * ow * oh];
-        for y in 0..oh {
-            let prow = &mut plane[y * ow..(y + 1) * ow];
-            prow.fill(bias);
+        for (j, plane_o) in rest.chunks_exact_mut(plane).enumerate() {
+            let o = blocks * OB + j;
+            let wts = &wts[o * taps..(o + 1) * taps];
+            let prow = &mut plane_o[y * ow..(y + 1) * ow];
+            prow.fill(d.bias(o));
             for i in 0..d.cin {
                 let src = &input[i * w * h..(i + 1) * w * h];
                 match (d.k, d.stride) {
@@ -242,7 +245,7 @@ pub fn conv(
                 }
             }
             if d.k == 3 && d.stride == 1 && w >= 18 {
-                conv3_row_lanes(&wts[..taps], d.cin, input, w, h, y, prow);
+                conv3_row_lanes(wts, d.cin, input, w, h, y, prow);
             }
             activate(prow, act);
         }
@@ -253,10 +256,9 @@ pub fn conv(
 fn activate(row: &mut [f32], act: Act) {
     match act {
         Act::Leaky => {
+            // a select, not a conditional store: it vectorises
             for p in row.iter_mut() {
-                if *p < 0.0 {
-                    *p *= LEAKY_SLOPE;
-                }
+                *p = if *p < 0.0 { *p * LEAKY_SLOPE } else { *p };
             }
         }
         Act::Sigmoid => {
@@ -276,7 +278,7 @@ fn activate(row: &mut [f32], act: Act) {
 #[allow(clippy::too_many_arguments)]
 fn conv3_rows_block(
     isa: Isa,
-    wts: &[[f32; MAX_TAPS]; OB],
+    wts: &[&[f32]; OB],
     cin: usize,
     lanes: &[f32],
     input: &[f32],
@@ -326,7 +328,7 @@ fn conv3_rows_block(
 /// One output row's 8-pixel groups for [`conv3_rows_block`]: what the lanes
 /// read (see there).
 struct Lanes<'a> {
-    wts: &'a [[f32; MAX_TAPS]; OB],
+    wts: &'a [&'a [f32]; OB],
     cin: usize,
     lanes: &'a [f32],
     w: usize,
@@ -348,14 +350,17 @@ fn load8(s: &[f32], x: isize) -> wide::f32x8 {
     })
 }
 
-/// `s[x..x + 8]` lane by lane, zeros outside `s` (the padded loads' slow path).
+/// `s[x..x + 8]` with zeros outside `s` (the padded loads' slow path): the
+/// part inside `s` copied, the rest left zero.
 #[cold]
 fn padded8(s: &[f32], x: isize) -> [f32; 8] {
     let mut a = [0f32; 8];
-    for (l, v) in a.iter_mut().enumerate() {
-        if let Some(e) = usize::try_from(x + l as isize).ok().and_then(|i| s.get(i)) {
-            *v = *e;
-        }
+    // lanes before s[0], and the first element of `s` read
+    let skip = x.clamp(-8, 0).unsigned_abs();
+    let start = usize::try_from(x).unwrap_or(0);
+    if let Some(tail) = s.get(start..) {
+        let n = (8 - skip).min(tail.len());
+        a[skip..skip + n].copy_from_slice(&tail[..n]);
     }
     a
 }
