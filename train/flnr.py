@@ -271,7 +271,7 @@ def main():
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--log", default=None, help="write the loss curve (step, loss) here")
     ap.add_argument("--sigmas", default="6,12,20", help="FLR windows: one σ, or three (the adaptive window, the library's default)")
-    ap.add_argument("--init", default=None, help="start from this blob's network weights (same widths)")
+    ap.add_argument("--init", default=None, help="start from this blob's network weights and eps (same widths)")
     ap.add_argument("--val", nargs="*", default=[], help="frames only scored (plain FLR and FLNR PSNR) at the end, never trained on")
     ap.add_argument("--check", action="store_true", help="only print plain FLR's PSNR per frame (compare with `lrd eval`)")
     args = ap.parse_args()
@@ -293,7 +293,12 @@ def main():
             print(f"{fr['name']}: plain FLR {psnr(full_frame(model, fr, plain=True), fr):.2f} dB")
         return
     if args.init:
-        load_blob(model.net, args.init)
+        # the network and the ε, ϵ it was trained with (before session 18 only
+        # the network was loaded, and ε, ϵ restarted from 1e-3, 1e-2)
+        _, (eps_mul, eps_add) = load_blob(model.net, args.init)
+        with torch.no_grad():
+            model.log_eps_mul.fill_(math.log(eps_mul))
+            model.log_eps_add.fill_(math.log(eps_add))
     opt = torch.optim.Adam(model.parameters(), lr=args.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, args.steps)
     curve = []
