@@ -18,20 +18,21 @@
 //! samples). The frame needs normal, depth and AO.
 //!
 //! **Tiles with halos.** The network runs tile by tile (default
-//! [`DEFAULT_TILE`] = 256 px edge), each on its input grown by a halo of the
+//! [`DEFAULT_TILE`] = 512 px edge), each on its input grown by a halo of the
 //! network's receptive radius (17 px for two levels, rounded up to 20 so the
 //! stride-2 grids of tile and frame coincide) and clipped to the frame, so
 //! its working memory is bounded by the tile, not the frame. At 1920×1080
-//! with the bundled 12/24/48 network, [`Flnr::scratch_len`] is 24.4 M f32
-//! (98 MB) instead of 226 M (0.9 GB) for the whole frame at once: 7.8 M for
-//! one tile's tensors, 16.6 M for the 2·Q' = 8 learned guide planes FLR reads,
-//! which stay frame-sized like any other guides of the frame. The tiles'
-//! results are bit-identical to the whole frame's (the zero padding at the
-//! frame's border is the same; a tile's own border effects stay inside its
-//! halo; tested). The halo is recomputed, ~1.3× the network's arithmetic at
-//! 256 px tiles, and still the tiles are faster than the whole frame: their
-//! tensors stay in cache longer (`examples/flnr_tiles`, 1080p, x86-64-v3, one
-//! thread: 5.3 s against 7.5 s; 6.5 s at 128 px tiles, 6.9 s at 512).
+//! with the bundled 12/24/48 network, [`Flnr::scratch_len`] is 39.3 M f32
+//! (157 MB) instead of 226 M (0.9 GB) for the whole frame at once: 22.7 M
+//! for one tile's tensors, 16.6 M for the 2·Q' = 8 learned guide planes FLR
+//! reads, which stay frame-sized like any other guides of the frame. The
+//! tiles' results are bit-identical to the whole frame's (the zero padding at
+//! the frame's border is the same; a tile's own border effects stay inside
+//! its halo; tested). The halo is recomputed: ~1.16× the network's arithmetic
+//! at 512 px tiles, ~1.34× at 256 (`examples/flnr_tiles`, 1080p, AVX2 + FMA,
+//! one thread, session 19: 2.9 s at 512, 3.5 s at 256, 4.6 s at 128, 2.8 s
+//! for the whole frame). The tiles are independent: [`Flnr::network_tile`]
+//! runs one, on any thread.
 
 use crate::config::{Blur, FlrConfig, Regularization};
 use crate::error::{Arg, Error};
@@ -43,27 +44,19 @@ use crate::nn::UNet;
 /// Guides the network reads.
 pub const INPUT_GUIDES: GuideSet = GuideSet::NORMAL_DEPTH_AO;
 const IN_CHANNELS: usize = 8;
-/// Default edge (pixels) of the network's output tiles. 256: the halo's
-/// recomputation is ~1.3× at this size (~1.7× at 128), and a tile's tensors
-/// (7.8 M f32, 31 MB, for the bundled network) are still far below a frame's.
-pub const DEFAULT_TILE: usize = 256;
+/// Default edge (pixels) of the network's output tiles. 512: the halo's
+/// recomputation is ~1.16× at this size (~1.34× at 256, which was the default
+/// until the 3×3 layers stopped depending on a tile's tensors staying in
+/// cache, session 18), a tile's tensors (22.7 M f32, 91 MB, for the bundled
+/// network) are a tenth of the whole frame's, and a 1080p frame still has 12
+/// tiles to spread over threads.
+pub const DEFAULT_TILE: usize = 512;
 /// Smallest tile edge [`Flnr::with_tile`] accepts: for networks of up to 3
 /// levels (tested; the bundled one has 2) every level of a tile's input stays
 /// wide enough for the vectorised convolution paths, which is what keeps
 /// tiles bit-identical to the whole frame (deeper networks may differ in the
 /// last bit where a narrow level falls back to the per-pixel path).
 pub const MIN_TILE: usize = 64;
-
-/// The per-frame scales of the network's input (means over the whole frame,
-/// computed before the first tile).
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct InputScale {
-    /// Mean of the finite, positive depths (1 without any).
-    depth: f32,
-    /// Mean of `max(noisy, 0)` over the finite samples of all three channels
-    /// (at least 1e-6).
-    light: f32,
-}
 
 /// A rectangle of pixels `[x0, x1) × [y0, y1)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -216,13 +209,26 @@ impl<'w> Flnr<'w> {
     fn single_tile(&self) -> bool {
         self.tile_grid() == (1, 1)
     }
-    /// f32 of scratch for [`Flnr::denoise`]: the 2·Q' learned guide planes
-    /// (frame-sized, FLR reads them), plus one tile's network input, output
-    /// and working tensors ([`UNet::scratch_len`] of the largest tile input).
+    /// f32 of the 2·Q' learned guide planes (frame-sized; FLR reads them): the
+    /// first part of [`Flnr::scratch_len`], and what [`TileGuides::scatter`]
+    /// writes into when the tiles run on several threads.
+    pub fn guide_planes_len(&self) -> usize {
+        2 * self.q * self.plane()
+    }
+    /// f32 of working space one thread needs for [`Flnr::network_tile`]: one
+    /// tile's network input and output and working tensors
+    /// ([`UNet::scratch_len`] of the largest tile input).
+    pub fn tile_scratch_len(&self) -> usize {
+        let r = self.region_len();
+        (IN_CHANNELS + 2 * self.q) * r + self.net.scratch_len(self.region_max.0, self.region_max.1)
+    }
+    /// f32 of scratch for [`Flnr::denoise`]: the guide planes plus one tile's
+    /// working space (without the tile's output copy when the whole frame is
+    /// one tile: it is written straight into the planes).
     pub fn scratch_len(&self) -> usize {
         let r = self.region_len();
         let out = if self.single_tile() { 0 } else { 2 * self.q * r };
-        2 * self.q * self.plane() + IN_CHANNELS * r + out + self.net.scratch_len(self.region_max.0, self.region_max.1)
+        self.guide_planes_len() + IN_CHANNELS * r + out + self.net.scratch_len(self.region_max.0, self.region_max.1)
     }
     /// f64 of scratch for the FLR stage ([`Flr::scratch_len`]).
     pub fn flr_scratch_len(&self) -> usize {
@@ -230,7 +236,7 @@ impl<'w> Flnr<'w> {
     }
 
     /// The frame's input scales, one pass over its depth and noisy rows.
-    fn input_scale(&self, depth: &ImageView<'_>, noisy: &ImageView<'_>) -> Result<InputScale, Error> {
+    fn scale_of(&self, depth: &ImageView<'_>, noisy: &ImageView<'_>) -> Result<InputScale, Error> {
         const CHUNK: usize = 64;
         let bad = Error::InvalidTile { index: 0, count: self.height };
         let (mut dsum, mut dn, mut lsum) = (0f64, 0u64, 0f64);
@@ -290,8 +296,8 @@ impl<'w> Flnr<'w> {
         Ok(())
     }
 
-    /// Runs the network tile by tile into the `2·Q'` guide planes `g`.
-    fn guides(&self, frame: &Frame<'_>, g: &mut [f32], work: &mut [f32]) -> Result<(), Error> {
+    /// The frame's five input views (normal x, y, z, depth, AO), checked against the plan.
+    fn views<'a>(&self, frame: &Frame<'a>) -> Result<[ImageView<'a>; 5], Error> {
         let (w, h) = (self.width, self.height);
         let n = &frame.noisy;
         if (n.width(), n.height()) != (w, h) {
@@ -300,43 +306,99 @@ impl<'w> Flnr<'w> {
         if n.channel_count() < 3 {
             return Err(Error::ChannelCount { arg: Arg::Noisy, expected: 3, got: n.channel_count() });
         }
+        if frame.guides_low.is_some() {
+            return Err(Error::Unsupported("FLNR has no joint upsampling (guides_low given)"));
+        }
         let cv = frame.guides.channel_views(&INPUT_GUIDES, w, h, Arg::Guide)?;
         let mut views = [*n; 5];
         for (v, c) in views.iter_mut().zip(&cv) {
             *v = c.ok_or(Error::GuideMismatch)?;
         }
-        let sc = self.input_scale(&views[3], n)?;
-        let (q2, np) = (2 * self.q, self.plane());
-        let (nx, ny) = self.tile_grid();
-        let single = self.single_tile();
-        let rl = self.region_len();
-        let (x, rest) = work.split_at_mut(IN_CHANNELS * rl);
-        let (o, net_scratch) = rest.split_at_mut(if single { 0 } else { q2 * rl });
-        for t in 0..nx * ny {
-            let r = self.tile_rect_at(t % nx, t / nx, nx, ny);
-            let reg = self.region(r);
-            let (rw, rn) = (reg.width(), reg.width() * reg.height());
-            let x = &mut x[..IN_CHANNELS * rn];
-            self.input(&views, n, sc, reg, x)?;
-            if single {
-                self.net.forward(x, rw, reg.height(), net_scratch, &mut g[..q2 * np])?;
-                continue;
-            }
-            let o = &mut o[..q2 * rn];
-            self.net.forward(x, rw, reg.height(), net_scratch, o)?;
-            for (src, dst) in o.chunks_exact(rn).zip(g.chunks_exact_mut(np)) {
-                for y in r.y0..r.y1 {
-                    let s = (y - reg.y0) * rw + (r.x0 - reg.x0);
-                    dst[y * w + r.x0..y * w + r.x1].copy_from_slice(&src[s..s + r.width()]);
-                }
-            }
-        }
-        Ok(())
+        Ok(views)
     }
 
-    /// Denoises one frame (normal, depth and AO guides). `scratch`: at least
-    /// [`Flnr::scratch_len`] f32, `flr_scratch`: [`Flnr::flr_scratch_len`] f64.
-    /// Allocates nothing.
+    /// Step 1 of a run split over threads: checks `frame` against the plan and
+    /// measures the per-frame scales of the network's input (one pass over its
+    /// depth and noisy rows). [`Flnr::denoise`] runs all the steps on one thread.
+    pub fn input_scale(&self, frame: &Frame<'_>) -> Result<InputScale, Error> {
+        let views = self.views(frame)?;
+        self.scale_of(&views[3], &frame.noisy)
+    }
+
+    /// Runs the network on the input region `reg` into `o` (2·Q' planes of
+    /// `reg`'s size); `x` holds the input, `net_scratch` the network's tensors.
+    #[allow(clippy::too_many_arguments)]
+    fn forward_region(
+        &self,
+        views: &[ImageView<'_>; 5],
+        noisy: &ImageView<'_>,
+        sc: InputScale,
+        reg: Rect,
+        x: &mut [f32],
+        net_scratch: &mut [f32],
+        o: &mut [f32],
+    ) -> Result<(), Error> {
+        let rn = reg.width() * reg.height();
+        let x = &mut x[..IN_CHANNELS * rn];
+        self.input(views, noisy, sc, reg, x)?;
+        self.net.forward(x, reg.width(), reg.height(), net_scratch, &mut o[..2 * self.q * rn])
+    }
+
+    /// Step 2: the network on tile `t` (row-major over [`Flnr::tile_grid`];
+    /// every tile once, in any order, on any thread), computed in
+    /// `tile_scratch` (at least [`Flnr::tile_scratch_len`] f32, one per
+    /// thread). The result borrows the scratch until it is scattered
+    /// ([`TileGuides::scatter`]) into the guide planes. Tiles are
+    /// independent, so the planes come out bit-identical to [`Flnr::denoise`]'s.
+    pub fn network_tile<'s>(
+        &self,
+        frame: &Frame<'_>,
+        scale: InputScale,
+        t: usize,
+        tile_scratch: &'s mut [f32],
+    ) -> Result<TileGuides<'s>, Error> {
+        if tile_scratch.len() < self.tile_scratch_len() {
+            return Err(Error::ScratchTooSmall { needed: self.tile_scratch_len(), got: tile_scratch.len() });
+        }
+        let rect = self.tile_rect(t)?;
+        let views = self.views(frame)?;
+        let reg = self.region(rect);
+        let rl = self.region_len();
+        let (x, rest) = tile_scratch.split_at_mut(IN_CHANNELS * rl);
+        let (o, net_scratch) = rest.split_at_mut(2 * self.q * rl);
+        self.forward_region(&views, &frame.noisy, scale, reg, x, net_scratch, o)?;
+        let len = 2 * self.q * reg.width() * reg.height();
+        Ok(TileGuides { rect, region: reg, planes: 2 * self.q, frame: (self.width, self.height), data: &o[..len] })
+    }
+
+    /// Step 3: the frame FLR runs on, given the learned guide planes `planes`
+    /// (at least [`Flnr::guide_planes_len`] f32, every tile scattered into
+    /// them): fitted on `[normal, depth, AO, X'_model]`, applied to `[normal,
+    /// depth, AO, X'_map]`. Denoise it with [`Flnr::flr`] (whole frame, or its
+    /// tiles over threads).
+    pub fn flr_frame<'a>(&self, frame: &Frame<'a>, planes: &'a [f32]) -> Result<Frame<'a>, Error> {
+        if planes.len() < self.guide_planes_len() {
+            return Err(Error::ScratchTooSmall { needed: self.guide_planes_len(), got: planes.len() });
+        }
+        self.views(frame)?;
+        let (w, h, np) = (self.width, self.height, self.plane());
+        let plane = |k: usize| ImageView::f32(&planes[k * np..(k + 1) * np], w, h, 1, Layout::planar(w, h));
+        let mut model = frame.guides;
+        let mut map = frame.guides;
+        for k in 0..self.q {
+            model.user[k] = Some(plane(k)?);
+            map.user[k] = Some(plane(self.q + k)?);
+        }
+        Ok(Frame { noisy: frame.noisy, guides: map, guides_low: Some(model) })
+    }
+
+    /// Denoises one frame (normal, depth and AO guides) on the calling thread.
+    /// `scratch`: at least [`Flnr::scratch_len`] f32, `flr_scratch`:
+    /// [`Flnr::flr_scratch_len`] f64. Allocates nothing. To spread the network
+    /// (nearly all of the time) over threads, run the steps yourself:
+    /// [`Flnr::input_scale`], then [`Flnr::network_tile`] and
+    /// [`TileGuides::scatter`] for every tile, then [`Flnr::flr_frame`] (as
+    /// `lrd --threads N` does).
     pub fn denoise(
         &self,
         frame: &Frame<'_>,
@@ -347,22 +409,70 @@ impl<'w> Flnr<'w> {
         if scratch.len() < self.scratch_len() {
             return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
         }
-        if frame.guides_low.is_some() {
-            return Err(Error::Unsupported("FLNR has no joint upsampling (guides_low given)"));
+        let views = self.views(frame)?;
+        let sc = self.scale_of(&views[3], &frame.noisy)?;
+        let (g, work) = scratch.split_at_mut(self.guide_planes_len());
+        if self.single_tile() {
+            // the whole frame in one piece, straight into the planes
+            let reg = Rect { x0: 0, y0: 0, x1: self.width, y1: self.height };
+            let (x, net_scratch) = work.split_at_mut(IN_CHANNELS * self.region_len());
+            self.forward_region(&views, &frame.noisy, sc, reg, x, net_scratch, g)?;
+        } else {
+            let (nx, ny) = self.tile_grid();
+            for t in 0..nx * ny {
+                self.network_tile(frame, sc, t, work)?.scatter(g)?;
+            }
         }
-        let (w, h, np, q) = (self.width, self.height, self.plane(), self.q);
-        let (g, work) = scratch.split_at_mut(2 * q * np);
-        self.guides(frame, g, work)?;
-        let g = &*g;
-        let plane = |k: usize| ImageView::f32(&g[k * np..(k + 1) * np], w, h, 1, Layout::planar(w, h));
-        let mut model = frame.guides;
-        let mut map = frame.guides;
-        for k in 0..q {
-            model.user[k] = Some(plane(k)?);
-            map.user[k] = Some(plane(q + k)?);
-        }
-        let f = Frame { noisy: frame.noisy, guides: map, guides_low: Some(model) };
+        let f = self.flr_frame(frame, g)?;
         self.flr.denoise(&f, flr_scratch, out)
+    }
+}
+
+/// The per-frame scales of the network's input ([`Flnr::input_scale`]): every
+/// tile of a frame must use the same.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InputScale {
+    /// Mean of the finite, positive depths (1 without any).
+    depth: f32,
+    /// Mean of `max(noisy, 0)` over the finite samples of all three channels
+    /// (at least 1e-6).
+    light: f32,
+}
+
+/// One tile's share of the learned guide planes ([`Flnr::network_tile`]),
+/// held in that thread's scratch.
+#[derive(Debug)]
+pub struct TileGuides<'s> {
+    rect: Rect,
+    region: Rect,
+    planes: usize,
+    frame: (usize, usize),
+    data: &'s [f32],
+}
+
+impl TileGuides<'_> {
+    /// The output pixels this tile owns.
+    pub fn rect(&self) -> Rect {
+        self.rect
+    }
+    /// Copies the tile's pixels into the frame-sized guide planes `planes`
+    /// (at least [`Flnr::guide_planes_len`] f32; other tiles' pixels are left
+    /// as they are).
+    pub fn scatter(&self, planes: &mut [f32]) -> Result<(), Error> {
+        let (w, h) = self.frame;
+        let np = w * h;
+        if planes.len() < self.planes * np {
+            return Err(Error::ScratchTooSmall { needed: self.planes * np, got: planes.len() });
+        }
+        let (r, reg) = (self.rect, self.region);
+        let (rw, rn) = (reg.width(), reg.width() * reg.height());
+        for (src, dst) in self.data.chunks_exact(rn).zip(planes.chunks_exact_mut(np)) {
+            for y in r.y0..r.y1 {
+                let s = (y - reg.y0) * rw + (r.x0 - reg.x0);
+                dst[y * w + r.x0..y * w + r.x1].copy_from_slice(&src[s..s + r.width()]);
+            }
+        }
+        Ok(())
     }
 }
 

@@ -141,6 +141,45 @@ fn tiles_with_halos_equal_the_whole_frame_bit_for_bit() {
 }
 
 #[test]
+fn split_steps_in_any_tile_order_equal_denoise_bit_for_bit() {
+    // what `lrd --threads N` does: the scales, every tile on its own scratch
+    // (here in reverse order, on two alternating scratches, as two threads
+    // would), scattered into the planes, then FLR on `flr_frame`
+    let blob = random_blob(2, &[4, 6, 8]);
+    for &(w, h, tile) in &[(300usize, 200usize, 64usize), (257, 131, 100), (64, 64, 64)] {
+        let mut f = Owned::synthetic(w, h, 11, 0.5);
+        f.noisy[5] = f32::NAN;
+        let fl = Flnr::new(&blob, w, h).unwrap().with_tile(tile).unwrap();
+        let (whole, _) = run_tiled(&blob, &f, tile);
+        let frame = f.frame(INPUT_GUIDES);
+        let scale = fl.input_scale(&frame).unwrap();
+        let mut planes = vec![f32::NAN; fl.guide_planes_len()];
+        let mut scratches = [vec![f32::NAN; fl.tile_scratch_len()], vec![f32::NAN; fl.tile_scratch_len()]];
+        let (nx, ny) = fl.tile_grid();
+        for t in (0..nx * ny).rev() {
+            let tg = fl.network_tile(&frame, scale, t, &mut scratches[t % 2]).unwrap();
+            assert_eq!(tg.rect(), fl.tile_rect(t).unwrap());
+            tg.scatter(&mut planes).unwrap();
+        }
+        assert!(planes.iter().all(|v| v.is_finite()), "{w}x{h}: a tile left a hole");
+        let mut fs = vec![0f64; fl.flr_scratch_len()];
+        let mut out = vec![f32::NAN; 3 * w * h];
+        let ff = fl.flr_frame(&frame, &planes).unwrap();
+        fl.flr().denoise(&ff, &mut fs, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+        let bad = whole.iter().zip(&out).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        assert_eq!(bad, 0, "{w}x{h} tile {tile}: {bad} values differ");
+        // typed errors: a tile past the grid, short scratch, short planes
+        let count = nx * ny;
+        assert!(matches!(fl.network_tile(&frame, scale, count, &mut scratches[0]), Err(Error::InvalidTile { .. })));
+        assert!(matches!(fl.network_tile(&frame, scale, 0, &mut scratches[0][..3]), Err(Error::ScratchTooSmall { .. })));
+        let tg = fl.network_tile(&frame, scale, 0, &mut scratches[0]).unwrap();
+        assert!(matches!(tg.scatter(&mut planes[..1]), Err(Error::ScratchTooSmall { .. })));
+        assert!(matches!(fl.flr_frame(&frame, &planes[..1]), Err(Error::ScratchTooSmall { .. })));
+        assert!(matches!(fl.input_scale(&f.frame(GuideSet::NORMAL_DEPTH)), Err(Error::GuideMismatch)));
+    }
+}
+
+#[test]
 fn receptive_radius_is_what_one_input_pixel_reaches() {
     // perturb one input value and find the farthest output that changes: the
     // halo is built from this radius, so it must not be an underestimate

@@ -423,7 +423,7 @@ impl Method {
                     Some(p) => (std::fs::read(p).map_err(|e| format!("--weights {}: {e}", p.display()))?, p.display().to_string()),
                     None => (BUNDLED_WEIGHTS.to_vec(), "train/flnr.bin".to_string()),
                 };
-                let runner = FlnrRunner::new(blob, w, h).map_err(|e| format!("flnr ({name}): {e}"))?;
+                let runner = FlnrRunner::new(blob, w, h, threads).map_err(|e| format!("flnr ({name}): {e}"))?;
                 let net = runner.flnr.network();
                 let label = format!("flnr {:?}", net.widths()).replace(' ', "");
                 let flags = match &a.weights {

@@ -396,27 +396,88 @@ impl BmfrRunner {
 }
 
 /// FLNR for one size: the weights (kept for the process's life), the plan and
-/// both scratch buffers. One thread (the network and FLR run on the caller).
+/// its scratch. With threads, the network's tiles (nearly all of the time) are
+/// handed out to the threads one at a time, each thread on its own tile
+/// scratch, and FLR runs its tiles in parallel: bit-identical to one thread.
 pub struct FlnrRunner {
     pub flnr: lrdenoise::flnr::Flnr<'static>,
+    /// One thread: `Flnr::scratch_len`. More: the guide planes, then one tile
+    /// scratch per thread.
     scratch: Vec<f32>,
     flr_scratch: Vec<f64>,
+    threads: usize,
+    pool: Option<rayon::ThreadPool>,
 }
 
 impl FlnrRunner {
-    pub fn new(weights: Vec<u8>, w: usize, h: usize) -> Result<Self, String> {
+    pub fn new(weights: Vec<u8>, w: usize, h: usize, threads: usize) -> Result<Self, String> {
         // leaked on purpose: a runner lives as long as the command
         let blob: &'static [u8] = Box::leak(weights.into_boxed_slice());
         let flnr = lrdenoise::flnr::Flnr::new(blob, w, h).map_err(|e| e.to_string())?;
-        Ok(FlnrRunner { scratch: vec![0f32; flnr.scratch_len()], flr_scratch: vec![0f64; flnr.flr_scratch_len()], flnr })
+        let (tx, ty) = flnr.tile_grid();
+        // more threads than tiles would only hold scratch
+        let threads = threads.clamp(1, tx * ty);
+        let (scratch, flr_scratch) = if threads > 1 {
+            (vec![0f32; flnr.guide_planes_len() + threads * flnr.tile_scratch_len()], vec![0f64; flnr.flr().scratch_len_for(threads)])
+        } else {
+            (vec![0f32; flnr.scratch_len()], vec![0f64; flnr.flr_scratch_len()])
+        };
+        Ok(FlnrRunner { scratch, flr_scratch, flnr, threads, pool: pool(threads)? })
     }
     pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<(), String> {
         let set = lrdenoise::flnr::INPUT_GUIDES;
         let noisy = ImageView::interleaved(&inputs.noisy, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
         let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
         let mut ov = ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
-        self.flnr.denoise(&frame, &mut self.scratch, &mut self.flr_scratch, &mut ov).map(|_| ()).map_err(|e| format!("flnr: {e}"))
+        let fl = &self.flnr;
+        let r = match &self.pool {
+            None => fl.denoise(&frame, &mut self.scratch, &mut self.flr_scratch, &mut ov),
+            Some(pool) => flnr_parallel(fl, pool, self.threads, &frame, &mut self.scratch, &mut self.flr_scratch, ov),
+        };
+        r.map(|_| ()).map_err(|e| format!("flnr: {e}"))
     }
+}
+
+/// [`lrdenoise::flnr::Flnr::denoise`]'s steps over `threads` threads: each
+/// takes the next tile of the network until none is left and copies its
+/// result into the shared guide planes under a lock (a copy of ~0.1 % of the
+/// tile's time); then FLR's tiles in parallel.
+fn flnr_parallel(
+    fl: &lrdenoise::flnr::Flnr<'_>,
+    pool: &rayon::ThreadPool,
+    threads: usize,
+    frame: &Frame<'_>,
+    scratch: &mut [f32],
+    flr_scratch: &mut [f64],
+    out: ImageViewMut<'_>,
+) -> Result<Report, Error> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let scale = fl.input_scale(frame)?;
+    let (planes, rest) = scratch.split_at_mut(fl.guide_planes_len());
+    let (tx, ty) = fl.tile_grid();
+    let next = AtomicUsize::new(0);
+    let shared = std::sync::Mutex::new(planes);
+    let mut results: Vec<Result<(), Error>> = (0..threads).map(|_| Ok(())).collect();
+    pool.scope(|s| {
+        for (ts, res) in rest.chunks_exact_mut(fl.tile_scratch_len()).zip(results.iter_mut()) {
+            let (next, shared) = (&next, &shared);
+            s.spawn(move |_| {
+                *res = (|| loop {
+                    let t = next.fetch_add(1, Ordering::Relaxed);
+                    if t >= tx * ty {
+                        return Ok(());
+                    }
+                    let tile = fl.network_tile(frame, scale, t, ts)?;
+                    let mut planes = shared.lock().map_err(|_| Error::Unsupported("a thread panicked"))?;
+                    tile.scatter(&mut planes)?;
+                })();
+            });
+        }
+    });
+    results.into_iter().collect::<Result<(), Error>>()?;
+    let planes: &[f32] = shared.into_inner().map_err(|_| Error::Unsupported("a thread panicked"))?;
+    let f = fl.flr_frame(frame, planes)?;
+    denoise_parallel(fl.flr(), &f, flr_scratch, threads, pool, out)
 }
 
 /// Single-frame WALR for one size: plan, scratch, and each stage's rows
@@ -583,5 +644,52 @@ impl TemporalRunner {
         };
         self.frames = self.frames.saturating_add(1);
         r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A synthetic frame of several FLNR tiles: smooth guides with edges, noisy light.
+    fn inputs(w: usize, h: usize) -> Inputs {
+        let n = w * h;
+        let hash = |i: usize| ((i.wrapping_mul(2654435761) >> 7) % 1000) as f32 / 1000.0;
+        Inputs {
+            w,
+            h,
+            noisy: (0..3 * n).map(|i| 4.0 * hash(i) * hash(i + 17)).collect(),
+            normal: Some((0..3 * n).map(|i| if (i / 3) % w < w / 3 { [0.0, 1.0, 0.0][i % 3] } else { [0.6, 0.0, 0.8][i % 3] }).collect()),
+            depth: Some((0..n).map(|i| 2.0 + (i / w) as f32 * 0.01 + ((i % w) > w / 2) as u8 as f32).collect()),
+            position: None,
+            ao: Some((0..n).map(|i| 0.5 + 0.5 * ((i % w) as f32 / w as f32)).collect()),
+            albedo: None,
+            reference: None,
+            motion: None,
+        }
+    }
+
+    #[test]
+    fn flnr_on_threads_equals_one_thread_bit_for_bit() {
+        let (w, h) = (1100, 290); // several tiles of the default size, cut off-block
+        let inp = inputs(w, h);
+        let run = |threads: usize| {
+            let mut r = FlnrRunner::new(crate::methods::BUNDLED_WEIGHTS.to_vec(), w, h, threads).unwrap();
+            let mut out = vec![f32::NAN; 3 * w * h];
+            r.run(&inp, &mut out).unwrap();
+            (out, r.threads)
+        };
+        let (one, t1) = run(1);
+        assert_eq!(t1, 1);
+        let fl = lrdenoise::flnr::Flnr::new(crate::methods::BUNDLED_WEIGHTS, w, h).unwrap();
+        let tiles = fl.tile_grid().0 * fl.tile_grid().1;
+        assert!(tiles >= 2, "{tiles} tile(s): nothing to spread");
+        assert!(one.iter().all(|v| v.is_finite()));
+        for threads in [2, 3, 16] {
+            let (many, used) = run(threads);
+            assert_eq!(used, threads.min(tiles), "threads are capped at the tile count");
+            let bad = one.iter().zip(&many).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+            assert_eq!(bad, 0, "{threads} threads: {bad} values differ");
+        }
     }
 }
