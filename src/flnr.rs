@@ -226,9 +226,8 @@ impl<'w> Flnr<'w> {
     /// working space (without the tile's output copy when the whole frame is
     /// one tile: it is written straight into the planes).
     pub fn scratch_len(&self) -> usize {
-        let r = self.region_len();
-        let out = if self.single_tile() { 0 } else { 2 * self.q * r };
-        self.guide_planes_len() + IN_CHANNELS * r + out + self.net.scratch_len(self.region_max.0, self.region_max.1)
+        let copy = if self.single_tile() { 2 * self.q * self.region_len() } else { 0 };
+        self.guide_planes_len() + self.tile_scratch_len() - copy
     }
     /// f64 of scratch for the FLR stage ([`Flr::scratch_len`]).
     pub fn flr_scratch_len(&self) -> usize {
@@ -357,16 +356,28 @@ impl<'w> Flnr<'w> {
         t: usize,
         tile_scratch: &'s mut [f32],
     ) -> Result<TileGuides<'s>, Error> {
+        let views = self.views(frame)?;
+        self.run_tile(&views, &frame.noisy, scale, t, tile_scratch)
+    }
+
+    /// [`Flnr::network_tile`] on views already checked.
+    fn run_tile<'s>(
+        &self,
+        views: &[ImageView<'_>; 5],
+        noisy: &ImageView<'_>,
+        scale: InputScale,
+        t: usize,
+        tile_scratch: &'s mut [f32],
+    ) -> Result<TileGuides<'s>, Error> {
         if tile_scratch.len() < self.tile_scratch_len() {
             return Err(Error::ScratchTooSmall { needed: self.tile_scratch_len(), got: tile_scratch.len() });
         }
         let rect = self.tile_rect(t)?;
-        let views = self.views(frame)?;
         let reg = self.region(rect);
         let rl = self.region_len();
         let (x, rest) = tile_scratch.split_at_mut(IN_CHANNELS * rl);
         let (o, net_scratch) = rest.split_at_mut(2 * self.q * rl);
-        self.forward_region(&views, &frame.noisy, scale, reg, x, net_scratch, o)?;
+        self.forward_region(views, noisy, scale, reg, x, net_scratch, o)?;
         let len = 2 * self.q * reg.width() * reg.height();
         Ok(TileGuides { rect, region: reg, planes: 2 * self.q, frame: (self.width, self.height), data: &o[..len] })
     }
@@ -381,6 +392,11 @@ impl<'w> Flnr<'w> {
             return Err(Error::ScratchTooSmall { needed: self.guide_planes_len(), got: planes.len() });
         }
         self.views(frame)?;
+        self.learned_frame(frame, planes)
+    }
+
+    /// [`Flnr::flr_frame`] on a frame and planes already checked.
+    fn learned_frame<'a>(&self, frame: &Frame<'a>, planes: &'a [f32]) -> Result<Frame<'a>, Error> {
         let (w, h, np) = (self.width, self.height, self.plane());
         let plane = |k: usize| ImageView::f32(&planes[k * np..(k + 1) * np], w, h, 1, Layout::planar(w, h));
         let mut model = frame.guides;
@@ -420,10 +436,10 @@ impl<'w> Flnr<'w> {
         } else {
             let (nx, ny) = self.tile_grid();
             for t in 0..nx * ny {
-                self.network_tile(frame, sc, t, work)?.scatter(g)?;
+                self.run_tile(&views, &frame.noisy, sc, t, work)?.scatter(g)?;
             }
         }
-        let f = self.flr_frame(frame, g)?;
+        let f = self.learned_frame(frame, g)?;
         self.flr.denoise(&f, flr_scratch, out)
     }
 }

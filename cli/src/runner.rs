@@ -438,10 +438,10 @@ impl FlnrRunner {
     }
 }
 
-/// [`lrdenoise::flnr::Flnr::denoise`]'s steps over `threads` threads: each
-/// takes the next tile of the network until none is left and copies its
-/// result into the shared guide planes under a lock (a copy of ~0.1 % of the
-/// tile's time); then FLR's tiles in parallel.
+/// [`lrdenoise::flnr::Flnr::denoise`]'s steps over `threads` threads: the
+/// network's tiles in contiguous groups, one per thread and tile scratch, each
+/// result copied into the shared guide planes under a lock (a copy of ~0.1 %
+/// of the tile's time); then FLR's tiles in parallel.
 fn flnr_parallel(
     fl: &lrdenoise::flnr::Flnr<'_>,
     pool: &rayon::ThreadPool,
@@ -451,31 +451,18 @@ fn flnr_parallel(
     flr_scratch: &mut [f64],
     out: ImageViewMut<'_>,
 ) -> Result<Report, Error> {
-    use std::sync::atomic::{AtomicUsize, Ordering};
     let scale = fl.input_scale(frame)?;
     let (planes, rest) = scratch.split_at_mut(fl.guide_planes_len());
     let (tx, ty) = fl.tile_grid();
-    let next = AtomicUsize::new(0);
+    let mut workers: Vec<&mut [f32]> = rest.chunks_exact_mut(fl.tile_scratch_len()).collect();
     let shared = std::sync::Mutex::new(planes);
-    let mut results: Vec<Result<(), Error>> = (0..threads).map(|_| Ok(())).collect();
-    pool.scope(|s| {
-        for (ts, res) in rest.chunks_exact_mut(fl.tile_scratch_len()).zip(results.iter_mut()) {
-            let (next, shared) = (&next, &shared);
-            s.spawn(move |_| {
-                *res = (|| loop {
-                    let t = next.fetch_add(1, Ordering::Relaxed);
-                    if t >= tx * ty {
-                        return Ok(());
-                    }
-                    let tile = fl.network_tile(frame, scale, t, ts)?;
-                    let mut planes = shared.lock().map_err(|_| Error::Unsupported("a thread panicked"))?;
-                    tile.scatter(&mut planes)?;
-                })();
-            });
-        }
-    });
-    results.into_iter().collect::<Result<(), Error>>()?;
-    let planes: &[f32] = shared.into_inner().map_err(|_| Error::Unsupported("a thread panicked"))?;
+    const POISONED: Error = Error::Unsupported("a thread panicked");
+    par_groups(pool, (0..tx * ty).collect(), &mut workers, &|t, ts| {
+        let tile = fl.network_tile(frame, scale, t, ts)?;
+        tile.scatter(&mut shared.lock().map_err(|_| POISONED)?)?;
+        Ok(Report::default())
+    })?;
+    let planes: &[f32] = shared.into_inner().map_err(|_| POISONED)?;
     let f = fl.flr_frame(frame, planes)?;
     denoise_parallel(fl.flr(), &f, flr_scratch, threads, pool, out)
 }
