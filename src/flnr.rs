@@ -471,6 +471,22 @@ impl TileGuides<'_> {
     pub fn rect(&self) -> Rect {
         self.rect
     }
+    /// Number of learned guide planes (2·Q').
+    pub fn plane_count(&self) -> usize {
+        self.planes
+    }
+    /// Plane `k`'s values of frame row `y` over this tile's own columns
+    /// (`rect().x0..rect().x1`); `None` outside the tile. For callers that
+    /// copy into the frame-sized planes through their own pointers (the C
+    /// API's threads); [`TileGuides::scatter`] does the copy from safe code.
+    pub fn row(&self, k: usize, y: usize) -> Option<&[f32]> {
+        let (r, reg) = (self.rect, self.region);
+        if k >= self.planes || !(r.y0..r.y1).contains(&y) {
+            return None;
+        }
+        let s = k * reg.width() * reg.height() + (y - reg.y0) * reg.width() + (r.x0 - reg.x0);
+        self.data.get(s..s + r.width())
+    }
     /// Copies the tile's pixels into the frame-sized guide planes `planes`
     /// (at least [`Flnr::guide_planes_len`] f32; other tiles' pixels are left
     /// as they are).
@@ -480,12 +496,11 @@ impl TileGuides<'_> {
         if planes.len() < self.planes * np {
             return Err(Error::ScratchTooSmall { needed: self.planes * np, got: planes.len() });
         }
-        let (r, reg) = (self.rect, self.region);
-        let (rw, rn) = (reg.width(), reg.width() * reg.height());
-        for (src, dst) in self.data.chunks_exact(rn).zip(planes.chunks_exact_mut(np)) {
+        let r = self.rect;
+        for (k, dst) in planes.chunks_exact_mut(np).take(self.planes).enumerate() {
             for y in r.y0..r.y1 {
-                let s = (y - reg.y0) * rw + (r.x0 - reg.x0);
-                dst[y * w + r.x0..y * w + r.x1].copy_from_slice(&src[s..s + r.width()]);
+                let src = self.row(k, y).ok_or(Error::InvalidTile { index: y, count: h })?;
+                dst[y * w + r.x0..y * w + r.x1].copy_from_slice(src);
             }
         }
         Ok(())

@@ -1,7 +1,8 @@
 /* A C99 client of liblrdenoise: builds a synthetic frame, queries sizes,
  * mallocs scratch, runs FLR whole-frame and tiled on two pthreads, checks the
  * two agree bit for bit, exercises error paths, prints the timing, and writes
- * the whole-frame output (raw little-endian f32 RGB) to argv[1] if given.
+ * the whole-frame output (raw little-endian f32 RGB) to argv[1] if given. With
+ * argv[2] (an FLNR weight blob, e.g. train/flnr.bin) it also runs FLNR.
  *
  *   gcc -std=c99 -Wall -Wextra -Werror -Iffi/include ffi/examples/client.c \
  *       target/release/liblrdenoise.a -lpthread -lm -ldl -o client
@@ -222,6 +223,58 @@ int main(int argc, char **argv) {
         printf("BMFR temporal: 3 frames, %zu + %zu bytes of scratch + history, %llu features dropped\n", sbytes, hbytes,
                (unsigned long long)brep.dropped_pivots);
         free(bscratch); free(hdata); free(bout);
+    }
+
+    /* FLNR: the network's weights are the caller's bytes (train/flnr.bin, path in
+       argv[2]). On the frame's top-left FW x FH pixels (views with the frame's
+       row stride: no copy; small, as this runs under valgrind in CI): whole
+       frame, then the threaded stages in order on this thread (PREPARE, every
+       NETWORK tile on worker t % 2, FLR), which must give the same output. */
+    if (argc > 2) {
+        enum { FW = 72, FH = 40 };
+        FILE *wf = fopen(argv[2], "rb");
+        if (!wf) return 7;
+        if (fseek(wf, 0, SEEK_END) != 0) return 7;
+        long wlen = ftell(wf);
+        if (wlen <= 0 || fseek(wf, 0, SEEK_SET) != 0) return 7;
+        uint8_t *wts = malloc((size_t)wlen);
+        if (!wts || fread(wts, 1, (size_t)wlen, wf) != (size_t)wlen) return 7;
+        fclose(wf);
+        LrdFrame crop = frame;
+        LrdImage *views[] = {&crop.noisy, &crop.guides.normal, &crop.guides.depth, &crop.guides.ao};
+        for (size_t v = 0; v < sizeof views / sizeof views[0]; v++) {
+            views[v]->row_stride = (size_t)W * views[v]->pixel_stride;
+            views[v]->width = FW;
+            views[v]->height = FH;
+        }
+        const uint32_t tile = 64; /* 2 x 1 tiles here; 0 = the default (512) */
+        size_t fbytes = 0, tbytes = 0;
+        uint32_t ftiles = 0;
+        CHECK(lrd_flnr_scratch_size(wts, (size_t)wlen, tile, FW, FH, &fbytes));
+        CHECK(lrd_flnr_tile_count(wts, (size_t)wlen, tile, FW, FH, &ftiles));
+        CHECK(lrd_flnr_tiled_scratch_size(wts, (size_t)wlen, tile, FW, FH, 2, &tbytes));
+        void *fscratch = malloc(fbytes), *ftscratch = malloc(tbytes);
+        float *fa = malloc(sizeof(float) * 3 * FW * FH), *fb = malloc(sizeof(float) * 3 * FW * FH);
+        if (!fscratch || !ftscratch || !fa || !fb) return 2;
+        LrdImageMut fo = out;
+        fo.width = FW;
+        fo.height = FH;
+        fo.data = fa;
+        double t0 = now_ms();
+        CHECK(lrd_flnr_denoise(wts, (size_t)wlen, tile, &crop, &fo, fscratch, fbytes, NULL));
+        double flnr_ms = now_ms() - t0;
+        fo.data = fb;
+        CHECK(lrd_flnr_run_tile(wts, (size_t)wlen, tile, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_PREPARE, 0, 0, NULL));
+        for (uint32_t t = 0; t < ftiles; t++)
+            CHECK(lrd_flnr_run_tile(wts, (size_t)wlen, tile, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_NETWORK, t, t % 2, NULL));
+        CHECK(lrd_flnr_run_tile(wts, (size_t)wlen, tile, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_FLR, 0, 0, NULL));
+        if (memcmp(fa, fb, sizeof(float) * 3 * FW * FH) != 0) return 8;
+        for (size_t i = 0; i < 3 * (size_t)FW * FH; i++)
+            if (!(fa[i] >= 0.0f && fa[i] < 1e30f)) return 8;
+        if (lrd_flnr_denoise(wts, (size_t)wlen - 1, tile, &crop, &fo, fscratch, fbytes, NULL) != LRD_STATUS_INVALID_CONFIG) return 3;
+        printf("FLNR %dx%d crop: %zu bytes of weights, %zu bytes of scratch, whole %.1f ms; %u tiles in stages: identical\n",
+               FW, FH, (size_t)wlen, fbytes, flnr_ms, ftiles);
+        free(wts); free(fscratch); free(ftscratch); free(fa); free(fb);
     }
 
     /* The GPU path: what an engine needs to run the compute shaders itself. */

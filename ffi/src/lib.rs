@@ -14,6 +14,9 @@ use lrdenoise_core::{
 };
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+#[cfg(feature = "flnr")]
+use lrdenoise_core::flnr::Flnr;
+
 /// Result of every call. Values are stable across versions.
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -205,6 +208,7 @@ pub enum LrdStage {
 pub const LRD_FEATURE_FLR: u32 = 1;
 pub const LRD_FEATURE_BMFR: u32 = 2;
 pub const LRD_FEATURE_WALR: u32 = 4;
+pub const LRD_FEATURE_FLNR: u32 = 8;
 
 fn status_of(e: Error) -> LrdStatus {
     match e {
@@ -558,13 +562,19 @@ impl Raw {
     }
 }
 
-fn split_raw(flr: &Flr, scratch: *mut c_void, bytes: usize, workers: usize) -> Result<Raw, LrdStatus> {
+/// A scratch pointer must be non-NULL and 8-byte aligned (f64 inside).
+fn check_scratch(scratch: *mut c_void) -> Result<(), LrdStatus> {
     if scratch.is_null() {
-        return Err(LRD_STATUS_NULL_POINTER);
+        Err(LRD_STATUS_NULL_POINTER)
+    } else if (scratch as usize) % 8 != 0 {
+        Err(LRD_STATUS_INVALID_ARGUMENT)
+    } else {
+        Ok(())
     }
-    if (scratch as usize) % 8 != 0 {
-        return Err(LRD_STATUS_INVALID_ARGUMENT);
-    }
+}
+
+fn split_raw(flr: &Flr, scratch: *mut c_void, bytes: usize, workers: usize) -> Result<Raw, LrdStatus> {
+    check_scratch(scratch)?;
     if bytes < tiled_scratch_bytes(flr, workers)? {
         return Err(LRD_STATUS_BUFFER_TOO_SMALL);
     }
@@ -606,12 +616,7 @@ pub unsafe extern "C" fn lrd_flr_denoise(
         // SAFETY: NULL-checked; the caller passes valid pointers.
         let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
         let flr = plan(config, out.width, out.height)?;
-        if scratch.is_null() {
-            return Err(LRD_STATUS_NULL_POINTER);
-        }
-        if (scratch as usize) % 8 != 0 {
-            return Err(LRD_STATUS_INVALID_ARGUMENT);
-        }
+        check_scratch(scratch)?;
         let needed = self::scratch_bytes(&flr, 1)?;
         if scratch_bytes < needed {
             return Err(LRD_STATUS_BUFFER_TOO_SMALL);
@@ -1327,6 +1332,276 @@ pub unsafe extern "C" fn lrd_walr_denoise_temporal(
     guard(|| unsafe { denoise_temporal(|w, h| walr_plan(config, w, h), frame, motion, history, out, scratch, scratch_bytes, report) })
 }
 
+/// Stages of a threaded FLNR run (`lrd_flnr_run_tile`), in order.
+#[cfg(feature = "flnr")]
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LrdFlnrStage {
+    /// One tile (tile 0): checks the frame and measures the network's input scales.
+    LRD_FLNR_STAGE_PREPARE = 0,
+    /// `lrd_flnr_tile_count` tiles: the network on one tile (nearly all of the
+    /// time; tiles may run concurrently, each call with its own `worker`).
+    LRD_FLNR_STAGE_NETWORK = 1,
+    /// One tile (tile 0): FLR with the learned guides, into `out`.
+    LRD_FLNR_STAGE_FLR = 2,
+}
+
+/// The network blob `weights` (`weights_bytes` bytes) planned for `width`×`height`
+/// frames in tiles of `tile` px (0: the library's default).
+#[cfg(feature = "flnr")]
+fn flnr_plan<'w>(weights: *const u8, weights_bytes: usize, tile: u32, width: u32, height: u32) -> Result<Flnr<'w>, LrdStatus> {
+    if weights.is_null() {
+        return Err(LRD_STATUS_NULL_POINTER);
+    }
+    // SAFETY: the caller passes `weights_bytes` readable bytes at `weights`,
+    // unchanged for the duration of the call (the header's contract).
+    let blob = unsafe { core::slice::from_raw_parts(weights, weights_bytes) };
+    let fl = Flnr::new(blob, width as usize, height as usize).map_err(status_of)?;
+    if tile == 0 {
+        Ok(fl)
+    } else {
+        fl.with_tile(tile as usize).map_err(status_of)
+    }
+}
+
+/// Byte offsets of a threaded FLNR scratch: the header (input scales), FLR's
+/// f64 scratch, the learned guide planes, then one network scratch per worker.
+#[cfg(feature = "flnr")]
+struct FlnrLayout {
+    flr: usize,
+    planes: usize,
+    workers: usize,
+    worker: usize,
+    total: usize,
+}
+
+#[cfg(feature = "flnr")]
+fn flnr_layout(fl: &Flnr<'_>, workers: usize) -> Result<FlnrLayout, LrdStatus> {
+    let big = LRD_STATUS_INVALID_ARGUMENT;
+    let flr = HEADER;
+    let planes = fl.flr_scratch_len().checked_mul(8).and_then(|b| b.checked_add(flr)).ok_or(big)?;
+    let worker_bytes = fl.tile_scratch_len().checked_mul(4).ok_or(big)?;
+    let first_worker = fl.guide_planes_len().checked_mul(4).and_then(|b| b.checked_add(planes)).ok_or(big)?;
+    let total = worker_bytes.checked_mul(workers).and_then(|b| b.checked_add(first_worker)).ok_or(big)?;
+    Ok(FlnrLayout { flr, planes, workers: first_worker, worker: worker_bytes, total })
+}
+
+/// Marks a header whose input scales the PREPARE stage wrote.
+#[cfg(feature = "flnr")]
+const FLNR_PREPARED: u64 = 0x6c72_645f_666c_6e72;
+
+/// Bytes of scratch `lrd_flnr_denoise` needs for `width`×`height` frames with
+/// the network `weights` (`weights_bytes` bytes, e.g. the contents of
+/// `train/flnr.bin`) run in tiles of `tile` px (0: the default, 512).
+#[cfg(feature = "flnr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flnr_scratch_size(
+    weights: *const u8,
+    weights_bytes: usize,
+    tile: u32,
+    width: u32,
+    height: u32,
+    bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| {
+        let fl = flnr_plan(weights, weights_bytes, tile, width, height)?;
+        let need = fl
+            .flr_scratch_len()
+            .checked_mul(8)
+            .and_then(|a| fl.scratch_len().checked_mul(4).and_then(|b| a.checked_add(b)))
+            .ok_or(LRD_STATUS_INVALID_ARGUMENT)?;
+        // SAFETY: NULL-checked; the caller passes a valid pointer.
+        *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = need;
+        Ok(())
+    })
+}
+
+/// FLNR (FLR with guides written by the network `weights`) on the calling
+/// thread. The frame needs normal, depth and AO guides and no `guides_low`;
+/// `out` (3 channels) has the frame's size. `scratch`: 8-byte aligned, at
+/// least `lrd_flnr_scratch_size` bytes (same `weights`, `tile`, size). A blob
+/// that does not parse gives LRD_STATUS_INVALID_CONFIG. `report` may be NULL.
+#[cfg(feature = "flnr")]
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_flnr_denoise(
+    weights: *const u8,
+    weights_bytes: usize,
+    tile: u32,
+    frame: *const LrdFrame,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    guard(|| {
+        // SAFETY: NULL-checked; the caller passes valid pointers.
+        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        let fl = flnr_plan(weights, weights_bytes, tile, out.width, out.height)?;
+        check_scratch(scratch)?;
+        let (flr_len, net_len) = (fl.flr_scratch_len(), fl.scratch_len());
+        let need = flr_len.checked_mul(8).and_then(|a| net_len.checked_mul(4).and_then(|b| a.checked_add(b)));
+        if need.is_none_or(|n| scratch_bytes < n) {
+            return Err(LRD_STATUS_BUFFER_TOO_SMALL);
+        }
+        // SAFETY: the caller's images satisfy the LrdImage contract; the scratch
+        // is 8-byte aligned and holds `flr_len` f64 followed by `net_len` f32
+        // (checked above); `out` is exclusively ours for the call.
+        let r = unsafe {
+            let f = frame_views(frame, false)?;
+            let fs = core::slice::from_raw_parts_mut(scratch as *mut f64, flr_len);
+            let ns = core::slice::from_raw_parts_mut((scratch as *mut u8).add(flr_len * 8) as *mut f32, net_len);
+            let mut o = view_mut(out, 0, out.height as usize)?;
+            fl.denoise(&f, ns, fs, &mut o).map_err(status_of)?
+        };
+        write_report(report, r);
+        Ok(())
+    })
+}
+
+/// Number of network tiles of a threaded FLNR run (LRD_FLNR_STAGE_NETWORK).
+#[cfg(feature = "flnr")]
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flnr_tile_count(
+    weights: *const u8,
+    weights_bytes: usize,
+    tile: u32,
+    width: u32,
+    height: u32,
+    count: *mut u32,
+) -> LrdStatus {
+    guard(|| {
+        let (nx, ny) = flnr_plan(weights, weights_bytes, tile, width, height)?.tile_grid();
+        let n = u32::try_from(nx * ny).map_err(|_| LRD_STATUS_INVALID_ARGUMENT)?;
+        // SAFETY: NULL-checked; the caller passes a valid pointer.
+        *unsafe { count.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = n;
+        Ok(())
+    })
+}
+
+/// Bytes of scratch a threaded FLNR run with `workers` concurrent network
+/// tiles needs (`lrd_flnr_run_tile`).
+#[cfg(feature = "flnr")]
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_flnr_tiled_scratch_size(
+    weights: *const u8,
+    weights_bytes: usize,
+    tile: u32,
+    width: u32,
+    height: u32,
+    workers: u32,
+    bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| {
+        if workers == 0 {
+            return Err(LRD_STATUS_INVALID_ARGUMENT);
+        }
+        let fl = flnr_plan(weights, weights_bytes, tile, width, height)?;
+        let total = flnr_layout(&fl, workers as usize)?.total;
+        // SAFETY: NULL-checked; the caller passes a valid pointer.
+        *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = total;
+        Ok(())
+    })
+}
+
+/// Runs one tile of one stage of a threaded FLNR run.
+///
+/// Rules (they make concurrent calls safe):
+/// - every call of a frame passes the same weights, tile size, frame, out,
+///   scratch (8-byte aligned, at least `lrd_flnr_tiled_scratch_size(.., workers, ..)`
+///   bytes) and `workers`;
+/// - stages run in order PREPARE (tile 0), NETWORK (tiles 0 .. `lrd_flnr_tile_count`),
+///   FLR (tile 0); every tile of a stage finishes before the next stage starts;
+/// - NETWORK tiles may run concurrently if each concurrent call passes a
+///   different `worker` in [0, workers).
+///
+/// The result is bit-identical to `lrd_flnr_denoise`. NETWORK before PREPARE
+/// on this scratch returns LRD_STATUS_INVALID_TILE. `report` may be NULL (FLR
+/// stage only adds to it).
+#[cfg(feature = "flnr")]
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_flnr_run_tile(
+    weights: *const u8,
+    weights_bytes: usize,
+    tile_size: u32,
+    frame: *const LrdFrame,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    workers: u32,
+    stage: u32,
+    tile: u32,
+    worker: u32,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    guard(|| {
+        // SAFETY: NULL-checked; the caller passes valid pointers.
+        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        let fl = flnr_plan(weights, weights_bytes, tile_size, out.width, out.height)?;
+        check_scratch(scratch)?;
+        if workers == 0 {
+            return Err(LRD_STATUS_INVALID_ARGUMENT);
+        }
+        let lay = flnr_layout(&fl, workers as usize)?;
+        if scratch_bytes < lay.total {
+            return Err(LRD_STATUS_BUFFER_TOO_SMALL);
+        }
+        let (nx, ny) = fl.tile_grid();
+        let one = |t: u32| if t == 0 { Ok(()) } else { Err(LRD_STATUS_INVALID_TILE) };
+        let base = scratch as *mut u8;
+        // SAFETY (the whole block): the caller's images satisfy the LrdImage
+        // contract; every region below lies inside the checked `lay.total` bytes;
+        // the header and planes are written only by the one-tile stages or, for
+        // the planes, at the disjoint pixels of each NETWORK tile (through raw
+        // pointers, never a `&mut` over the shared planes); a worker's network
+        // scratch is used by one call at a time (the rules above).
+        unsafe {
+            let f = frame_views(frame, false)?;
+            let header = base as *mut u64;
+            let scale_at = base.add(8) as *mut lrdenoise_core::flnr::InputScale;
+            const { assert!(8 + core::mem::size_of::<lrdenoise_core::flnr::InputScale>() <= HEADER) };
+            let planes = base.add(lay.planes) as *mut f32;
+            match stage {
+                s if s == LrdFlnrStage::LRD_FLNR_STAGE_PREPARE as u32 => {
+                    one(tile)?;
+                    let sc = fl.input_scale(&f).map_err(status_of)?;
+                    scale_at.write_unaligned(sc);
+                    header.write(FLNR_PREPARED);
+                }
+                s if s == LrdFlnrStage::LRD_FLNR_STAGE_NETWORK as u32 => {
+                    if tile as usize >= nx * ny || worker >= workers || header.read() != FLNR_PREPARED {
+                        return Err(LRD_STATUS_INVALID_TILE);
+                    }
+                    let sc = scale_at.read_unaligned();
+                    let ws =
+                        core::slice::from_raw_parts_mut(base.add(lay.workers + worker as usize * lay.worker) as *mut f32, lay.worker / 4);
+                    let tg = fl.network_tile(&f, sc, tile as usize, ws).map_err(status_of)?;
+                    let (r, w, np) = (tg.rect(), out.width as usize, out.width as usize * out.height as usize);
+                    for k in 0..tg.plane_count() {
+                        for y in r.y0..r.y1 {
+                            let src = tg.row(k, y).ok_or(LRD_STATUS_INTERNAL)?;
+                            core::ptr::copy_nonoverlapping(src.as_ptr(), planes.add(k * np + y * w + r.x0), src.len());
+                        }
+                    }
+                }
+                s if s == LrdFlnrStage::LRD_FLNR_STAGE_FLR as u32 => {
+                    one(tile)?;
+                    let g = core::slice::from_raw_parts(planes, fl.guide_planes_len());
+                    let fs = core::slice::from_raw_parts_mut(base.add(lay.flr) as *mut f64, fl.flr_scratch_len());
+                    let lf = fl.flr_frame(&f, g).map_err(status_of)?;
+                    let mut o = view_mut(out, 0, out.height as usize)?;
+                    let r = fl.flr().denoise(&lf, fs, &mut o).map_err(status_of)?;
+                    write_report(report, r);
+                }
+                _ => return Err(LRD_STATUS_INVALID_ARGUMENT),
+            }
+        }
+        Ok(())
+    })
+}
+
 /// One compute dispatch of the GPU path: the WGSL entry point and its workgroup counts.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -1437,6 +1712,9 @@ pub extern "C" fn lrd_features() -> u32 {
     }
     if cfg!(feature = "walr") {
         f |= LRD_FEATURE_WALR;
+    }
+    if cfg!(feature = "flnr") {
+        f |= LRD_FEATURE_FLNR;
     }
     f
 }

@@ -465,3 +465,137 @@ fn adaptive_case(w: u32, h: u32, sigmas: [f32; 3]) {
     flr.denoise(&f, &mut scratch, &mut ImageViewMut::interleaved(&mut want, w as usize, h as usize, 3).unwrap()).unwrap();
     assert_eq!(out, want);
 }
+
+/// `lrd_flnr_denoise` and the threaded stages (`lrd_flnr_run_tile`, tiles
+/// run in reverse order on two alternating workers, and concurrently on
+/// threads) equal `Flnr::denoise` bit for bit; bad blobs, sizes, stages
+/// and orders give their statuses.
+#[test]
+fn flnr_matches_the_rust_api() {
+    use lrdenoise_core::flnr::Flnr;
+    let blob = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/../train/flnr.bin")).expect("train/flnr.bin");
+    // 150×97 in 64 px tiles: 3×2 tiles, the last ones partial
+    let (w, h, tile) = (150u32, 97u32, 64u32);
+    let n = (w * h) as usize;
+    let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 1000) as f32 / 400.0).collect();
+    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == (i / 3 / 40) % 3 { 1.0 } else { 0.0 }).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 2.0 + (i % w as usize) as f32 * 0.01 + (i / 997) as f32).collect();
+    let ao: Vec<f32> = (0..n).map(|i| ((i / w as usize) % 13) as f32 / 13.0).collect();
+    let mut frame = depth_frame(&noisy, &depth, w, h);
+    frame.guides.normal = img(normal.as_ptr(), w, h, 3);
+    frame.guides.ao = img(ao.as_ptr(), w, h, 1);
+
+    // the Rust API
+    let fl = Flnr::new(&blob, w as usize, h as usize).unwrap().with_tile(tile as usize).unwrap();
+    let guides = lrdenoise_core::Guides {
+        normal: Some(lrdenoise_core::ImageView::interleaved(&normal, w as usize, h as usize, 3).unwrap()),
+        depth: Some(lrdenoise_core::ImageView::interleaved(&depth, w as usize, h as usize, 1).unwrap()),
+        ao: Some(lrdenoise_core::ImageView::interleaved(&ao, w as usize, h as usize, 1).unwrap()),
+        ..Default::default()
+    };
+    let rf = lrdenoise_core::Frame::new(lrdenoise_core::ImageView::interleaved(&noisy, w as usize, h as usize, 3).unwrap(), guides);
+    let mut want = vec![0f32; 3 * n];
+    let (mut s32, mut s64) = (vec![0f32; fl.scratch_len()], vec![0f64; fl.flr_scratch_len()]);
+    let mut wv = lrdenoise_core::ImageViewMut::interleaved(&mut want, w as usize, h as usize, 3).unwrap();
+    fl.denoise(&rf, &mut s32, &mut s64, &mut wv).unwrap();
+    assert!(want.iter().all(|v| v.is_finite()));
+
+    let (bp, bl) = (blob.as_ptr(), blob.len());
+    unsafe {
+        // whole frame
+        let mut bytes = 0usize;
+        assert_eq!(lrd_flnr_scratch_size(bp, bl, tile, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
+        let mut scratch = vec![0f64; bytes / 8 + 1];
+        let sp = scratch.as_mut_ptr() as *mut _;
+        let mut out = vec![0f32; 3 * n];
+        let o = packed_out(&mut out, w, h);
+        let mut rep = LrdReport::default();
+        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &frame, &o, sp, bytes, &mut rep), LrdStatus::LRD_STATUS_OK);
+        assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "C whole frame != Rust");
+        assert_eq!(lrd_features() & LRD_FEATURE_FLNR, LRD_FEATURE_FLNR);
+
+        // errors
+        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &frame, &o, sp, bytes - 1, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
+        assert_eq!(lrd_flnr_denoise(null(), bl, tile, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        assert_eq!(lrd_flnr_denoise(bp, bl - 1, tile, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        assert_eq!(lrd_flnr_denoise(bp, bl, 8, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        let mut bad = blob.clone();
+        bad[0] ^= 1;
+        assert_eq!(lrd_flnr_scratch_size(bad.as_ptr(), bad.len(), tile, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        assert_eq!(lrd_flnr_scratch_size(bp, bl, tile, w, h, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        let mut nf = frame;
+        nf.guides.ao = none();
+        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_GUIDE_MISMATCH);
+        nf = frame;
+        nf.guides_low.depth = img(depth.as_ptr(), w, h, 1);
+        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+        nf = frame;
+        nf.guides.depth.width = w - 1;
+        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_SIZE_MISMATCH);
+
+        // threaded stages, two workers, tiles in reverse order
+        let mut count = 0u32;
+        assert_eq!(lrd_flnr_tile_count(bp, bl, tile, w, h, &mut count), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(count, 6);
+        let mut tb = 0usize;
+        assert_eq!(lrd_flnr_tiled_scratch_size(bp, bl, tile, w, h, 0, &mut tb), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        assert_eq!(lrd_flnr_tiled_scratch_size(bp, bl, tile, w, h, 2, &mut tb), LrdStatus::LRD_STATUS_OK);
+        let mut tiled = vec![0f64; tb / 8 + 1];
+        let tp = tiled.as_mut_ptr() as *mut _;
+        const PREPARE: u32 = LrdFlnrStage::LRD_FLNR_STAGE_PREPARE as u32;
+        const NETWORK: u32 = LrdFlnrStage::LRD_FLNR_STAGE_NETWORK as u32;
+        const FLR: u32 = LrdFlnrStage::LRD_FLNR_STAGE_FLR as u32;
+        // a network tile before PREPARE (fresh scratch), and bad stage / tile / worker
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(
+            lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb - 1, 2, PREPARE, 0, 0, null_mut()),
+            LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
+        );
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, 9, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 1, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        out.fill(0.0);
+        let o = packed_out(&mut out, w, h);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(
+            lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, count, 0, null_mut()),
+            LrdStatus::LRD_STATUS_INVALID_TILE
+        );
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 2, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        for t in (0..count).rev() {
+            assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, t, t % 2, null_mut()), LrdStatus::LRD_STATUS_OK);
+        }
+        let mut trep = LrdReport::default();
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 0, &mut trep), LrdStatus::LRD_STATUS_OK);
+        assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "C tiled != Rust");
+        assert_eq!((trep.nonfinite_noisy, trep.fallback_pixels), (rep.nonfinite_noisy, rep.fallback_pixels));
+
+        // the network stage on three threads at once, each with its own worker
+        assert_eq!(lrd_flnr_tiled_scratch_size(bp, bl, tile, w, h, 3, &mut tb), LrdStatus::LRD_STATUS_OK);
+        let mut tiled = vec![0f64; tb / 8 + 1];
+        out.fill(0.0);
+        let o = packed_out(&mut out, w, h);
+        /// The call's pointers, shared with the threads (the C API's rules make it safe).
+        #[derive(Clone, Copy)]
+        struct Shared(*const u8, usize, *const LrdFrame, *const LrdImageMut, *mut core::ffi::c_void, usize);
+        // SAFETY: the pointees outlive the scope and the threads write only disjoint tiles (lrd_flnr_run_tile's rules).
+        unsafe impl Send for Shared {}
+        unsafe impl Sync for Shared {}
+        let sh = Shared(bp, bl, &frame, &o, tiled.as_mut_ptr() as *mut _, tb);
+        let run =
+            |stage: u32, t: u32, worker: u32| lrd_flnr_run_tile(sh.0, sh.1, tile, sh.2, sh.3, sh.4, sh.5, 3, stage, t, worker, null_mut());
+        assert_eq!(run(PREPARE, 0, 0), LrdStatus::LRD_STATUS_OK);
+        std::thread::scope(|s| {
+            for worker in 0..3u32 {
+                s.spawn(move || {
+                    let sh = sh;
+                    for t in (worker..count).step_by(3) {
+                        let st = lrd_flnr_run_tile(sh.0, sh.1, tile, sh.2, sh.3, sh.4, sh.5, 3, NETWORK, t, worker, null_mut());
+                        assert_eq!(st, LrdStatus::LRD_STATUS_OK);
+                    }
+                });
+            }
+        });
+        assert_eq!(run(FLR, 0, 0), LrdStatus::LRD_STATUS_OK);
+        assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "C on threads != Rust");
+    }
+}

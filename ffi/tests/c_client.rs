@@ -83,6 +83,7 @@ fn c_client_matches_rust() {
     assert!(st.success(), "header does not compile as C++17");
 
     let raw = dir.join("out.raw");
+    let blob = root().join("train/flnr.bin");
     let have_valgrind = Command::new("valgrind").arg("--version").output().is_ok();
     if std::env::var("LRD_REQUIRE_VALGRIND").is_ok() {
         assert!(have_valgrind, "valgrind required but not installed");
@@ -92,15 +93,17 @@ fn c_client_matches_rust() {
             .args(["--error-exitcode=3", "--leak-check=full", "--errors-for-leak-kinds=definite", "-q"])
             .arg(&exe)
             .arg(&raw)
+            .arg(&blob)
             .output()
             .unwrap()
     } else {
         eprintln!("valgrind not installed: running the client without memcheck");
-        Command::new(&exe).arg(&raw).output().unwrap()
+        Command::new(&exe).arg(&raw).arg(&blob).output().unwrap()
     };
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "client failed ({:?}): {stdout}{}", out.status, String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("identical"), "{stdout}");
+    assert!(stdout.contains("FLNR") && stdout.contains("tiles in stages: identical"), "{stdout}");
     assert!(stdout.contains("passes: reference 1x1 moments") && stdout.contains("apply"), "{stdout}");
     println!("{stdout}");
 

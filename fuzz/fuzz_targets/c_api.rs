@@ -1,4 +1,5 @@
-//! (c) The C entry points (FLR; BMFR and WALR, single frame + temporal) with
+//! (c) The C entry points (FLR; BMFR and WALR, single frame + temporal; FLNR
+//! with the bundled weights, a byte of them sometimes corrupted) with
 //! arbitrary sizes, strides, formats, configs and NULL pointers. Buffers are allocated to span whatever layout is passed (the
 //! C contract), so any crash or non-finite output is a library bug.
 #![no_main]
@@ -151,6 +152,39 @@ fuzz_target!(|d: &[u8]| {
             assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
             if r == LrdStatus::LRD_STATUS_OK {
                 assert!(out.iter().all(|v| v.is_finite()));
+            }
+        }
+    }
+    // FLNR with the bundled network (on a quarter of the inputs: the network
+    // is slow next to the rest); a fuzzed byte of the blob may be corrupted.
+    if d[12] % 4 == 0 {
+        static BLOB: &[u8] = include_bytes!("../../train/flnr.bin");
+        let mut blob = BLOB.to_vec();
+        if d[13] % 2 == 1 {
+            let i = u32_at(d, 0) as usize % blob.len();
+            blob[i] ^= d[14] | 1;
+        }
+        let len = if d[15] % 8 == 0 { blob.len() / 2 } else { blob.len() };
+        let tile = [0, 64, 8, 100][d[16] as usize % 4];
+        let mut fb = 0usize;
+        let st = unsafe { lrd_flnr_scratch_size(blob.as_ptr(), len, tile, w, h, &mut fb) };
+        assert_ne!(st, LrdStatus::LRD_STATUS_PANIC);
+        if st == LrdStatus::LRD_STATUS_OK {
+            let mut s = vec![0f64; fb / 8 + 1];
+            let r = unsafe { lrd_flnr_denoise(blob.as_ptr(), len, tile, &frame, &o, s.as_mut_ptr() as *mut _, fb, null_mut()) };
+            assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
+            if r == LrdStatus::LRD_STATUS_OK {
+                assert!(out.iter().all(|v| v.is_finite()), "flnr");
+            }
+            let mut tb = 0usize;
+            if unsafe { lrd_flnr_tiled_scratch_size(blob.as_ptr(), len, tile, w, h, 1, &mut tb) } == LrdStatus::LRD_STATUS_OK {
+                let mut ts = vec![0f64; tb / 8 + 1];
+                for (stage, t) in [(d[17] as u32 % 4, d[18] as u32 % 3), (0, 0), (1, 0), (2, 0)] {
+                    let r = unsafe {
+                        lrd_flnr_run_tile(blob.as_ptr(), len, tile, &frame, &o, ts.as_mut_ptr() as *mut _, tb, 1, stage, t, 0, null_mut())
+                    };
+                    assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
+                }
             }
         }
     }
