@@ -61,13 +61,13 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> 
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 unsafe fn groups<const G: usize>(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize) {
-    let (w, h, ew) = (g.w, g.h, g.w.div_ceil(2));
+    let (w, plane, ew) = (g.w, g.plane, g.w.div_ceil(2));
     let mut acc = [g.bias.map(|b| _mm256_set1_ps(b)); G];
     // every tap of the G groups inside the row (else the zero padding is
     // loaded lane by lane); stride 2 reads odd[x − 1..], even[x..], odd[x..]
     let interior = x0 >= 1 && if g.stride == 1 { x0 + 8 * G < w } else { x0 + 8 * G <= w / 2 };
     for i in 0..g.cin {
-        let src = &g.lanes[i * w * h..(i + 1) * w * h];
+        let src = &g.lanes[i * plane..];
         for (ky, r) in g.src_rows.iter().enumerate() {
             let Some(sy) = *r else { continue };
             let srow = &src[sy * w..(sy + 1) * w];

@@ -109,10 +109,11 @@ fn avx2_fma_available() -> bool {
     false
 }
 
-/// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `out` at
-/// least `cout` planes of the output size. `weights`: room for the layer's
+/// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `in_plane`
+/// values apart, `out` `cout` planes of the output size, `out_plane` apart
+/// (see [`plane_stride`]). `weights`: room for the layer's
 /// weights in f32 ([`ConvDesc::weights_len`]), converted from f16 once per
-/// call. `split`: for a stride-2 layer, room for `cin · w · h` values where
+/// call. `split`: for a stride-2 layer, room for `cin · in_plane` values where
 /// the input's rows are rearranged as [even columns | odd columns], so the
 /// taps become contiguous 8-pixel loads (without it, or for narrow rows,
 /// stride 2 runs per pixel). `isa`: the lanes' instruction set;
@@ -128,9 +129,11 @@ pub fn conv(
     isa: Isa,
     d: ConvDesc<'_>,
     input: &[f32],
+    in_plane: usize,
     w: usize,
     h: usize,
     out: &mut [f32],
+    out_plane: usize,
     act: Act,
     weights: &mut [f32],
     split: &mut [f32],
@@ -138,8 +141,9 @@ pub fn conv(
     let isa = if isa.available() { isa } else { Isa::Portable };
     let (ow, oh) = d.out_size(w, h);
     let taps = d.cin * d.k * d.k;
-    if input.len() < d.cin * w * h || out.len() < d.cout * ow * oh || d.params.len() != 2 * (d.cout * taps + d.cout) {
-        return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: d.cout * ow * oh, len: out.len() });
+    let (ip, op) = (in_plane, out_plane);
+    if ip < w * h || op < ow * oh || input.len() < d.cin * ip || out.len() < d.cout * op || d.params.len() != 2 * (d.cout * taps + d.cout) {
+        return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: d.cout * op, len: out.len() });
     }
     if weights.len() < d.weights_len() {
         return Err(Error::ScratchTooSmall { needed: d.weights_len(), got: weights.len() });
@@ -150,52 +154,53 @@ pub fn conv(
     }
     let wts = &*wts;
     // Stride 2: the blocked lanes below run on the even/odd split rows.
-    let s2 = d.k == 3 && d.stride == 2 && w / 2 >= 9 && split.len() >= d.cin * w * h;
+    let s2 = d.k == 3 && d.stride == 2 && w / 2 >= 9 && split.len() >= d.cin * ip;
     let (lanes_input, stride): (&[f32], usize) = if s2 {
         let ew = w.div_ceil(2);
-        for (src, dst) in input[..d.cin * w * h].chunks_exact(w).zip(split.chunks_exact_mut(w)) {
-            let (even, odd) = dst.split_at_mut(ew);
-            for (pair, (e, o)) in src.chunks_exact(2).zip(even.iter_mut().zip(odd.iter_mut())) {
-                *e = pair[0];
-                *o = pair[1];
-            }
-            if w % 2 == 1 {
-                even[ew - 1] = src[w - 1];
+        for (sp, dp) in input[..d.cin * ip].chunks_exact(ip).zip(split.chunks_exact_mut(ip)) {
+            for (src, dst) in sp[..w * h].chunks_exact(w).zip(dp[..w * h].chunks_exact_mut(w)) {
+                let (even, odd) = dst.split_at_mut(ew);
+                for (pair, (e, o)) in src.chunks_exact(2).zip(even.iter_mut().zip(odd.iter_mut())) {
+                    *e = pair[0];
+                    *o = pair[1];
+                }
+                if w % 2 == 1 {
+                    even[ew - 1] = src[w - 1];
+                }
             }
         }
-        (&split[..d.cin * w * h], 2)
+        (&split[..d.cin * ip], 2)
     } else {
         (input, 1)
     };
     // blocks of OB output channels in lanes (3×3 on rows wide enough), the
     // rest one channel at a time
     let blocks = if d.k == 3 && ((d.stride == 1 && w >= 18) || s2) { d.cout / OB } else { 0 };
-    let plane = ow * oh;
-    let (blocked, rest) = out[..d.cout * plane].split_at_mut(blocks * OB * plane);
+    let (blocked, rest) = out[..d.cout * op].split_at_mut(blocks * OB * op);
     for y in 0..oh {
-        for (k, block) in blocked.chunks_exact_mut(OB * plane).enumerate() {
+        for (k, block) in blocked.chunks_exact_mut(OB * op).enumerate() {
             let mut rows: [&mut [f32]; OB] = Default::default();
             let mut bias = [0f32; OB];
             let mut wb: [&[f32]; OB] = [&[]; OB];
-            for (b, (r, p)) in rows.iter_mut().zip(block.chunks_exact_mut(plane)).enumerate() {
+            for (b, (r, p)) in rows.iter_mut().zip(block.chunks_exact_mut(op)).enumerate() {
                 let o = k * OB + b;
                 bias[b] = d.bias(o);
                 wb[b] = &wts[o * taps..(o + 1) * taps];
                 *r = &mut p[y * ow..(y + 1) * ow];
                 r.fill(bias[b]);
             }
-            conv3_rows_block(isa, &wb, d.cin, lanes_input, input, w, h, y, stride, bias, &mut rows);
+            conv3_rows_block(isa, &wb, d.cin, lanes_input, input, (w, h, ip), y, stride, bias, &mut rows);
             for r in rows.iter_mut() {
                 activate(r, act);
             }
         }
-        for (j, plane_o) in rest.chunks_exact_mut(plane).enumerate() {
+        for (j, plane_o) in rest.chunks_exact_mut(op).enumerate() {
             let o = blocks * OB + j;
             let wts = &wts[o * taps..(o + 1) * taps];
             let prow = &mut plane_o[y * ow..(y + 1) * ow];
             prow.fill(d.bias(o));
             for i in 0..d.cin {
-                let src = &input[i * w * h..(i + 1) * w * h];
+                let src = &input[i * ip..i * ip + w * h];
                 match (d.k, d.stride) {
                     (1, _) => {
                         let wt = wts[i];
@@ -245,7 +250,7 @@ pub fn conv(
                 }
             }
             if d.k == 3 && d.stride == 1 && w >= 18 {
-                conv3_row_lanes(wts, d.cin, input, w, h, y, prow);
+                conv3_row_lanes(wts, d.cin, input, (w, h, ip), y, prow);
             }
             activate(prow, act);
         }
@@ -282,8 +287,7 @@ fn conv3_rows_block(
     cin: usize,
     lanes: &[f32],
     input: &[f32],
-    w: usize,
-    h: usize,
+    (w, h, plane): (usize, usize, usize),
     y: usize,
     stride: usize,
     bias: [f32; OB],
@@ -294,7 +298,7 @@ fn conv3_rows_block(
     let ow = rows[0].len();
     // The lanes cover the whole row (loads past either end read the zero
     // padding); a row narrower than one group goes per pixel.
-    let g = Lanes { wts, cin, lanes, w, h, src_rows, stride, bias };
+    let g = Lanes { wts, cin, lanes, w, plane, src_rows, stride, bias };
     let done = if ow < 8 {
         0
     } else {
@@ -309,7 +313,7 @@ fn conv3_rows_block(
         for (px, out) in row.iter_mut().enumerate().skip(done) {
             let mut a = *out;
             for i in 0..cin {
-                let src = &input[i * w * h..(i + 1) * w * h];
+                let src = &input[i * plane..i * plane + w * h];
                 for (ky, r) in src_rows.iter().enumerate() {
                     let Some(sy) = *r else { continue };
                     for kx in 0..3 {
@@ -332,7 +336,8 @@ struct Lanes<'a> {
     cin: usize,
     lanes: &'a [f32],
     w: usize,
-    h: usize,
+    /// Distance between two input planes (≥ w · h).
+    plane: usize,
     /// The 3 input rows (`None`: the zero padding).
     src_rows: [Option<usize>; 3],
     stride: usize,
@@ -370,7 +375,7 @@ fn padded8(s: &[f32], x: isize) -> [f32; 8] {
 /// returns the end of the pixels filled (from 0).
 fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
     use wide::f32x8;
-    let (w, h, ew) = (g.w, g.h, g.w.div_ceil(2));
+    let (w, plane, ew) = (g.w, g.plane, g.w.div_ceil(2));
     let mut x = 0;
     let mut done = 0;
     let end = rows[0].len(); // the output row (≥ 8)
@@ -381,7 +386,7 @@ fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
         let xi = x as isize;
         let mut acc = g.bias.map(f32x8::splat);
         for i in 0..g.cin {
-            let src = &g.lanes[i * w * h..(i + 1) * w * h];
+            let src = &g.lanes[i * plane..];
             for (ky, r) in g.src_rows.iter().enumerate() {
                 let Some(sy) = *r else { continue };
                 let srow = &src[sy * w..(sy + 1) * w];
@@ -413,7 +418,7 @@ fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
 /// 8-pixel groups accumulate every input channel and tap in registers (one
 /// load and one multiply-add per 8 products); the first and last pixels of
 /// the row, which touch the zero padding, per pixel.
-fn conv3_row_lanes(wts: &[f32], cin: usize, input: &[f32], w: usize, h: usize, y: usize, prow: &mut [f32]) {
+fn conv3_row_lanes(wts: &[f32], cin: usize, input: &[f32], (w, h, plane): (usize, usize, usize), y: usize, prow: &mut [f32]) {
     use wide::f32x8;
     let rows: [Option<usize>; 3] = [y.checked_sub(1), Some(y), (y + 1 < h).then_some(y + 1)];
     let load = |s: &[f32], x: usize| -> f32x8 {
@@ -425,7 +430,7 @@ fn conv3_row_lanes(wts: &[f32], cin: usize, input: &[f32], w: usize, h: usize, y
     while x + 9 <= w {
         let mut acc = f32x8::from(<[f32; 8]>::try_from(&prow[x..x + 8]).unwrap_or([0.0; 8]));
         for i in 0..cin {
-            let src = &input[i * w * h..(i + 1) * w * h];
+            let src = &input[i * plane..i * plane + w * h];
             for (ky, r) in rows.iter().enumerate() {
                 let Some(sy) = *r else { continue };
                 let srow = &src[sy * w..(sy + 1) * w];
@@ -442,7 +447,7 @@ fn conv3_row_lanes(wts: &[f32], cin: usize, input: &[f32], w: usize, h: usize, y
     for px in core::iter::once(0).chain(x..w) {
         let mut a = prow[px];
         for i in 0..cin {
-            let src = &input[i * w * h..(i + 1) * w * h];
+            let src = &input[i * plane..i * plane + w * h];
             for (ky, r) in rows.iter().enumerate() {
                 let Some(sy) = *r else { continue };
                 for kx in 0..3 {
@@ -457,26 +462,33 @@ fn conv3_row_lanes(wts: &[f32], cin: usize, input: &[f32], w: usize, h: usize, y
     }
 }
 
-/// `out = concat(upsample×2(low) cropped to sw × sh, skip)` along channels.
+/// `out = concat(upsample×2(low) cropped to sw × sh, skip)` along channels;
+/// `low` (`cl` planes of `lw × lh`) has planes `lp` apart, `skip` (`cs`
+/// planes of `sw × sh`) and `out` `sp` apart.
 #[allow(clippy::too_many_arguments)]
 pub fn concat_upsampled(
     low: &[f32],
     cl: usize,
-    lw: usize,
-    lh: usize,
+    (lw, lh, lp): (usize, usize, usize),
     skip: &[f32],
     cs: usize,
-    sw: usize,
-    sh: usize,
+    (sw, sh, sp): (usize, usize, usize),
     out: &mut [f32],
 ) -> Result<(), Error> {
     let n = sw * sh;
-    if low.len() < cl * lw * lh || skip.len() < cs * n || out.len() < (cl + cs) * n || lw < sw.div_ceil(2) || lh < sh.div_ceil(2) {
-        return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: (cl + cs) * n, len: out.len() });
+    if lp < lw * lh
+        || sp < n
+        || low.len() < cl * lp
+        || skip.len() < cs * sp
+        || out.len() < (cl + cs) * sp
+        || lw < sw.div_ceil(2)
+        || lh < sh.div_ceil(2)
+    {
+        return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: (cl + cs) * sp, len: out.len() });
     }
     for c in 0..cl {
-        let src = &low[c * lw * lh..(c + 1) * lw * lh];
-        let dst = &mut out[c * n..(c + 1) * n];
+        let src = &low[c * lp..c * lp + lw * lh];
+        let dst = &mut out[c * sp..c * sp + n];
         for y in 0..sh {
             let srow = &src[(y / 2) * lw..(y / 2) * lw + lw];
             for (x, d) in dst[y * sw..(y + 1) * sw].iter_mut().enumerate() {
@@ -484,6 +496,6 @@ pub fn concat_upsampled(
             }
         }
     }
-    out[cl * n..(cl + cs) * n].copy_from_slice(&skip[..cs * n]);
+    out[cl * sp..(cl + cs) * sp].copy_from_slice(&skip[..cs * sp]);
     Ok(())
 }
