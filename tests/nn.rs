@@ -174,8 +174,8 @@ fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
     assert_eq!(level_size(7, 3, 2), (2, 1));
 }
 
-/// The instruction sets this build can run here (the AVX2 one needs the CPU,
-/// and the build's flags or the `std` feature, which `cargo test --workspace` enables).
+/// The instruction sets this build can run here (the AVX2 one needs a CPU with
+/// AVX2 and FMA; it is detected at run time in every build).
 fn isas() -> Vec<Isa> {
     let all: Vec<Isa> = [Isa::Portable, Isa::Avx2Fma].into_iter().filter(|i| i.available()).collect();
     if all.len() == 1 {

@@ -33,9 +33,9 @@ use conv::{concat_upsampled, conv, Act};
 /// `w·h` divisible by 1024, e.g. 256×256 or 512×512) all those rows fall in
 /// the same L1 and L2 cache sets and evict each other. An odd number of lines
 /// puts the planes' rows in different sets. Measured (session 20, one thread,
-/// one thread, real 256×256 frames): FLNR 5 % faster in the default build (3×3
-/// layers in AVX2 chosen at run time), unchanged in an x86-64-v3 build;
-/// other sizes unchanged. The caller's input and output tensors keep `w·h`.
+/// real 256×256 frames): FLNR 5 % faster in the default build (3×3 layers in
+/// AVX2 chosen at run time, the rest SSE2), unchanged in an x86-64-v3 build.
+/// The caller's input and output tensors keep `w·h`.
 pub const fn plane_stride(w: usize, h: usize) -> usize {
     let lines = (w * h).div_ceil(16);
     (if lines % 2 == 0 { lines + 1 } else { lines }) * 16
