@@ -1,12 +1,13 @@
 //! Times each FLR stage on a synthetic 1920×1080 frame (one thread; the
-//! fastest of 15 runs per stage, as this is a shared virtual machine).
-//! `cargo run --release --example stages [WIDTH HEIGHT]`
+//! fastest of 15 runs (default) per stage, as this is a shared virtual machine).
+//! `cargo run --release --example stages [WIDTH HEIGHT [RUNS]]` (more runs for `perf`)
 use lrdenoise::*;
 use std::time::Instant;
 
 fn main() {
     let a: Vec<usize> = std::env::args().skip(1).filter_map(|s| s.parse().ok()).collect();
     let (w, h) = (a.first().copied().unwrap_or(1920), a.get(1).copied().unwrap_or(1080));
+    let runs = a.get(2).copied().unwrap_or(16).max(2);
     let n = w * h;
     let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 1000) as f32 / 1000.0).collect();
     // Planar guides (as in `benches/flr.rs`): normal x, y, z, depth, AO.
@@ -23,7 +24,7 @@ fn main() {
     let mut scratch = vec![0f64; flr.scratch_len()];
     let mut out = vec![0f32; 3 * n];
     let mut t = [f64::MAX; 6];
-    for it in 0..16 {
+    for it in 0..runs {
         let f = flr.check_frame(&frame).unwrap();
         let p = flr.split_scratch(&mut scratch, 1).unwrap();
         let nt = flr.tile_count();
