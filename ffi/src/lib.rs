@@ -563,6 +563,16 @@ impl Raw {
 }
 
 /// A scratch pointer must be non-NULL and 8-byte aligned (f64 inside).
+/// The frame and output image behind the caller's pointers;
+/// LRD_STATUS_NULL_POINTER if either is NULL.
+///
+/// # Safety
+/// Each pointer is NULL or points to a value valid for `'a`.
+unsafe fn frame_and_out<'a>(frame: *const LrdFrame, out: *const LrdImageMut) -> Result<(&'a LrdFrame, &'a LrdImageMut), LrdStatus> {
+    // SAFETY: the caller's contract above; `as_ref` checks for NULL.
+    unsafe { Ok((frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?)) }
+}
+
 fn check_scratch(scratch: *mut c_void) -> Result<(), LrdStatus> {
     if scratch.is_null() {
         Err(LRD_STATUS_NULL_POINTER)
@@ -613,8 +623,8 @@ pub unsafe extern "C" fn lrd_flr_denoise(
     report: *mut LrdReport,
 ) -> LrdStatus {
     guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        // SAFETY: the caller passes valid (or NULL) pointers.
+        let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let flr = plan(config, out.width, out.height)?;
         check_scratch(scratch)?;
         let needed = self::scratch_bytes(&flr, 1)?;
@@ -667,8 +677,8 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
     report: *mut LrdReport,
 ) -> LrdStatus {
     guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        // SAFETY: the caller passes valid (or NULL) pointers.
+        let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let flr = plan(config, out.width, out.height)?;
         let (workers, tile, worker) = (workers as usize, tile as usize, worker as usize);
         if workers == 0 || worker >= workers {
@@ -1016,7 +1026,7 @@ unsafe fn denoise_single<M: Temporal>(
     // the LrdImage contract; the scratch is checked (NULL, alignment, size) and
     // `out` is exclusively ours.
     unsafe {
-        let (frame, out) = (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?);
+        let (frame, out) = frame_and_out(frame, out)?;
         let m = plan(out.width, out.height)?;
         let f = frame_views(frame, false)?;
         let s = f32_buffer(scratch, scratch_bytes, f32_bytes(m.scratch_len())?)?;
@@ -1435,8 +1445,8 @@ pub unsafe extern "C" fn lrd_flnr_denoise(
     report: *mut LrdReport,
 ) -> LrdStatus {
     guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        // SAFETY: the caller passes valid (or NULL) pointers.
+        let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let fl = flnr_plan(weights, weights_bytes, tile, out.width, out.height)?;
         check_scratch(scratch)?;
         let (flr_len, net_len) = (fl.flr_scratch_len(), fl.scratch_len());
@@ -1537,8 +1547,8 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
     report: *mut LrdReport,
 ) -> LrdStatus {
     guard(|| {
-        // SAFETY: NULL-checked; the caller passes valid pointers.
-        let (frame, out) = unsafe { (frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?) };
+        // SAFETY: the caller passes valid (or NULL) pointers.
+        let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let fl = flnr_plan(weights, weights_bytes, tile_size, out.width, out.height)?;
         check_scratch(scratch)?;
         if workers == 0 {
