@@ -17,7 +17,9 @@
 //! same per pixel. Estimating `r_s` needs the energy moment, so this mode
 //! costs three blurs and three solves instead of one.
 
-use crate::kernels::{CellLayout, LUMA};
+use crate::kernels::cholesky::F64Lanes;
+use crate::kernels::{model_len, CellLayout, LUMA};
+use wide::f64x4;
 
 /// `K`: the share of the variance difference `v₀ − v_s` that `d_s²` is taken
 /// to contain (0.5 measured best of 0.25 / 0.5 / 1 on the training scenes;
@@ -63,29 +65,50 @@ const L: [f64; 3] = [LUMA[0] as f64, LUMA[1] as f64, LUMA[2] as f64];
 /// blurred moments are `cell`; `norm` turns the window weight into its valid
 /// fraction, `area` is `4πσ²` in input pixels. `+∞` for an empty window.
 pub fn variance<const Q: usize>(cell: &[f64], model: &[f32], norm: f64, area: f64, min_weight: f64) -> f64 {
+    variance_lanes::<f64, Q>(|m| cell[m], |j| model[j] as f64, norm, area, min_weight)
+}
+
+/// [`variance`] of four cells at once, one per `f64x4` lane (`cells`: 4 ×
+/// `k` moments, `models`: 4 × `model_len(Q)`): bit-identical to four calls.
+pub fn variances4<const Q: usize>(cells: &[f64], models: &[f32], norm: f64, area: f64, min_weight: f64) -> [f64; 4] {
+    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
+    let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let model = |j: usize| f64x4::from([models[j] as f64, models[ml + j] as f64, models[2 * ml + j] as f64, models[3 * ml + j] as f64]);
+    variance_lanes::<f64x4, Q>(cell, model, norm, area, min_weight).to_array()
+}
+
+/// [`variance`] of one cell (`T = f64`) or four (`f64x4`); `cell(m)` reads
+/// moment `m`, `model(j)` model value `j`. Empty lanes and non-finite
+/// results are `+∞`.
+#[inline(always)]
+fn variance_lanes<T: F64Lanes, const Q: usize>(
+    cell: impl Fn(usize) -> T,
+    model: impl Fn(usize) -> T,
+    norm: f64,
+    area: f64,
+    min_weight: f64,
+) -> T {
     let lay = CellLayout::new(Q);
-    let n = cell[0];
-    if !(n > min_weight && n.is_finite()) {
-        return f64::INFINITY;
-    }
-    let inv = 1.0 / n;
-    let luma = |at: usize| (L[0] * cell[at] + L[1] * cell[at + 1] + L[2] * cell[at + 2]) * inv;
+    let s = T::splat;
+    let n = cell(0);
+    let empty = n.not_above(s(min_weight));
+    let inv = s(1.0) / n;
+    let luma = |at: usize| (s(L[0]) * cell(at) + s(L[1]) * cell(at + 1) + s(L[2]) * cell(at + 2)) * inv;
     let mean = luma(lay.t);
-    let mut explained = 0.0;
+    let mut explained = s(0.0);
     for a in 0..Q {
-        let cov = luma(lay.p + 3 * a) - cell[lay.s + a] * inv * mean;
+        let cov = luma(lay.p + 3 * a) - cell(lay.s + a) * inv * mean;
         let j = 3 + 3 * a;
-        let beta = L[0] * model[j] as f64 + L[1] * model[j + 1] as f64 + L[2] * model[j + 2] as f64;
-        explained += beta * cov;
+        let beta = s(L[0]) * model(j) + s(L[1]) * model(j + 1) + s(L[2]) * model(j + 2);
+        explained = explained + beta * cov;
     }
-    let residual = (cell[lay.e] * inv - mean * mean - explained).max(0.0);
-    let samples = (area * (n * norm).min(1.0)).max(1.0);
-    let v = residual * (Q + 1) as f64 / samples;
-    if v.is_finite() {
-        v
-    } else {
-        f64::INFINITY
-    }
+    let residual = (cell(lay.e) * inv - mean * mean - explained).max_(s(0.0));
+    // min(n · norm, 1) as −max(−n · norm, −1) (exact; NaN → 1)
+    let valid = s(0.0) - (s(0.0) - n * s(norm)).max_(s(-1.0));
+    let samples = (s(area) * valid).max_(s(1.0));
+    let v = residual * s((Q + 1) as f64) / samples;
+    // v ≥ 0 where finite: "not above −1" means not finite
+    v.set_where(empty | v.not_above(s(-1.0)), f64::INFINITY)
 }
 
 /// `d_s²` for windows 1 and 2: the mean squared difference between the
@@ -93,73 +116,194 @@ pub fn variance<const Q: usize>(cell: &[f64], model: &[f32], norm: f64, area: f6
 /// window's) over the smallest window, whose blurred moments are `cell`:
 /// `(Δc₀ + Δcᵀμ)² + Δcᵀ Σ Δc`. `gaps[0]` is 0.
 pub fn prediction_gaps<const Q: usize>(cell: &[f64], models: [&[f32]; 3], min_weight: f64) -> [f64; 3] {
+    gaps_lanes::<f64, Q>(|m| cell[m], |w, j| models[w][j] as f64, min_weight)
+}
+
+/// [`prediction_gaps`] of one cell (`T = f64`) or four (`f64x4`); `cell(m)`
+/// reads moment `m`, `model(w, j)` value `j` of window `w`'s model. Empty
+/// lanes get 0, non-finite gaps `+∞`.
+#[inline(always)]
+fn gaps_lanes<T: F64Lanes, const Q: usize>(cell: impl Fn(usize) -> T, model: impl Fn(usize, usize) -> T, min_weight: f64) -> [T; 3] {
     let lay = CellLayout::new(Q);
-    let n = cell[0];
-    if !(n > min_weight && n.is_finite()) {
-        return [0.0; 3];
-    }
-    let inv = 1.0 / n;
-    let mut mu = [0f64; crate::MAX_GUIDES];
-    for a in 0..Q {
-        mu[a] = cell[lay.s + a] * inv;
-    }
+    let s = T::splat;
+    let n = cell(0);
+    let empty = n.not_above(s(min_weight));
+    let inv = s(1.0) / n;
+    let mu: [T; crate::MAX_GUIDES] = core::array::from_fn(|a| if a < Q { cell(lay.s + a) * inv } else { s(0.0) });
     // Windows 1 and 2 side by side (two independent chains; the sums are
     // the same, in the same order, as one window at a time).
-    let first = models[0];
-    let dl = |model: &[f32], j: usize| {
-        let d = |c: usize| L[c] * (model[j + c] as f64 - first[j + c] as f64);
-        0.0 + d(0) + d(1) + d(2)
+    let dl = |w: usize, j: usize| {
+        let d = |c: usize| s(L[c]) * (model(w, j + c) - model(0, j + c));
+        s(0.0) + d(0) + d(1) + d(2)
     };
-    let mut at_mean = [dl(models[1], 0), dl(models[2], 0)];
-    let mut dc = [[0f64; crate::MAX_GUIDES]; 2];
+    let mut at_mean = [dl(1, 0), dl(2, 0)];
+    let mut dc = [[s(0.0); crate::MAX_GUIDES]; 2];
     for a in 0..Q {
         for w in 0..2 {
-            dc[w][a] = dl(models[w + 1], 3 + 3 * a);
-            at_mean[w] += dc[w][a] * mu[a];
+            dc[w][a] = dl(w + 1, 3 + 3 * a);
+            at_mean[w] = at_mean[w] + dc[w][a] * mu[a];
         }
     }
     // Δcᵀ Σ Δc with Σ (packed upper triangle) formed on the fly.
-    let mut spread = [0f64; 2];
+    let mut spread = [s(0.0); 2];
     let mut p = 0;
     for a in 0..Q {
         for b in a..Q {
-            let cov = cell[lay.ss + p] * inv - mu[a] * mu[b];
+            let cov = cell(lay.ss + p) * inv - mu[a] * mu[b];
             for w in 0..2 {
-                spread[w] += if a == b { dc[w][a] * dc[w][a] * cov } else { 2.0 * dc[w][a] * dc[w][b] * cov };
+                let term = if a == b { dc[w][a] * dc[w][a] * cov } else { s(2.0) * dc[w][a] * dc[w][b] * cov };
+                spread[w] = spread[w] + term;
             }
             p += 1;
         }
     }
-    let mut gaps = [0f64; 3];
+    let mut gaps = [s(0.0); 3];
     for w in 0..2 {
-        let d2 = at_mean[w] * at_mean[w] + spread[w].max(0.0);
-        gaps[w + 1] = if d2.is_finite() { d2 } else { f64::INFINITY };
+        let d2 = at_mean[w] * at_mean[w] + spread[w].max_(s(0.0));
+        // d2 ≥ 0 where finite
+        gaps[w + 1] = d2.set_where(d2.not_above(s(-1.0)), f64::INFINITY).set_where(empty, 0.0);
     }
     gaps
+}
+
+/// The blend weights `1 / (b_s² + v_s)` of the three windows from their
+/// `variances` and `gaps` (`gaps[0]` unused), divided by their sum; lanes
+/// whose sum is not positive and finite are flagged in the returned mask
+/// (bit `l`: use the middle window's model).
+#[inline(always)]
+fn weights_lanes<T: F64Lanes>(variances: [T; 3], gaps: [T; 3]) -> ([T; 3], u32) {
+    let s = T::splat;
+    let mut w = [s(0.0); 3];
+    for i in 0..3 {
+        let mse = if i == 0 {
+            variances[0]
+        } else {
+            let seen = (variances[0] - variances[i]).max_(s(0.0));
+            // seen ≥ 0 where finite; an infinite one (no variance to discount) counts no bias
+            let bias = (gaps[i] - s(BIAS_DISCOUNT) * seen).max_(s(0.0)).set_where(seen.not_above(s(-1.0)), 0.0);
+            bias + variances[i]
+        };
+        w[i] = (s(1.0) / mse.max_(s(1e-300))).set_where(mse.not_above(s(-1.0)), 0.0);
+    }
+    let total = w[0] + w[1] + w[2];
+    let fallback = total.not_above(s(0.0));
+    (w.map(|x| x / total), fallback)
 }
 
 /// Blends the three windows' models of one cell into `out`: weights
 /// `1 / (b_s² + v_s)` from `variances` and the gaps `gaps[s]` (`gaps[0]` unused).
 /// Falls back to the middle window's model where no weight is usable.
 pub fn blend(models: [&[f32]; 3], variances: [f64; 3], gaps: [f64; 3], out: &mut [f32]) {
-    let mut w = [0f64; 3];
-    for s in 0..3 {
-        let mse = if s == 0 {
-            variances[0]
-        } else {
-            let seen = (variances[0] - variances[s]).max(0.0);
-            let bias = if seen.is_finite() { (gaps[s] - BIAS_DISCOUNT * seen).max(0.0) } else { 0.0 };
-            bias + variances[s]
-        };
-        w[s] = if mse.is_finite() { 1.0 / mse.max(1e-300) } else { 0.0 };
-    }
-    let total = w[0] + w[1] + w[2];
-    if !(total > 0.0 && total.is_finite()) {
+    let (w, fallback) = weights_lanes::<f64>(variances, gaps);
+    blend_with(models, (fallback == 0).then_some(w), out);
+}
+
+/// Blends the windows' models of one cell with the normalised weights `w`
+/// (`None`: the middle window's model).
+#[inline(always)]
+fn blend_with(models: [&[f32]; 3], w: Option<[f64; 3]>, out: &mut [f32]) {
+    let Some(w) = w else {
         out.copy_from_slice(models[1]);
         return;
-    }
+    };
     // zipped (no bounds checks), so it vectorises
     for (((o, a), b), c) in out.iter_mut().zip(models[0]).zip(models[1]).zip(models[2]) {
-        *o = ((w[0] * *a as f64 + w[1] * *b as f64 + w[2] * *c as f64) / total) as f32;
+        *o = (w[0] * *a as f64 + w[1] * *b as f64 + w[2] * *c as f64) as f32;
+    }
+}
+
+/// [`prediction_gaps`] and [`blend`] of four cells at once, one per `f64x4`
+/// lane: `cells` holds 4 × `k` moments, `models[l]` cell `l`'s three window
+/// models, `variances[w]` window `w`'s four variances, `out` 4 ×
+/// `model_len(Q)` values. Bit-identical to four scalar calls.
+pub fn blend4<const Q: usize>(cells: &[f64], models: [[&[f32]; 3]; 4], variances: [[f64; 4]; 3], min_weight: f64, out: &mut [f32]) {
+    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
+    let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let model = |w: usize, j: usize| f64x4::from(core::array::from_fn::<f64, 4, _>(|l| models[l][w][j] as f64));
+    let gaps = gaps_lanes::<f64x4, Q>(cell, model, min_weight);
+    let (w, fallback) = weights_lanes::<f64x4>(variances.map(f64x4::from), gaps);
+    let w = w.map(|x| x.to_array());
+    for (l, o) in out.chunks_exact_mut(ml).take(4).enumerate() {
+        let wl = (fallback >> l & 1 == 0).then(|| [w[0][l], w[1][l], w[2][l]]);
+        blend_with(models[l], wl, o);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const Q: usize = 5;
+
+    /// A small deterministic generator (no dependency in the core's tests).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((self.0 >> 11) as f64) / (1u64 << 53) as f64
+        }
+    }
+
+    /// Four cells' moments and three windows' models each, with the awkward
+    /// lanes of real frames: an empty cell, a non-finite moment, a huge model
+    /// value, negative energy (a residual clamped to 0).
+    type Case = ([f64; 4 * 64], [[[f32; 32]; 3]; 4], [[f64; 4]; 3]);
+
+    fn cases(seed: u64) -> Case {
+        let k = CellLayout::new(Q).k;
+        let mut r = Lcg(seed);
+        let mut cells = [0f64; 4 * 64];
+        for (i, c) in cells[..4 * k].iter_mut().enumerate() {
+            *c = if i % k == 0 { 1.0 + 100.0 * r.next() } else { 20.0 * r.next() - 5.0 };
+        }
+        let mut models = [[[0f32; 32]; 3]; 4];
+        for m in models.iter_mut().flatten() {
+            for v in m.iter_mut() {
+                *v = (4.0 * r.next() - 2.0) as f32;
+            }
+        }
+        let mut var = [[0f64; 4]; 3];
+        for v in var.iter_mut().flatten() {
+            *v = r.next() * 0.1;
+        }
+        match seed % 4 {
+            0 => cells[k] = 0.0, // lane 1 empty
+            1 => {
+                // lane 2: a NaN moment; every window's variance infinite (the middle model)
+                cells[2 * k + 3] = f64::NAN;
+                for v in var.iter_mut() {
+                    v[2] = f64::INFINITY;
+                }
+            }
+            2 => models[3][2][4] = 3e38,    // lane 3: a huge slope
+            _ => var[1][0] = f64::INFINITY, // lane 0: an empty larger window
+        }
+        (cells, models, var)
+    }
+
+    #[test]
+    fn four_lanes_equal_four_cells() {
+        let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
+        for seed in 0..64 {
+            let (cells, models, var) = cases(seed);
+            let flat: [f32; 4 * 32] = core::array::from_fn(|i| models[(i / ml) % 4][0][i % ml]);
+            let got = variances4::<Q>(&cells, &flat[..4 * ml], 0.01, 1800.0, 1e-9);
+            for l in 0..4 {
+                let want = variance::<Q>(&cells[l * k..(l + 1) * k], &flat[l * ml..(l + 1) * ml], 0.01, 1800.0, 1e-9);
+                assert_eq!(got[l].to_bits(), want.to_bits(), "seed {seed} lane {l}");
+            }
+            let m: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &models[l][w][..ml]));
+            let mut out = [0f32; 4 * 32];
+            blend4::<Q>(&cells, m, var, 1e-9, &mut out[..4 * ml]);
+            for l in 0..4 {
+                let cell = &cells[l * k..(l + 1) * k];
+                let gaps = prediction_gaps::<Q>(cell, m[l], 1e-9);
+                let mut want = [0f32; 32];
+                blend(m[l], [var[0][l], var[1][l], var[2][l]], gaps, &mut want[..ml]);
+                for (a, b) in out[l * ml..(l + 1) * ml].iter().zip(&want[..ml]) {
+                    assert_eq!(a.to_bits(), b.to_bits(), "seed {seed} lane {l}");
+                }
+            }
+        }
     }
 }

@@ -954,7 +954,7 @@ impl Flr {
             count(dispatch_q!(self.q, solve_cell(cell, &p, model)));
         }
         if !variances_tile.is_empty() {
-            dispatch_q!(self.q, variances_of(cells_tile, models_tile, &p, self.window_area(s), variances_tile));
+            dispatch_q!(self.q, variances_of(cells_tile, models_tile, &p, self.window_area(s), self.kernel_simd(), variances_tile));
         }
         Ok(rep)
     }
@@ -990,7 +990,7 @@ impl Flr {
             vo += n;
         }
         let (r0, _) = self.tile_rows(t)?;
-        dispatch_q!(self.q, blend_band(first_tile, windows, r0, self.min_weight(0), models_tile));
+        dispatch_q!(self.q, blend_band(first_tile, windows, r0, self.min_weight(0), self.kernel_simd(), models_tile));
         Ok(())
     }
 
@@ -1185,10 +1185,17 @@ fn merged3<'a>(views: &[Option<ImageView<'a>>; MAX_GUIDES], g: usize, q: usize) 
     ImageView::merged3([a, b, c])
 }
 
-/// Each cell's variance estimate ([`adaptive::variance`]).
-fn variances_of<const Q: usize>(cells: &[f64], models: &[f32], p: &SolveParams, area: f64, out: &mut [f64]) {
+/// Each cell's variance estimate ([`adaptive::variance`]; with `simd`, four
+/// cells per `f64x4`, bit-identical).
+fn variances_of<const Q: usize>(cells: &[f64], models: &[f32], p: &SolveParams, area: f64, simd: bool, out: &mut [f64]) {
     let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
-    for ((cell, model), v) in cells.chunks_exact(k).zip(models.chunks_exact(ml)).zip(out) {
+    let quads = if simd { out.len() / 4 } else { 0 };
+    let (oq, or) = out.split_at_mut(4 * quads);
+    for ((cells, models), v) in cells.chunks_exact(4 * k).zip(models.chunks_exact(4 * ml)).zip(oq.chunks_exact_mut(4)) {
+        v.copy_from_slice(&adaptive::variances4::<Q>(cells, models, p.weight_norm, area, p.min_weight));
+    }
+    let (cells, models) = (&cells[4 * quads * k..], &models[4 * quads * ml..]);
+    for ((cell, model), v) in cells.chunks_exact(k).zip(models.chunks_exact(ml)).zip(or) {
         *v = adaptive::variance::<Q>(cell, model, p.weight_norm, area, p.min_weight);
     }
 }
@@ -1230,18 +1237,34 @@ impl WindowModels<'_> {
     }
 }
 
-/// Blends one band of cells, whose first row is block-grid row `r0` ([`adaptive::blend`]).
-fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0: usize, min_weight: f64, out: &mut [f32]) {
+/// Blends one band of cells, whose first row is block-grid row `r0`
+/// ([`adaptive::blend`]; with `simd`, four cells per `f64x4`, bit-identical).
+fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0: usize, min_weight: f64, simd: bool, out: &mut [f32]) {
     let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
     let cx = windows[0].grid.cells_x;
-    let mut buf = [[0f32; model_len(MAX_GUIDES)]; MAX_SCALES];
-    for (idx, (cell, o)) in first.chunks_exact(k).zip(out.chunks_exact_mut(ml)).enumerate() {
+    let n = out.len() / ml;
+    let quads = if simd { n / 4 } else { 0 };
+    let mut buf = [[[0f32; model_len(MAX_GUIDES)]; MAX_SCALES]; 4];
+    for q in 0..quads {
+        let mut v = [[0f64; 4]; MAX_SCALES];
+        for (l, b) in buf.iter_mut().enumerate() {
+            let idx = 4 * q + l;
+            let ij = (r0 + idx / cx, idx % cx);
+            for (w, win) in windows.iter().enumerate() {
+                v[w][l] = win.at::<Q>(ij, &mut b[w]);
+            }
+        }
+        let models: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &buf[l][w][..ml]));
+        adaptive::blend4::<Q>(&first[4 * q * k..4 * (q + 1) * k], models, v, min_weight, &mut out[4 * q * ml..4 * (q + 1) * ml]);
+    }
+    for idx in 4 * quads..n {
+        let (cell, o) = (&first[idx * k..(idx + 1) * k], &mut out[idx * ml..(idx + 1) * ml]);
         let ij = (r0 + idx / cx, idx % cx);
         let mut v = [0f64; MAX_SCALES];
-        for ((w, b), v) in windows.iter().zip(buf.iter_mut()).zip(v.iter_mut()) {
+        for ((w, b), v) in windows.iter().zip(buf[0].iter_mut()).zip(v.iter_mut()) {
             *v = w.at::<Q>(ij, b);
         }
-        let m = [&buf[0][..ml], &buf[1][..ml], &buf[2][..ml]];
+        let m = [&buf[0][0][..ml], &buf[0][1][..ml], &buf[0][2][..ml]];
         let gaps = adaptive::prediction_gaps::<Q>(cell, m, min_weight);
         adaptive::blend(m, v, gaps, o);
     }
