@@ -647,8 +647,9 @@ LrdStatus lrd_flr_denoise(const struct LrdFlrConfig *config,
  * - APPLY needs an output whose rows do not overlap in memory (e.g. interleaved
  *   RGB/RGBA); planar outputs return LRD_STATUS_UNSUPPORTED (use lrd_flr_denoise).
  *
- * The result is bit-identical to lrd_flr_denoise. `report` may be NULL; give
- * concurrent calls distinct reports and sum them.
+ * The result is bit-identical to lrd_flr_denoise. An unknown stage, a tile or
+ * worker index out of range and `workers` = 0 return LRD_STATUS_INVALID_TILE.
+ * `report` may be NULL; give concurrent calls distinct reports and sum them.
  */
 LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
                            const struct LrdFrame *frame,
@@ -830,8 +831,9 @@ LrdStatus lrd_flnr_tiled_scratch_size(const uint8_t *weights,
  * - NETWORK tiles may run concurrently if each concurrent call passes a
  *   different `worker` in [0, workers).
  *
- * The result is bit-identical to `lrd_flnr_denoise`. NETWORK before PREPARE
- * on this scratch returns LRD_STATUS_INVALID_TILE. `report` may be NULL (FLR
+ * The result is bit-identical to `lrd_flnr_denoise`. An unknown stage, a tile
+ * or worker index out of range, `workers` = 0, and NETWORK before PREPARE on
+ * this scratch return LRD_STATUS_INVALID_TILE. `report` may be NULL (FLR
  * stage only adds to it).
  */
 LrdStatus lrd_flnr_run_tile(const uint8_t *weights,

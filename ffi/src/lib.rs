@@ -661,8 +661,9 @@ pub unsafe extern "C" fn lrd_flr_denoise(
 /// - APPLY needs an output whose rows do not overlap in memory (e.g. interleaved
 ///   RGB/RGBA); planar outputs return LRD_STATUS_UNSUPPORTED (use lrd_flr_denoise).
 ///
-/// The result is bit-identical to lrd_flr_denoise. `report` may be NULL; give
-/// concurrent calls distinct reports and sum them.
+/// The result is bit-identical to lrd_flr_denoise. An unknown stage, a tile or
+/// worker index out of range and `workers` = 0 return LRD_STATUS_INVALID_TILE.
+/// `report` may be NULL; give concurrent calls distinct reports and sum them.
 #[no_mangle]
 pub unsafe extern "C" fn lrd_flr_run_tile(
     config: *const LrdFlrConfig,
@@ -1526,8 +1527,9 @@ pub unsafe extern "C" fn lrd_flnr_tiled_scratch_size(
 /// - NETWORK tiles may run concurrently if each concurrent call passes a
 ///   different `worker` in [0, workers).
 ///
-/// The result is bit-identical to `lrd_flnr_denoise`. NETWORK before PREPARE
-/// on this scratch returns LRD_STATUS_INVALID_TILE. `report` may be NULL (FLR
+/// The result is bit-identical to `lrd_flnr_denoise`. An unknown stage, a tile
+/// or worker index out of range, `workers` = 0, and NETWORK before PREPARE on
+/// this scratch return LRD_STATUS_INVALID_TILE. `report` may be NULL (FLR
 /// stage only adds to it).
 #[cfg(feature = "flnr")]
 #[no_mangle]
@@ -1551,8 +1553,9 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
         let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let fl = flnr_plan(weights, weights_bytes, tile_size, out.width, out.height)?;
         check_scratch(scratch)?;
+        // As in lrd_flr_run_tile: no worker index is in [0, 0).
         if workers == 0 {
-            return Err(LRD_STATUS_INVALID_ARGUMENT);
+            return Err(LRD_STATUS_INVALID_TILE);
         }
         let lay = flnr_layout(&fl, workers as usize)?;
         if scratch_bytes < lay.total {
@@ -1605,7 +1608,8 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
                     let r = fl.flr().denoise(&lf, fs, &mut o).map_err(status_of)?;
                     write_report(report, r);
                 }
-                _ => return Err(LRD_STATUS_INVALID_ARGUMENT),
+                // an unknown stage is a stage index out of range (as in lrd_flr_run_tile)
+                _ => return Err(LRD_STATUS_INVALID_TILE),
             }
         }
         Ok(())

@@ -104,6 +104,7 @@ fn entry_points_validate_everything() {
         for (stage, tile, worker) in [(7, 0, 0), (0, 1, 0), (1, 99, 0), (1, 0, 1), (6, 99, 0)] {
             assert_eq!(lrd_flr_run_tile(&cfg, &frame, &o, sp, tb, 1, stage, tile, worker, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         }
+        assert_eq!(lrd_flr_run_tile(&cfg, &frame, &o, sp, tb, 0, 1, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         // f16 noisy + planar f32 output give the same result as f32 interleaved
         let n16: Vec<half::f16> = noisy.iter().map(|v| half::f16::from_f32(*v)).collect();
         let noisy_r: Vec<f32> = n16.iter().map(|v| v.to_f32()).collect();
@@ -551,7 +552,8 @@ fn flnr_matches_the_rust_api() {
             lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb - 1, 2, PREPARE, 0, 0, null_mut()),
             LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
         );
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, 9, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, 9, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 0, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 1, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         out.fill(0.0);
         let o = packed_out(&mut out, w, h);
