@@ -167,29 +167,30 @@ impl UNet<'_> {
             conv(isa, self.conv(layer)?, &wa[..c[l] * pp], pp, pw, ph, cur[0], pl, Act::Leaky, wts, wb)?;
             layer += 1;
         }
-        // decoder: the current tensor lives in `wb` (or s_L at first)
+        // decoder: the current tensor lives in `y` (or s_L at first); each
+        // level concatenates into `x`, convolves x → y → x and swaps the two
+        // names, so the result is in `y` again without a copy
+        let (mut x, mut y) = (wa, wb);
         for l in (1..=levels).rev() {
             let (lw, lh) = level_size(w, h, l);
             let (sw, sh) = level_size(w, h, l - 1);
             let (lp, sp) = (plane(l), plane(l - 1));
             let cur_c = c[l];
             {
-                let low: &[f32] = if l == levels { &*skip_store[l] } else { &wb[..cur_c * lp] };
-                concat_upsampled(low, cur_c, (lw, lh, lp), skip_store[l - 1], c[l - 1], (sw, sh, sp), wa)?;
+                let low: &[f32] = if l == levels { &*skip_store[l] } else { &y[..cur_c * lp] };
+                concat_upsampled(low, cur_c, (lw, lh, lp), skip_store[l - 1], c[l - 1], (sw, sh, sp), x)?;
             }
-            conv(isa, self.conv(layer)?, &wa[..(cur_c + c[l - 1]) * sp], sp, sw, sh, wb, sp, Act::Leaky, wts, &mut [])?;
+            conv(isa, self.conv(layer)?, &x[..(cur_c + c[l - 1]) * sp], sp, sw, sh, y, sp, Act::Leaky, wts, &mut [])?;
             layer += 1;
-            // second conv: wb → wa, then move back to wb for the next level
-            conv(isa, self.conv(layer)?, &wb[..c[l - 1] * sp], sp, sw, sh, wa, sp, Act::Leaky, wts, &mut [])?;
+            conv(isa, self.conv(layer)?, &y[..c[l - 1] * sp], sp, sw, sh, x, sp, Act::Leaky, wts, &mut [])?;
             layer += 1;
-            let k = c[l - 1] * sp;
-            wb[..k].copy_from_slice(&wa[..k]);
+            core::mem::swap(&mut x, &mut y);
         }
-        let cur: &[f32] = if levels == 0 { &*skip_store[0] } else { &wb[..c[0] * p0] };
-        conv(isa, self.conv(layer)?, cur, p0, w, h, wa, p0, Act::Leaky, wts, &mut [])?;
+        let cur: &[f32] = if levels == 0 { &*skip_store[0] } else { &y[..c[0] * p0] };
+        conv(isa, self.conv(layer)?, cur, p0, w, h, x, p0, Act::Leaky, wts, &mut [])?;
         layer += 1;
         // the output has planes `n` apart, as the caller's input
-        conv(isa, self.conv(layer)?, &wa[..c[0] * p0], p0, w, h, out, n, Act::Sigmoid, wts, &mut [])?;
+        conv(isa, self.conv(layer)?, &x[..c[0] * p0], p0, w, h, out, n, Act::Sigmoid, wts, &mut [])?;
         Ok(())
     }
 }
