@@ -1,6 +1,7 @@
 //! Times the adaptive window's per-cell arithmetic (gaps, variance, blend) on
-//! synthetic cells: `cargo run --release --example adaptive_cells`.
-use lrdenoise::flr::adaptive::{blend, prediction_gaps, variance};
+//! synthetic cells, one cell at a time and four per f64x4 lane (what `Flr`
+//! runs), in the same run: `cargo run --release --example adaptive_cells`.
+use lrdenoise::flr::adaptive::{blend, blend4, prediction_gaps, variance, variances4};
 use std::time::Instant;
 
 fn main() {
@@ -40,5 +41,43 @@ fn main() {
         best[2] = best[2].min(t.elapsed().as_secs_f64());
         check = gs.iter().map(|g| g[1] + g[2]).sum::<f64>() + vs.iter().sum::<f64>() + out.iter().map(|v| *v as f64).sum::<f64>();
     }
-    println!("gaps {:.3} ms, variance {:.3} ms, blend {:.3} ms (check {check:.12e})", best[0] * 1e3, best[1] * 1e3, best[2] * 1e3);
+    println!(
+        "one cell at a time: gaps {:.3} ms, variance {:.3} ms, blend {:.3} ms (check {check:.12e})",
+        best[0] * 1e3,
+        best[1] * 1e3,
+        best[2] * 1e3
+    );
+    // four cells per lane: variances, then gaps + blend together (as `Flr` does)
+    let mut best4 = [f64::MAX; 2];
+    let mut vs = vec![0f64; n];
+    let mut out4 = vec![0f32; n * ml];
+    for _ in 0..30 {
+        let t = Instant::now();
+        for (q, v) in vs.chunks_exact_mut(4).enumerate() {
+            v.copy_from_slice(&variances4::<Q>(
+                &cells[4 * q * k..4 * (q + 1) * k],
+                &models[0][4 * q * ml..4 * (q + 1) * ml],
+                0.01,
+                1800.0,
+                1e-9,
+            ));
+        }
+        best4[0] = best4[0].min(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        for q in 0..n / 4 {
+            let m: [[&[f32]; 3]; 4] = std::array::from_fn(|l| {
+                let c = 4 * q + l;
+                std::array::from_fn(|w| &models[w][c * ml..(c + 1) * ml])
+            });
+            let v: [[f64; 4]; 3] = std::array::from_fn(|w| std::array::from_fn(|l| vs[4 * q + l] * [1.0, 0.5, 0.25][w]));
+            blend4::<Q>(&cells[4 * q * k..4 * (q + 1) * k], m, v, 1e-9, &mut out4[4 * q * ml..4 * (q + 1) * ml]);
+        }
+        best4[1] = best4[1].min(t.elapsed().as_secs_f64());
+    }
+    let same = out4.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits());
+    println!(
+        "four per lane: variance {:.3} ms, gaps + blend {:.3} ms (same blend output bit for bit: {same})",
+        best4[0] * 1e3,
+        best4[1] * 1e3
+    );
 }
