@@ -213,7 +213,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 Some(b) => b, // a temporal method, one frame further into its sequence
                 None => {
                     let mut b = match v.method.as_str() {
-                        "noisy" => Built { method: Method::Noisy, label: v.input_layer.clone(), flags: String::new() },
+                        "noisy" => Built { method: Method::Noisy, label: v.input_layer.clone(), flags: String::new(), min_bytes: None },
                         name => match Method::build(name, &v.args, &inputs, opt.threads) {
                             Ok(b) => b,
                             Err(e) => {

@@ -455,7 +455,32 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
         all.len(),
         (w * h) as f64 / med / 1e3
     );
+    if let Some(bytes) = b.min_bytes {
+        let copy = memcpy_median(bytes, all.len());
+        println!(
+            "baseline, same run: memcpy of the {:.1} MB one call must at least move (each input layer read once, the RGB output written once; one thread): median {copy:.3} ms; {method} takes {:.1}x that",
+            bytes as f64 / 1e6,
+            med / copy
+        );
+    }
     Ok(())
+}
+
+/// Median time (ms) of copying `bytes / 2` bytes (reading half and writing
+/// half of `bytes`), `runs` times after a warm-up: `lrd bench`'s baseline.
+fn memcpy_median(bytes: usize, runs: usize) -> f64 {
+    let src = vec![1u8; bytes / 2];
+    let mut dst = vec![0u8; bytes / 2];
+    dst.copy_from_slice(&src);
+    let mut t: Vec<f64> = (0..runs.max(1))
+        .map(|_| {
+            let s = std::time::Instant::now();
+            dst.copy_from_slice(std::hint::black_box(&src));
+            std::hint::black_box(&mut dst);
+            s.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    evaluate::median(&mut t)
 }
 
 /// Prints the shader time alone (timestamp queries: median per pass over `runs` frames).

@@ -386,6 +386,17 @@ pub struct Built {
     pub method: Method,
     pub label: String,
     pub flags: String,
+    /// Bytes one call must at least move: every f32 input layer it reads,
+    /// once, and the f32 RGB output, once (`lrd bench`'s memory-copy
+    /// baseline). `None` where that is not the whole story: the temporal
+    /// pipelines (their history) and the GPU path (upload and readback).
+    pub min_bytes: Option<usize>,
+}
+
+/// [`Built::min_bytes`] of a single-frame method reading the noisy RGB at
+/// `noisy_px` pixels and `guide_channels` f32 guide values per output pixel.
+fn one_pass_bytes(w: usize, h: usize, noisy_px: usize, guide_channels: usize) -> usize {
+    4 * (3 * noisy_px + (guide_channels + 3) * w * h)
 }
 
 impl Method {
@@ -405,11 +416,13 @@ impl Method {
                 let low = (cfg.upsample > 1).then(|| Box::new(inputs.subsample(cfg.upsample)));
                 let label = format!("{} gpu", label(&cfg));
                 let method = Method::FlrGpu { gpu: Box::new(gpu), low };
-                Ok(Built { method, label, flags: format!("{} --device gpu", flag_line(&cfg)) })
+                Ok(Built { method, label, flags: format!("{} --device gpu", flag_line(&cfg)), min_bytes: None })
             }
             "flr" => {
                 let cfg = a.config(inputs)?;
-                Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg) })
+                let u = cfg.upsample.max(1);
+                let min_bytes = Some(one_pass_bytes(w, h, w.div_ceil(u) * h.div_ceil(u), cfg.guides.channels()));
+                Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg), min_bytes })
             }
             _ if a.gpu()? => Err(format!("--device gpu: only flr runs on the GPU, not {name}")),
             "flnr" => {
@@ -430,21 +443,24 @@ impl Method {
                     Some(p) => format!("--method flnr --weights {}", p.display()),
                     None => "--method flnr".to_string(),
                 };
-                Ok(Built { method: Method::Flnr(Box::new(runner)), label, flags })
+                let min_bytes = Some(one_pass_bytes(w, h, w * h, lrdenoise::flnr::INPUT_GUIDES.channels()));
+                Ok(Built { method: Method::Flnr(Box::new(runner)), label, flags, min_bytes })
             }
             "walr" | "walr-temporal" => {
                 let cfg = walr_config(a, inputs)?;
                 let (label, flags) = walr_flags(name, &cfg);
+                let min_bytes = (name == "walr").then(|| one_pass_bytes(w, h, w * h, cfg.guides.channels()));
                 let method = if name == "walr" {
                     Method::Walr(Box::new(WalrRunner::new(cfg, w, h, threads)?))
                 } else {
                     Method::Temporal(Box::new(TemporalRunner::walr(cfg, w, h)?))
                 };
-                Ok(Built { method, label, flags })
+                Ok(Built { method, label, flags, min_bytes })
             }
             _ => {
                 let cfg = bmfr_config(a, inputs)?;
                 let temporal = name == "bmfr-temporal";
+                let min_bytes = (!temporal).then(|| one_pass_bytes(w, h, w * h, cfg.guides.channels()));
                 let label = format!("{name} {} b{}", short_guides(&cfg.guides), cfg.block);
                 let flags = format!("--method {name} --guides {} --block {}", guides_string(&cfg.guides), cfg.block);
                 let method = if temporal {
@@ -452,7 +468,7 @@ impl Method {
                 } else {
                     Method::Bmfr(Box::new(BmfrRunner::new(cfg, w, h, threads)?))
                 };
-                Ok(Built { method, label, flags })
+                Ok(Built { method, label, flags, min_bytes })
             }
         }
     }
