@@ -4,7 +4,7 @@
 //! Rows are accumulated with slice arithmetic the compiler vectorises; the
 //! 3×3 layers' rows in 8-pixel lanes, with `wide` (any ISA, chosen at
 //! compile time) or, where the CPU has them, AVX2 + FMA intrinsics
-//! ([`avx2`], chosen at run time: see [`Isa`]).
+//! (`avx2`, chosen at run time: see [`Isa`]).
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -154,7 +154,7 @@ mod tests {
 
 /// `out = act(conv(input))`; `input` holds `cin` planes of `w × h`, `in_plane`
 /// values apart, `out` `cout` planes of the output size, `out_plane` apart
-/// (see [`plane_stride`]). `weights`: room for the layer's
+/// (see [`crate::nn::plane_stride`]). `weights`: room for the layer's
 /// weights in f32 ([`ConvDesc::weights_len`]), converted from f16 once per
 /// call. `split`: for a stride-2 layer, room for `cin · in_plane` values where
 /// the input's rows are rearranged as [even columns | odd columns], so the
