@@ -54,7 +54,7 @@ fn main() {
             }
             let t3 = Instant::now();
             let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-            wl.solve_rows(&prep, 0, geo, z0, &mut ov).unwrap();
+            wl.solve_rows(&prep, 0, geo, [z0, z1], &mut ov).unwrap();
             let t4 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
             let this = [ms(t0, t1), ms(t1, t2), its[0], its[1], its[2], its[3], ms(t3, t4), ms(t0, t4)];

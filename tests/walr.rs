@@ -333,14 +333,23 @@ fn walr_equals_refwlr_without_edges() {
     // Every weight 1, no tracing, no replacement: the à-trous averages are
     // the window averages REFWLR sums directly (over the same samples in the
     // interior), so the two regressions agree to f32 rounding there.
-    for &(w, h, t) in &[(40, 32, 2u8), (64, 40, 3)] {
-        let f = scene(w, h, 11, 0.6, false, false).f;
-        let cfg =
-            WalrConfig { iterations: t, tracing: false, replace: false, storage: Storage::F32, ..flat_weights(WalrConfig::default()) };
-        let (a, _) = run(cfg, &f, 0);
-        let b = run_ref(cfg, &f);
-        let worst = worst_interior_relative(&a, &b, w, h, (3usize.pow(t as u32) - 1) / 2);
-        assert!(worst < 1e-3, "{w}x{h}: worst relative difference {worst}");
+    // (the default blends in the previous iteration's window; 0 is one window)
+    for previous_weight in [lrdenoise::walr::DEFAULT_PREVIOUS_WEIGHT, 0.0, 1.0] {
+        for &(w, h, t) in &[(40, 32, 2u8), (64, 40, 3)] {
+            let f = scene(w, h, 11, 0.6, false, false).f;
+            let cfg = WalrConfig {
+                iterations: t,
+                tracing: false,
+                replace: false,
+                storage: Storage::F32,
+                previous_weight,
+                ..flat_weights(WalrConfig::default())
+            };
+            let (a, _) = run(cfg, &f, 0);
+            let b = run_ref(cfg, &f);
+            let worst = worst_interior_relative(&a, &b, w, h, (3usize.pow(t as u32) - 1) / 2);
+            assert!(worst < 1e-3, "{w}x{h} previous_weight {previous_weight}: worst relative difference {worst}");
+        }
     }
 }
 
@@ -448,7 +457,7 @@ fn bands_are_bit_identical_to_whole_frame() {
             wl.iterate_rows(t, &prep, a, geo, sin, zin, &mut sout[a * w..b * w], &mut zout[a * zl..b * zl]).unwrap();
         }
     }
-    let zr = if Walr::buffer_of(cfg.iterations) == 0 { &*z0 } else { &*z1 };
+    let zr = [&*z0, &*z1];
     let mut view = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
     for k in 0..cuts.len() - 1 {
         let (a, b) = (cuts[k], cuts[k + 1]);

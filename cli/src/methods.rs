@@ -66,6 +66,9 @@ pub struct FlrArgs {
     /// WALR: pivot floor of the per-pixel Cholesky
     #[arg(long)]
     pub epsilon: Option<f32>,
+    /// WALR: weight w of the previous iteration's fit (a window a third as wide) in the output, (1 - w) fit_T + w fit_T-1 (0..=1; 0 = one window)
+    #[arg(long)]
+    pub previous_weight: Option<f32>,
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
@@ -100,6 +103,7 @@ impl FlrArgs {
             || self.storage.is_some()
             || self.sdf_step.is_some()
             || self.epsilon.is_some()
+            || self.previous_weight.is_some()
     }
 }
 
@@ -171,7 +175,9 @@ impl FlrArgs {
             return Err(format!("--guides asks for '{m}' but the frame has no '{m}' layer"));
         }
         if self.has_walr_flags() {
-            return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step and --epsilon are WALR flags".into());
+            return Err(
+                "--iterations, --near, --far, --no-tracing, --storage, --sdf-step, --epsilon and --previous-weight are WALR flags".into()
+            );
         }
         let mut c = FlrConfig::with_guides(guides);
         if let Some(b) = self.block {
@@ -207,7 +213,7 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
         return Err("--sigma, --radius, --box, --regularization and --upsample are FLR flags; bmfr takes --guides and --block".into());
     }
     if a.has_walr_flags() {
-        return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step and --epsilon are WALR flags; bmfr takes --guides and --block".into());
+        return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step, --epsilon and --previous-weight are WALR flags; bmfr takes --guides and --block".into());
     }
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
@@ -264,6 +270,9 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
     if let Some(v) = a.epsilon {
         c.epsilon = v;
     }
+    if let Some(v) = a.previous_weight {
+        c.previous_weight = v;
+    }
     if let Some(s) = &a.storage {
         c.storage = match s.as_str() {
             "f16" => Storage::F16,
@@ -281,15 +290,17 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
         Storage::F32 => "f32",
     };
     let tr = if c.tracing { "" } else { " --no-tracing" };
-    let label = format!("{name} {} t{} {st}{}", short_guides(&c.guides), c.iterations, if c.tracing { "" } else { " notrace" });
+    let pw = if c.previous_weight > 0.0 && c.iterations > 1 { format!(" pw{}", c.previous_weight) } else { String::new() };
+    let label = format!("{name} {} t{}{pw} {st}{}", short_guides(&c.guides), c.iterations, if c.tracing { "" } else { " notrace" });
     let flags = format!(
-        "--method {name} --guides {} --iterations {} --near {} --far {} --sdf-step {} --epsilon {:e} --storage {st}{tr}",
+        "--method {name} --guides {} --iterations {} --near {} --far {} --sdf-step {} --epsilon {:e} --previous-weight {} --storage {st}{tr}",
         guides_string(&c.guides),
         c.iterations,
         c.near,
         c.far,
         c.sdf_step,
-        c.epsilon
+        c.epsilon,
+        c.previous_weight
     );
     (label, flags)
 }

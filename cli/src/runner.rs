@@ -552,7 +552,7 @@ fn walr_parallel(
         let prep = &prep;
         par_each(pool, items, &|(y, s, zo)| wl.iterate_rows(t, prep, y, geo, sin, zin, s, zo).map(|_| WalrReport::default()))?;
     }
-    let zr = &*z[Walr::buffer_of(wl.config().iterations)];
+    let zr = [&*z[0], &*z[1]];
     let mut items = Vec::new();
     let mut rest = Some(out);
     for y in (0..h).step_by(band) {

@@ -256,7 +256,8 @@ fn walr_single_frame_temporal_flags_and_errors() {
     let seq = data("seq_box_7");
     let (ok, so, e) = lrd(&["eval", &seq, "--methods", "walr,walr-temporal", "--runs", "5", "--json", json.to_str().unwrap()]);
     assert!(ok, "{e}");
-    assert!(so.contains("walr-temporal NDP t4 f32"), "{so}");
+    // the default blends in the previous iteration's window (pw0.6)
+    assert!(so.contains("walr-temporal NDP t4 pw0.6 f32"), "{so}");
     let recs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let recs = recs.as_array().unwrap();
     let get = |method: &str, frame: &str| recs.iter().find(|r| r["method"] == method && r["frame"] == frame).unwrap().clone();
@@ -279,6 +280,11 @@ fn walr_single_frame_temporal_flags_and_errors() {
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--guides", "normal,depth"], &["normal and position"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--storage", "f8"], &["f16 or f32"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--near", "0.5", "--far", "0.1"], &["near/far"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--previous-weight", "1.5"], &["previous_weight"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "bmfr", "--previous-weight", "0.5"], &["WALR flags"]);
+    // one window (the paper's): no pw in the label
+    let (ok, so, e) = lrd(&["eval", &room, "--methods", "walr", "--previous-weight", "0", "--runs", "5"]);
+    assert!(ok && so.contains("walr NDP t4 f32") && !so.contains("pw"), "{e}{so}");
 }
 
 #[test]

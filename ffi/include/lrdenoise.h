@@ -522,6 +522,11 @@ typedef struct LrdWalrConfig {
    */
   bool scalar_kernels;
   /**
+   * Weight w of the previous iteration's fit in the output, (1 − w)·fit_T +
+   * w·fit_{T−1}: 0..=1, 0 = one window (default: see lrd_walr_config_default).
+   */
+  float previous_weight;
+  /**
    * Temporal pipeline: frames after which accumulation becomes exponential (16).
    */
   float max_samples;

@@ -1206,6 +1206,9 @@ pub struct LrdWalrConfig {
     pub clamp_negative: bool,
     /// Use the scalar reference kernels (slow; for testing).
     pub scalar_kernels: bool,
+    /// Weight w of the previous iteration's fit in the output, (1 − w)·fit_T +
+    /// w·fit_{T−1}: 0..=1, 0 = one window (default: see lrd_walr_config_default).
+    pub previous_weight: f32,
     /// Temporal pipeline: frames after which accumulation becomes exponential (16).
     pub max_samples: f32,
     /// Lowest blend weight of the new frame in the post pass (0.1).
@@ -1234,6 +1237,7 @@ fn walr_config(c: &LrdWalrConfig) -> Result<lrdenoise_core::WalrConfig, LrdStatu
         view: c.has_view.then_some(c.view),
         clamp_negative: c.clamp_negative,
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
+        previous_weight: c.previous_weight,
         temporal: TemporalConfig {
             max_samples: c.max_samples,
             post_alpha: c.post_alpha,
@@ -1275,6 +1279,7 @@ pub extern "C" fn lrd_walr_config_default() -> LrdWalrConfig {
         view: d.view.unwrap_or([0.0, 0.0, 1.0]),
         clamp_negative: d.clamp_negative,
         scalar_kernels: false,
+        previous_weight: d.previous_weight,
         max_samples: t.max_samples,
         post_alpha: t.post_alpha,
         clip_gamma: t.clip_gamma,

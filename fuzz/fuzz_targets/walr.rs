@@ -19,6 +19,7 @@ fuzz_target!(|d: &[u8]| {
         replace: d[4] & 2 == 0,
         storage: if d[4] & 4 == 0 { Storage::F32 } else { Storage::F16 },
         kernel: if d[4] & 8 == 0 { Kernel::Simd } else { Kernel::Scalar },
+        previous_weight: if d[4] & 16 == 0 { 0.0 } else { 0.5 },
         sdf_step: (d[5] % 5) as f32 * 0.25,
         near: (d[6] % 8) as f32 * 0.005,
         far: (d[6] % 8) as f32 * 0.005 + 0.001 + (d[7] % 8) as f32 * 0.01,
@@ -66,12 +67,13 @@ fuzz_target!(|d: &[u8]| {
             wl.features_rows(&f, &prep, a, &mut geo[a * gl..b * gl], &mut z0[a * zl..b * zl]).unwrap();
         }
         for t in 0..cfg.iterations {
-            let (sin, sout, zin, zout) = if Walr::buffer_of(t) == 0 { (&*s0, &mut *s1, &*z0, &mut *z1) } else { (&*s1, &mut *s0, &*z1, &mut *z0) };
+            let (sin, sout, zin, zout) =
+                if Walr::buffer_of(t) == 0 { (&*s0, &mut *s1, &*z0, &mut *z1) } else { (&*s1, &mut *s0, &*z1, &mut *z0) };
             for &(a, b) in &bands {
                 wl.iterate_rows(t, &prep, a, geo, sin, zin, &mut sout[a * w..b * w], &mut zout[a * zl..b * zl]).unwrap();
             }
         }
-        let zr = if Walr::buffer_of(cfg.iterations) == 0 { &*z0 } else { &*z1 };
+        let zr = [&*z0, &*z1];
         for &(a, b) in &bands {
             let mut band = ImageViewMut::interleaved(&mut banded[3 * w * a..3 * w * b], w, b - a, 3).unwrap();
             wl.solve_rows(&prep, a, geo, zr, &mut band).unwrap();
@@ -83,7 +85,8 @@ fuzz_target!(|d: &[u8]| {
     let mut hist = vec![0f32; wl.history_len()];
     let mut history = History::new(&mut hist);
     for _ in 0..3 {
-        wl.denoise_temporal(&frame, Some(&mv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut whole, w, h, 3).unwrap()).unwrap();
+        wl.denoise_temporal(&frame, Some(&mv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut whole, w, h, 3).unwrap())
+            .unwrap();
         assert!(whole.iter().all(|v| v.is_finite()));
     }
 });

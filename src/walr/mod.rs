@@ -63,6 +63,15 @@ pub use temporal::{History, TemporalConfig};
 
 /// Largest number of regression features (1 + 2 normal + AO + 4 user).
 pub const MAX_FEATURES: usize = 8;
+/// Default [`WalrConfig::previous_weight`]: 0.6 of the 27×27 window's fit and
+/// 0.4 of the 81×81 one's. Chosen on the 34 training-family frames (session
+/// 22, `lrd eval`, mean PSNR / SSIM / FLIP): 0 (the paper's single window)
+/// 28.90 dB / 0.706 / 0.136; 0.5: 29.72 / 0.707 / 0.123; 0.6: 29.78 / 0.704 /
+/// 0.122; 0.7: 29.80 / 0.702 / 0.122 (T = 3 alone: 29.56 / 0.689 / 0.129).
+/// Neither window suits every region, and the mixture of a narrow and a wide
+/// box is a heavier-tailed kernel than either.
+pub const DEFAULT_PREVIOUS_WEIGHT: f32 = 0.6;
+
 /// Largest number of à-trous iterations (5: 243×243 pixels).
 pub const MAX_ITERATIONS: u8 = 5;
 
@@ -115,6 +124,12 @@ pub struct WalrConfig {
     pub clamp_negative: bool,
     /// Kernel implementation (SIMD or the scalar oracle).
     pub kernel: Kernel,
+    /// Weight `w` of the previous iteration's fit in the output: each pixel
+    /// is `(1 − w)·fit_T + w·fit_{T−1}`, the fits of the 3^T and 3^(T−1)
+    /// windows (the sums of iteration T − 1 are still in the other buffer, so
+    /// this costs one more solve). 0..=1; 0 is the paper's single window;
+    /// ignored when T = 1.
+    pub previous_weight: f32,
     /// Temporal pipeline settings (ignored by the single-frame filter).
     pub temporal: TemporalConfig,
 }
@@ -134,6 +149,7 @@ impl Default for WalrConfig {
             view: None,
             clamp_negative: true,
             kernel: Kernel::Simd,
+            previous_weight: DEFAULT_PREVIOUS_WEIGHT,
             temporal: TemporalConfig::default(),
         }
     }
@@ -161,6 +177,9 @@ impl WalrConfig {
         }
         if !(self.epsilon > 0.0 && self.epsilon < 1.0) {
             return Err(Error::InvalidConfig("epsilon (0..1)"));
+        }
+        if !(0.0..=1.0).contains(&self.previous_weight) {
+            return Err(Error::InvalidConfig("previous_weight (0..=1)"));
         }
         if let Some(v) = self.view {
             let l = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
@@ -317,7 +336,9 @@ impl Walr {
         (self.width * self.height).div_ceil(4)
     }
     /// Which averages buffer iteration `t` reads (it writes the other one);
-    /// [`Walr::solve_rows`] reads buffer `iterations % 2`.
+    /// The buffer iteration `t` reads (and iteration `t − 1` wrote):
+    /// [`Walr::solve_rows`] reads buffer `buffer_of(iterations)`, and with
+    /// [`WalrConfig::previous_weight`] also `buffer_of(iterations − 1)`.
     pub fn buffer_of(t: u8) -> usize {
         (t % 2) as usize
     }
@@ -394,8 +415,7 @@ impl Walr {
                 if Self::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
             self.iterate_rows(t, prep, 0, geo, sin, zin, sout, zout)?;
         }
-        let zr = &*z[Self::buffer_of(self.cfg.iterations)];
-        rep += self.solve_rows(prep, 0, geo, zr, out)?;
+        rep += self.solve_rows(prep, 0, geo, [&*z[0], &*z[1]], out)?;
         Ok(rep)
     }
 }

@@ -3,8 +3,11 @@
 //! function and pivot floor, but every pixel of the `(3^T)²` window is
 //! weighted directly — by the minimum of the edge-stopping function along
 //! the digital line from the centre (every pixel visited, no SDF, no
-//! replacement, no à-trous) — and sums are in f64. O(pixels × window ×
-//! line length): for small frames only.
+//! replacement, no à-trous) — and sums are in f64. With
+//! [`WalrConfig::previous_weight`](super::WalrConfig::previous_weight) `w > 0`
+//! the fit of the `(3^(T−1))²` window is blended in as WALR does:
+//! `(1 − w)·fit_T + w·fit_{T−1}`. O(pixels × window × line length): for
+//! small frames only.
 
 use super::store::Store;
 use super::{Parts, Report, Storage, Walr, GEO_FIXED, G_INV_SCALE, G_N, G_P, G_VALID, MAX_FEATURES};
@@ -31,7 +34,11 @@ impl Walr {
     fn reference_impl<S: Store>(&self, geo: &[f32], z0: &[S], scale: f32, out: &mut ImageViewMut<'_>) -> Result<u64, Error> {
         let (w, h, m) = (self.width as i64, self.height as i64, self.m);
         let (gp, kp, zl, ps) = (self.geo_planes(), self.planes(), self.z_row_values(), self.plane_stride());
-        let radius = (3i64.pow(self.cfg.iterations as u32) - 1) / 2;
+        let t = self.cfg.iterations as u32;
+        let radius = (3i64.pow(t) - 1) / 2;
+        let wp = if t >= 2 { self.cfg.previous_weight as f64 } else { 0.0 };
+        // the previous iteration's window (radius −1: none)
+        let radius_prev = if wp > 0.0 { (3i64.pow(t - 1) - 1) / 2 } else { -1 };
         let g = |c: usize, x: i64, y: i64| geo[(y as usize * gp + c) * ps + x as usize] as f64;
         let (far, range) = (self.cfg.far as f64, (self.cfg.far - self.cfg.near) as f64);
         let weight = |cx: i64, cy: i64, x: i64, y: i64| -> f64 {
@@ -46,6 +53,7 @@ impl Walr {
             for cx in 0..w {
                 // moments of the stored Z_0 (products, W) with weights w
                 let mut sum = [0f64; 64];
+                let mut sum_prev = [0f64; 64];
                 for y in (cy - radius).max(0)..=(cy + radius).min(h - 1) {
                     for x in (cx - radius).max(0)..=(cx + radius).min(w - 1) {
                         let (dx, dy) = (x - cx, y - cy);
@@ -68,23 +76,40 @@ impl Walr {
                         }
                         let base = y as usize * zl + x as usize;
                         let wz = S::get(z0, base + (kp - 1) * ps) as f64;
+                        let inner = n <= radius_prev;
                         for k in 0..kp - 1 {
-                            sum[k] += wt * wz * S::get(z0, base + k * ps) as f64;
+                            let v = wt * wz * S::get(z0, base + k * ps) as f64;
+                            sum[k] += v;
+                            if inner {
+                                sum_prev[k] += v;
+                            }
                         }
                         sum[kp - 1] += wt * wz;
+                        if inner {
+                            sum_prev[kp - 1] += wt * wz;
+                        }
                     }
                 }
-                let mut y = [0f64; 3];
-                if sum[kp - 1] > 0.0 {
-                    let inv = 1.0 / sum[kp - 1];
-                    let zz: [f64; 64] = core::array::from_fn(|k| sum[k] * inv);
-                    let mut x = [1f64; MAX_FEATURES];
-                    for q in 1..m {
-                        x[q] = g(GEO_FIXED + q - 1, cx, cy);
+                let mut x = [1f64; MAX_FEATURES];
+                for q in 1..m {
+                    x[q] = g(GEO_FIXED + q - 1, cx, cy);
+                }
+                let fit = |sum: &[f64; 64]| {
+                    if sum[kp - 1] > 0.0 {
+                        let inv = 1.0 / sum[kp - 1];
+                        let zz: [f64; 64] = core::array::from_fn(|k| sum[k] * inv);
+                        Some(solve_f64(&zz[..kp - 1], &x[..m], self.cfg.epsilon as f64))
+                    } else {
+                        None
                     }
-                    y = solve_f64(&zz[..kp - 1], &x[..m], self.cfg.epsilon as f64);
-                } else {
+                };
+                let mut y = fit(&sum).unwrap_or_else(|| {
                     fallback += 1;
+                    [0.0; 3]
+                });
+                if wp > 0.0 {
+                    let yp = fit(&sum_prev).unwrap_or([0.0; 3]);
+                    y = core::array::from_fn(|c| (1.0 - wp) * y[c] + wp * yp[c]);
                 }
                 let v = y.map(|c| {
                     let c = c * scale as f64;

@@ -50,36 +50,55 @@ pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) 
 
 impl Walr {
     /// Stage 3 on rows `y0..y0 + out.height()`: solves every pixel from the
-    /// final sums `z` (divided by their W here) (buffer [`Walr::buffer_of`]`(iterations)`, whole
-    /// frame) and writes the light to `out` (those rows only).
-    pub fn solve_rows(&self, p: &Prepared, y0: usize, geo: &[f32], z: &[f32], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+    /// final sums (divided by their W here) and writes the light to `out`
+    /// (those rows only). `z` is the pair of sum buffers of [`Walr::parts`]
+    /// (whole frame): the final sums are `z[buffer_of(iterations)]`; with
+    /// [`WalrConfig::previous_weight`](super::WalrConfig::previous_weight) `w > 0` (and T ≥ 2) the
+    /// fit of the previous iteration's sums, `z[buffer_of(iterations − 1)]`,
+    /// is blended in: `(1 − w)·fit_T + w·fit_{T−1}`.
+    pub fn solve_rows(&self, p: &Prepared, y0: usize, geo: &[f32], z: [&[f32]; 2], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
         let (w, h) = (self.width, self.height);
         let rows = out.height();
         if out.width() != w || out.channel_count() < 3 || y0 + rows > h {
             return Err(Error::SizeMismatch { arg: crate::error::Arg::Output, expected: (w, h - y0.min(h)), got: (out.width(), rows) });
         }
-        if geo.len() < h * self.geo_row_len() || z.len() < h * self.z_row_len() {
+        if geo.len() < h * self.geo_row_len() || z.iter().any(|z| z.len() < h * self.z_row_len()) {
             return Err(Error::InvalidTile { index: y0, count: h });
         }
+        let t = self.cfg.iterations;
+        let last = z[Self::buffer_of(t)];
+        let wp = self.cfg.previous_weight;
+        let prev = (t >= 2 && wp > 0.0).then(|| (z[Self::buffer_of(t - 1)], wp));
         macro_rules! go {
-            ($s:ty, $z:expr) => {
+            ($s:ty, $cast:expr) => {{
+                let prev = prev.map(|(z, w)| ($cast(z), w));
                 match self.m {
-                    3 => self.solve_impl::<$s, 3>(p, y0, rows, geo, $z, out),
-                    4 => self.solve_impl::<$s, 4>(p, y0, rows, geo, $z, out),
-                    5 => self.solve_impl::<$s, 5>(p, y0, rows, geo, $z, out),
-                    6 => self.solve_impl::<$s, 6>(p, y0, rows, geo, $z, out),
-                    7 => self.solve_impl::<$s, 7>(p, y0, rows, geo, $z, out),
-                    8 => self.solve_impl::<$s, 8>(p, y0, rows, geo, $z, out),
+                    3 => self.solve_impl::<$s, 3>(p, y0, rows, geo, $cast(last), prev, out),
+                    4 => self.solve_impl::<$s, 4>(p, y0, rows, geo, $cast(last), prev, out),
+                    5 => self.solve_impl::<$s, 5>(p, y0, rows, geo, $cast(last), prev, out),
+                    6 => self.solve_impl::<$s, 6>(p, y0, rows, geo, $cast(last), prev, out),
+                    7 => self.solve_impl::<$s, 7>(p, y0, rows, geo, $cast(last), prev, out),
+                    8 => self.solve_impl::<$s, 8>(p, y0, rows, geo, $cast(last), prev, out),
                     _ => Err(Error::InvalidConfig("feature count")),
                 }
-            };
+            }};
+        }
+        fn as_f32(z: &[f32]) -> &[f32] {
+            z
+        }
+        fn as_f16_bits(z: &[f32]) -> &[u16] {
+            bytemuck::cast_slice(z)
         }
         match self.cfg.storage {
-            Storage::F32 => go!(f32, z),
-            Storage::F16 => go!(u16, bytemuck::cast_slice(z)),
+            Storage::F32 => go!(f32, as_f32),
+            Storage::F16 => go!(u16, as_f16_bits),
         }
     }
 
+    /// [`Walr::solve_rows`] for storage `S` and `M` features: the fit of
+    /// `z` at every pixel of the rows, blended with the fit of `prev`'s sums
+    /// (weight `w`) when given.
+    #[allow(clippy::too_many_arguments)]
     fn solve_impl<S: Store, const M: usize>(
         &self,
         p: &Prepared,
@@ -87,10 +106,11 @@ impl Walr {
         rows: usize,
         geo: &[f32],
         z: &[S],
+        prev: Option<(&[S], f32)>,
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
         let w = self.width;
-        let (gp, kp, zl, ps) = (self.geo_planes(), self.planes(), self.z_row_values(), self.plane_stride());
+        let zl = self.z_row_values();
         let mut rep = Report::default();
         let scale = p.light_scale;
         let clamp = self.cfg.clamp_negative;
@@ -106,57 +126,18 @@ impl Walr {
         };
         for r in 0..rows {
             let y = y0 + r;
-            let zrow = &z[y * zl..(y + 1) * zl];
-            let grow = &geo[y * gp * ps..(y + 1) * gp * ps];
+            let grow = &geo[y * self.geo_planes() * self.plane_stride()..(y + 1) * self.geo_planes() * self.plane_stride()];
             let mut x0 = 0;
             while x0 < w {
                 let n = if simd && x0 + 8 <= w { 8 } else { 1 };
-                let mut res = [[0f32; 8]; 3];
-                if n == 8 {
-                    let mut zv = [f32x8::ZERO; 64];
-                    for k in 0..kp {
-                        zv[k] = S::load8(zrow, k * ps + x0);
-                    }
-                    // sums → averages (eq. 6: XX̄ = Σ w X Xᵀ / Σ w)
-                    let wsum = zv[kp - 1];
-                    let inv = wsum.simd_gt(f32x8::ZERO).select(f32x8::ONE / wsum, f32x8::ZERO);
-                    for k in 0..kp - 1 {
-                        zv[k] *= inv;
-                    }
-                    let mut xv = [f32x8::ONE; M];
-                    // unknown geometry (NaN/Inf guides, code −1): evaluate at the
-                    // window's mean features, i.e. output the weighted mean light
-                    let unknown = <f32 as Store>::load8(grow, G_VALID * ps + x0).simd_lt(f32x8::ZERO);
-                    for q in 1..M {
-                        xv[q] = unknown.select(zv[q - 1], <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * ps + x0));
-                    }
-                    rep.fallback_pixels += unknown.to_bitmask().count_ones() as u64;
-                    let yv = solve_pixel::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(self.cfg.epsilon));
-                    let empty = zv[kp - 1].simd_le(f32x8::ZERO);
-                    rep.fallback_pixels += empty.to_bitmask().count_ones() as u64;
+                let (mut res, fallback) = self.fit_group::<S, M>(&z[y * zl..(y + 1) * zl], grow, x0, n);
+                rep.fallback_pixels += fallback;
+                if let Some((zp, wp)) = prev {
+                    // the previous window's fit (its fallbacks are the same pixels' or fewer)
+                    let (rp, _) = self.fit_group::<S, M>(&zp[y * zl..(y + 1) * zl], grow, x0, n);
+                    let (a, b) = (f32x8::splat(1.0 - wp), f32x8::splat(wp));
                     for c in 0..3 {
-                        res[c] = empty.select(f32x8::ZERO, yv[c]).to_array();
-                    }
-                } else {
-                    let mut zs = [0f32; 64];
-                    for k in 0..kp {
-                        zs[k] = S::get(zrow, k * ps + x0);
-                    }
-                    let inv = if zs[kp - 1] > 0.0 { 1.0 / zs[kp - 1] } else { 0.0 };
-                    for k in 0..kp - 1 {
-                        zs[k] *= inv;
-                    }
-                    let mut xs = [1f32; M];
-                    let unknown = grow[G_VALID * ps + x0] < 0.0;
-                    for q in 1..M {
-                        xs[q] = if unknown { zs[q - 1] } else { grow[(GEO_FIXED + q - 1) * ps + x0] };
-                    }
-                    rep.fallback_pixels += unknown as u64;
-                    let ys = solve_pixel::<f32, M>(&zs[..kp], &xs, self.cfg.epsilon);
-                    let empty = !(zs[kp - 1] > 0.0);
-                    rep.fallback_pixels += empty as u64;
-                    for c in 0..3 {
-                        res[c][0] = if empty { 0.0 } else { ys[c] };
+                        res[c] = (a * f32x8::from(res[c]) + b * f32x8::from(rp[c])).to_array();
                     }
                 }
                 let planes = res.map(|c| c.map(fix));
@@ -166,5 +147,64 @@ impl Walr {
             }
         }
         Ok(rep)
+    }
+
+    /// The light of pixels `x0..x0 + n` (n = 8: in lanes; n = 1: scalar) of
+    /// one row from its sums `zrow` and geometry row `grow`, and how many of
+    /// them fell back (unknown geometry: the window's mean light; an empty
+    /// window: 0).
+    #[inline(always)]
+    fn fit_group<S: Store, const M: usize>(&self, zrow: &[S], grow: &[f32], x0: usize, n: usize) -> ([[f32; 8]; 3], u64) {
+        let (kp, ps) = (self.planes(), self.plane_stride());
+        let mut res = [[0f32; 8]; 3];
+        let mut fallback = 0u64;
+        if n == 8 {
+            let mut zv = [f32x8::ZERO; 64];
+            for k in 0..kp {
+                zv[k] = S::load8(zrow, k * ps + x0);
+            }
+            // sums → averages (eq. 6: XX̄ = Σ w X Xᵀ / Σ w)
+            let wsum = zv[kp - 1];
+            let inv = wsum.simd_gt(f32x8::ZERO).select(f32x8::ONE / wsum, f32x8::ZERO);
+            for k in 0..kp - 1 {
+                zv[k] *= inv;
+            }
+            let mut xv = [f32x8::ONE; M];
+            // unknown geometry (NaN/Inf guides, code −1): evaluate at the
+            // window's mean features, i.e. output the weighted mean light
+            let unknown = <f32 as Store>::load8(grow, G_VALID * ps + x0).simd_lt(f32x8::ZERO);
+            for q in 1..M {
+                xv[q] = unknown.select(zv[q - 1], <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * ps + x0));
+            }
+            fallback += unknown.to_bitmask().count_ones() as u64;
+            let yv = solve_pixel::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(self.cfg.epsilon));
+            let empty = zv[kp - 1].simd_le(f32x8::ZERO);
+            fallback += empty.to_bitmask().count_ones() as u64;
+            for c in 0..3 {
+                res[c] = empty.select(f32x8::ZERO, yv[c]).to_array();
+            }
+        } else {
+            let mut zs = [0f32; 64];
+            for k in 0..kp {
+                zs[k] = S::get(zrow, k * ps + x0);
+            }
+            let inv = if zs[kp - 1] > 0.0 { 1.0 / zs[kp - 1] } else { 0.0 };
+            for k in 0..kp - 1 {
+                zs[k] *= inv;
+            }
+            let mut xs = [1f32; M];
+            let unknown = grow[G_VALID * ps + x0] < 0.0;
+            for q in 1..M {
+                xs[q] = if unknown { zs[q - 1] } else { grow[(GEO_FIXED + q - 1) * ps + x0] };
+            }
+            fallback += unknown as u64;
+            let ys = solve_pixel::<f32, M>(&zs[..kp], &xs, self.cfg.epsilon);
+            let empty = !(zs[kp - 1] > 0.0);
+            fallback += empty as u64;
+            for c in 0..3 {
+                res[c][0] = if empty { 0.0 } else { ys[c] };
+            }
+        }
+        (res, fallback)
     }
 }
