@@ -562,7 +562,6 @@ impl Raw {
     }
 }
 
-/// A scratch pointer must be non-NULL and 8-byte aligned (f64 inside).
 /// The frame and output image behind the caller's pointers;
 /// LRD_STATUS_NULL_POINTER if either is NULL.
 ///
@@ -573,6 +572,7 @@ unsafe fn frame_and_out<'a>(frame: *const LrdFrame, out: *const LrdImageMut) -> 
     unsafe { Ok((frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?, out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?)) }
 }
 
+/// A scratch pointer must be non-NULL and 8-byte aligned (f64 inside).
 fn check_scratch(scratch: *mut c_void) -> Result<(), LrdStatus> {
     if scratch.is_null() {
         Err(LRD_STATUS_NULL_POINTER)

@@ -335,10 +335,9 @@ impl Walr {
     fn field_len(&self) -> usize {
         (self.width * self.height).div_ceil(4)
     }
-    /// Which averages buffer iteration `t` reads (it writes the other one);
-    /// The buffer iteration `t` reads (and iteration `t − 1` wrote):
-    /// [`Walr::solve_rows`] reads buffer `buffer_of(iterations)`, and with
-    /// [`WalrConfig::previous_weight`] also `buffer_of(iterations − 1)`.
+    /// Which sums buffer iteration `t` reads (iteration `t − 1` wrote it; `t`
+    /// writes the other one). [`Walr::solve_rows`] reads `buffer_of(iterations)`
+    /// and, with [`WalrConfig::previous_weight`], also `buffer_of(iterations − 1)`.
     pub fn buffer_of(t: u8) -> usize {
         (t % 2) as usize
     }
