@@ -1,6 +1,6 @@
 //! Times WALR's stages separately at 1920×1080 on one thread (a profiling
 //! aid, not a benchmark: `cargo bench --bench walr` is the benchmark).
-//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo run --release --example walr_stages [W H] [trace|notrace] [f16]`
+//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo run --release --example walr_stages [W H] [trace|notrace] [f16] [fixed]` (fixed: the fixed blend of the last two windows, not the adaptive one)
 
 use lrdenoise::walr::{Parts, Storage, Walr, WalrConfig};
 use lrdenoise::*;
@@ -30,7 +30,8 @@ fn main() {
     });
     for tracing in [false, true].into_iter().filter(|t| only.is_none_or(|o| o == *t)) {
         let storage = if std::env::args().any(|a| a == "f16") { Storage::F16 } else { Storage::F32 };
-        let wl = Walr::new(WalrConfig { tracing, storage, ..Default::default() }, w, h).unwrap();
+        let adaptive_blend = !std::env::args().any(|a| a == "fixed");
+        let wl = Walr::new(WalrConfig { tracing, storage, adaptive_blend, ..Default::default() }, w, h).unwrap();
         let mut scratch = vec![0f32; wl.scratch_len()];
         // fastest of the repetitions per stage: prepare, features, 4 iterations, solve, total
         let mut best = [f64::INFINITY; 8];
@@ -54,7 +55,18 @@ fn main() {
             }
             let t3 = Instant::now();
             let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-            wl.solve_rows(&prep, 0, geo, [z0, z1], &mut ov).unwrap();
+            if wl.blends_adaptively() {
+                // T = 4: the last sums are in z0, the previous window's in z1
+                let a = Instant::now();
+                wl.fit_rows(0, geo, z0, z1).unwrap();
+                let b = Instant::now();
+                wl.blend_rows(&prep, 0, z1, z0, &mut ov).unwrap();
+                if std::env::var_os("WALR_BLEND_TIMES").is_some() {
+                    eprintln!("fit_rows {:.2} blend_rows {:.2} ms", (b - a).as_secs_f64() * 1e3, b.elapsed().as_secs_f64() * 1e3);
+                }
+            } else {
+                wl.solve_rows(&prep, 0, geo, [z0, z1], &mut ov).unwrap();
+            }
             let t4 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
             let this = [ms(t0, t1), ms(t1, t2), its[0], its[1], its[2], its[3], ms(t3, t4), ms(t0, t4)];

@@ -286,7 +286,8 @@ fn atrous_counts_every_sample_once() {
             let (wl, z, ls) = averages(cfg, &f);
             let kp = wl.planes();
             let r = (3i64.pow(iterations as u32) - 1) / 2;
-            let k_y0 = kp - 1 - 3 * wl.feature_count();
+            // (W last, the energy plane before it with the adaptive blend)
+            let k_y0 = kp - 1 - wl.blends_adaptively() as usize - 3 * wl.feature_count();
             for y in 0..h as i64 {
                 for x in 0..w as i64 {
                     let mut samples = vec![];
@@ -333,8 +334,10 @@ fn walr_equals_refwlr_without_edges() {
     // Every weight 1, no tracing, no replacement: the à-trous averages are
     // the window averages REFWLR sums directly (over the same samples in the
     // interior), so the two regressions agree to f32 rounding there.
-    // (the default blends in the previous iteration's window; 0 is one window)
-    for previous_weight in [lrdenoise::walr::DEFAULT_PREVIOUS_WEIGHT, 0.0, 1.0] {
+    // (the default blends the last two windows adaptively; the fixed blend at
+    // 0 is one window; the adaptive blend averages its statistics over the
+    // small window, so its interior is that much smaller)
+    for (adaptive_blend, previous_weight) in [(true, 0.0), (false, lrdenoise::walr::DEFAULT_PREVIOUS_WEIGHT), (false, 0.0), (false, 1.0)] {
         for &(w, h, t) in &[(40, 32, 2u8), (64, 40, 3)] {
             let f = scene(w, h, 11, 0.6, false, false).f;
             let cfg = WalrConfig {
@@ -343,12 +346,14 @@ fn walr_equals_refwlr_without_edges() {
                 replace: false,
                 storage: Storage::F32,
                 previous_weight,
+                adaptive_blend,
                 ..flat_weights(WalrConfig::default())
             };
             let (a, _) = run(cfg, &f, 0);
             let b = run_ref(cfg, &f);
-            let worst = worst_interior_relative(&a, &b, w, h, (3usize.pow(t as u32) - 1) / 2);
-            assert!(worst < 1e-3, "{w}x{h} previous_weight {previous_weight}: worst relative difference {worst}");
+            let margin = (3usize.pow(t as u32) - 1) / 2 + if adaptive_blend { (3usize.pow(t as u32 - 1) - 1) / 2 } else { 0 };
+            let worst = worst_interior_relative(&a, &b, w, h, margin);
+            assert!(worst < 1e-3, "{w}x{h} adaptive {adaptive_blend} previous_weight {previous_weight}: worst relative difference {worst}");
         }
     }
 }
@@ -410,9 +415,9 @@ fn thin_pole_stops_light_with_tracing_only() {
 fn simd_matches_scalar() {
     for &(w, h) in &[(67, 45), (256, 20)] {
         let s = scene(w, h, 8, 0.6, true, true);
-        for storage in [Storage::F16, Storage::F32] {
+        for (storage, adaptive_blend) in [(Storage::F16, true), (Storage::F32, true), (Storage::F32, false)] {
             for tracing in [false, true] {
-                let cfg = WalrConfig { storage, tracing, ..WalrConfig::default() };
+                let cfg = WalrConfig { storage, tracing, adaptive_blend, ..WalrConfig::default() };
                 let (a, _) = run(cfg, &s.f, 3);
                 let (b, _) = run(WalrConfig { kernel: Kernel::Scalar, ..cfg }, &s.f, 3);
                 if !tracing {
@@ -430,10 +435,81 @@ fn simd_matches_scalar() {
 }
 
 #[test]
+fn adaptive_blend_matches_f64_box_oracle() {
+    // Pass 2 against an obvious f64 version: each statistic averaged over the
+    // (2r+1)² box clipped to the frame, w = (var_L + b²) / (var_S + var_L + b²)
+    // with b² = max(d² − (var_S − var_L)⁺, 0), light = fit_L + w (fit_S − fit_L).
+    for &(w, h, t) in &[(1, 1, 2u8), (7, 3, 2), (29, 17, 3), (40, 45, 4)] {
+        for storage in [Storage::F32, Storage::F16] {
+            let s = scene(w, h, 5, 0.6, true, true);
+            let cfg = WalrConfig { iterations: t, storage, ..WalrConfig::default() };
+            let (whole, _) = run(cfg, &s.f, 1);
+            let wl = Walr::new(cfg, w, h).unwrap();
+            let mut scratch = vec![0f32; wl.scratch_len()];
+            let fr = s.f.frame(cfg.guides);
+            let cf = wl.check_frame(&fr).unwrap();
+            let prep = wl.prepare(&cf, 1);
+            let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = wl.parts(&mut scratch).unwrap();
+            wl.features_rows(&cf, &prep, 0, geo, z0).unwrap();
+            for t in 0..t {
+                if Walr::buffer_of(t) == 0 {
+                    wl.iterate_rows(t, &prep, 0, geo, s0, z0, s1, z1).unwrap();
+                } else {
+                    wl.iterate_rows(t, &prep, 0, geo, s1, z1, s0, z0).unwrap();
+                }
+            }
+            let (last, prev) = if Walr::buffer_of(t) == 0 { (z0, z1) } else { (z1, z0) };
+            wl.fit_rows(0, geo, last, prev).unwrap();
+            let (zl, ps) = (wl.z_row_len(), wl.plane_stride());
+            let at = |k: usize, x: usize, y: usize| -> f64 {
+                match storage {
+                    Storage::F32 => prev[y * zl + k * ps + x] as f64,
+                    Storage::F16 => half::f16::from_bits(bytemuck::cast_slice::<f32, u16>(prev)[2 * y * zl + k * ps + x]).to_f64(),
+                }
+            };
+            let r = wl.blend_radius() as i64;
+            assert_eq!(r, (3i64.pow(t as u32 - 1) - 1) / 2);
+            let mut worst = 0f64;
+            for y in 0..h {
+                for x in 0..w {
+                    let mut st = [0f64; 3];
+                    let mut n = 0.0;
+                    for yy in (y as i64 - r).max(0)..=(y as i64 + r).min(h as i64 - 1) {
+                        for xx in (x as i64 - r).max(0)..=(x as i64 + r).min(w as i64 - 1) {
+                            for (k, v) in st.iter_mut().enumerate() {
+                                *v += at(6 + k, xx as usize, yy as usize);
+                            }
+                            n += 1.0;
+                        }
+                    }
+                    let [d2, vs, vl] = st.map(|v| v / n);
+                    let b2 = (d2 - (vs - vl).max(0.0)).max(0.0);
+                    let wt = if vs + vl + b2 > 0.0 { ((vl + b2) / (vs + vl + b2)).clamp(0.0, 1.0) } else { 0.0 };
+                    for c in 0..3 {
+                        let (fl, fs) = (at(c, x, y), at(3 + c, x, y));
+                        let want = ((fl + wt * (fs - fl)) * prep.light_scale as f64).max(0.0);
+                        let got = whole[3 * (y * w + x) + c] as f64;
+                        worst = worst.max((got - want).abs() / want.abs().max(1e-3));
+                    }
+                }
+            }
+            let tol = 1e-5;
+            assert!(worst < tol, "{w}x{h} T={t} {storage:?}: worst relative difference {worst}");
+        }
+    }
+}
+
+#[test]
 fn bands_are_bit_identical_to_whole_frame() {
+    // the default (adaptive blend: two passes after the iterations) and the fixed blend (one solve)
+    for adaptive_blend in [true, false] {
+        bands_case(WalrConfig { adaptive_blend, ..Default::default() });
+    }
+}
+
+fn bands_case(cfg: WalrConfig) {
     let s = scene(61, 47, 9, 0.6, true, true);
     let f = &s.f;
-    let cfg = WalrConfig::default();
     let (whole, _) = run(cfg, f, 2);
     let wl = Walr::new(cfg, f.w, f.h).unwrap();
     let mut scratch = vec![0f32; wl.scratch_len()];
@@ -457,11 +533,32 @@ fn bands_are_bit_identical_to_whole_frame() {
             wl.iterate_rows(t, &prep, a, geo, sin, zin, &mut sout[a * w..b * w], &mut zout[a * zl..b * zl]).unwrap();
         }
     }
-    let zr = [&*z0, &*z1];
     let mut view = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
-    for k in 0..cuts.len() - 1 {
-        let (a, b) = (cuts[k], cuts[k + 1]);
-        wl.solve_rows(&prep, a, geo, zr, &mut view.rows(a, b - a).unwrap()).unwrap();
+    if wl.blends_adaptively() {
+        let t = cfg.iterations;
+        let (last, prev) = if Walr::buffer_of(t) == 0 { (&mut *z0, &mut *z1) } else { (&mut *z1, &mut *z0) };
+        // pass 1 on every band (reverse order), then pass 2
+        for k in (0..cuts.len() - 1).rev() {
+            let (a, b) = (cuts[k], cuts[k + 1]);
+            wl.fit_rows(a, geo, &last[a * zl..b * zl], &mut prev[a * zl..b * zl]).unwrap();
+        }
+        assert!(matches!(wl.solve_rows(&prep, 0, geo, [&*last, &*prev], &mut view), Err(Error::Unsupported(_))));
+        for k in 0..cuts.len() - 1 {
+            let (a, b) = (cuts[k], cuts[k + 1]);
+            wl.blend_rows(&prep, a, prev, &mut last[a * zl..b * zl], &mut view.rows(a, b - a).unwrap()).unwrap();
+        }
+        // a band of the wrong length is a typed error
+        assert!(matches!(
+            wl.blend_rows(&prep, 0, prev, &mut last[..3 * zl], &mut view.rows(0, 2).unwrap()),
+            Err(Error::InvalidTile { .. })
+        ));
+    } else {
+        let zr = [&*z0, &*z1];
+        for k in 0..cuts.len() - 1 {
+            let (a, b) = (cuts[k], cuts[k + 1]);
+            wl.solve_rows(&prep, a, geo, zr, &mut view.rows(a, b - a).unwrap()).unwrap();
+        }
+        assert!(matches!(wl.fit_rows(0, geo, &z0[..zl], &mut z1[..zl]), Err(Error::Unsupported(_))));
     }
     assert!(whole.iter().zip(&out).all(|(x, y)| x.to_bits() == y.to_bits()));
     // a band of the wrong length is a typed error
@@ -740,7 +837,9 @@ fn walr_equals_refwlr_without_edges_extra_guide() {
         };
         let (a, _) = run(cfg, &f, 0);
         let b = run_ref(cfg, &f);
-        let worst = worst_interior_relative(&a, &b, w, h, (3usize.pow(t as u32) - 1) / 2);
+        // the large window, and the box the adaptive blend averages its statistics over
+        let margin = (3usize.pow(t as u32) - 1) / 2 + (3usize.pow(t as u32 - 1) - 1) / 2;
+        let worst = worst_interior_relative(&a, &b, w, h, margin);
         assert!(worst < 1e-3, "{w}x{h}: worst relative difference {worst}");
         let e = rmse(&a, &f.clean);
         let e3 = rmse(&run(WalrConfig { guides: NDP, ..cfg }, &f, 0).0, &f.clean);

@@ -243,8 +243,9 @@ fn report_variants() -> Vec<Variant> {
         Variant::method("walr", FlrArgs::default()),
         Variant::method("walr", FlrArgs { no_tracing: true, ..Default::default() }),
         Variant::method("walr", FlrArgs { storage: Some("f16".into()), ..Default::default() }),
-        Variant::method("walr", FlrArgs { previous_weight: Some(0.0), ..Default::default() }),
-        Variant::method("walr", FlrArgs { iterations: Some(3), previous_weight: Some(0.0), ..Default::default() }),
+        Variant::method("walr", FlrArgs { previous_weight: Some("0.6".into()), ..Default::default() }),
+        Variant::method("walr", FlrArgs { previous_weight: Some("0".into()), ..Default::default() }),
+        Variant::method("walr", FlrArgs { iterations: Some(3), previous_weight: Some("0".into()), ..Default::default() }),
         Variant::method("walr-temporal", FlrArgs::default()),
         Variant::method("flnr", FlrArgs::default()),
     ]

@@ -66,9 +66,9 @@ pub struct FlrArgs {
     /// WALR: pivot floor of the per-pixel Cholesky
     #[arg(long)]
     pub epsilon: Option<f32>,
-    /// WALR: weight w of the previous iteration's fit (a window a third as wide) in the output, (1 - w) fit_T + w fit_T-1 (0..=1; 0 = one window)
+    /// WALR: weight w of the previous iteration's fit (a window a third as wide) in the output, (1 - w) fit_T + w fit_T-1 (0..=1; 0 = one window), or "adaptive": w per pixel from the two fits' estimated errors, averaged over the small window
     #[arg(long)]
-    pub previous_weight: Option<f32>,
+    pub previous_weight: Option<String>,
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
@@ -270,8 +270,13 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
     if let Some(v) = a.epsilon {
         c.epsilon = v;
     }
-    if let Some(v) = a.previous_weight {
-        c.previous_weight = v;
+    match a.previous_weight.as_deref() {
+        None => {}
+        Some("adaptive") => c.adaptive_blend = true,
+        Some(v) => {
+            c.previous_weight = v.parse().map_err(|_| format!("--previous-weight: '{v}' is not a number in 0..=1 or 'adaptive'"))?;
+            c.adaptive_blend = false;
+        }
     }
     if let Some(s) = &a.storage {
         c.storage = match s.as_str() {
@@ -290,7 +295,12 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
         Storage::F32 => "f32",
     };
     let tr = if c.tracing { "" } else { " --no-tracing" };
-    let pw = if c.previous_weight > 0.0 && c.iterations > 1 { format!(" pw{}", c.previous_weight) } else { String::new() };
+    let pw = match (c.iterations > 1, c.adaptive_blend) {
+        (true, true) => " pw-adaptive".to_string(),
+        (true, false) if c.previous_weight > 0.0 => format!(" pw{}", c.previous_weight),
+        _ => String::new(),
+    };
+    let pw_flag = if c.adaptive_blend { "adaptive".to_string() } else { c.previous_weight.to_string() };
     let label = format!("{name} {} t{}{pw} {st}{}", short_guides(&c.guides), c.iterations, if c.tracing { "" } else { " notrace" });
     let flags = format!(
         "--method {name} --guides {} --iterations {} --near {} --far {} --sdf-step {} --epsilon {:e} --previous-weight {} --storage {st}{tr}",
@@ -300,7 +310,7 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
         c.far,
         c.sdf_step,
         c.epsilon,
-        c.previous_weight
+        pw_flag
     );
     (label, flags)
 }

@@ -256,8 +256,8 @@ fn walr_single_frame_temporal_flags_and_errors() {
     let seq = data("seq_box_7");
     let (ok, so, e) = lrd(&["eval", &seq, "--methods", "walr,walr-temporal", "--runs", "5", "--json", json.to_str().unwrap()]);
     assert!(ok, "{e}");
-    // the default blends in the previous iteration's window (pw0.6)
-    assert!(so.contains("walr-temporal NDP t4 pw0.6 f32"), "{so}");
+    // the default blends the last two windows adaptively
+    assert!(so.contains("walr-temporal NDP t4 pw-adaptive f32"), "{so}");
     let recs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let recs = recs.as_array().unwrap();
     let get = |method: &str, frame: &str| recs.iter().find(|r| r["method"] == method && r["frame"] == frame).unwrap().clone();
@@ -281,6 +281,13 @@ fn walr_single_frame_temporal_flags_and_errors() {
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--storage", "f8"], &["f16 or f32"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--near", "0.5", "--far", "0.1"], &["near/far"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--previous-weight", "1.5"], &["previous_weight"]);
+    fails_with(
+        &["denoise", &room, "-o", x, "--method", "walr", "--previous-weight", "auto"],
+        &["'auto' is not a number in 0..=1 or 'adaptive'"],
+    );
+    // the fixed blend (the default before the adaptive one)
+    let (ok, so, e) = lrd(&["eval", &room, "--methods", "walr", "--previous-weight", "0.6", "--runs", "5"]);
+    assert!(ok && so.contains("walr NDP t4 pw0.6 f32"), "{e}{so}");
     fails_with(&["denoise", &room, "-o", x, "--method", "bmfr", "--previous-weight", "0.5"], &["WALR flags"]);
     // one window (the paper's): no pw in the label
     let (ok, so, e) = lrd(&["eval", &room, "--methods", "walr", "--previous-weight", "0", "--runs", "5"]);

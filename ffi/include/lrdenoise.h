@@ -527,6 +527,11 @@ typedef struct LrdWalrConfig {
    */
   float previous_weight;
   /**
+   * Blend the two windows per pixel by their estimated errors (true by
+   * default); previous_weight is then ignored.
+   */
+  bool adaptive_blend;
+  /**
    * Temporal pipeline: frames after which accumulation becomes exponential (16).
    */
   float max_samples;
@@ -724,7 +729,8 @@ LrdStatus lrd_bmfr_denoise_temporal(const struct LrdBmfrConfig *config,
 
 /**
  * WALR's defaults: normal + depth + position, T = 4, tracing and replacement
- * on, thresholds 0.5 % / 1 %, f32 averages, and the pipeline's settings.
+ * on, thresholds 0.5 % / 1 %, f32 averages, the adaptive blend of the last
+ * two windows, and the pipeline's settings.
  */
 struct LrdWalrConfig lrd_walr_config_default(void);
 

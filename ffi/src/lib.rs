@@ -1209,6 +1209,9 @@ pub struct LrdWalrConfig {
     /// Weight w of the previous iteration's fit in the output, (1 − w)·fit_T +
     /// w·fit_{T−1}: 0..=1, 0 = one window (default: see lrd_walr_config_default).
     pub previous_weight: f32,
+    /// Blend the two windows per pixel by their estimated errors (true by
+    /// default); previous_weight is then ignored.
+    pub adaptive_blend: bool,
     /// Temporal pipeline: frames after which accumulation becomes exponential (16).
     pub max_samples: f32,
     /// Lowest blend weight of the new frame in the post pass (0.1).
@@ -1238,6 +1241,7 @@ fn walr_config(c: &LrdWalrConfig) -> Result<lrdenoise_core::WalrConfig, LrdStatu
         clamp_negative: c.clamp_negative,
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
         previous_weight: c.previous_weight,
+        adaptive_blend: c.adaptive_blend,
         temporal: TemporalConfig {
             max_samples: c.max_samples,
             post_alpha: c.post_alpha,
@@ -1258,7 +1262,8 @@ fn walr_plan(c: *const LrdWalrConfig, width: u32, height: u32) -> Result<lrdenoi
 }
 
 /// WALR's defaults: normal + depth + position, T = 4, tracing and replacement
-/// on, thresholds 0.5 % / 1 %, f32 averages, and the pipeline's settings.
+/// on, thresholds 0.5 % / 1 %, f32 averages, the adaptive blend of the last
+/// two windows, and the pipeline's settings.
 #[cfg(feature = "walr")]
 #[no_mangle]
 pub extern "C" fn lrd_walr_config_default() -> LrdWalrConfig {
@@ -1280,6 +1285,7 @@ pub extern "C" fn lrd_walr_config_default() -> LrdWalrConfig {
         clamp_negative: d.clamp_negative,
         scalar_kernels: false,
         previous_weight: d.previous_weight,
+        adaptive_blend: d.adaptive_blend,
         max_samples: t.max_samples,
         post_alpha: t.post_alpha,
         clip_gamma: t.clip_gamma,

@@ -20,6 +20,7 @@ fuzz_target!(|d: &[u8]| {
         storage: if d[4] & 4 == 0 { Storage::F32 } else { Storage::F16 },
         kernel: if d[4] & 8 == 0 { Kernel::Simd } else { Kernel::Scalar },
         previous_weight: if d[4] & 16 == 0 { 0.0 } else { 0.5 },
+        adaptive_blend: d[4] & 32 == 0,
         sdf_step: (d[5] % 5) as f32 * 0.25,
         near: (d[6] % 8) as f32 * 0.005,
         far: (d[6] % 8) as f32 * 0.005 + 0.001 + (d[7] % 8) as f32 * 0.01,
@@ -73,10 +74,22 @@ fuzz_target!(|d: &[u8]| {
                 wl.iterate_rows(t, &prep, a, geo, sin, zin, &mut sout[a * w..b * w], &mut zout[a * zl..b * zl]).unwrap();
             }
         }
-        let zr = [&*z0, &*z1];
-        for &(a, b) in &bands {
-            let mut band = ImageViewMut::interleaved(&mut banded[3 * w * a..3 * w * b], w, b - a, 3).unwrap();
-            wl.solve_rows(&prep, a, geo, zr, &mut band).unwrap();
+        if wl.blends_adaptively() {
+            let t = cfg.iterations;
+            let (last, prev) = if Walr::buffer_of(t) == 0 { (&mut *z0, &mut *z1) } else { (&mut *z1, &mut *z0) };
+            for &(a, b) in &bands {
+                wl.fit_rows(a, geo, &last[a * zl..b * zl], &mut prev[a * zl..b * zl]).unwrap();
+            }
+            for &(a, b) in &bands {
+                let mut band = ImageViewMut::interleaved(&mut banded[3 * w * a..3 * w * b], w, b - a, 3).unwrap();
+                wl.blend_rows(&prep, a, prev, &mut last[a * zl..b * zl], &mut band).unwrap();
+            }
+        } else {
+            let zr = [&*z0, &*z1];
+            for &(a, b) in &bands {
+                let mut band = ImageViewMut::interleaved(&mut banded[3 * w * a..3 * w * b], w, b - a, 3).unwrap();
+                wl.solve_rows(&prep, a, geo, zr, &mut band).unwrap();
+            }
         }
     }
     assert!(whole.iter().zip(&banded).all(|(a, b)| a.to_bits() == b.to_bits()));

@@ -341,13 +341,19 @@ impl Walr {
         // the plane count is a compile-time constant, so the plane loop unrolls
         type Row<S> = fn(&Ctx<'_, S>, usize, usize, &mut [S], &mut [u8], &mut Chunk, &mut Extras);
         type Lanes<S> = fn(&Ctx<'_, S>, usize, usize, usize, usize, &mut [S], &mut [u8], &mut Extras);
-        let (row, lanes): (Row<S>, Lanes<S>) = match self.m {
-            3 => (row8::<S, 15>, gather_lanes::<S, 15>),
-            4 => (row8::<S, 22>, gather_lanes::<S, 22>),
-            5 => (row8::<S, 30>, gather_lanes::<S, 30>),
-            6 => (row8::<S, 39>, gather_lanes::<S, 39>),
-            7 => (row8::<S, 49>, gather_lanes::<S, 49>),
-            _ => (row8::<S, 60>, gather_lanes::<S, 60>),
+        let (row, lanes): (Row<S>, Lanes<S>) = match self.planes() {
+            15 => (row8::<S, 15>, gather_lanes::<S, 15>),
+            16 => (row8::<S, 16>, gather_lanes::<S, 16>),
+            22 => (row8::<S, 22>, gather_lanes::<S, 22>),
+            23 => (row8::<S, 23>, gather_lanes::<S, 23>),
+            30 => (row8::<S, 30>, gather_lanes::<S, 30>),
+            31 => (row8::<S, 31>, gather_lanes::<S, 31>),
+            39 => (row8::<S, 39>, gather_lanes::<S, 39>),
+            40 => (row8::<S, 40>, gather_lanes::<S, 40>),
+            49 => (row8::<S, 49>, gather_lanes::<S, 49>),
+            50 => (row8::<S, 50>, gather_lanes::<S, 50>),
+            60 => (row8::<S, 60>, gather_lanes::<S, 60>),
+            _ => (row8::<S, 61>, gather_lanes::<S, 61>),
         };
         // (allocated once per band: fresh ones per group would be memsets)
         let mut chunk =

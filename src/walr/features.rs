@@ -5,6 +5,7 @@
 use super::store::Store;
 use super::{CheckedFrame, Prepared, Report, Storage, Walr, GEO_FIXED, G_INV_SCALE, G_N, G_P, G_VALID, MAX_FEATURES};
 use crate::error::Error;
+use crate::kernels::LUMA;
 
 /// Octahedral map of a direction in a local frame whose third axis is the
 /// pole (Cigolle et al. 2014), remapped from [−1, 1]² to [0, 1]². Continuous
@@ -43,6 +44,21 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
 /// Stored light is clamped to ± this many frame means: within f16's range,
 /// and a 1e30 firefly cannot swamp its 81×81 window by more than ~9 means.
 pub const LIGHT_LIMIT: f32 = 60000.0;
+
+/// The energy plane holds `min(ℓ², ENERGY_MAX) · ENERGY_SCALE` per pixel (ℓ
+/// = [`LUMA`]·y in light-scale units): scaled and capped so that f16 storage
+/// holds it (a value above 4096 × the frame's mean light only counts as
+/// 4096 in the noise estimate).
+pub const ENERGY_SCALE: f32 = 1.0 / 256.0;
+/// Cap of `ℓ²` in the energy plane (see [`ENERGY_SCALE`]).
+pub const ENERGY_MAX: f32 = 16_777_216.0;
+
+/// One pixel's energy-plane value (the scalar form of the lanes' operations).
+#[inline(always)]
+pub fn energy(y: [f32; 3]) -> f32 {
+    let l = y[0] * LUMA[0] + y[1] * LUMA[1] + y[2] * LUMA[2];
+    (l * l).min(ENERGY_MAX) * ENERGY_SCALE
+}
 
 /// Subsampling step of [`Walr::prepare`] in x and y.
 const PREP_STEP: usize = 4;
@@ -241,6 +257,10 @@ impl Walr {
                 put(yv[c] * xf[q]);
             }
         }
+        if self.blends_adaptively() {
+            let l = yv[0] * f32x8::splat(LUMA[0]) + yv[1] * f32x8::splat(LUMA[1]) + yv[2] * f32x8::splat(LUMA[2]);
+            put((l * l).fast_min(f32x8::splat(ENERGY_MAX)) * f32x8::splat(ENERGY_SCALE));
+        }
         put(wgt);
         (8 - finite.to_bitmask().count_ones(), 8 - ok.to_bitmask().count_ones())
     }
@@ -375,6 +395,9 @@ impl Walr {
                     for q in 0..m {
                         put(yv[c] * x_feat[q]);
                     }
+                }
+                if self.blends_adaptively() {
+                    put(energy(yv));
                 }
                 put(wgt);
                 debug_assert_eq!(k, planes);

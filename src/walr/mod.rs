@@ -21,7 +21,8 @@
 //!
 //! Stages (each callable on any band of rows; bands are independent and
 //! bit-identical to the whole frame): [`Walr::prepare`] (frame-wide constants),
-//! [`Walr::features_rows`], [`Walr::iterate_rows`] × T, [`Walr::solve_rows`].
+//! [`Walr::features_rows`], [`Walr::iterate_rows`] × T, [`Walr::solve_rows`]
+//! (or, with the adaptive blend, [`Walr::fit_rows`] then [`Walr::blend_rows`]).
 //! [`Walr::denoise`] runs them all. [`Walr::reference`] is REFWLR, the slow
 //! exact per-pixel version used as the test oracle, and [`temporal`] the
 //! paper's pipeline around it.
@@ -48,6 +49,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod atrous;
+pub mod blend;
 pub mod features;
 pub mod reference;
 mod regress;
@@ -130,6 +132,12 @@ pub struct WalrConfig {
     /// this costs one more solve). 0..=1; 0 is the paper's single window;
     /// ignored when T = 1.
     pub previous_weight: f32,
+    /// Blend the last two windows per pixel by their estimated errors
+    /// instead of with the fixed `previous_weight` (which is then ignored):
+    /// weights 1 / (bias² + variance), from statistics averaged over the
+    /// small window ([`blend`]). Costs one more stored plane per pixel (the
+    /// light's energy) and a second pass after the solve. Ignored when T = 1.
+    pub adaptive_blend: bool,
     /// Temporal pipeline settings (ignored by the single-frame filter).
     pub temporal: TemporalConfig,
 }
@@ -150,6 +158,7 @@ impl Default for WalrConfig {
             clamp_negative: true,
             kernel: Kernel::Simd,
             previous_weight: DEFAULT_PREVIOUS_WEIGHT,
+            adaptive_blend: true,
             temporal: TemporalConfig::default(),
         }
     }
@@ -295,10 +304,12 @@ impl Walr {
         self.m
     }
     /// Stored values per pixel: the sums behind `m(m+1)/2 − 1` values of XX̄
-    /// (XX̄₀₀ = 1 is implicit) and `3m` of YX̄ — 14 for m = 3 — plus the
+    /// (XX̄₀₀ = 1 is implicit) and `3m` of YX̄ — 14 for m = 3 — then, with the
+    /// adaptive blend ([`Walr::blends_adaptively`]), the luminance energy
+    /// `Σ ℓ²` (its noise estimate, see [`features::energy`]), and last the
     /// sample count (weight sum) W they are divided by.
     pub fn planes(&self) -> usize {
-        self.m * (self.m + 1) / 2 - 1 + 3 * self.m + 1
+        self.m * (self.m + 1) / 2 - 1 + 3 * self.m + self.blends_adaptively() as usize + 1
     }
     /// Distance in values between two planes of a row: the width rounded up
     /// to a multiple of 16 (whole 64-byte lines; f16 rows are whole f32s).
@@ -414,7 +425,15 @@ impl Walr {
                 if Self::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
             self.iterate_rows(t, prep, 0, geo, sin, zin, sout, zout)?;
         }
-        rep += self.solve_rows(prep, 0, geo, [&*z[0], &*z[1]], out)?;
+        if self.blends_adaptively() {
+            let t = self.cfg.iterations;
+            let [za, zb] = &mut z;
+            let (last, prev) = if Self::buffer_of(t) == 0 { (&mut **za, &mut **zb) } else { (&mut **zb, &mut **za) };
+            rep += self.fit_rows(0, geo, last, prev)?;
+            self.blend_rows(prep, 0, prev, last, out)?;
+        } else {
+            rep += self.solve_rows(prep, 0, geo, [&*z[0], &*z[1]], out)?;
+        }
         Ok(rep)
     }
 }

@@ -21,24 +21,38 @@ impl Walr {
         let f = self.check_frame(frame)?;
         self.check_out(out, self.height)?;
         let prep = self.prepare(&f, index);
-        let Parts { geo, z: [z0, _], .. } = self.parts(scratch)?;
+        let Parts { geo, z: [z0, z1], .. } = self.parts(scratch)?;
         let mut rep = self.features_rows(&f, &prep, 0, geo, z0)?;
         let r = match self.cfg.storage {
-            Storage::F32 => self.reference_impl::<f32>(geo, z0, prep.light_scale, out),
-            Storage::F16 => self.reference_impl::<u16>(geo, bytemuck::cast_slice(z0), prep.light_scale, out),
+            Storage::F32 => self.reference_impl::<f32>(geo, z0, z1, prep.light_scale, out),
+            Storage::F16 => self.reference_impl::<u16>(geo, bytemuck::cast_slice(z0), bytemuck::cast_slice_mut(z1), prep.light_scale, out),
         }?;
         rep.fallback_pixels = r;
+        if self.blends_adaptively() {
+            // the per-pixel fits and statistics are in z1, as `Walr::fit_rows` leaves them
+            self.blend_rows(&prep, 0, z1, z0, out)?;
+        }
         Ok(rep)
     }
 
-    fn reference_impl<S: Store>(&self, geo: &[f32], z0: &[S], scale: f32, out: &mut ImageViewMut<'_>) -> Result<u64, Error> {
+    /// The exact fits at every pixel, blended into `out` — or, with the
+    /// adaptive blend, stored into `stats` as [`Walr::fit_rows`] stores them.
+    fn reference_impl<S: Store>(
+        &self,
+        geo: &[f32],
+        z0: &[S],
+        stats: &mut [S],
+        scale: f32,
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<u64, Error> {
         let (w, h, m) = (self.width as i64, self.height as i64, self.m);
         let (gp, kp, zl, ps) = (self.geo_planes(), self.planes(), self.z_row_values(), self.plane_stride());
         let t = self.cfg.iterations as u32;
         let radius = (3i64.pow(t) - 1) / 2;
+        let adaptive = self.blends_adaptively();
         let wp = if t >= 2 { self.cfg.previous_weight as f64 } else { 0.0 };
         // the previous iteration's window (radius −1: none)
-        let radius_prev = if wp > 0.0 { (3i64.pow(t - 1) - 1) / 2 } else { -1 };
+        let radius_prev = if wp > 0.0 || adaptive { (3i64.pow(t - 1) - 1) / 2 } else { -1 };
         let g = |c: usize, x: i64, y: i64| geo[(y as usize * gp + c) * ps + x as usize] as f64;
         let (far, range) = (self.cfg.far as f64, (self.cfg.far - self.cfg.near) as f64);
         let weight = |cx: i64, cy: i64, x: i64, y: i64| -> f64 {
@@ -103,6 +117,15 @@ impl Walr {
                         None
                     }
                 };
+                if adaptive {
+                    let (fl, fs, st) = stats_f64(&sum, &sum_prev, kp, &x[..m], self.cfg.epsilon as f64);
+                    fallback += (sum[kp - 1] <= 0.0) as u64;
+                    let at = cy as usize * zl + cx as usize;
+                    for (k, v) in fl.iter().chain(&fs).chain(&st).enumerate() {
+                        S::set(stats, at + k * ps, *v as f32);
+                    }
+                    continue;
+                }
                 let mut y = fit(&sum).unwrap_or_else(|| {
                     fallback += 1;
                     [0.0; 3]
@@ -134,6 +157,41 @@ fn round_div(a: i64, b: i64) -> i64 {
         (2 * a + b) / (2 * b)
     } else {
         -((-2 * a + b) / (2 * b))
+    }
+}
+
+/// Both windows' fits in f64 (0 for an empty window) and the statistics of
+/// the adaptive blend, from the weighted sums (W last; true sample counts).
+fn stats_f64(large: &[f64; 64], small: &[f64; 64], kp: usize, x: &[f64], eps: f64) -> ([f64; 3], [f64; 3], [f64; 3]) {
+    use super::blend::window_stats;
+    use super::regress::{fit_stats, WindowFit};
+    let avg = |s: &[f64; 64]| -> [f64; 64] {
+        let inv = if s[kp - 1] > 0.0 { 1.0 / s[kp - 1] } else { 0.0 };
+        core::array::from_fn(|k| s[k] * inv)
+    };
+    let (zl, zs) = (avg(large), avg(small));
+    macro_rules! go {
+        ($m:literal) => {{
+            let mut xa = [1f64; $m];
+            xa.copy_from_slice(x);
+            let mut l: WindowFit<f64> = fit_stats::<f64, $m>(&zl[..kp], &xa, eps);
+            let mut s: WindowFit<f64> = fit_stats::<f64, $m>(&zs[..kp], &xa, eps);
+            if !(large[kp - 1] > 0.0) {
+                l.y = [0.0; 3];
+            }
+            if !(small[kp - 1] > 0.0) {
+                s.y = [0.0; 3];
+            }
+            (l.y, s.y, window_stats(&l, &s, large[kp - 1], small[kp - 1], $m as f32))
+        }};
+    }
+    match x.len() {
+        3 => go!(3),
+        4 => go!(4),
+        5 => go!(5),
+        6 => go!(6),
+        7 => go!(7),
+        _ => go!(8),
     }
 }
 

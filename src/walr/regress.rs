@@ -48,6 +48,85 @@ pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) 
     y
 }
 
+/// One window's fit at a pixel and what [`blend_adaptive`] needs from it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct WindowFit<T> {
+    /// The light (still divided by the scale).
+    pub y: [T; 3],
+    /// Residual luminance variance in the window, `E[ℓ²] − |C⁻¹ E[xℓ]|²`.
+    pub rss: T,
+    /// Leverage `xᵀ A⁻¹ x = |C⁻¹ x|²` of the pixel's features (≥ 1 with the
+    /// constant feature): the fit's variance is `σ² · lev / W`.
+    pub lev: T,
+}
+
+/// [`solve_pixel`] through the factor's forward substitution alone, with the
+/// window's residual variance and the pixel's leverage: `u = C⁻¹ E[xy]`,
+/// `v = C⁻¹ x`, `ŷ = v·u` (the same fit: `xᵀ C⁻ᵀ C⁻¹ E[xy]`). `z` are the
+/// averages (sums over W; energy at `z[planes − 2]` = `z[k_energy]`).
+#[inline(always)]
+pub(crate) fn fit_stats<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) -> WindowFit<T> {
+    let one = T::splat(1.0);
+    let zero = T::splat(0.0);
+    let mut a = [[one; M]; M];
+    let mut k = 0;
+    for q in 1..M {
+        a[q][0] = z[k];
+        a[0][q] = z[k];
+        k += 1;
+    }
+    for p in 1..M {
+        for q in p..M {
+            a[q][p] = z[k];
+            a[p][q] = z[k];
+            k += 1;
+        }
+    }
+    // right-hand sides: the three colours, then the features themselves
+    let mut b = [[zero; 4]; M];
+    for c in 0..3 {
+        for p in 0..M {
+            b[p][c] = z[k];
+            k += 1;
+        }
+    }
+    for p in 0..M {
+        b[p][3] = x[p];
+    }
+    let energy = z[k] * T::splat(1.0 / super::features::ENERGY_SCALE);
+    let mut eps_v = [eps; M];
+    eps_v[0] = one;
+    let inv = factor_floor(&mut a, &eps_v);
+    forward(&a, &inv, &mut b);
+    let luma = crate::kernels::LUMA.map(T::splat);
+    let (mut y, mut explained, mut lev) = ([zero; 3], zero, zero);
+    for row in &b {
+        for c in 0..3 {
+            y[c] = y[c] + row[3] * row[c];
+        }
+        let ul = luma[0] * row[0] + luma[1] * row[1] + luma[2] * row[2];
+        explained = explained + ul * ul;
+        lev = lev + row[3] * row[3];
+    }
+    WindowFit { y, rss: energy - explained, lev }
+}
+
+/// Forward substitution `C u = b` in place (the first half of
+/// [`substitute`]).
+#[inline(always)]
+fn forward<T: Lane, const M: usize, const R: usize>(c: &[[T; M]; M], inv: &[T; M], b: &mut [[T; R]; M]) {
+    for i in 0..M {
+        for j in 0..i {
+            for r in 0..R {
+                b[i][r] = b[i][r] - c[i][j] * b[j][r];
+            }
+        }
+        for r in 0..R {
+            b[i][r] = b[i][r] * inv[i];
+        }
+    }
+}
+
 impl Walr {
     /// Stage 3 on rows `y0..y0 + out.height()`: solves every pixel from the
     /// final sums (divided by their W here) and writes the light to `out`
@@ -64,6 +143,9 @@ impl Walr {
         }
         if geo.len() < h * self.geo_row_len() || z.iter().any(|z| z.len() < h * self.z_row_len()) {
             return Err(Error::InvalidTile { index: y0, count: h });
+        }
+        if self.blends_adaptively() {
+            return Err(Error::Unsupported("solve_rows: the configuration blends adaptively (use fit_rows, then blend_rows)"));
         }
         let t = self.cfg.iterations;
         let last = z[Self::buffer_of(t)];
@@ -130,16 +212,18 @@ impl Walr {
             let mut x0 = 0;
             while x0 < w {
                 let n = if simd && x0 + 8 <= w { 8 } else { 1 };
-                let (mut res, fallback) = self.fit_group::<S, M>(&z[y * zl..(y + 1) * zl], grow, x0, n);
+                let (large, _, fallback) = self.fit_group::<S, M>(&z[y * zl..(y + 1) * zl], grow, x0, n, false);
                 rep.fallback_pixels += fallback;
+                let mut res = large.y;
                 if let Some((zp, wp)) = prev {
                     // the previous window's fit (its fallbacks are the same pixels' or fewer)
-                    let (rp, _) = self.fit_group::<S, M>(&zp[y * zl..(y + 1) * zl], grow, x0, n);
+                    let (small, _, _) = self.fit_group::<S, M>(&zp[y * zl..(y + 1) * zl], grow, x0, n, false);
                     let (a, b) = (f32x8::splat(1.0 - wp), f32x8::splat(wp));
                     for c in 0..3 {
-                        res[c] = (a * f32x8::from(res[c]) + b * f32x8::from(rp[c])).to_array();
+                        res[c] = a * large.y[c] + b * small.y[c];
                     }
                 }
+                let res = res.map(|c| c.to_array());
                 let planes = res.map(|c| c.map(fix));
                 out.write_row_n(r, x0, [&planes[0][..n], &planes[1][..n], &planes[2][..n]])
                     .ok_or(Error::InvalidTile { index: y, count: rows })?;
@@ -149,14 +233,23 @@ impl Walr {
         Ok(rep)
     }
 
-    /// The light of pixels `x0..x0 + n` (n = 8: in lanes; n = 1: scalar) of
-    /// one row from its sums `zrow` and geometry row `grow`, and how many of
-    /// them fell back (unknown geometry: the window's mean light; an empty
-    /// window: 0).
+    /// The fit at pixels `x0..x0 + n` (n = 8: in lanes; n = 1: scalar, in
+    /// lane 0) of one row from its sums `zrow` and geometry row `grow`, the
+    /// stored sample count W, and how many of them fell back (unknown
+    /// geometry: the window's mean light; an empty window: 0). With `stats`
+    /// the fit goes through [`fit_stats`] (residual variance and leverage for
+    /// [`blend_adaptive`]), else through [`solve_pixel`] (`rss`, `lev` = 0).
     #[inline(always)]
-    fn fit_group<S: Store, const M: usize>(&self, zrow: &[S], grow: &[f32], x0: usize, n: usize) -> ([[f32; 8]; 3], u64) {
+    pub(crate) fn fit_group<S: Store, const M: usize>(
+        &self,
+        zrow: &[S],
+        grow: &[f32],
+        x0: usize,
+        n: usize,
+        stats: bool,
+    ) -> (WindowFit<f32x8>, f32x8, u64) {
         let (kp, ps) = (self.planes(), self.plane_stride());
-        let mut res = [[0f32; 8]; 3];
+        let eps = self.cfg.epsilon;
         let mut fallback = 0u64;
         if n == 8 {
             let mut zv = [f32x8::ZERO; 64];
@@ -177,18 +270,22 @@ impl Walr {
                 xv[q] = unknown.select(zv[q - 1], <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * ps + x0));
             }
             fallback += unknown.to_bitmask().count_ones() as u64;
-            let yv = solve_pixel::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(self.cfg.epsilon));
+            let mut fit = if stats {
+                fit_stats::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(eps))
+            } else {
+                WindowFit { y: solve_pixel::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(eps)), rss: f32x8::ZERO, lev: f32x8::ZERO }
+            };
             let empty = zv[kp - 1].simd_le(f32x8::ZERO);
             fallback += empty.to_bitmask().count_ones() as u64;
-            for c in 0..3 {
-                res[c] = empty.select(f32x8::ZERO, yv[c]).to_array();
-            }
+            fit.y = fit.y.map(|c| empty.select(f32x8::ZERO, c));
+            (fit, wsum, fallback)
         } else {
             let mut zs = [0f32; 64];
             for k in 0..kp {
                 zs[k] = S::get(zrow, k * ps + x0);
             }
-            let inv = if zs[kp - 1] > 0.0 { 1.0 / zs[kp - 1] } else { 0.0 };
+            let wsum = zs[kp - 1];
+            let inv = if wsum > 0.0 { 1.0 / wsum } else { 0.0 };
             for k in 0..kp - 1 {
                 zs[k] *= inv;
             }
@@ -198,13 +295,16 @@ impl Walr {
                 xs[q] = if unknown { zs[q - 1] } else { grow[(GEO_FIXED + q - 1) * ps + x0] };
             }
             fallback += unknown as u64;
-            let ys = solve_pixel::<f32, M>(&zs[..kp], &xs, self.cfg.epsilon);
+            let fit = if stats {
+                fit_stats::<f32, M>(&zs[..kp], &xs, eps)
+            } else {
+                WindowFit { y: solve_pixel::<f32, M>(&zs[..kp], &xs, eps), rss: 0.0, lev: 0.0 }
+            };
             let empty = !(zs[kp - 1] > 0.0);
             fallback += empty as u64;
-            for c in 0..3 {
-                res[c][0] = if empty { 0.0 } else { ys[c] };
-            }
+            let lane0 = |v: f32| f32x8::from([v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+            let y = fit.y.map(|c| lane0(if empty { 0.0 } else { c }));
+            (WindowFit { y, rss: lane0(fit.rss), lev: lane0(fit.lev) }, lane0(wsum), fallback)
         }
-        (res, fallback)
     }
 }
