@@ -308,3 +308,97 @@ impl Walr {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+
+    /// `fit_stats` against the textbook f64 least squares on samples: the fit,
+    /// the residual variance `E[ℓ²] − β_ℓ·E[xℓ]` and the leverage `xᵀA⁻¹x`.
+    #[test]
+    fn fit_stats_matches_f64_least_squares() {
+        let mut seed = 7u32;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f64 / (1u32 << 24) as f64
+        };
+        for case in 0..20 {
+            const M: usize = 4;
+            let n = 30 + case * 7;
+            // samples: features in [0, 1], light affine in them plus noise
+            let xs: std::vec::Vec<[f64; M]> = (0..n).map(|_| [1.0, rnd(), rnd(), rnd()]).collect();
+            let ys: std::vec::Vec<[f64; 3]> =
+                xs.iter().map(|x| core::array::from_fn(|c| 0.5 + x[1] * (c as f64 + 1.0) - x[2] + 0.3 * rnd())).collect();
+            let luma = crate::kernels::LUMA.map(|v| v as f64);
+            let lum = |y: &[f64; 3]| luma[0] * y[0] + luma[1] * y[1] + luma[2] * y[2];
+            // averages in the stored order (as the features stage writes them, / W)
+            let nf = n as f64;
+            let mut z = std::vec::Vec::new();
+            for q in 1..M {
+                z.push(xs.iter().map(|x| x[q]).sum::<f64>() / nf);
+            }
+            for p in 1..M {
+                for q in p..M {
+                    z.push(xs.iter().map(|x| x[p] * x[q]).sum::<f64>() / nf);
+                }
+            }
+            for c in 0..3 {
+                for p in 0..M {
+                    z.push(xs.iter().zip(&ys).map(|(x, y)| x[p] * y[c]).sum::<f64>() / nf);
+                }
+            }
+            let e: f64 = ys.iter().map(|y| lum(y) * lum(y)).sum::<f64>() / nf;
+            z.push(e * super::super::features::ENERGY_SCALE as f64);
+            // textbook: A β = b by Gaussian elimination
+            let mut a = [[0f64; M]; M];
+            let mut b = [[0f64; 3]; M];
+            for (x, y) in xs.iter().zip(&ys) {
+                for p in 0..M {
+                    for q in 0..M {
+                        a[p][q] += x[p] * x[q] / nf;
+                    }
+                    for c in 0..3 {
+                        b[p][c] += x[p] * y[c] / nf;
+                    }
+                }
+            }
+            let solve = |rhs: [f64; M]| -> [f64; M] {
+                let (mut m, mut v) = (a, rhs);
+                for i in 0..M {
+                    for r in i + 1..M {
+                        let f = m[r][i] / m[i][i];
+                        for k in i..M {
+                            m[r][k] -= f * m[i][k];
+                        }
+                        v[r] -= f * v[i];
+                    }
+                }
+                let mut out = [0f64; M];
+                for i in (0..M).rev() {
+                    out[i] = (v[i] - (i + 1..M).map(|k| m[i][k] * out[k]).sum::<f64>()) / m[i][i];
+                }
+                out
+            };
+            let x0 = [1.0, rnd(), rnd(), rnd()];
+            let beta: [[f64; M]; 3] = core::array::from_fn(|c| solve(core::array::from_fn(|p| b[p][c])));
+            let want_y: [f64; 3] = core::array::from_fn(|c| (0..M).map(|p| x0[p] * beta[c][p]).sum());
+            let bl: [f64; M] = core::array::from_fn(|p| (0..3).map(|c| luma[c] * beta[c][p]).sum());
+            let el: [f64; M] = core::array::from_fn(|p| (0..3).map(|c| luma[c] * b[p][c]).sum());
+            let want_rss = e - (0..M).map(|p| bl[p] * el[p]).sum::<f64>();
+            let ainv_x = solve(x0);
+            let want_lev: f64 = (0..M).map(|p| x0[p] * ainv_x[p]).sum();
+            // f64 lanes (tiny floor: not engaged) and f32
+            let got = fit_stats::<f64, M>(&z, &x0, 1e-12);
+            let z32: std::vec::Vec<f32> = z.iter().map(|&v| v as f32).collect();
+            let got32 = fit_stats::<f32, M>(&z32, &x0.map(|v| v as f32), 1e-7);
+            for c in 0..3 {
+                assert!((got.y[c] - want_y[c]).abs() < 1e-9, "case {case}: y {c}");
+                assert!((got32.y[c] as f64 - want_y[c]).abs() < 2e-3, "case {case}: f32 y {c}");
+            }
+            assert!((got.rss - want_rss).abs() < 1e-9 * e, "case {case}: rss {} vs {want_rss}", got.rss);
+            assert!(want_rss > 0.0 && (got32.rss as f64 - want_rss).abs() < 0.05 * want_rss, "case {case}: f32 rss");
+            assert!((got.lev - want_lev).abs() < 1e-9 * want_lev && want_lev >= 1.0 - 1e-9, "case {case}: lev");
+        }
+    }
+}
