@@ -7,8 +7,10 @@
 pub fn bilinear_taps(px: f32, py: f32) -> [(i64, i64, f32); 4] {
     let (fx, fy) = (floor(px), floor(py));
     let (ax, ay) = (px - fx, py - fy);
+    // (a huge or infinite position saturates: its taps are outside any frame)
     let (ix, iy) = (fx as i64, fy as i64);
-    [(ix, iy, (1.0 - ax) * (1.0 - ay)), (ix + 1, iy, ax * (1.0 - ay)), (ix, iy + 1, (1.0 - ax) * ay), (ix + 1, iy + 1, ax * ay)]
+    let (jx, jy) = (ix.saturating_add(1), iy.saturating_add(1));
+    [(ix, iy, (1.0 - ax) * (1.0 - ay)), (jx, iy, ax * (1.0 - ay)), (ix, jy, (1.0 - ax) * ay), (jx, jy, ax * ay)]
 }
 
 /// `⌊x⌋` (`libm::floorf` is a software routine; this is a conversion and a
@@ -127,6 +129,19 @@ mod tests {
             assert_eq!(floor(x), libm::floorf(x), "{x}");
         }
         assert!(floor(f32::NAN).is_nan());
+    }
+
+    #[test]
+    fn bilinear_taps_of_huge_positions_do_not_overflow() {
+        // (found by the walr fuzz target: 1e30 + 1 overflowed i64 in debug builds)
+        for p in [1e30f32, f32::INFINITY, -1e30, f32::NEG_INFINITY, 9.3e18] {
+            for (x, y, _) in bilinear_taps(p, p) {
+                assert!(x.unsigned_abs() > 1 << 40 && y.unsigned_abs() > 1 << 40, "{p}: ({x}, {y})");
+            }
+        }
+        let t = bilinear_taps(2.25, 3.5);
+        assert_eq!((t[0].0, t[0].1, t[3].0, t[3].1), (2, 3, 3, 4));
+        assert!((t.iter().map(|t| t.2).sum::<f32>() - 1.0).abs() < 1e-6);
     }
 
     /// The row-wise clamp box equals the per-pixel 3×3 box / cross extremes.
