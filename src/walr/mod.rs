@@ -91,7 +91,10 @@ pub enum Storage {
 
 /// Everything that defines a WALR run. The default is the paper's
 /// configuration (m = 3 features, 4 iterations, tracing and replacement on),
-/// with f32 averages (the paper's f16 is [`Storage::F16`]).
+/// with f32 averages (the paper's f16 is [`Storage::F16`]) and, beyond the
+/// paper, the last two windows' fits blended per pixel
+/// ([`WalrConfig::adaptive_blend`]; `previous_weight = 0` with it off is the
+/// paper's single window).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WalrConfig {
     /// Guides the frames carry. Normal and position are required; depth, if
