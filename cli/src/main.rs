@@ -92,6 +92,11 @@ enum Cmd {
         runs: usize,
         #[arg(long)]
         threads: Option<usize>,
+        /// Methods to weigh, comma separated from flr,bmfr,walr: besides FLR's guides × block × window
+        /// grid, BMFR at 32×32 and 64×64 blocks and WALR's stages (tracing, blend) with the frame's
+        /// guides; the choice is then made over all of them
+        #[arg(long, default_value = "flr")]
+        methods: String,
     },
     /// Time the denoiser alone on a synthetic frame (or FRAME resampled to WxH)
     Bench {
@@ -299,11 +304,18 @@ fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, 
     Ok(())
 }
 
-fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize, threads: usize) -> Result<(), String> {
+fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize, threads: usize, methods: &str) -> Result<(), String> {
     let exr = ExrFrame::read(frame)?;
     let inputs = Inputs::from_exr(&exr, frame, "noisy")?;
     if inputs.reference.is_none() {
         return Err(format!("{}: advise measures quality and needs a 'reference' layer", frame.display()));
+    }
+    let methods: Vec<&str> = methods.split(',').map(str::trim).filter(|m| !m.is_empty()).collect();
+    if let Some(m) = methods.iter().find(|m| !["flr", "bmfr", "walr"].contains(m)) {
+        return Err(format!("--methods: '{m}' is not flr, bmfr or walr"));
+    }
+    if !methods.contains(&"flr") {
+        return Err("--methods: flr is always weighed (the guide verdicts are FLR's); add bmfr and/or walr to it".into());
     }
     // Every subset of the available guides x block sizes x window sizes.
     let avail: Vec<&str> = [
@@ -332,18 +344,35 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
             }
         }
     }
+    // Other methods with what the frame has (BMFR wants normals; WALR normals and positions),
+    // and WALR's optional stages one at a time.
+    let has = |g: &str| avail.contains(&g);
+    if methods.contains(&"bmfr") && has("normal") {
+        for block in [32, 64] {
+            variants.push(Variant::method("bmfr", FlrArgs { block: Some(block), ..Default::default() }));
+        }
+    }
+    if methods.contains(&"walr") && has("normal") && has("position") {
+        let pw = |w: &str| Some(w.to_string());
+        variants.push(Variant::method("walr", FlrArgs::default()));
+        variants.push(Variant::method("walr", FlrArgs { no_tracing: true, ..Default::default() }));
+        variants.push(Variant::method("walr", FlrArgs { previous_weight: pw("0.6"), ..Default::default() }));
+        variants.push(Variant::method("walr", FlrArgs { previous_weight: pw("0"), ..Default::default() }));
+    }
     let opt = EvalOptions { runs: runs.max(5), threads, keep_images: false };
     let (records, _) = evaluate(&[frame.to_path_buf()], &variants, &opt)?;
     let noisy = records.iter().find(|r| r.method == "noisy").map(|r| r.psnr).unwrap_or(f64::NAN);
     let flr: Vec<&Record> = records.iter().filter(|r| r.method == "flr").collect();
-    let best = flr.iter().max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or("no configuration could run")?;
+    // the choice is made over every method weighed
+    let all: Vec<&Record> = records.iter().filter(|r| r.method != "noisy").collect();
+    let best = all.iter().max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or("no configuration could run")?;
     let pick = match budget {
-        Some(t) => flr.iter().filter(|r| r.ms <= t).max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or_else(|| {
-            format!("no configuration runs within {t} ms (fastest: {:.3} ms)", flr.iter().map(|r| r.ms).fold(f64::MAX, f64::min))
+        Some(t) => all.iter().filter(|r| r.ms <= t).max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or_else(|| {
+            format!("no configuration runs within {t} ms (fastest: {:.3} ms)", all.iter().map(|r| r.ms).fold(f64::MAX, f64::min))
         })?,
         None => {
             let d = max_loss.unwrap_or(0.25);
-            flr.iter().filter(|r| r.psnr >= best.psnr - d).min_by(|a, b| a.ms.total_cmp(&b.ms)).unwrap_or(best)
+            all.iter().filter(|r| r.psnr >= best.psnr - d).min_by(|a, b| a.ms.total_cmp(&b.ms)).unwrap_or(best)
         }
     };
     // What each guide is worth: best PSNR with it minus best without it.
@@ -357,6 +386,36 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         let without = flr.iter().filter(|r| !uses(r, gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
         let verdict = if with - without > 0.1 { "keep" } else { "can drop" };
         println!("  guide {gname:<8}: best with {with:.2} dB, without {without:.2} dB ({:+.2} dB) -> {verdict}", with - without);
+    }
+    // BMFR and WALR, each against its own default
+    let find = |method: &str, flag: &str| records.iter().find(|r| r.method == method && r.flags.contains(flag));
+    let walr = |flag: &str| find("walr", flag);
+    let walr_default = records.iter().find(|r| r.method == "walr" && r.flags.contains("adaptive") && !r.flags.contains("--no-tracing"));
+    if let (Some(d), Some(nt)) = (walr_default, walr("--no-tracing")) {
+        let verdict = if d.psnr - nt.psnr > 0.1 { "keep" } else { "can drop (it also stops light leaking past thin objects: check those)" };
+        println!(
+            "  walr tracing     : with {:.2} dB in {:.3} ms, without {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
+            d.psnr,
+            d.ms,
+            nt.psnr,
+            nt.ms,
+            d.psnr - nt.psnr
+        );
+    }
+    if let (Some(d), Some(f), Some(one)) = (walr_default, walr("--previous-weight 0.6 "), walr("--previous-weight 0 ")) {
+        let verdict = if d.psnr - f.psnr > 0.1 { "keep" } else { "can drop (--previous-weight 0.6)" };
+        println!(
+            "  walr blend       : adaptive {:.2} dB in {:.3} ms, fixed 0.6 {:.2} dB in {:.3} ms, one window {:.2} dB ({:+.2} dB adaptive - fixed) -> {verdict}",
+            d.psnr,
+            d.ms,
+            f.psnr,
+            f.ms,
+            one.psnr,
+            d.psnr - f.psnr
+        );
+    }
+    if let (Some(b32), Some(b64)) = (find("bmfr", "--block 32"), find("bmfr", "--block 64")) {
+        println!("  bmfr blocks      : 32x32 {:.2} dB in {:.3} ms, 64x64 {:.2} dB in {:.3} ms", b32.psnr, b32.ms, b64.psnr, b64.ms);
     }
     println!("  best     : {:.2} dB in {:.3} ms  ({})", best.psnr, best.ms, best.config);
     println!("  chosen   : {:.2} dB in {:.3} ms  ({})", pick.psnr, pick.ms, pick.config);
@@ -618,8 +677,8 @@ fn run(cli: Cli) -> Result<(), String> {
         Cmd::Report { frames, output, peers, runs, threads } => {
             write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads))?
         }
-        Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads } => {
-            advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads))?
+        Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads, methods } => {
+            advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads), &methods)?
         }
         Cmd::Bench { method, size, threads, runs, flr, frame } => bench(&method, &size, threads, runs, &flr, frame.as_deref())?,
         Cmd::Shaders { out, size, f16_inputs, flr } => shaders(&out, &size, f16_inputs, &flr)?,

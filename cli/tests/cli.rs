@@ -165,8 +165,14 @@ fn advise_bench_and_sequences() {
         assert!(db.len() == 3 && db.iter().all(|v| v.is_finite() && v.abs() < 100.0), "{line}");
     }
     assert!(so.contains("guide albedo"), "{so}");
-    let (ok, so, e) = lrd(&["advise", &data("poles_7.exr"), "--runs", "5", "--budget-ms", "1000"]);
+    // with the other methods: WALR's stages and BMFR's blocks weighed too, the choice over all
+    let (ok, so, e) = lrd(&["advise", &data("poles_7.exr"), "--runs", "5", "--budget-ms", "1000", "--methods", "flr,bmfr,walr"]);
     assert!(ok && so.contains("chosen"), "{e}");
+    for l in ["walr tracing", "walr blend", "bmfr blocks"] {
+        assert!(so.contains(l), "{l}: {so}");
+    }
+    fails_with(&["advise", &data("poles_7.exr"), "--methods", "walr"], &["flr is always weighed"]);
+    fails_with(&["advise", &data("poles_7.exr"), "--methods", "flr,oidn"], &["'oidn' is not flr, bmfr or walr"]);
     let (ok, so, e) = lrd(&["bench", "--size", "320x200", "--runs", "5"]);
     assert!(ok, "{e}");
     assert!(so.contains("median") && so.contains("ms") && so.contains("simd"), "{so}");
