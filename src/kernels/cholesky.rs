@@ -314,10 +314,10 @@ pub fn factor_floor<T: Lane, const M: usize>(a: &mut [[T; M]; M], eps: &[T; M]) 
     inv
 }
 
-/// WALR Algorithm 2: forward then backward substitution with the factor of
-/// [`factor_floor`], for `R` right-hand sides at once (`b[i][r]`), in place.
+/// The forward half of [`substitute`]: `C u = b` for `R` right-hand sides,
+/// in place.
 #[inline(always)]
-pub fn substitute<T: Lane, const M: usize, const R: usize>(c: &[[T; M]; M], inv: &[T; M], b: &mut [[T; R]; M]) {
+pub fn forward<T: Lane, const M: usize, const R: usize>(c: &[[T; M]; M], inv: &[T; M], b: &mut [[T; R]; M]) {
     for i in 0..M {
         for j in 0..i {
             for r in 0..R {
@@ -328,6 +328,13 @@ pub fn substitute<T: Lane, const M: usize, const R: usize>(c: &[[T; M]; M], inv:
             b[i][r] = b[i][r] * inv[i];
         }
     }
+}
+
+/// WALR Algorithm 2: forward then backward substitution with the factor of
+/// [`factor_floor`], for `R` right-hand sides at once (`b[i][r]`), in place.
+#[inline(always)]
+pub fn substitute<T: Lane, const M: usize, const R: usize>(c: &[[T; M]; M], inv: &[T; M], b: &mut [[T; R]; M]) {
+    forward(c, inv, b);
     for j in (0..M).rev() {
         for i in j + 1..M {
             for r in 0..R {

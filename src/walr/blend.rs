@@ -26,7 +26,7 @@
 //! Both passes work on bands of rows; pass 2 reads pass 1's results of the
 //! rows around its band, so all of pass 1 must be done first.
 
-use super::regress::WindowFit;
+use super::regress::{output_value, WindowFit};
 use super::store::Store;
 use super::{Prepared, Report, Storage, Walr};
 use crate::error::{Arg, Error};
@@ -205,15 +205,7 @@ impl Walr {
         let rad = self.blend_radius();
         let simd = self.cfg.kernel == crate::config::Kernel::Simd;
         let (scale, clamp) = (p.light_scale, self.cfg.clamp_negative);
-        let fix = |v: f32| {
-            let v = v * scale;
-            let v = if clamp { v.max(0.0) } else { v };
-            if v.is_finite() {
-                v
-            } else {
-                0.0
-            }
-        };
+        let fix = |v: f32| output_value(v, scale, clamp);
         for r in 0..out.height() {
             let y = y0 + r;
             // Vertical averages of the statistics over rows ya..=yb into

@@ -6,15 +6,15 @@ use super::{Prepared, Report, Storage, Walr, GEO_FIXED, G_VALID};
 use crate::config::Kernel;
 use crate::error::Error;
 use crate::image::ImageViewMut;
-use crate::kernels::cholesky::{factor_floor, substitute, Lane};
+use crate::kernels::cholesky::{factor_floor, forward, substitute, Lane};
 use wide::f32x8;
 
-/// Solves one pixel (or 8 in lanes): `z` are the averages (sums over W; W last),
-/// `x` the pixel's features; returns the light (still divided by the scale).
+/// The moment matrix `A` (`A₀₀ = 1`, the rest from the averages `z`) and the
+/// colours' right-hand sides `E[x y_c]` (the first 3 of `R` columns of `b`,
+/// the others 0); returns them and the index in `z` of the next stored value.
 #[inline(always)]
-pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) -> [T; 3] {
-    let one = T::splat(1.0);
-    let mut a = [[one; M]; M];
+fn system<T: Lane, const M: usize, const R: usize>(z: &[T]) -> ([[T; M]; M], [[T; R]; M], usize) {
+    let mut a = [[T::splat(1.0); M]; M];
     let mut k = 0;
     for q in 1..M {
         a[q][0] = z[k];
@@ -28,13 +28,22 @@ pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) 
             k += 1;
         }
     }
-    let mut b = [[one; 3]; M];
+    let mut b = [[T::splat(0.0); R]; M];
     for c in 0..3 {
         for p in 0..M {
             b[p][c] = z[k];
             k += 1;
         }
     }
+    (a, b, k)
+}
+
+/// Solves one pixel (or 8 in lanes): `z` are the averages (sums over W; W last),
+/// `x` the pixel's features; returns the light (still divided by the scale).
+#[inline(always)]
+pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) -> [T; 3] {
+    let one = T::splat(1.0);
+    let (mut a, mut b, _) = system::<T, M, 3>(z);
     let mut eps_v = [eps; M];
     eps_v[0] = one;
     let inv = factor_floor(&mut a, &eps_v);
@@ -68,28 +77,8 @@ pub(crate) struct WindowFit<T> {
 pub(crate) fn fit_stats<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) -> WindowFit<T> {
     let one = T::splat(1.0);
     let zero = T::splat(0.0);
-    let mut a = [[one; M]; M];
-    let mut k = 0;
-    for q in 1..M {
-        a[q][0] = z[k];
-        a[0][q] = z[k];
-        k += 1;
-    }
-    for p in 1..M {
-        for q in p..M {
-            a[q][p] = z[k];
-            a[p][q] = z[k];
-            k += 1;
-        }
-    }
     // right-hand sides: the three colours, then the features themselves
-    let mut b = [[zero; 4]; M];
-    for c in 0..3 {
-        for p in 0..M {
-            b[p][c] = z[k];
-            k += 1;
-        }
-    }
+    let (mut a, mut b, k) = system::<T, M, 4>(z);
     for p in 0..M {
         b[p][3] = x[p];
     }
@@ -111,19 +100,16 @@ pub(crate) fn fit_stats<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) ->
     WindowFit { y, rss: energy - explained, lev }
 }
 
-/// Forward substitution `C u = b` in place (the first half of
-/// [`substitute`]).
+/// A pixel's output from its fitted light `v` (divided by the frame's light
+/// `scale`): scaled back, clamped at 0 with `clamp`, 0 if not finite.
 #[inline(always)]
-fn forward<T: Lane, const M: usize, const R: usize>(c: &[[T; M]; M], inv: &[T; M], b: &mut [[T; R]; M]) {
-    for i in 0..M {
-        for j in 0..i {
-            for r in 0..R {
-                b[i][r] = b[i][r] - c[i][j] * b[j][r];
-            }
-        }
-        for r in 0..R {
-            b[i][r] = b[i][r] * inv[i];
-        }
+pub(crate) fn output_value(v: f32, scale: f32, clamp: bool) -> f32 {
+    let v = v * scale;
+    let v = if clamp { v.max(0.0) } else { v };
+    if v.is_finite() {
+        v
+    } else {
+        0.0
     }
 }
 
@@ -197,15 +183,7 @@ impl Walr {
         let scale = p.light_scale;
         let clamp = self.cfg.clamp_negative;
         let simd = self.cfg.kernel == Kernel::Simd;
-        let fix = |v: f32| {
-            let v = v * scale;
-            let v = if clamp { v.max(0.0) } else { v };
-            if v.is_finite() {
-                v
-            } else {
-                0.0
-            }
-        };
+        let fix = |v: f32| output_value(v, scale, clamp);
         for r in 0..rows {
             let y = y0 + r;
             let grow = &geo[y * self.geo_planes() * self.plane_stride()..(y + 1) * self.geo_planes() * self.plane_stride()];
