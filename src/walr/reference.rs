@@ -160,56 +160,53 @@ fn round_div(a: i64, b: i64) -> i64 {
     }
 }
 
+/// Runs `$body` with `$xa`, the features `$x` as an array of its length
+/// `$m` (a constant: 3..=8), for the const-generic solves.
+macro_rules! with_features {
+    ($x:expr, $xa:ident, $m:ident, $body:expr) => {{
+        macro_rules! arm {
+            ($n:literal) => {{
+                const $m: usize = $n;
+                let mut $xa = [1f64; $m];
+                $xa.copy_from_slice($x);
+                $body
+            }};
+        }
+        match $x.len() {
+            3 => arm!(3),
+            4 => arm!(4),
+            5 => arm!(5),
+            6 => arm!(6),
+            7 => arm!(7),
+            _ => arm!(8),
+        }
+    }};
+}
+
 /// Both windows' fits in f64 (0 for an empty window) and the statistics of
 /// the adaptive blend, from the weighted sums (W last; true sample counts).
 fn stats_f64(large: &[f64; 64], small: &[f64; 64], kp: usize, x: &[f64], eps: f64) -> ([f64; 3], [f64; 3], [f64; 3]) {
     use super::blend::window_stats;
-    use super::regress::{fit_stats, WindowFit};
+    use super::regress::fit_stats;
     let avg = |s: &[f64; 64]| -> [f64; 64] {
         let inv = if s[kp - 1] > 0.0 { 1.0 / s[kp - 1] } else { 0.0 };
         core::array::from_fn(|k| s[k] * inv)
     };
     let (zl, zs) = (avg(large), avg(small));
-    macro_rules! go {
-        ($m:literal) => {{
-            let mut xa = [1f64; $m];
-            xa.copy_from_slice(x);
-            let mut l: WindowFit<f64> = fit_stats::<f64, $m>(&zl[..kp], &xa, eps);
-            let mut s: WindowFit<f64> = fit_stats::<f64, $m>(&zs[..kp], &xa, eps);
-            if !(large[kp - 1] > 0.0) {
-                l.y = [0.0; 3];
-            }
-            if !(small[kp - 1] > 0.0) {
-                s.y = [0.0; 3];
-            }
-            (l.y, s.y, window_stats(&l, &s, large[kp - 1], small[kp - 1], $m as f32))
-        }};
-    }
-    match x.len() {
-        3 => go!(3),
-        4 => go!(4),
-        5 => go!(5),
-        6 => go!(6),
-        7 => go!(7),
-        _ => go!(8),
-    }
+    with_features!(x, xa, M, {
+        let mut l = fit_stats::<f64, M>(&zl[..kp], &xa, eps);
+        let mut s = fit_stats::<f64, M>(&zs[..kp], &xa, eps);
+        if !(large[kp - 1] > 0.0) {
+            l.y = [0.0; 3];
+        }
+        if !(small[kp - 1] > 0.0) {
+            s.y = [0.0; 3];
+        }
+        (l.y, s.y, window_stats(&l, &s, large[kp - 1], small[kp - 1], M as f32))
+    })
 }
 
 /// The regression of one pixel in f64 with the same floor (Algorithms 1–2).
 fn solve_f64(z: &[f64], x: &[f64], eps: f64) -> [f64; 3] {
-    macro_rules! go {
-        ($m:literal) => {{
-            let mut xa = [1f64; $m];
-            xa.copy_from_slice(x);
-            super::regress::solve_pixel::<f64, $m>(z, &xa, eps)
-        }};
-    }
-    match x.len() {
-        3 => go!(3),
-        4 => go!(4),
-        5 => go!(5),
-        6 => go!(6),
-        7 => go!(7),
-        _ => go!(8),
-    }
+    with_features!(x, xa, M, super::regress::solve_pixel::<f64, M>(z, &xa, eps))
 }
