@@ -69,6 +69,9 @@ pub struct FlrArgs {
     /// WALR: weight w of the previous iteration's fit (a window a third as wide) in the output, (1 - w) fit_T + w fit_T-1 (0..=1; 0 = one window), or "adaptive": w per pixel from the two fits' estimated errors, averaged over the small window
     #[arg(long)]
     pub previous_weight: Option<String>,
+    /// BMFR: kappa of the Wiener shrinkage of each block's fit in its QR basis (0..=100; default 4; 0 = the paper's plain least squares)
+    #[arg(long)]
+    pub shrinkage: Option<f32>,
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
@@ -179,6 +182,9 @@ impl FlrArgs {
                 "--iterations, --near, --far, --no-tracing, --storage, --sdf-step, --epsilon and --previous-weight are WALR flags".into()
             );
         }
+        if self.shrinkage.is_some() {
+            return Err("--shrinkage is a BMFR flag".into());
+        }
         let mut c = FlrConfig::with_guides(guides);
         if let Some(b) = self.block {
             c.block = b;
@@ -210,10 +216,12 @@ impl FlrArgs {
 /// BMFR's configuration from the shared flags.
 pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
     if a.sigma.is_some() || a.radius.is_some() || a.box_radius.is_some() || a.regularization.is_some() || a.upsample.is_some() {
-        return Err("--sigma, --radius, --box, --regularization and --upsample are FLR flags; bmfr takes --guides and --block".into());
+        return Err(
+            "--sigma, --radius, --box, --regularization and --upsample are FLR flags; bmfr takes --guides, --block and --shrinkage".into(),
+        );
     }
     if a.has_walr_flags() {
-        return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step, --epsilon and --previous-weight are WALR flags; bmfr takes --guides and --block".into());
+        return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step, --epsilon and --previous-weight are WALR flags; bmfr takes --guides, --block and --shrinkage".into());
     }
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
@@ -227,7 +235,10 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
     if let Some(m) = inputs.missing(&guides) {
         return Err(format!("--guides asks for '{m}' but the frame has no '{m}' layer"));
     }
-    let c = BmfrConfig { block: a.block.unwrap_or(32), ..BmfrConfig::with_guides(guides) };
+    let mut c = BmfrConfig { block: a.block.unwrap_or(32), ..BmfrConfig::with_guides(guides) };
+    if let Some(k) = a.shrinkage {
+        c.shrinkage = k;
+    }
     c.validate().map_err(|e| format!("bmfr flags: {e}"))?;
     Ok(c)
 }
@@ -240,8 +251,9 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
         || a.regularization.is_some()
         || a.upsample.is_some()
         || a.block.is_some()
+        || a.shrinkage.is_some()
     {
-        return Err("--block, --sigma, --radius, --box, --regularization and --upsample are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
+        return Err("--block, --sigma, --radius, --box, --regularization, --upsample and --shrinkage are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
     }
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
@@ -482,8 +494,12 @@ impl Method {
                 let cfg = bmfr_config(a, inputs)?;
                 let temporal = name == "bmfr-temporal";
                 let min_bytes = (!temporal).then(|| one_pass_bytes(w, h, w * h, cfg.guides.channels()));
-                let label = format!("{name} {} b{}", short_guides(&cfg.guides), cfg.block);
-                let flags = format!("--method {name} --guides {} --block {}", guides_string(&cfg.guides), cfg.block);
+                let mut label = format!("{name} {} b{}", short_guides(&cfg.guides), cfg.block);
+                let mut flags = format!("--method {name} --guides {} --block {}", guides_string(&cfg.guides), cfg.block);
+                if cfg.shrinkage != BmfrConfig::default().shrinkage {
+                    label += &format!(" k{}", cfg.shrinkage);
+                    flags += &format!(" --shrinkage {}", cfg.shrinkage);
+                }
                 let method = if temporal {
                     Method::Temporal(Box::new(TemporalRunner::new(cfg, w, h)?))
                 } else {
@@ -599,6 +615,23 @@ mod tests {
             assert_eq!((v.get(0, 0, 0), v.get(1, 0, 0)), (Some(0.1 * (ch + 1) as f32), Some(0.1 * (ch + 4) as f32)));
         }
         assert!(gd.user[3].is_none());
+    }
+
+    #[test]
+    fn shrinkage_is_a_bmfr_flag() {
+        let mut i = inputs();
+        i.position = Some(vec![0.0; 6]);
+        let a = FlrArgs { shrinkage: Some(0.0), ..Default::default() };
+        assert_eq!(bmfr_config(&a, &i).unwrap().shrinkage, 0.0);
+        assert_eq!(bmfr_config(&FlrArgs::default(), &i).unwrap().shrinkage, BmfrConfig::default().shrinkage);
+        let bad = FlrArgs { shrinkage: Some(-1.0), ..Default::default() };
+        assert!(bmfr_config(&bad, &i).unwrap_err().contains("shrinkage"));
+        assert!(a.config(&i).unwrap_err().contains("BMFR flag"));
+        assert!(walr_config(&a, &i).unwrap_err().contains("--shrinkage"));
+        let built = Method::build("bmfr", &a, &i, 1).unwrap();
+        assert!(built.label.ends_with(" k0") && built.flags.ends_with(" --shrinkage 0"), "{} / {}", built.label, built.flags);
+        let built = Method::build("bmfr", &FlrArgs::default(), &i, 1).unwrap();
+        assert!(!built.flags.contains("shrinkage"), "{}", built.flags);
     }
 
     #[test]

@@ -406,6 +406,12 @@ typedef struct LrdBmfrConfig {
    */
   float pivot_tol;
   /**
+   * Wiener shrinkage of each block's fit in its QR basis: component q of
+   * Q^T z is scaled by q^2 / (q^2 + shrinkage x residual variance)
+   * (0..=100; default 4; 0 = the paper's plain least squares).
+   */
+  float shrinkage;
+  /**
    * Shift the block grid every frame (default true).
    */
   bool shift;
@@ -673,8 +679,10 @@ LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
                            struct LrdReport *report);
 
 /**
- * The paper's BMFR configuration: normal + position guides (M = 10
- * features), 32x32 blocks, noise 0.01, and the pipeline's blend weights.
+ * The default BMFR configuration: the paper's normal + position guides
+ * (M = 10 features), 32x32 blocks, noise 0.01 and pipeline blend weights,
+ * plus this library's shrinkage 4 (set `shrinkage = 0` for the paper's
+ * plain least squares).
  */
 struct LrdBmfrConfig lrd_bmfr_config_default(void);
 

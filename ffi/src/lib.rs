@@ -817,6 +817,10 @@ pub struct LrdBmfrConfig {
     pub noise: f32,
     /// Drop a feature whose QR pivot is below pivot_tol x the largest (1e-4).
     pub pivot_tol: f32,
+    /// Wiener shrinkage of each block's fit in its QR basis: component q of
+    /// Q^T z is scaled by q^2 / (q^2 + shrinkage x residual variance)
+    /// (0..=100; default 4; 0 = the paper's plain least squares).
+    pub shrinkage: f32,
     /// Shift the block grid every frame (default true).
     pub shift: bool,
     /// Clamp negative output to 0 (default true).
@@ -862,6 +866,7 @@ fn bmfr_config(c: &LrdBmfrConfig) -> Result<lrdenoise_core::BmfrConfig, LrdStatu
         quadratic: c.quadratic,
         noise: c.noise,
         pivot_tol: c.pivot_tol,
+        shrinkage: c.shrinkage,
         shift: c.shift,
         clamp_negative: c.clamp_negative,
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
@@ -1077,8 +1082,10 @@ unsafe fn denoise_temporal<M: Temporal>(
     Ok(())
 }
 
-/// The paper's BMFR configuration: normal + position guides (M = 10
-/// features), 32x32 blocks, noise 0.01, and the pipeline's blend weights.
+/// The default BMFR configuration: the paper's normal + position guides
+/// (M = 10 features), 32x32 blocks, noise 0.01 and pipeline blend weights,
+/// plus this library's shrinkage 4 (set `shrinkage = 0` for the paper's
+/// plain least squares).
 #[cfg(feature = "bmfr")]
 #[no_mangle]
 pub extern "C" fn lrd_bmfr_config_default() -> LrdBmfrConfig {
@@ -1091,6 +1098,7 @@ pub extern "C" fn lrd_bmfr_config_default() -> LrdBmfrConfig {
         quadratic: d.quadratic,
         noise: d.noise,
         pivot_tol: d.pivot_tol,
+        shrinkage: d.shrinkage,
         shift: d.shift,
         clamp_negative: d.clamp_negative,
         scalar_kernels: false,

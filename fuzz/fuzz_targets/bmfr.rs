@@ -14,7 +14,9 @@ fuzz_target!(|d: &[u8]| {
     let block = 8 + d[2] as usize % 57;
     let guides = GuideSet { normal: d[3] & 1 != 0, depth: d[3] & 2 != 0, position: d[3] & 4 != 0, ao: d[3] & 8 != 0, user: 0 };
     let index = d[4] as u32;
-    let cfg = BmfrConfig { block, noise: (d[5] % 4) as f32 * 0.01, shift: d[5] & 4 == 0, ..BmfrConfig::with_guides(guides) };
+    // bits 3..4 of d[5]: the shrinkage (off, the default, or strong)
+    let shrinkage = [0.0, 4.0, 100.0, 4.0][(d[5] >> 3 & 3) as usize];
+    let cfg = BmfrConfig { block, noise: (d[5] % 4) as f32 * 0.01, shift: d[5] & 4 == 0, shrinkage, ..BmfrConfig::with_guides(guides) };
     let body = &d[8..];
     let val = |i: usize| -> f32 {
         if body.is_empty() {

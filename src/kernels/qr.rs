@@ -316,6 +316,48 @@ pub const fn padded_ld(rows: usize) -> usize {
 /// [`lstsq`] on columns `ld ≥ rows` apart (column `c` is `a[c * ld..c * ld + rows]`).
 #[allow(clippy::too_many_arguments)]
 pub fn lstsq_ld(a: &mut [f32], ld: usize, rows: usize, m: usize, k: usize, rel_tol: f32, simd: bool, x: &mut [f32]) -> Option<Fit> {
+    lstsq_shrunk_ld(a, ld, rows, m, k, rel_tol, simd, Shrinkage::NONE, x)
+}
+
+/// Wiener shrinkage of a least-squares fit in the orthogonal basis of its QR
+/// factorisation ([`lstsq_shrunk_ld`]).
+///
+/// With `A = Q R`, the fitted values are `Q₁ q`, `q = (Qᵀz)_top`: coordinate
+/// `q_l` is the data's component along Q's column `l`, the signal there plus
+/// noise of the residual variance `σ̂² = ‖(Qᵀz)_{m..}‖² / (samples − m)`
+/// (white noise keeps its variance in any orthonormal basis). Each `q_l`,
+/// `l ≥ 1`, is scaled by `q_l² / (q_l² + κ σ̂²)` before back-substitution:
+/// components that stand well above the noise are kept, those at its level
+/// are damped. Column 0 (BMFR's constant feature: the block mean) is kept.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shrinkage {
+    /// κ ≥ 0 (0: plain least squares).
+    pub kappa: f32,
+    /// Rows that hold data (the rest are zero rows), for σ̂²'s degrees of freedom.
+    pub samples: usize,
+}
+
+impl Shrinkage {
+    /// No shrinkage: plain least squares.
+    pub const NONE: Shrinkage = Shrinkage { kappa: 0.0, samples: 0 };
+}
+
+/// [`lstsq_ld`] with [`Shrinkage`] of the fit: factors, scales `Qᵀz`'s
+/// components (right-hand side by right-hand side, each with its own σ̂²),
+/// then back-substitutes. `Shrinkage::NONE`, or no more samples than
+/// features, is plain least squares.
+#[allow(clippy::too_many_arguments)]
+pub fn lstsq_shrunk_ld(
+    a: &mut [f32],
+    ld: usize,
+    rows: usize,
+    m: usize,
+    k: usize,
+    rel_tol: f32,
+    simd: bool,
+    shrink: Shrinkage,
+    x: &mut [f32],
+) -> Option<Fit> {
     if rows == 0 || m + k == 0 || ld < rows || m > MAX_FEATURES || k > MAX_RHS || a.len() < ld * (m + k - 1) + rows || x.len() < m * k {
         return None;
     }
@@ -329,7 +371,31 @@ pub fn lstsq_ld(a: &mut [f32], ld: usize, rows: usize, m: usize, k: usize, rel_t
     for d in diag.iter_mut().skip(rows) {
         *d = 0.0;
     }
+    if shrink.kappa > 0.0 && shrink.samples > m && rows > m {
+        for c in 0..k {
+            shrink_components(&mut a[(m + c) * ld..(m + c) * ld + rows], m, shrink, simd);
+        }
+    }
     Some(back_substitute(a, ld, m, k, &diag, rel_tol, x))
+}
+
+/// Scales `qtz[1..m]` (one right-hand side's `Qᵀz`, whose rows `m..` are the
+/// residual) by `q² / (q² + κσ̂²)` ([`Shrinkage`]). A non-finite σ̂² leaves
+/// it as is. The residual's sum of squares is an f32 [`dot`] (in lanes with
+/// `simd`; its rounding, ~1e-6 relative, is far below what a shrinkage factor
+/// needs); the factors are formed in f64.
+fn shrink_components(qtz: &mut [f32], m: usize, shrink: Shrinkage, simd: bool) {
+    let rss = dot(&qtz[m..], &qtz[m..], simd) as f64;
+    let noise = shrink.kappa as f64 * rss / (shrink.samples - m) as f64;
+    if !noise.is_finite() {
+        return;
+    }
+    for q in &mut qtz[1..m] {
+        let q2 = *q as f64 * *q as f64;
+        let f = q2 / (q2 + noise);
+        // 0/0 (a zero component, no noise): nothing to scale
+        *q = if f.is_finite() { (*q as f64 * f) as f32 } else { *q };
+    }
 }
 
 /// Solves `R x = (Qᵀz)_top` (R: the top `m` rows of the first `m` columns,

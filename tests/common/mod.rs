@@ -150,6 +150,48 @@ pub fn run_frame(cfg: FlrConfig, w: usize, h: usize, frame: &Frame<'_>) -> (Vec<
     (out, rep)
 }
 
+/// Least squares `min ‖A x − z_c‖` with the fit shrunk in its orthogonal
+/// basis (`lrdenoise::kernels::qr::Shrinkage`), the obvious way in f64:
+/// modified Gram–Schmidt on the columns `cols[j]` of A (Q₁ explicit, R upper
+/// triangular), `q = Q₁ᵀz`, the residual variance `‖z − Q₁q‖² / (samples −
+/// m)`, each `q_l` (l ≥ 1) scaled by `q_l² / (q_l² + κσ̂²)`, then `x = R⁻¹q`
+/// (row-major m × k). κ = 0 is plain least squares. Full column rank assumed.
+pub fn shrunk_lstsq(cols: &[Vec<f64>], zs: &[Vec<f64>], kappa: f64, samples: usize) -> Vec<f64> {
+    let (m, k, rows) = (cols.len(), zs.len(), cols[0].len());
+    let mut q = cols.to_vec();
+    let mut r = vec![0f64; m * m];
+    for j in 0..m {
+        for i in 0..j {
+            let (done, rest) = q.split_at_mut(j);
+            let d: f64 = done[i].iter().zip(&rest[0]).map(|(a, b)| a * b).sum();
+            r[i * m + j] = d;
+            for (v, u) in rest[0].iter_mut().zip(&done[i]) {
+                *v -= d * u;
+            }
+        }
+        let n = q[j].iter().map(|v| v * v).sum::<f64>().sqrt();
+        r[j * m + j] = n;
+        q[j].iter_mut().for_each(|v| *v /= n);
+    }
+    let mut x = vec![0f64; m * k];
+    for (c, z) in zs.iter().enumerate() {
+        let mut qz: Vec<f64> = (0..m).map(|j| (0..rows).map(|t| q[j][t] * z[t]).sum()).collect();
+        let rss: f64 = (0..rows).map(|t| (z[t] - (0..m).map(|j| q[j][t] * qz[j]).sum::<f64>()).powi(2)).sum();
+        let noise = kappa * rss / (samples - m) as f64;
+        if kappa > 0.0 {
+            for v in qz.iter_mut().skip(1) {
+                let f = *v * *v / (*v * *v + noise);
+                *v *= f;
+            }
+        }
+        for i in (0..m).rev() {
+            let s: f64 = qz[i] - (i + 1..m).map(|j| r[i * m + j] * x[j * k + c]).sum::<f64>();
+            x[i * k + c] = s / r[i * m + i];
+        }
+    }
+    x
+}
+
 /// Solves the dense system `a x = b` (n×n, nrhs columns) by Gaussian
 /// elimination with partial pivoting (a different algorithm from the library's
 /// Cholesky on purpose). Singular pivots give 0.
