@@ -244,7 +244,9 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
         Variant::flr(FlrArgs::default()).on("noisy4"),
         Variant::method("bmfr", FlrArgs::default()),
+        Variant::method("bmfr", FlrArgs { shrinkage: Some(0.0), ..Default::default() }),
         Variant::method("bmfr-temporal", FlrArgs::default()),
+        Variant::method("bmfr-temporal", FlrArgs { shrinkage: Some(0.0), ..Default::default() }),
         Variant::method("walr", FlrArgs::default()),
         Variant::method("walr", FlrArgs { no_tracing: true, ..Default::default() }),
         Variant::method("walr", FlrArgs { storage: Some("f16".into()), ..Default::default() }),
@@ -351,6 +353,7 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         for block in [32, 64] {
             variants.push(Variant::method("bmfr", FlrArgs { block: Some(block), ..Default::default() }));
         }
+        variants.push(Variant::method("bmfr", FlrArgs { shrinkage: Some(0.0), ..Default::default() }));
     }
     if methods.contains(&"walr") && has("normal") && has("position") {
         let pw = |w: &str| Some(w.to_string());
@@ -414,8 +417,20 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
             d.psnr - f.psnr
         );
     }
-    if let (Some(b32), Some(b64)) = (find("bmfr", "--block 32"), find("bmfr", "--block 64")) {
+    let bmfr_default = records.iter().find(|r| r.method == "bmfr" && r.flags.contains("--block 32") && !r.flags.contains("--shrinkage"));
+    if let (Some(b32), Some(b64)) = (bmfr_default, find("bmfr", "--block 64")) {
         println!("  bmfr blocks      : 32x32 {:.2} dB in {:.3} ms, 64x64 {:.2} dB in {:.3} ms", b32.psnr, b32.ms, b64.psnr, b64.ms);
+    }
+    if let (Some(d), Some(plain)) = (bmfr_default, find("bmfr", "--shrinkage 0")) {
+        let verdict = if d.psnr - plain.psnr > 0.1 { "keep" } else { "can drop (--shrinkage 0)" };
+        println!(
+            "  bmfr shrinkage   : with {:.2} dB in {:.3} ms, without {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
+            d.psnr,
+            d.ms,
+            plain.psnr,
+            plain.ms,
+            d.psnr - plain.psnr
+        );
     }
     println!("  best     : {:.2} dB in {:.3} ms  ({})", best.psnr, best.ms, best.config);
     println!("  chosen   : {:.2} dB in {:.3} ms  ({})", pick.psnr, pick.ms, pick.config);

@@ -168,7 +168,7 @@ fn advise_bench_and_sequences() {
     // with the other methods: WALR's stages and BMFR's blocks weighed too, the choice over all
     let (ok, so, e) = lrd(&["advise", &data("poles_7.exr"), "--runs", "5", "--budget-ms", "1000", "--methods", "flr,bmfr,walr"]);
     assert!(ok && so.contains("chosen"), "{e}");
-    for l in ["walr tracing", "walr blend", "bmfr blocks"] {
+    for l in ["walr tracing", "walr blend", "bmfr blocks", "bmfr shrinkage"] {
         assert!(so.contains(l), "{l}: {so}");
     }
     fails_with(&["advise", &data("poles_7.exr"), "--methods", "walr"], &["flr is always weighed"]);
