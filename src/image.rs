@@ -79,6 +79,31 @@ pub fn f16_to_f32(h: f16) -> f32 {
     f32::from_bits(bits | sign)
 }
 
+/// Hints that `s[i]` will be read soon (nothing when out of range or not x86-64).
+#[inline(always)]
+pub(crate) fn prefetch<T>(s: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if i < s.len() {
+        // SAFETY: `i < s.len()`, so the pointer is inside the slice; a prefetch
+        // reads nothing architecturally and cannot fault.
+        unsafe { core::arch::x86_64::_mm_prefetch(s.as_ptr().add(i) as *const i8, core::arch::x86_64::_MM_HINT_T0) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (s, i);
+}
+
+/// [`prefetch`] of every 64-byte line of `s[a..b]`.
+#[inline]
+fn prefetch_lines<T>(s: &[T], a: usize, b: usize) {
+    let line = (64 / core::mem::size_of::<T>()).max(1);
+    let mut i = a;
+    while i < b {
+        prefetch(s, i);
+        i += line;
+    }
+    prefetch(s, b.saturating_sub(1));
+}
+
 /// Largest width or height accepted (keeps every index computation far from overflow).
 pub const MAX_DIM: usize = 1 << 16;
 
@@ -195,6 +220,31 @@ impl<'a> ImageView<'a> {
             }
         }
         Some(())
+    }
+
+    /// Hints that channels `0..channels` of row `y`, pixels `x0..x0 + len`
+    /// (clamped to the image), will be read soon: one prefetch per 64-byte line.
+    /// Reads nothing; a no-op off x86-64. For callers whose reads jump between
+    /// more row streams than the hardware prefetchers follow (BMFR's blocks).
+    #[inline]
+    pub fn prefetch_span(&self, y: usize, x0: usize, len: usize) {
+        let x1 = x0.saturating_add(len).min(self.width);
+        if y >= self.height || x0 >= x1 {
+            return;
+        }
+        let l = &self.layout;
+        let (ps, cs) = (l.pixel_stride, l.channel_stride);
+        let start = l.offset + y * l.row_stride + x0 * ps;
+        let span = (x1 - x0 - 1) * ps + 1;
+        // interleaved channels share lines: one range; otherwise one range per channel
+        let (ranges, extra) = if cs < ps { (1, (self.channels - 1) * cs) } else { (self.channels, 0) };
+        for c in 0..ranges {
+            let a = start + c * cs;
+            match self.samples {
+                Samples::F32(s) => prefetch_lines(s, a, a + span + extra),
+                Samples::F16(s) => prefetch_lines(s, a, a + span + extra),
+            }
+        }
     }
 
     /// The three single-channel views `v` as one 3-channel view, when they are

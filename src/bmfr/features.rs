@@ -17,6 +17,8 @@ use super::CheckedFrame;
 use crate::error::Error;
 use crate::guides::{GuideSet, MAX_GUIDES};
 use crate::image::ImageView;
+#[cfg(doc)]
+use crate::kernels::qr::lstsq_shrunk_ld_dots;
 use crate::kernels::qr::{padded_ld, MAX_FEATURES};
 use wide::{f32x8, i32x8, u32x8};
 
@@ -82,7 +84,7 @@ impl FeatureSet {
 
 /// f32 values of a worker for `b × b` blocks and `m` features.
 pub const fn worker_len(b: usize, m: usize) -> usize {
-    padded_ld(b * b) * (m + 3 + 3) + 2 * b * b
+    padded_ld(b * b) * (m + 3 + 3) + 4 * b * b
 }
 
 /// A worker buffer split into its regions.
@@ -98,6 +100,8 @@ pub struct Worker<'w> {
     pub guide_ok: &'w mut [f32],
     /// 1 where the row takes part in the fit.
     pub valid: &'w mut [f32],
+    /// `2·B²` values of regularisation noise ([`noise_table`]).
+    pub noise: &'w mut [f32],
 }
 
 impl<'w> Worker<'w> {
@@ -110,8 +114,9 @@ impl<'w> Worker<'w> {
         let (a, rest) = buf.split_at_mut(ld * (m + 3));
         let (model, rest) = rest.split_at_mut(3 * ld);
         let (guide_ok, rest) = rest.split_at_mut(n);
-        let valid = &mut rest[..n];
-        Some(Worker { a, model, ld, guide_ok, valid })
+        let (valid, rest) = rest.split_at_mut(n);
+        let noise = &mut rest[..2 * n];
+        Some(Worker { a, model, ld, guide_ok, valid, noise })
     }
 }
 
@@ -140,11 +145,41 @@ fn read_span<const N: usize>(v: &ImageView<'_>, y: usize, x0: i64, dst: [&mut [f
         });
         v.read_row_n(y, a as usize, inner)?;
     }
-    // the mirrored margins, pixel by pixel
-    let (left, right) = ((a - x0).min(len) as usize, ((b - x0).max(0) as usize).max((a - x0).min(len) as usize));
-    for i in (0..left).chain(right..len as usize) {
-        for (c, d) in dst.iter_mut().enumerate() {
-            d[i] = v.get(mirror(x0 + i as i64, w as usize), y, c)?;
+    // the mirrored margins: each is a run of the image read backwards (pixel
+    // `−1 − k` is pixel `k`, pixel `w + k` is `w − 1 − k`), so read it forwards
+    // and reverse it; pixel by pixel when a margin is wider than the image
+    let left = (a - x0).clamp(0, len) as usize;
+    let right = ((b - x0).max(0) as usize).max(left);
+    let len = len as usize;
+    if left > 0 && (left as i64) <= w && x0 + left as i64 == 0 {
+        let mut it = dst.iter_mut();
+        let part: [&mut [f32]; N] = core::array::from_fn(|_| match it.next() {
+            Some(d) => &mut d[..left],
+            None => &mut [],
+        });
+        v.read_row_n(y, 0, part)?;
+        dst.iter_mut().for_each(|d| d[..left].reverse());
+    } else {
+        for i in 0..left {
+            for (c, d) in dst.iter_mut().enumerate() {
+                d[i] = v.get(mirror(x0 + i as i64, w as usize), y, c)?;
+            }
+        }
+    }
+    let n_right = len - right;
+    if n_right > 0 && (n_right as i64) <= w && x0 + right as i64 == w {
+        let mut it = dst.iter_mut();
+        let part: [&mut [f32]; N] = core::array::from_fn(|_| match it.next() {
+            Some(d) => &mut d[right..],
+            None => &mut [],
+        });
+        v.read_row_n(y, (w as usize) - n_right, part)?;
+        dst.iter_mut().for_each(|d| d[right..].reverse());
+    } else {
+        for i in right..len {
+            for (c, d) in dst.iter_mut().enumerate() {
+                d[i] = v.get(mirror(x0 + i as i64, w as usize), y, c)?;
+            }
         }
     }
     Some(())
@@ -223,17 +258,8 @@ impl Band<'_> {
     pub fn fill(&mut self, frame: &CheckedFrame<'_>, q: usize, (x0, y0): (i64, i64), h: usize) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: 0, count: 0 };
         let (plane, stride) = (self.plane(), self.stride);
-        // Guide channels that are three consecutive channels of one image
-        // (normal, position) are read together.
         let view = |g: usize| frame.guides[g].as_ref().ok_or(Error::GuideMismatch);
-        let mut joined = [None; MAX_GUIDES];
-        let mut g = 0;
-        while g < q {
-            if g + 3 <= q {
-                joined[g] = ImageView::join3(view(g)?, view(g + 1)?, view(g + 2)?);
-            }
-            g += if joined[g].is_some() { 3 } else { 1 };
-        }
+        let joined = joined_guides(frame, q)?;
         for j in 0..self.rows {
             let y = mirror(y0 + j as i64, h);
             let row = |ch: usize| ch * plane + j * stride;
@@ -256,6 +282,53 @@ impl Band<'_> {
             }
         }
         Ok(())
+    }
+}
+
+/// Guide channels that are three consecutive channels of one image (normal,
+/// position), joined into one view at their first channel so that a row of
+/// all three is read together.
+fn joined_guides<'a>(frame: &CheckedFrame<'a>, q: usize) -> Result<[Option<ImageView<'a>>; MAX_GUIDES], Error> {
+    let view = |g: usize| frame.guides[g].as_ref().ok_or(Error::GuideMismatch);
+    let mut joined = [None; MAX_GUIDES];
+    let mut g = 0;
+    while g < q {
+        if g + 3 <= q {
+            joined[g] = ImageView::join3(view(g)?, view(g + 1)?, view(g + 2)?);
+        }
+        g += if joined[g].is_some() { 3 } else { 1 };
+    }
+    Ok(joined)
+}
+
+/// Hints that [`Band::fill`] will soon read rows `rows` of the band at
+/// `(x0, y0)` with `stride` pixels (mirrored rows as `fill` reads them; the
+/// mirrored columns, a few pixels at the image's borders, are left out).
+/// BMFR reads each block row of every input as its own short run, more runs
+/// than the hardware prefetchers follow: asked for while the previous chunk's
+/// blocks are fitted, they arrive before `fill` reads them.
+pub fn prefetch_band(frame: &CheckedFrame<'_>, q: usize, (x0, y0): (i64, i64), stride: usize, rows: core::ops::Range<usize>, h: usize) {
+    let Ok(joined) = joined_guides(frame, q) else { return };
+    let w = frame.noisy.width() as i64;
+    let (a, b) = (x0.clamp(0, w) as usize, (x0 + stride as i64).clamp(0, w) as usize);
+    for j in rows {
+        let y = mirror(y0 + j as i64, h);
+        frame.noisy.prefetch_span(y, a, b - a);
+        let mut g = 0;
+        while g < q {
+            match (joined[g], &frame.guides[g]) {
+                (Some(v), _) => {
+                    v.prefetch_span(y, a, b - a);
+                    g += 3;
+                }
+                (None, v) => {
+                    if let Some(v) = v {
+                        v.prefetch_span(y, a, b - a);
+                    }
+                    g += 1;
+                }
+            }
+        }
     }
 }
 
@@ -388,13 +461,44 @@ pub fn gather_block(
     Ok(g)
 }
 
+/// Fills `table` with the regularisation noise: `(hash(seed + i) >> 8)`
+/// scaled onto `[−amp, amp)` (uniform; the same bits on every platform).
+/// Filled once per tile: a block's features read windows of it ([`fit_matrix`]),
+/// which costs one load per 8 values instead of a hash (~1 ms of the 1080p fit).
+pub fn noise_table(table: &mut [f32], seed: u32, amp: f32) {
+    let scale = 2.0 * amp / (1u32 << 24) as f32;
+    let mut chunks = table.chunks_exact_mut(8);
+    let mut i = 0u32;
+    for c in &mut chunks {
+        let x = u32x8::splat(seed.wrapping_add(i)) + u32x8::from([0, 1, 2, 3, 4, 5, 6, 7]);
+        let u: i32x8 = bytemuck::cast(hash8(x) >> 8);
+        c.copy_from_slice(&(f32x8::from_i32x8(u) * f32x8::splat(scale) - f32x8::splat(amp)).to_array());
+        i = i.wrapping_add(8);
+    }
+    for v in chunks.into_remainder() {
+        *v = (hash(seed.wrapping_add(i)) >> 8) as f32 * scale - amp;
+        i = i.wrapping_add(1);
+    }
+}
+
+/// Where feature `f`'s noise starts in the `2n`-value table for the block
+/// whose seed is `seed`: its rows `0..n` read `table[o..o + n]`, `o < n`, a
+/// window that differs per block and feature.
+#[inline]
+fn noise_offset(seed: u32, f: usize, n: usize) -> usize {
+    hash(seed ^ ((f as u32) << 24)) as usize % n
+}
+
 /// Fills the block's fit matrix `wb.a` (row `j·B + i` = pixel `(i, j)`):
 /// column 0 = 1, then every guide feature (rescaled with `g.scale`), then
-/// the squares, each plus the regularisation noise (uniform in `[−amp, amp]`,
-/// from `seed`; see `noise8`), then the noisy colour; rows that are not
-/// valid are 0. (Tried: feeding 128-row panels to a streamed TSQR that stays
+/// the squares, each plus the regularisation noise (uniform in `[−amp, amp]`:
+/// a window of `wb.noise`, [`noise_table`], picked by `seed`), then the noisy
+/// colour; rows that are not valid are 0. Returns each column's sum, i.e.
+/// its dot product with column 0 (the 0/1 row mask), which the QR's first
+/// reflection needs ([`lstsq_shrunk_ld_dots`]): formed here from the values
+/// as they are stored, not in another pass over the matrix. (Tried: feeding 128-row panels to a streamed TSQR that stays
 /// in L1 — 12 % slower overall at 1080p; the QR is not bound by L2 here.)
-pub fn fit_matrix(fs: &FeatureSet, band: &Band<'_>, bx: usize, g: &Gathered, amp: f32, seed: u32, wb: &mut Worker<'_>) {
+pub fn fit_matrix(fs: &FeatureSet, band: &Band<'_>, bx: usize, g: &Gathered, seed: u32, wb: &mut Worker<'_>) -> [f32; MAX_FEATURES + 3] {
     let b = band.rows;
     let n = b * b;
     let m = fs.count();
@@ -403,11 +507,16 @@ pub fn fit_matrix(fs: &FeatureSet, band: &Band<'_>, bx: usize, g: &Gathered, amp
     let at = |ch: usize, j: usize| ch * plane + j * band.stride + bx * b;
     let data = &*band.data;
     let sc = g.scale;
-    let noise_scale = 2.0 * amp / (1u32 << 24) as f32;
-    let base = |f: usize| seed ^ ((f as u32) << 24);
+    let mut off = [0usize; MAX_FEATURES];
+    for (f, o) in off.iter_mut().enumerate().take(m).skip(1) {
+        *o = noise_offset(seed, f, n);
+    }
+    let noise = &*wb.noise;
     let ld = wb.ld;
     let a = &mut *wb.a;
     a[..n].copy_from_slice(wb.valid);
+    let mut sum8 = [f32x8::ZERO; MAX_FEATURES + 3];
+    let mut sum = [0f32; MAX_FEATURES + 3];
     for j in 0..b {
         let mut i = 0;
         while i + 8 <= b {
@@ -416,17 +525,21 @@ pub fn fit_matrix(fs: &FeatureSet, band: &Band<'_>, bx: usize, g: &Gathered, amp
             let mut feat = [f32x8::ZERO; MAX_GUIDES];
             for (f, x) in feat.iter_mut().enumerate().take(q) {
                 *x = sc.apply8(f, load8(data, at(3 + f, j) + i));
-                let v = *x + noise8(base(1 + f), r as u32, noise_scale, amp);
-                store8(a, (1 + f) * ld + r, valid.select(v, f32x8::ZERO));
+                let v = valid.select(*x + load8(noise, off[1 + f] + r), f32x8::ZERO);
+                sum8[1 + f] += v;
+                store8(a, (1 + f) * ld + r, v);
             }
             for s in 0..fs.n_squares {
                 let x = feat[fs.squares[s]];
                 let f = 1 + q + s;
-                let v = x * x + noise8(base(f), r as u32, noise_scale, amp);
-                store8(a, f * ld + r, valid.select(v, f32x8::ZERO));
+                let v = valid.select(x * x + load8(noise, off[f] + r), f32x8::ZERO);
+                sum8[f] += v;
+                store8(a, f * ld + r, v);
             }
             for c in 0..3 {
-                store8(a, (m + c) * ld + r, valid.select(load8(data, at(c, j) + i), f32x8::ZERO));
+                let v = valid.select(load8(data, at(c, j) + i), f32x8::ZERO);
+                sum8[m + c] += v;
+                store8(a, (m + c) * ld + r, v);
             }
             i += 8;
         }
@@ -434,32 +547,29 @@ pub fn fit_matrix(fs: &FeatureSet, band: &Band<'_>, bx: usize, g: &Gathered, amp
             let r = j * b + i;
             let valid = wb.valid[r] != 0.0;
             let mut feat = [0f32; MAX_GUIDES];
-            let noise = |f: usize| ((hash(base(f).wrapping_add(r as u32)) >> 8) as f32) * noise_scale - amp;
             for f in 0..q {
                 feat[f] = sc.apply(f, data[at(3 + f, j) + i]);
-                a[(1 + f) * ld + r] = if valid { feat[f] + noise(1 + f) } else { 0.0 };
+                a[(1 + f) * ld + r] = if valid { feat[f] + noise[off[1 + f] + r] } else { 0.0 };
             }
             for s in 0..fs.n_squares {
                 let x = feat[fs.squares[s]];
                 let f = 1 + q + s;
-                a[f * ld + r] = if valid { x * x + noise(f) } else { 0.0 };
+                a[f * ld + r] = if valid { x * x + noise[off[f] + r] } else { 0.0 };
             }
             for c in 0..3 {
                 a[(m + c) * ld + r] = if valid { data[at(c, j) + i] } else { 0.0 };
             }
+            for (c, s) in sum.iter_mut().enumerate().take(m + 3).skip(1) {
+                *s += a[c * ld + r];
+            }
             i += 1;
         }
     }
-}
-
-/// The regularisation noise of feature `f`'s rows `r..r + 8` (`base` =
-/// seed ^ f << 24): `hash(base + r) >> 8` scaled onto `[−amp, amp)`, lane for
-/// lane the same value as the scalar remainder computes.
-#[inline(always)]
-fn noise8(base: u32, r: u32, scale: f32, amp: f32) -> f32x8 {
-    let x = u32x8::splat(base.wrapping_add(r)) + u32x8::from([0, 1, 2, 3, 4, 5, 6, 7]);
-    let u: i32x8 = bytemuck::cast(hash8(x) >> 8);
-    f32x8::from_i32x8(u) * f32x8::splat(scale) - f32x8::splat(amp)
+    sum[0] = g.valid as f32;
+    for c in 1..m + 3 {
+        sum[c] += sum8[c].reduce_add();
+    }
+    sum
 }
 
 /// Evaluates the fitted model `coef` (`m × 3`, row-major) on the block in
@@ -544,3 +654,59 @@ pub fn seed(index: u32, block_id: u32) -> u32 {
 }
 
 use crate::hash::{lowbias32 as hash, lowbias32x8 as hash8};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The table's lanes and its scalar remainder give the same values, all in
+    /// `[−amp, amp)` and centred (a biased noise would shift every feature).
+    #[test]
+    fn noise_table_is_uniform_in_range_and_lane_exact() {
+        let amp = 0.01;
+        for len in [0usize, 1, 7, 8, 2048, 2051] {
+            let mut t = [0f32; 2051];
+            let t = &mut t[..len];
+            noise_table(t, 0xDEAD_BEEF, amp);
+            let scale = 2.0 * amp / (1u32 << 24) as f32;
+            for (i, v) in t.iter().enumerate() {
+                let want = (hash(0xDEAD_BEEFu32.wrapping_add(i as u32)) >> 8) as f32 * scale - amp;
+                assert_eq!(*v, want, "value {i} of {len}");
+                assert!((-amp..amp).contains(v));
+            }
+            if len >= 2048 {
+                let mean = t.iter().map(|&v| v as f64).sum::<f64>() / len as f64;
+                assert!(mean.abs() < 0.05 * amp as f64, "mean {mean}");
+                let var = t.iter().map(|&v| (v as f64).powi(2)).sum::<f64>() / len as f64;
+                let uniform = (amp as f64).powi(2) / 3.0;
+                assert!((var / uniform - 1.0).abs() < 0.1, "variance {var} vs {uniform}");
+            }
+        }
+        let mut a = [0f32; 64];
+        let mut b = [0f32; 64];
+        noise_table(&mut a, 1, amp);
+        noise_table(&mut b, 2, amp);
+        assert_ne!(a, b, "the seed changes the noise");
+    }
+
+    /// Mirrored margins read as reversed runs equal the per-pixel mirror.
+    #[test]
+    fn read_span_mirrors_like_the_index_map() {
+        let (w, h) = (9usize, 2usize);
+        let data: [f32; 9 * 2 * 3] = core::array::from_fn(|i| i as f32);
+        let v = ImageView::interleaved(&data, w, h, 3).unwrap();
+        for x0 in -12i64..14 {
+            for len in [1usize, 4, 9, 16, 30] {
+                let mut p = [[0f32; 30]; 3];
+                let [a, b, c] = &mut p;
+                read_span(&v, 1, x0, [&mut a[..len], &mut b[..len], &mut c[..len]]).unwrap();
+                for i in 0..len {
+                    let x = mirror(x0 + i as i64, w);
+                    for (ch, plane) in p.iter().enumerate() {
+                        assert_eq!(plane[i], data[(w + x) * 3 + ch], "x0 {x0} len {len} i {i}");
+                    }
+                }
+            }
+        }
+    }
+}

@@ -37,7 +37,7 @@ use crate::config::Kernel;
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
-use crate::kernels::qr::{lstsq_shrunk_ld, Shrinkage, MAX_FEATURES};
+use crate::kernels::qr::{lstsq_shrunk_ld_dots, Shrinkage, MAX_FEATURES};
 use features::{apply_block, gather_block, Band, FeatureSet};
 
 pub use temporal::History;
@@ -316,16 +316,32 @@ impl Bmfr {
         let (blk, rest) = worker.split_at_mut(features::worker_len(b, m));
         let mut wb = features::Worker::split(blk, b, m).ok_or(Error::ScratchTooSmall { needed: self.worker_len(), got: 0 })?;
         let ty0 = y0 + (t * b) as i64;
+        features::noise_table(wb.noise, features::seed(index, u32::MAX - t as u32), self.cfg.noise);
         let mut rep = Report::default();
+        let tiles = self.tile_count(index);
         for c0 in (0..bx_n).step_by(chunk) {
             let blocks = chunk.min(bx_n - c0);
             let mut band = Band { data: &mut rest[..Band::len(3 + self.fs.q, b, b * blocks)], rows: b, stride: b * blocks };
             band.fill(frame, self.fs.q, (x0 + (c0 * b) as i64, ty0), self.height)?;
+            // the chunk read next (this tile's, else the next tile's first), asked for
+            // a few rows per block while this chunk's blocks are fitted (asked for
+            // over the first half of them only, it measured slower)
+            let next = if c0 + chunk < bx_n { Some((c0 + chunk, ty0)) } else { (t + 1 < tiles).then_some((0, ty0 + b as i64)) };
             for k in 0..blocks {
+                // this block's share of the rows, a quarter before each of its stages
+                // (in one burst the prefetches waited on the full miss buffers)
+                let mut prefetch = |stage: usize| {
+                    if let Some((nc, ny)) = next {
+                        let (r0, r1) = (k * b / blocks, (k + 1) * b / blocks);
+                        let rows = r0 + stage * (r1 - r0) / 4..r0 + (stage + 1) * (r1 - r0) / 4;
+                        let stride = b * chunk.min(bx_n - nc);
+                        features::prefetch_band(frame, self.fs.q, (x0 + (nc * b) as i64, ny), stride, rows, self.height);
+                    }
+                };
                 let bx = c0 + k;
                 let origin = (x0 + (bx * b) as i64, ty0);
                 let block_id = (t * bx_n + bx) as u32;
-                rep += self.fit_block(&band, k, index, block_id, origin, &mut wb, rows.0, out_band)?;
+                rep += self.fit_block(&band, k, index, block_id, origin, &mut wb, rows.0, out_band, &mut prefetch)?;
             }
         }
         Ok(rep)
@@ -333,7 +349,7 @@ impl Bmfr {
 
     /// Fits block `k` of the chunk in `band` (top-left pixel `origin`) and
     /// writes its pixels inside the image into `out` (whose row 0 is image
-    /// row `row0`).
+    /// row `row0`). Calls `prefetch(0..4)` before each of its four stages.
     #[allow(clippy::too_many_arguments)]
     fn fit_block(
         &self,
@@ -345,24 +361,30 @@ impl Bmfr {
         wb: &mut features::Worker<'_>,
         row0: usize,
         out: &mut ImageViewMut<'_>,
+        prefetch: &mut dyn FnMut(usize),
     ) -> Result<Report, Error> {
         let b = self.cfg.block;
         let (m, w) = (self.fs.count(), self.width);
         let simd = self.cfg.kernel == Kernel::Simd;
         let mut rep = Report::default();
+        prefetch(0);
         let g = gather_block(&self.fs, band, k, (w, self.height), origin, wb)?;
         rep.nonfinite_noisy += g.nonfinite_noisy;
         rep.nonfinite_guides += g.nonfinite_guides;
         let mut coef = [0f32; MAX_FEATURES * 3];
+        prefetch(1);
         if g.valid > 0 {
-            features::fit_matrix(&self.fs, band, k, &g, self.cfg.noise, features::seed(index, block_id), wb);
+            let dots = features::fit_matrix(&self.fs, band, k, &g, features::seed(index, block_id), wb);
+            prefetch(2);
             let shrink = Shrinkage { kappa: self.cfg.shrinkage, samples: g.valid };
-            let fit = lstsq_shrunk_ld(wb.a, wb.ld, b * b, m, 3, self.cfg.pivot_tol, simd, shrink, &mut coef[..m * 3])
+            let fit = lstsq_shrunk_ld_dots(wb.a, wb.ld, b * b, m, 3, self.cfg.pivot_tol, simd, shrink, &dots[..m + 3], &mut coef[..m * 3])
                 .ok_or(Error::Unsupported("QR sizes"))?;
             rep.dropped_features += fit.dropped.count_ones() as u64;
         } else {
+            prefetch(2);
             rep.empty_blocks += 1;
         }
+        prefetch(3);
         let ld = wb.ld;
         apply_block(&self.fs, band, k, &coef[..m * 3], &g, wb.guide_ok, self.cfg.clamp_negative, wb.model, ld);
         let xa = origin.0.max(0) as usize;

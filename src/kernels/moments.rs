@@ -11,6 +11,7 @@
 
 use super::CellLayout;
 use crate::guides::MAX_GUIDES;
+use crate::image::prefetch;
 use wide::f32x8;
 
 /// Largest moment count (Q = 12).
@@ -206,19 +207,6 @@ fn load_at(s: &[f32], i: usize) -> f32x8 {
 /// band has `rows × Q` guide streams advancing by one block each: more than
 /// the hardware prefetchers follow, so every block's loads would wait on DRAM.
 const PREFETCH_AHEAD: usize = 48;
-
-/// Hints that `s[i..]` will be read soon (nothing when out of range or not x86-64).
-#[inline(always)]
-fn prefetch(s: &[f32], i: usize) {
-    #[cfg(target_arch = "x86_64")]
-    if i < s.len() {
-        // SAFETY: `i < s.len()`, so the pointer is inside the slice; a prefetch
-        // reads nothing architecturally and cannot fault.
-        unsafe { core::arch::x86_64::_mm_prefetch(s.as_ptr().add(i) as *const i8, core::arch::x86_64::_MM_HINT_T0) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (s, i);
-}
 
 /// Group vectors of a block assuming every pixel valid: `e = (g − m) − r`
 /// (the value the gathered plane holds, minus the reference, times weight 1).

@@ -199,15 +199,28 @@ fn update_and_dot_group(v: &[f32], s: &[f32], cols: &mut [&mut [f32]; GROUP], g:
 /// `vᵀv = 2(‖x‖² − α x₀)`, so the reflection needs only those dot products.
 /// Halves the loads and stores of the two-pass form (the matrix, 53 KB for a
 /// 1024 × 13 block, lives in L2).
-fn triangularize_fused(a: &mut [f32], ld: usize, rows: usize, cols: usize, m: usize, diag: &mut [f32; MAX_FEATURES]) {
+fn triangularize_fused(
+    a: &mut [f32],
+    ld: usize,
+    rows: usize,
+    cols: usize,
+    m: usize,
+    diag: &mut [f32; MAX_FEATURES],
+    dots0: Option<&[f32]>,
+) {
     let mut d = [0f32; MAX_FEATURES + MAX_RHS];
     let pivots = m.min(rows);
     if pivots == 0 {
         return;
     }
-    // dots of column 0 with every column, over all rows
-    for c in 0..cols {
-        d[c] = dot(&a[..rows], &a[c * ld..c * ld + rows], true);
+    // dots of column 0 with every column, over all rows (given, or one pass)
+    match dots0 {
+        Some(d0) => d[..cols].copy_from_slice(&d0[..cols]),
+        None => {
+            for c in 0..cols {
+                d[c] = dot(&a[..rows], &a[c * ld..c * ld + rows], true);
+            }
+        }
     }
     for j in 0..pivots {
         let (head, tail) = a.split_at_mut((j + 1) * ld);
@@ -358,13 +371,53 @@ pub fn lstsq_shrunk_ld(
     shrink: Shrinkage,
     x: &mut [f32],
 ) -> Option<Fit> {
+    solve(a, ld, rows, m, k, rel_tol, simd, shrink, None, x)
+}
+
+/// [`lstsq_shrunk_ld`] for a caller that already has the dot products of
+/// column 0 with every column (`dots0[c] = a₀ · a_c`, `m + k` values), which
+/// the first reflection needs: BMFR, whose column 0 is the 0/1 row mask, sums
+/// the columns while it fills them and saves the QR a pass over the matrix.
+/// (The scalar path, `simd = false`, computes them itself.)
+#[allow(clippy::too_many_arguments)]
+pub fn lstsq_shrunk_ld_dots(
+    a: &mut [f32],
+    ld: usize,
+    rows: usize,
+    m: usize,
+    k: usize,
+    rel_tol: f32,
+    simd: bool,
+    shrink: Shrinkage,
+    dots0: &[f32],
+    x: &mut [f32],
+) -> Option<Fit> {
+    if dots0.len() < m + k {
+        return None;
+    }
+    solve(a, ld, rows, m, k, rel_tol, simd, shrink, Some(dots0), x)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn solve(
+    a: &mut [f32],
+    ld: usize,
+    rows: usize,
+    m: usize,
+    k: usize,
+    rel_tol: f32,
+    simd: bool,
+    shrink: Shrinkage,
+    dots0: Option<&[f32]>,
+    x: &mut [f32],
+) -> Option<Fit> {
     if rows == 0 || m + k == 0 || ld < rows || m > MAX_FEATURES || k > MAX_RHS || a.len() < ld * (m + k - 1) + rows || x.len() < m * k {
         return None;
     }
     let cols = m + k;
     let mut diag = [0f32; MAX_FEATURES];
     if simd {
-        triangularize_fused(a, ld, rows, cols, m, &mut diag);
+        triangularize_fused(a, ld, rows, cols, m, &mut diag, dots0);
     } else {
         triangularize(a, ld, rows, cols, m, &mut diag);
     }
