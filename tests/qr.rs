@@ -147,6 +147,34 @@ fn rank_deficient_blocks() {
     assert!(lstsq(&mut [0.0; 4], 2, 17, 1, 1e-4, true, &mut [0.0; 17]).is_none());
 }
 
+/// Column 0's dot products handed in (`dots0`, as BMFR sums its columns while
+/// filling them) give the fit the QR computes them for, to rounding: the
+/// products are summed in another order. Dots of a different problem change
+/// the fit (so they are used), and too few are refused.
+#[test]
+fn given_column_dots_match_computed_ones() {
+    for (rows, m, k) in [(1024, 10, 3), (81, 5, 3), (7, 3, 1)] {
+        let p = Problem::random(rows, m, k, 21);
+        let dots: Vec<f32> =
+            (0..m + k).map(|c| p.col(0).iter().zip(p.col(c)).map(|(a, b)| *a as f64 * *b as f64).sum::<f64>() as f32).collect();
+        let shrink = Shrinkage { kappa: 4.0, samples: rows };
+        let run = |d: Option<&[f32]>| {
+            let (mut a, mut x) = (p.a.clone(), vec![0f32; m * k]);
+            lstsq_shrunk_ld(&mut a, rows, rows, m, k, 1e-4, true, shrink, d, &mut x).unwrap();
+            x
+        };
+        let (want, got) = (run(None), run(Some(&dots)));
+        let scale = want.iter().fold(1e-3f32, |s, v| s.max(v.abs()));
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() <= 1e-4 * scale, "{rows}x{m}x{k}: {g} vs {w}");
+        }
+        let wrong: Vec<f32> = dots.iter().map(|d| d * 1.5 + 1.0).collect();
+        assert_ne!(run(Some(&wrong)), want, "{rows}x{m}x{k}: the given dots are used");
+        let (mut a, mut x) = (p.a.clone(), vec![0f32; m * k]);
+        assert!(lstsq_shrunk_ld(&mut a, rows, rows, m, k, 1e-4, true, shrink, Some(&dots[..m + k - 1]), &mut x).is_none());
+    }
+}
+
 /// Columns `ld > rows` apart (padded off multiples of 4 KiB, as BMFR stores
 /// its blocks) give bit-identical results; the padding is never read.
 #[test]
@@ -180,7 +208,7 @@ impl Problem {
     fn solve_shrunk(&self, kappa: f32, samples: usize, simd: bool) -> Vec<f32> {
         let mut a = self.a.clone();
         let mut x = vec![0f32; self.m * self.k];
-        lstsq_shrunk_ld(&mut a, self.rows, self.rows, self.m, self.k, 1e-4, simd, Shrinkage { kappa, samples }, &mut x).unwrap();
+        lstsq_shrunk_ld(&mut a, self.rows, self.rows, self.m, self.k, 1e-4, simd, Shrinkage { kappa, samples }, None, &mut x).unwrap();
         x
     }
     /// A block of `rows` samples whose right-hand sides are `A β` for a

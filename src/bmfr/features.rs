@@ -18,7 +18,7 @@ use crate::error::Error;
 use crate::guides::{GuideSet, MAX_GUIDES};
 use crate::image::ImageView;
 #[cfg(doc)]
-use crate::kernels::qr::lstsq_shrunk_ld_dots;
+use crate::kernels::qr::lstsq_shrunk_ld;
 use crate::kernels::qr::{padded_ld, MAX_FEATURES};
 use wide::{f32x8, i32x8, u32x8};
 
@@ -495,7 +495,7 @@ fn noise_offset(seed: u32, f: usize, n: usize) -> usize {
 /// a window of `wb.noise`, [`noise_table`], picked by `seed`), then the noisy
 /// colour; rows that are not valid are 0. Returns each column's sum, i.e.
 /// its dot product with column 0 (the 0/1 row mask), which the QR's first
-/// reflection needs ([`lstsq_shrunk_ld_dots`]): formed here from the values
+/// reflection needs ([`lstsq_shrunk_ld`]'s `dots0`): formed here from the values
 /// as they are stored, not in another pass over the matrix. (Tried: feeding 128-row panels to a streamed TSQR that stays
 /// in L1 — 12 % slower overall at 1080p; the QR is not bound by L2 here.)
 pub fn fit_matrix(fs: &FeatureSet, band: &Band<'_>, bx: usize, g: &Gathered, seed: u32, wb: &mut Worker<'_>) -> [f32; MAX_FEATURES + 3] {

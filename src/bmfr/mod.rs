@@ -37,7 +37,7 @@ use crate::config::Kernel;
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
-use crate::kernels::qr::{lstsq_shrunk_ld_dots, Shrinkage, MAX_FEATURES};
+use crate::kernels::qr::{lstsq_shrunk_ld, Shrinkage, MAX_FEATURES};
 use features::{apply_block, gather_block, Band, FeatureSet};
 
 pub use temporal::History;
@@ -377,7 +377,7 @@ impl Bmfr {
             let dots = features::fit_matrix(&self.fs, band, k, &g, features::seed(index, block_id), wb);
             prefetch(2);
             let shrink = Shrinkage { kappa: self.cfg.shrinkage, samples: g.valid };
-            let fit = lstsq_shrunk_ld_dots(wb.a, wb.ld, b * b, m, 3, self.cfg.pivot_tol, simd, shrink, &dots[..m + 3], &mut coef[..m * 3])
+            let fit = lstsq_shrunk_ld(wb.a, wb.ld, b * b, m, 3, self.cfg.pivot_tol, simd, shrink, Some(&dots[..m + 3]), &mut coef[..m * 3])
                 .ok_or(Error::Unsupported("QR sizes"))?;
             rep.dropped_features += fit.dropped.count_ones() as u64;
         } else {

@@ -329,7 +329,7 @@ pub const fn padded_ld(rows: usize) -> usize {
 /// [`lstsq`] on columns `ld ≥ rows` apart (column `c` is `a[c * ld..c * ld + rows]`).
 #[allow(clippy::too_many_arguments)]
 pub fn lstsq_ld(a: &mut [f32], ld: usize, rows: usize, m: usize, k: usize, rel_tol: f32, simd: bool, x: &mut [f32]) -> Option<Fit> {
-    lstsq_shrunk_ld(a, ld, rows, m, k, rel_tol, simd, Shrinkage::NONE, x)
+    lstsq_shrunk_ld(a, ld, rows, m, k, rel_tol, simd, Shrinkage::NONE, None, x)
 }
 
 /// Wiener shrinkage of a least-squares fit in the orthogonal basis of its QR
@@ -359,47 +359,14 @@ impl Shrinkage {
 /// components (right-hand side by right-hand side, each with its own σ̂²),
 /// then back-substitutes. `Shrinkage::NONE`, or no more samples than
 /// features, is plain least squares.
+///
+/// `dots0`: the dot products of column 0 with every column (`a₀ · a_c`,
+/// `m + k` values), which the first reflection needs, when the caller already
+/// has them; `None` computes them in a pass over the matrix. BMFR, whose
+/// column 0 is the 0/1 row mask, sums the columns while it fills them. (The
+/// scalar path, `simd = false`, always computes them itself.)
 #[allow(clippy::too_many_arguments)]
 pub fn lstsq_shrunk_ld(
-    a: &mut [f32],
-    ld: usize,
-    rows: usize,
-    m: usize,
-    k: usize,
-    rel_tol: f32,
-    simd: bool,
-    shrink: Shrinkage,
-    x: &mut [f32],
-) -> Option<Fit> {
-    solve(a, ld, rows, m, k, rel_tol, simd, shrink, None, x)
-}
-
-/// [`lstsq_shrunk_ld`] for a caller that already has the dot products of
-/// column 0 with every column (`dots0[c] = a₀ · a_c`, `m + k` values), which
-/// the first reflection needs: BMFR, whose column 0 is the 0/1 row mask, sums
-/// the columns while it fills them and saves the QR a pass over the matrix.
-/// (The scalar path, `simd = false`, computes them itself.)
-#[allow(clippy::too_many_arguments)]
-pub fn lstsq_shrunk_ld_dots(
-    a: &mut [f32],
-    ld: usize,
-    rows: usize,
-    m: usize,
-    k: usize,
-    rel_tol: f32,
-    simd: bool,
-    shrink: Shrinkage,
-    dots0: &[f32],
-    x: &mut [f32],
-) -> Option<Fit> {
-    if dots0.len() < m + k {
-        return None;
-    }
-    solve(a, ld, rows, m, k, rel_tol, simd, shrink, Some(dots0), x)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn solve(
     a: &mut [f32],
     ld: usize,
     rows: usize,
@@ -411,6 +378,9 @@ fn solve(
     dots0: Option<&[f32]>,
     x: &mut [f32],
 ) -> Option<Fit> {
+    if dots0.is_some_and(|d| d.len() < m + k) {
+        return None;
+    }
     if rows == 0 || m + k == 0 || ld < rows || m > MAX_FEATURES || k > MAX_RHS || a.len() < ld * (m + k - 1) + rows || x.len() < m * k {
         return None;
     }
