@@ -50,6 +50,7 @@ mod hash;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod history;
 pub mod image;
+pub mod isa;
 pub mod kernels;
 #[cfg(feature = "flnr")]
 pub mod nn;
