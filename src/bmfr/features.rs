@@ -255,80 +255,71 @@ impl Band<'_> {
     /// Reads the rows `y0..y0 + rows` (mirrored) of every channel, columns
     /// `x0..x0 + stride` (mirrored); three consecutive channels of one image
     /// are read in one pass.
-    pub fn fill(&mut self, frame: &CheckedFrame<'_>, q: usize, (x0, y0): (i64, i64), h: usize) -> Result<(), Error> {
+    pub fn fill(&mut self, src: &Sources<'_>, (x0, y0): (i64, i64), h: usize) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: 0, count: 0 };
         let (plane, stride) = (self.plane(), self.stride);
-        let view = |g: usize| frame.guides[g].as_ref().ok_or(Error::GuideMismatch);
-        let joined = joined_guides(frame, q)?;
         for j in 0..self.rows {
             let y = mirror(y0 + j as i64, h);
-            let row = |ch: usize| ch * plane + j * stride;
-            {
-                let (p0, rest) = self.data[row(0)..].split_at_mut(plane);
-                let (p1, p2) = rest.split_at_mut(plane);
-                read_span(&frame.noisy, y, x0, [&mut p0[..stride], &mut p1[..stride], &mut p2[..stride]]).ok_or(bad)?;
-            }
-            let mut g = 0;
-            while g < q {
-                if let Some(v) = joined[g] {
-                    let (p0, rest) = self.data[row(3 + g)..].split_at_mut(plane);
+            for &(v, first, channels) in src.iter() {
+                let at = first * plane + j * stride;
+                if channels == 3 {
+                    let (p0, rest) = self.data[at..].split_at_mut(plane);
                     let (p1, p2) = rest.split_at_mut(plane);
                     read_span(&v, y, x0, [&mut p0[..stride], &mut p1[..stride], &mut p2[..stride]]).ok_or(bad)?;
-                    g += 3;
                 } else {
-                    read_span(view(g)?, y, x0, [&mut self.data[row(3 + g)..row(3 + g) + stride]]).ok_or(bad)?;
-                    g += 1;
+                    read_span(&v, y, x0, [&mut self.data[at..at + stride]]).ok_or(bad)?;
                 }
             }
         }
         Ok(())
     }
-}
 
-/// Guide channels that are three consecutive channels of one image (normal,
-/// position), joined into one view at their first channel so that a row of
-/// all three is read together.
-fn joined_guides<'a>(frame: &CheckedFrame<'a>, q: usize) -> Result<[Option<ImageView<'a>>; MAX_GUIDES], Error> {
-    let view = |g: usize| frame.guides[g].as_ref().ok_or(Error::GuideMismatch);
-    let mut joined = [None; MAX_GUIDES];
-    let mut g = 0;
-    while g < q {
-        if g + 3 <= q {
-            joined[g] = ImageView::join3(view(g)?, view(g + 1)?, view(g + 2)?);
-        }
-        g += if joined[g].is_some() { 3 } else { 1 };
-    }
-    Ok(joined)
-}
-
-/// Hints that [`Band::fill`] will soon read rows `rows` of the band at
-/// `(x0, y0)` with `stride` pixels (mirrored rows as `fill` reads them; the
-/// mirrored columns, a few pixels at the image's borders, are left out).
-/// BMFR reads each block row of every input as its own short run, more runs
-/// than the hardware prefetchers follow: asked for while the previous chunk's
-/// blocks are fitted, they arrive before `fill` reads them.
-pub fn prefetch_band(frame: &CheckedFrame<'_>, q: usize, (x0, y0): (i64, i64), stride: usize, rows: core::ops::Range<usize>, h: usize) {
-    let Ok(joined) = joined_guides(frame, q) else { return };
-    let w = frame.noisy.width() as i64;
-    let (a, b) = (x0.clamp(0, w) as usize, (x0 + stride as i64).clamp(0, w) as usize);
-    for j in rows {
-        let y = mirror(y0 + j as i64, h);
-        frame.noisy.prefetch_span(y, a, b - a);
-        let mut g = 0;
-        while g < q {
-            match (joined[g], &frame.guides[g]) {
-                (Some(v), _) => {
-                    v.prefetch_span(y, a, b - a);
-                    g += 3;
-                }
-                (None, v) => {
-                    if let Some(v) = v {
-                        v.prefetch_span(y, a, b - a);
-                    }
-                    g += 1;
-                }
+    /// Hints that [`Band::fill`] will soon read rows `rows` of the band at
+    /// `(x0, y0)` with `stride` pixels (mirrored rows as `fill` reads them; the
+    /// mirrored columns, a few pixels at the image's borders, are left out).
+    /// BMFR reads each block row of every input as its own short run, more
+    /// runs than the hardware prefetchers follow: asked for while the previous
+    /// chunk's blocks are fitted, they arrive before `fill` reads them.
+    pub fn prefetch(src: &Sources<'_>, (x0, y0): (i64, i64), stride: usize, rows: core::ops::Range<usize>, h: usize) {
+        for j in rows {
+            let y = mirror(y0 + j as i64, h);
+            for (v, _, _) in src.iter() {
+                let w = v.width() as i64;
+                let (a, b) = (x0.clamp(0, w) as usize, (x0 + stride as i64).clamp(0, w) as usize);
+                v.prefetch_span(y, a, b - a);
             }
         }
+    }
+}
+
+/// The images a [`Band`] is read from, each with the band plane of its first
+/// channel and how many channels it gives (3, read in one pass, or 1): the
+/// noisy colour, then the guides, where three consecutive channels of one
+/// image (normal, position) are joined into one view. Built once per tile.
+#[derive(Clone, Copy, Debug)]
+pub struct Sources<'a> {
+    views: [Option<(ImageView<'a>, usize, usize)>; 1 + MAX_GUIDES],
+}
+
+impl<'a> Sources<'a> {
+    pub fn new(frame: &CheckedFrame<'a>, q: usize) -> Result<Self, Error> {
+        let view = |g: usize| frame.guides.get(g).copied().flatten().ok_or(Error::GuideMismatch);
+        let mut views = [None; 1 + MAX_GUIDES];
+        views[0] = Some((frame.noisy, 0, 3));
+        let (mut n, mut g) = (1, 0);
+        while g < q {
+            let joined = if g + 3 <= q { ImageView::join3(&view(g)?, &view(g + 1)?, &view(g + 2)?) } else { None };
+            let (v, channels) = match joined {
+                Some(v) => (v, 3),
+                None => (view(g)?, 1),
+            };
+            views[n] = Some((v, 3 + g, channels));
+            (n, g) = (n + 1, g + channels);
+        }
+        Ok(Sources { views })
+    }
+    fn iter(&self) -> impl Iterator<Item = &(ImageView<'a>, usize, usize)> {
+        self.views.iter().flatten()
     }
 }
 

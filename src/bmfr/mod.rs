@@ -38,7 +38,7 @@ use crate::error::{Arg, Error};
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::qr::{lstsq_shrunk_ld, Shrinkage, MAX_FEATURES};
-use features::{apply_block, gather_block, Band, FeatureSet};
+use features::{apply_block, gather_block, Band, FeatureSet, Sources};
 
 pub use temporal::History;
 
@@ -319,10 +319,11 @@ impl Bmfr {
         features::noise_table(wb.noise, features::seed(index, u32::MAX - t as u32), self.cfg.noise);
         let mut rep = Report::default();
         let tiles = self.tile_count(index);
+        let src = Sources::new(frame, self.fs.q)?;
         for c0 in (0..bx_n).step_by(chunk) {
             let blocks = chunk.min(bx_n - c0);
             let mut band = Band { data: &mut rest[..Band::len(3 + self.fs.q, b, b * blocks)], rows: b, stride: b * blocks };
-            band.fill(frame, self.fs.q, (x0 + (c0 * b) as i64, ty0), self.height)?;
+            band.fill(&src, (x0 + (c0 * b) as i64, ty0), self.height)?;
             // the chunk read next (this tile's, else the next tile's first), asked for
             // a few rows per block while this chunk's blocks are fitted (asked for
             // over the first half of them only, it measured slower)
@@ -335,7 +336,7 @@ impl Bmfr {
                         let (r0, r1) = (k * b / blocks, (k + 1) * b / blocks);
                         let rows = r0 + stage * (r1 - r0) / 4..r0 + (stage + 1) * (r1 - r0) / 4;
                         let stride = b * chunk.min(bx_n - nc);
-                        features::prefetch_band(frame, self.fs.q, (x0 + (nc * b) as i64, ny), stride, rows, self.height);
+                        Band::prefetch(&src, (x0 + (nc * b) as i64, ny), stride, rows, self.height);
                     }
                 };
                 let bx = c0 + k;

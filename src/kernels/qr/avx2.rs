@@ -2,10 +2,12 @@
 //! for builds whose `wide` is SSE2: the same loop with `core::arch`
 //! intrinsics, chosen at run time by [`crate::isa::Isa`]. (One file per
 //! instruction set, as in `nn::conv` and fast_image_resize: `wide`'s methods
-//! are not promised to inline into a `#[target_feature]` function.) Same
-//! operations in the same order as the portable version in an `x86-64-v3`
-//! build, whose `mul_add` is a fused multiply-add; against an SSE2 build the
-//! products round separately (the QR tests compare both with f64).
+//! are not promised to inline into a `#[target_feature]` function.) The
+//! same multiply-adds in the same order as the portable version in an
+//! `x86-64-v3` build, whose `mul_add` is fused (only the final lane sums may
+//! associate differently); against an SSE2 build the products round
+//! separately. `qr::tests` compares the two versions; the QR and BMFR tests
+//! check whichever the CPU runs against f64.
 
 use core::arch::x86_64::{
     __m256, _mm256_add_ps, _mm256_castps256_ps128, _mm256_extractf128_ps, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps,
