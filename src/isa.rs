@@ -2,7 +2,9 @@
 //! time with `core::arch` (so `no_std` builds get it too).
 
 /// The instruction set of a kernel's 8-lane loops: the network's 3×3 layers
-/// (`nn::conv`) and the QR's column updates (`kernels::qr`).
+/// (`nn::conv`), the QR's column updates (`kernels::qr`), and FLR's block
+/// accumulation (`kernels::moments`), four-cell solve (`kernels::solve`, in
+/// `f64` lanes) and model application (`kernels::apply`).
 ///
 /// `wide` picks SSE2/AVX/NEON at compile time, so a plain x86-64 build runs
 /// them in SSE2 without fused multiply-adds (the network 2.4× slower than in

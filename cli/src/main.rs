@@ -282,11 +282,11 @@ fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, 
     let mut md = String::new();
     md += "# lrdenoise report\n\n";
     md += &format!(
-        "{} frame(s), {w}x{h} (first frame); {threads} thread(s); {cpu}; SIMD level `{}` (FLNR's 3×3 layers: `{:?}`, chosen at run time); time = median of {} runs after a warm-up, denoiser only (no I/O). \
+        "{} frame(s), {w}x{h} (first frame); {threads} thread(s); {cpu}; SIMD level `{}` (compiled; run-time choice for FLR's moments, solve and apply, BMFR's QR and FLNR's 3×3 layers: `{:?}`); time = median of {} runs after a warm-up, denoiser only (no I/O). \
          Metrics follow shared/DATA.md (albedo-modulated, tone-mapped PSNR/SSIM/LDR-FLIP, linear rMSE). Peer rows (if any) were measured by their own tools.\n\n",
         images.len(),
         lrdenoise::SIMD_LEVEL,
-        lrdenoise::nn::Isa::detect(),
+        lrdenoise::isa::Isa::detect(),
         opt.runs
     );
     md += "## Mean over frames\n\n";
@@ -525,9 +525,10 @@ fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, f
     let min = all.iter().copied().fold(f64::MAX, f64::min);
     let max = all.iter().copied().fold(0.0, f64::max);
     println!(
-        "{method} {w}x{h} [{}] threads {threads} simd {}: median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
+        "{method} {w}x{h} [{}] threads {threads} simd {} (run-time kernels {:?}): median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
         b.label,
         lrdenoise::SIMD_LEVEL,
+        lrdenoise::isa::Isa::detect(),
         all.len(),
         (w * h) as f64 / med / 1e3
     );

@@ -13,6 +13,7 @@
 //! scalar remainder; the scalar path is the textbook two-pass form, its oracle.
 
 #[cfg(target_arch = "x86_64")]
+#[cfg_attr(all(target_feature = "avx2", target_feature = "fma"), allow(dead_code))] // `wide` is AVX2 there
 mod avx2;
 
 use crate::isa::Isa;

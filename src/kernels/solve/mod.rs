@@ -8,10 +8,15 @@
 //! `c[q][3]` applied to `d = g − m` (guide minus frame reference), and the
 //! local mean `μ_y[3]` (used where a pixel's guides are not finite).
 
+#[cfg(target_arch = "x86_64")]
+#[cfg_attr(all(target_feature = "avx2", target_feature = "fma"), allow(dead_code))] // `wide` is AVX2 there
+mod avx2;
+
 use super::cholesky::{self, F64Lanes};
 use super::CellLayout;
 use crate::config::Regularization;
 use crate::guides::MAX_GUIDES;
+use crate::isa::Isa;
 use wide::f64x4;
 
 const N1: usize = MAX_GUIDES + 1;
@@ -63,14 +68,37 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
 
 /// Solves four consecutive cells (`cells` holds 4·k values, `models` 4·`model_len(Q)`)
 /// with one cell per f64x4 lane: bit-identical to four [`solve_cell`] calls.
+/// In a default x86-64 build, whose `f64x4` is two SSE2 halves, the lanes are
+/// AVX2 registers where the CPU has them (`avx2::normalized4`; same result).
 pub fn solve_cells4<const Q: usize>(cells: &[f64], p: &SolveParams, models: &mut [f32]) -> [CellOutcome; 4] {
+    solve_cells4_on::<Q>(Isa::detect(), cells, p, models)
+}
+
+/// [`solve_cells4`] on the given instruction set (`Avx2Fma` only where it is
+/// available and the build's `wide` lacks it; otherwise the portable lanes).
+fn solve_cells4_on<const Q: usize>(isa: Isa, cells: &[f64], p: &SolveParams, models: &mut [f32]) -> [CellOutcome; 4] {
     let lay = CellLayout::new(Q);
     let (k, ml) = (lay.k, super::model_len(Q));
     let Regularization::Normalized { eps_mul, eps_add } = p.regularization else {
         return core::array::from_fn(|l| solve_cell::<Q>(&cells[l * k..(l + 1) * k], p, &mut models[l * ml..(l + 1) * ml]));
     };
-    let get = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
-    let (c0, coef, muy, dropped) = normalized::<f64x4, Q>(get, p, eps_mul, eps_add);
+    let cells = &cells[..4 * k];
+    let portable = || {
+        let get = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+        normalized::<f64x4, Q>(get, p, eps_mul, eps_add)
+    };
+    #[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma"))))]
+    let (c0, coef, muy, dropped) = if isa == Isa::Avx2Fma && isa.available() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        unsafe { avx2::normalized4::<Q>(cells, p, eps_mul, eps_add) }
+    } else {
+        portable()
+    };
+    #[cfg(not(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma")))))]
+    let (c0, coef, muy, dropped) = {
+        let _ = isa;
+        portable()
+    };
     write_models4::<Q>(&c0, &coef, &muy, models);
     core::array::from_fn(|l| {
         if is_empty(cells[l * k], p) {
@@ -270,4 +298,94 @@ fn write_model<const Q: usize>(c0: &[f64; 3], coef: &[[f64; 3]], muy: &[f64; 3],
         }
     }
     model[3 + 3 * Q..3 + 3 * Q + 3].copy_from_slice(&muy_f);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Moments of `n` pixels (guides from `g(i, q)`, light from `y(i, c)`) in
+    /// the cell layout, summed in f64.
+    fn cell_of<const Q: usize>(n: usize, g: impl Fn(usize, usize) -> f64, y: impl Fn(usize, usize) -> f64) -> [f64; 160] {
+        let lay = CellLayout::new(Q);
+        let mut cell = [0f64; 160];
+        for i in 0..n {
+            cell[0] += 1.0;
+            let mut p = lay.ss;
+            for a in 0..Q {
+                cell[lay.s + a] += g(i, a);
+                for b in a..Q {
+                    cell[p] += g(i, a) * g(i, b);
+                    p += 1;
+                }
+                for c in 0..3 {
+                    cell[lay.p + 3 * a + c] += g(i, a) * y(i, c);
+                }
+            }
+            for c in 0..3 {
+                cell[lay.t + c] += y(i, c);
+            }
+        }
+        cell
+    }
+
+    /// The four-cell solve gives the same bits on either instruction set and
+    /// as four single-cell solves, on ordinary, duplicated-guide, empty and
+    /// non-finite cells.
+    #[test]
+    fn cells4_match_on_every_isa() {
+        let mut seed = 99u32;
+        let mut rnd = move || {
+            seed = crate::hash::lowbias32(seed);
+            (seed >> 8) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
+        };
+        fn check<const Q: usize>(rnd: &mut impl FnMut() -> f64) {
+            let lay = CellLayout::new(Q);
+            let (k, ml) = (lay.k, crate::kernels::model_len(Q));
+            let p = SolveParams {
+                reference: [0.0; MAX_GUIDES],
+                mean: [0.1; MAX_GUIDES],
+                scale: [0.7; MAX_GUIDES],
+                regularization: Regularization::Normalized { eps_mul: 1e-3, eps_add: 1e-2 },
+                weight_norm: 1.0,
+                min_weight: 0.5,
+            };
+            let vals: [f64; 64 * 16] = core::array::from_fn(|_| rnd());
+            let plain = cell_of::<Q>(64, |i, q| vals[i * 16 + q], |i, c| 2.0 + vals[i * 16 + 12 + c]);
+            // guide 1 duplicates guide 0
+            let dup = cell_of::<Q>(64, |i, q| vals[i * 16 + if q == 1 { 0 } else { q }], |i, c| vals[i * 16 + 12 + c]);
+            let mut nan = plain;
+            nan[lay.t] = f64::NAN;
+            let empty = [0f64; 160];
+            let mut cells = [0f64; 4 * 160];
+            for (l, c) in [plain, dup, empty, nan].iter().enumerate() {
+                cells[l * k..(l + 1) * k].copy_from_slice(&c[..k]);
+            }
+            let run = |isa: Isa| {
+                let mut m = [0f32; 4 * 48];
+                let o = solve_cells4_on::<Q>(isa, &cells[..4 * k], &p, &mut m[..4 * ml]);
+                (o, m)
+            };
+            let (po, pm) = run(Isa::Portable);
+            let (ao, am) = run(Isa::Avx2Fma);
+            assert_eq!(po, ao, "Q {Q}");
+            for j in 0..4 * ml {
+                assert_eq!(pm[j].to_bits(), am[j].to_bits(), "Q {Q} value {j}: {} vs {}", pm[j], am[j]);
+            }
+            for l in 0..4 {
+                let mut one = [0f32; 48];
+                let o = solve_cell::<Q>(&cells[l * k..(l + 1) * k], &p, &mut one[..ml]);
+                assert_eq!(o, po[l], "Q {Q} cell {l}");
+                for j in 0..ml {
+                    assert_eq!(one[j].to_bits(), pm[l * ml + j].to_bits(), "Q {Q} cell {l} value {j}");
+                }
+            }
+        }
+        check::<0>(&mut rnd);
+        check::<1>(&mut rnd);
+        check::<3>(&mut rnd);
+        check::<5>(&mut rnd);
+        check::<8>(&mut rnd);
+        check::<MAX_GUIDES>(&mut rnd);
+    }
 }
