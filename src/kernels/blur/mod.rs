@@ -6,8 +6,23 @@
 //! exist). Both passes work on whole cell rows, so each output row (or band)
 //! is independent: the caller may run bands in any order or in parallel.
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+
 use crate::config::MAX_RADIUS_CELLS;
+use crate::isa::Isa;
 use wide::f64x4;
+
+/// Whether the Gaussian interiors run in [`avx2`]: wherever the CPU has AVX2
+/// + FMA. (That matters for builds whose `wide` lacks them, where an `f64x4`
+/// is two SSE2 halves with multiply and add unfused; an `x86-64-v3` build runs
+/// the same instructions either way, and its tests thereby compare the two
+/// versions bit for bit.)
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn use_avx2(isa: Isa) -> bool {
+    isa == Isa::Avx2Fma && isa.available()
+}
 
 /// Gaussian taps `w[0..=r]` for offsets `0..=r` (symmetric), normalised so the
 /// full 1-D kernel sums to 1.
@@ -57,6 +72,12 @@ fn axpy(dst: &mut [f64], a: f64, src: &[f64]) {
 
 /// Horizontal pass over one cell row: `src` and `dst` are rows of `cells_x * k`.
 pub fn blur_row(taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
+    blur_row_on(Isa::detect(), taps, k, src, dst)
+}
+
+/// [`blur_row`] on the given instruction set (its Gaussian interior in
+/// [`avx2`] where [`use_avx2`]).
+fn blur_row_on(isa: Isa, taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     let cx = src.len() / k;
     if taps.is_box {
         // O(1) per cell: running window sum.
@@ -84,6 +105,13 @@ pub fn blur_row(taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     let at = |x: usize, o: usize, left: bool| if left { src[x - o * k] } else { src[x + o * k] };
     let (i0, i1) = if cx > 2 * r { (r, cx - r) } else { (cx, cx) };
     let mut x = i0 * k;
+    #[cfg(target_arch = "x86_64")]
+    if use_avx2(isa) {
+        // SAFETY: the CPU has AVX2 and FMA (`use_avx2`); x = r·k and the
+        // interior ends r cells before the row's end (slices bounds-checked).
+        x = unsafe { avx2::row_interior(&taps.w, r, k, src, dst, x, i1 * k) };
+    }
+    let _ = isa;
     while x + LANES <= i1 * k {
         let w0 = f64x4::splat(taps.w[0]);
         let mut acc = load::<VECS>(&src[x..]).map(|v| v * w0);
@@ -146,6 +174,13 @@ fn store<const V: usize>(a: &[f64x4; V], d: &mut [f64]) {
 /// Vertical pass for output rows `row0..row0 + dst.len() / row_len` of a grid
 /// with `cells_y` rows: `src` is the whole grid, `dst` the band.
 pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, src: &[f64], dst: &mut [f64]) {
+    blur_cols_band_on(Isa::detect(), taps, row_len, cells_y, row0, src, dst)
+}
+
+/// [`blur_cols_band`] on the given instruction set (its Gaussian chunks in
+/// [`avx2`] where [`use_avx2`]).
+fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0: usize, src: &[f64], dst: &mut [f64]) {
+    let _ = isa;
     let rows = dst.len() / row_len;
     let r = taps.radius as isize;
     let row = |j: isize| &src[j as usize * row_len..(j as usize + 1) * row_len];
@@ -181,6 +216,11 @@ pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, 
             let lo = (j - r).max(0);
             let hi = (j + r).min(cells_y as isize - 1);
             let mut c = s0;
+            #[cfg(target_arch = "x86_64")]
+            if use_avx2(isa) {
+                // SAFETY: the CPU has AVX2 and FMA (`use_avx2`); slices are bounds-checked.
+                c = unsafe { avx2::cols_strip(&taps.w, src, row_len, j, lo, hi, out, c, s1) };
+            }
             while c + LANES <= s1 {
                 let mut acc = [f64x4::ZERO; VECS];
                 for jj in lo..=hi {
@@ -202,5 +242,53 @@ pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, 
             }
         }
         s0 = s1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The AVX2 + FMA Gaussian interiors (where this CPU has them) agree with
+    /// the portable lanes: bit for bit where `wide` is AVX2 + FMA, else to the
+    /// rounding of fused against separate products; for rows and bands of
+    /// awkward lengths (interior tails, borders, radii 1 to 6).
+    #[test]
+    fn avx2_blurs_match_portable() {
+        if !Isa::Avx2Fma.available() {
+            return;
+        }
+        let mut seed = 31u32;
+        let src: [f64; 4096] = core::array::from_fn(|_| {
+            seed = crate::hash::lowbias32(seed);
+            (seed >> 8) as f64 / (1u64 << 24) as f64 * 4.0 - 1.0
+        });
+        let fused = cfg!(all(target_feature = "avx2", target_feature = "fma"));
+        let same = |p: &[f64], a: &[f64], what: (&str, usize, usize, usize)| {
+            for (i, (p, a)) in p.iter().zip(a).enumerate() {
+                if fused {
+                    assert_eq!(p.to_bits(), a.to_bits(), "{what:?} value {i}: {p} vs {a}");
+                } else {
+                    assert!((p - a).abs() <= 1e-13 * (1.0 + p.abs()), "{what:?} value {i}: {p} vs {a}");
+                }
+            }
+        };
+        for radius in [1usize, 2, 4, 6] {
+            let taps = Taps::gaussian(radius as f64 / 2.0, radius);
+            for (k, cx) in [(1usize, 7usize), (5, 13), (40, 9), (41, 20), (131, 3)] {
+                let n = k * cx;
+                let (mut p, mut a) = ([0f64; 4096], [0f64; 4096]);
+                blur_row_on(Isa::Portable, &taps, k, &src[..n], &mut p[..n]);
+                blur_row_on(Isa::Avx2Fma, &taps, k, &src[..n], &mut a[..n]);
+                same(&p[..n], &a[..n], ("row: radius, k, cells", radius, k, cx));
+            }
+            for (row_len, cells_y, row0, rows) in [(16usize, 5usize, 0usize, 5usize), (40, 9, 2, 4), (300, 12, 3, 6), (517, 7, 0, 7)] {
+                let (mut p, mut a) = ([0f64; 4096], [0f64; 4096]);
+                let n = rows * row_len;
+                blur_cols_band_on(Isa::Portable, &taps, row_len, cells_y, row0, &src[..row_len * cells_y], &mut p[..n]);
+                blur_cols_band_on(Isa::Avx2Fma, &taps, row_len, cells_y, row0, &src[..row_len * cells_y], &mut a[..n]);
+                same(&p[..n], &a[..n], ("cols: radius, row_len, rows", radius, row_len, cells_y));
+            }
+        }
     }
 }

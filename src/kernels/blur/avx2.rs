@@ -1,0 +1,106 @@
+//! AVX2 + FMA version of the Gaussian blurs' interior loops
+//! ([`super::blur_row`], [`super::blur_cols_band`]), for builds whose `wide`
+//! is SSE2 (an `f64x4` of two SSE2 halves, multiply and add unfused): the same
+//! loops with `core::arch` intrinsics, chosen at run time by
+//! [`crate::isa::Isa`]. The same operations in the same order as the portable
+//! version in an `x86-64-v3` build (bit-identical there); `blur::tests`
+//! compares the two.
+
+use super::{LANES, VECS};
+use core::arch::x86_64::{
+    __m256d, _mm256_add_pd, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+};
+
+/// `VECS` vectors from `s[..LANES]` (bounds-checked).
+///
+/// # Safety
+/// The CPU must support AVX.
+#[inline(always)]
+unsafe fn load(s: &[f64]) -> [__m256d; VECS] {
+    let s = &s[..LANES];
+    // SAFETY: AVX is guaranteed by the caller.
+    let mut a = unsafe { [_mm256_setzero_pd(); VECS] };
+    for (l, v) in a.iter_mut().enumerate() {
+        // SAFETY: `s` holds LANES = 4·VECS values; AVX is guaranteed by the caller.
+        *v = unsafe { _mm256_loadu_pd(s[4 * l..4 * l + 4].as_ptr()) };
+    }
+    a
+}
+
+/// Stores `a` into `d[..LANES]` (bounds-checked).
+///
+/// # Safety
+/// The CPU must support AVX.
+#[inline(always)]
+unsafe fn store(a: &[__m256d; VECS], d: &mut [f64]) {
+    let d = &mut d[..LANES];
+    for (l, v) in a.iter().enumerate() {
+        // SAFETY: `d` holds LANES = 4·VECS values; AVX is guaranteed by the caller.
+        unsafe { _mm256_storeu_pd(d[4 * l..4 * l + 4].as_mut_ptr(), *v) };
+    }
+}
+
+/// The horizontal pass's interior, values `x..` in steps of `LANES` while
+/// `x + LANES ≤ end`: `dst[x] = w0·src[x] + Σ_o w_o (src[x − o·k] + src[x + o·k])`.
+/// Returns the first value not done.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA; `x ≥ r·k` and `end + r·k ≤ src.len()`
+/// (the slices are bounds-checked regardless).
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn row_interior(w: &[f64], r: usize, k: usize, src: &[f64], dst: &mut [f64], mut x: usize, end: usize) -> usize {
+    // SAFETY (every `load`/`store`): AVX2 and FMA are enabled in this function.
+    while x + LANES <= end {
+        let w0 = _mm256_set1_pd(w[0]);
+        let mut acc = unsafe { load(&src[x..]) };
+        for v in acc.iter_mut() {
+            *v = _mm256_mul_pd(*v, w0);
+        }
+        for o in 1..=r {
+            let (a, b) = unsafe { (load(&src[x - o * k..]), load(&src[x + o * k..])) };
+            let wo = _mm256_set1_pd(w[o]);
+            for l in 0..VECS {
+                acc[l] = _mm256_fmadd_pd(_mm256_add_pd(a[l], b[l]), wo, acc[l]);
+            }
+        }
+        unsafe { store(&acc, &mut dst[x..]) };
+        x += LANES;
+    }
+    x
+}
+
+/// The vertical pass for one output chunk: `out[c..c + LANES] = Σ_j w_{|j − centre|} row(j)[c..]`
+/// over the rows `rows` (each `row_len` values of `src`, from row `first`).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA.
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn cols_strip(
+    w: &[f64],
+    src: &[f64],
+    row_len: usize,
+    j: isize,
+    lo: isize,
+    hi: isize,
+    out: &mut [f64],
+    mut c: usize,
+    end: usize,
+) -> usize {
+    while c + LANES <= end {
+        let mut acc = [_mm256_setzero_pd(); VECS];
+        for jj in lo..=hi {
+            let wk = _mm256_set1_pd(w[(jj - j).unsigned_abs()]);
+            let start = jj as usize * row_len + c;
+            // SAFETY: AVX2 and FMA are enabled in this function.
+            let a = unsafe { load(&src[start..]) };
+            for l in 0..VECS {
+                acc[l] = _mm256_fmadd_pd(a[l], wk, acc[l]);
+            }
+        }
+        // SAFETY: as above.
+        unsafe { store(&acc, &mut out[c..]) };
+        c += LANES;
+    }
+    c
+}
