@@ -14,7 +14,7 @@ use crate::isa::Isa;
 use wide::f64x4;
 
 /// Whether the Gaussian interiors run in [`avx2`]: wherever the CPU has AVX2
-/// + FMA. (That matters for builds whose `wide` lacks them, where an `f64x4`
+/// and FMA. (That matters for builds whose `wide` lacks them, where an `f64x4`
 /// is two SSE2 halves with multiply and add unfused; an `x86-64-v3` build runs
 /// the same instructions either way, and its tests thereby compare the two
 /// versions bit for bit.)
