@@ -12,6 +12,14 @@ pub fn lowbias32(mut x: u32) -> u32 {
     x ^ (x >> 16)
 }
 
+/// A uniform value in [−1, 1) from the sequence `seed` walks (unit tests'
+/// random inputs: reproducible, no dependency).
+#[cfg(test)]
+pub(crate) fn uniform(seed: &mut u32) -> f64 {
+    *seed = lowbias32(*seed);
+    (*seed >> 8) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
+}
+
 /// [`lowbias32`] on eight lanes (bit-identical per lane).
 #[cfg(feature = "bmfr")]
 #[inline(always)]

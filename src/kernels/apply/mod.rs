@@ -301,10 +301,7 @@ mod tests {
             return;
         }
         let mut seed = 4242u32;
-        let mut rnd = || {
-            seed = crate::hash::lowbias32(seed);
-            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rnd = || crate::hash::uniform(&mut seed) as f32;
         const W: usize = 263;
         let rows: [[f32; W]; MAX_GUIDES] =
             core::array::from_fn(|q| core::array::from_fn(|x| if (x * 7 + q) % 97 == 5 { f32::NAN } else { 3.0 * rnd() }));

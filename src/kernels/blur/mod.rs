@@ -259,10 +259,7 @@ mod tests {
             return;
         }
         let mut seed = 31u32;
-        let src: [f64; 4096] = core::array::from_fn(|_| {
-            seed = crate::hash::lowbias32(seed);
-            (seed >> 8) as f64 / (1u64 << 24) as f64 * 4.0 - 1.0
-        });
+        let src: [f64; 4096] = core::array::from_fn(|_| 1.0 + 2.0 * crate::hash::uniform(&mut seed));
         let fused = cfg!(all(target_feature = "avx2", target_feature = "fma"));
         let same = |p: &[f64], a: &[f64], what: (&str, usize, usize, usize)| {
             for (i, (p, a)) in p.iter().zip(a).enumerate() {

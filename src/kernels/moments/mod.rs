@@ -567,10 +567,7 @@ mod tests {
             return;
         }
         let mut seed = 777u32;
-        let mut rnd = || {
-            seed = crate::hash::lowbias32(seed);
-            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rnd = || crate::hash::uniform(&mut seed) as f32;
         fn run<const Q: usize>(isa: Isa, groups: &[[f32x8; VW]], check: bool) -> (bool, [f32; MAX_K]) {
             let (mut sums, mut acc) = ([f32x8::ZERO; MAX_K], [0f32; MAX_K]);
             let (wsum, lay) = (f32x8::splat(groups.len() as f32), CellLayout::new(Q));

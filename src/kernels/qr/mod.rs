@@ -509,10 +509,7 @@ mod tests {
             return;
         }
         let mut seed = 12345u32;
-        let mut rnd = || {
-            seed = crate::hash::lowbias32(seed);
-            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rnd = || crate::hash::uniform(&mut seed) as f32;
         for rows in [1usize, 7, 8, 15, 16, 17, 33, 1024] {
             for lo in [0usize, 1, 5] {
                 let lo = lo.min(rows);

@@ -335,10 +335,7 @@ mod tests {
     #[test]
     fn cells4_match_on_every_isa() {
         let mut seed = 99u32;
-        let mut rnd = move || {
-            seed = crate::hash::lowbias32(seed);
-            (seed >> 8) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = move || crate::hash::uniform(&mut seed);
         fn check<const Q: usize>(rnd: &mut impl FnMut() -> f64) {
             let lay = CellLayout::new(Q);
             let (k, ml) = (lay.k, crate::kernels::model_len(Q));
