@@ -44,7 +44,7 @@ fn room(w: usize, h: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
                 seed ^= seed << 13;
                 seed ^= seed >> 17;
                 seed ^= seed << 5;
-                noisy[3 * i + c] = (0.5 + 0.05 * p[1]) * if seed % 5 == 0 { 3.0 } else { 0.5 };
+                noisy[3 * i + c] = (0.5 + 0.05 * p[1]) * if seed.is_multiple_of(5) { 3.0 } else { 0.5 };
             }
         }
     }

@@ -182,7 +182,7 @@ fn leading_dimension_does_not_change_the_result() {
     for (rows, m, k) in [(1024, 10, 3), (81, 5, 3), (7, 3, 1), (1, 1, 1)] {
         let p = Problem::random(rows, m, k, 9);
         let ld = padded_ld(rows) + 3;
-        assert!(ld > rows && (ld * 4) % 4096 != 0);
+        assert!(ld > rows && !(ld * 4).is_multiple_of(4096));
         for simd in [true, false] {
             let mut padded = vec![f32::NAN; ld * (m + k)];
             for c in 0..m + k {

@@ -246,7 +246,7 @@ fn layout_of(
         _ => return Err(LRD_STATUS_INVALID_ARGUMENT),
     };
     let (ps, rs, cs) = strides;
-    if w == 0 || h == 0 || (data as usize) % elem != 0 {
+    if w == 0 || h == 0 || !(data as usize).is_multiple_of(elem) {
         return Err(LRD_STATUS_INVALID_ARGUMENT);
     }
     let cs = if cs == 0 { elem } else { cs };
@@ -576,7 +576,7 @@ unsafe fn frame_and_out<'a>(frame: *const LrdFrame, out: *const LrdImageMut) -> 
 fn check_scratch(scratch: *mut c_void) -> Result<(), LrdStatus> {
     if scratch.is_null() {
         Err(LRD_STATUS_NULL_POINTER)
-    } else if (scratch as usize) % 8 != 0 {
+    } else if !(scratch as usize).is_multiple_of(8) {
         Err(LRD_STATUS_INVALID_ARGUMENT)
     } else {
         Ok(())
@@ -904,7 +904,7 @@ unsafe fn f32_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Resul
     if ptr.is_null() {
         return Err(LRD_STATUS_NULL_POINTER);
     }
-    if (ptr as usize) % 4 != 0 {
+    if !(ptr as usize).is_multiple_of(4) {
         return Err(LRD_STATUS_INVALID_ARGUMENT);
     }
     if bytes < needed {

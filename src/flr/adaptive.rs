@@ -45,7 +45,7 @@ pub fn pooled(sigma: f32, block: usize) -> bool {
 /// weights sum to 1; at the border one neighbour with weight 1, the other 0).
 pub fn pooled_taps(i: usize, n: usize) -> [(usize, f64); 2] {
     let c = (i / 2).min(n.saturating_sub(1));
-    if i % 2 == 0 {
+    if i.is_multiple_of(2) {
         if c == 0 {
             [(0, 1.0), (0, 0.0)]
         } else {

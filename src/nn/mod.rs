@@ -38,7 +38,7 @@ use conv::{concat_upsampled, conv, Act};
 /// The caller's input and output tensors keep `w·h`.
 pub const fn plane_stride(w: usize, h: usize) -> usize {
     let lines = (w * h).div_ceil(16);
-    (if lines % 2 == 0 { lines + 1 } else { lines }) * 16
+    (if lines.is_multiple_of(2) { lines + 1 } else { lines }) * 16
 }
 
 /// Elements of one planar tensor of `c` channels.

@@ -9,7 +9,6 @@
 //! fixed lane weights.
 
 #[cfg(target_arch = "x86_64")]
-#[cfg_attr(all(target_feature = "avx2", target_feature = "fma"), allow(dead_code))] // `wide` is AVX2 there
 mod avx2;
 
 use crate::guides::MAX_GUIDES;
@@ -91,7 +90,7 @@ pub fn apply_row<const Q: usize>(
     let mut fallback = 0;
 
     let mut x = 0;
-    if simd && block % 8 == 0 && cells_x > 1 {
+    if simd && block.is_multiple_of(8) && cells_x > 1 {
         // Left edge: pixels before the first centre use cell 0 alone (scalar below).
         let half = block / 2;
         while x < half.min(w) {
@@ -170,9 +169,9 @@ fn simd_spans_on<const Q: usize, const CLAMP: bool>(
     guides: &RowGuides<'_>,
     outs: &mut [&mut [f32]; 3],
 ) -> (usize, usize) {
-    #[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma"))))]
-    if isa == Isa::Avx2Fma && isa.available() {
-        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+    #[cfg(target_arch = "x86_64")]
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
         return unsafe { avx2::simd_spans::<Q, CLAMP>(row_models, row_slopes, sp, guides, outs) };
     }
     let _ = isa;

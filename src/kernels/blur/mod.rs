@@ -13,17 +13,6 @@ use crate::config::MAX_RADIUS_CELLS;
 use crate::isa::Isa;
 use wide::f64x4;
 
-/// Whether the Gaussian interiors run in [`avx2`]: wherever the CPU has AVX2
-/// and FMA. (That matters for builds whose `wide` lacks them, where an `f64x4`
-/// is two SSE2 halves with multiply and add unfused; an `x86-64-v3` build runs
-/// the same instructions either way, and its tests thereby compare the two
-/// versions bit for bit.)
-#[cfg(target_arch = "x86_64")]
-#[inline]
-fn use_avx2(isa: Isa) -> bool {
-    isa == Isa::Avx2Fma && isa.available()
-}
-
 /// Gaussian taps `w[0..=r]` for offsets `0..=r` (symmetric), normalised so the
 /// full 1-D kernel sums to 1.
 #[derive(Clone, Copy, Debug)]
@@ -76,7 +65,7 @@ pub fn blur_row(taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
 }
 
 /// [`blur_row`] on the given instruction set (its Gaussian interior in
-/// [`avx2`] where [`use_avx2`]).
+/// [`avx2`] where [`Isa::intrinsics`]).
 fn blur_row_on(isa: Isa, taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     let cx = src.len() / k;
     if taps.is_box {
@@ -106,8 +95,8 @@ fn blur_row_on(isa: Isa, taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     let (i0, i1) = if cx > 2 * r { (r, cx - r) } else { (cx, cx) };
     let mut x = i0 * k;
     #[cfg(target_arch = "x86_64")]
-    if use_avx2(isa) {
-        // SAFETY: the CPU has AVX2 and FMA (`use_avx2`); x = r·k and the
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`); x = r·k and the
         // interior ends r cells before the row's end (slices bounds-checked).
         x = unsafe { avx2::row_interior(&taps.w, r, k, src, dst, x, i1 * k) };
     }
@@ -178,7 +167,7 @@ pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, 
 }
 
 /// [`blur_cols_band`] on the given instruction set (its Gaussian chunks in
-/// [`avx2`] where [`use_avx2`]).
+/// [`avx2`] where [`Isa::intrinsics`]).
 fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0: usize, src: &[f64], dst: &mut [f64]) {
     let _ = isa;
     let rows = dst.len() / row_len;
@@ -217,8 +206,8 @@ fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0
             let hi = (j + r).min(cells_y as isize - 1);
             let mut c = s0;
             #[cfg(target_arch = "x86_64")]
-            if use_avx2(isa) {
-                // SAFETY: the CPU has AVX2 and FMA (`use_avx2`); slices are bounds-checked.
+            if isa.intrinsics() {
+                // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`); slices are bounds-checked.
                 c = unsafe { avx2::cols_strip(&taps.w, src, row_len, j, lo, hi, out, c, s1) };
             }
             while c + LANES <= s1 {

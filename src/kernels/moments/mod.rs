@@ -10,7 +10,6 @@
 //! row maps onto `f32x8` lanes.
 
 #[cfg(target_arch = "x86_64")]
-#[cfg_attr(all(target_feature = "avx2", target_feature = "fma"), allow(dead_code))] // `wide` is AVX2 there
 mod avx2;
 
 use super::CellLayout;
@@ -109,7 +108,7 @@ pub fn moments_band<const Q: usize>(
             empty += 1;
             continue;
         }
-        if simd && block % 8 == 0 && band.rows * block / 8 <= MAX_GROUPS {
+        if simd && block.is_multiple_of(8) && band.rows * block / 8 <= MAX_GROUPS {
             block_simd::<Q>(isa, &band, x0, block, w, &y, &g, &r, &lay, &mut acc, scratch);
         } else {
             acc[..k].fill(0.0);
@@ -148,7 +147,7 @@ pub struct RowsCounts {
 
 /// Whether [`moments_rows`] handles this block size and band height.
 pub const fn rows_supported(block: usize, rows: usize) -> bool {
-    block % 8 == 0 && block > 0 && rows <= MAX_ROWS && rows * block / 8 <= MAX_GROUPS
+    block.is_multiple_of(8) && block > 0 && rows <= MAX_ROWS && rows * block / 8 <= MAX_GROUPS
 }
 
 /// Accumulates the moments of blocks `0..cells.len() / k` (all whole: they
@@ -426,9 +425,9 @@ fn accumulate_on<const Q: usize>(
     acc: &mut [f32; MAX_K],
     check: bool,
 ) -> bool {
-    #[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma"))))]
-    if isa == Isa::Avx2Fma && isa.available() {
-        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+    #[cfg(target_arch = "x86_64")]
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
         return unsafe { avx2::accumulate::<Q>(groups, sums, wsum, lay, acc, check) };
     }
     let _ = isa;

@@ -13,7 +13,6 @@
 //! scalar remainder; the scalar path is the textbook two-pass form, its oracle.
 
 #[cfg(target_arch = "x86_64")]
-#[cfg_attr(all(target_feature = "avx2", target_feature = "fma"), allow(dead_code))] // `wide` is AVX2 there
 mod avx2;
 
 use crate::isa::Isa;
@@ -214,9 +213,9 @@ fn update_and_dot_group_with(
     dots: &mut [f32],
 ) {
     let [c0, c1, c2, c3] = cols;
-    #[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma"))))]
-    if isa == Isa::Avx2Fma && isa.available() {
-        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+    #[cfg(target_arch = "x86_64")]
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
         unsafe {
             match g {
                 1 => avx2::update_and_dot::<1>(v, s, [&mut **c0], x, lo, dots),

@@ -9,7 +9,6 @@
 //! local mean `μ_y[3]` (used where a pixel's guides are not finite).
 
 #[cfg(target_arch = "x86_64")]
-#[cfg_attr(all(target_feature = "avx2", target_feature = "fma"), allow(dead_code))] // `wide` is AVX2 there
 mod avx2;
 
 use super::cholesky::{self, F64Lanes};
@@ -68,14 +67,15 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
 
 /// Solves four consecutive cells (`cells` holds 4·k values, `models` 4·`model_len(Q)`)
 /// with one cell per f64x4 lane: bit-identical to four [`solve_cell`] calls.
-/// In a default x86-64 build, whose `f64x4` is two SSE2 halves, the lanes are
-/// AVX2 registers where the CPU has them (`avx2::normalized4`; same result).
+/// On x86-64 the lanes are AVX2 registers where the CPU has them
+/// (`avx2::normalized4`; same result), which matters in a default build,
+/// whose `f64x4` is two SSE2 halves.
 pub fn solve_cells4<const Q: usize>(cells: &[f64], p: &SolveParams, models: &mut [f32]) -> [CellOutcome; 4] {
     solve_cells4_on::<Q>(Isa::detect(), cells, p, models)
 }
 
-/// [`solve_cells4`] on the given instruction set (`Avx2Fma` only where it is
-/// available and the build's `wide` lacks it; otherwise the portable lanes).
+/// [`solve_cells4`] on the given instruction set (the intrinsics file where
+/// [`Isa::intrinsics`], otherwise the portable lanes).
 fn solve_cells4_on<const Q: usize>(isa: Isa, cells: &[f64], p: &SolveParams, models: &mut [f32]) -> [CellOutcome; 4] {
     let lay = CellLayout::new(Q);
     let (k, ml) = (lay.k, super::model_len(Q));
@@ -83,22 +83,7 @@ fn solve_cells4_on<const Q: usize>(isa: Isa, cells: &[f64], p: &SolveParams, mod
         return core::array::from_fn(|l| solve_cell::<Q>(&cells[l * k..(l + 1) * k], p, &mut models[l * ml..(l + 1) * ml]));
     };
     let cells = &cells[..4 * k];
-    let portable = || {
-        let get = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
-        normalized::<f64x4, Q>(get, p, eps_mul, eps_add)
-    };
-    #[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma"))))]
-    let (c0, coef, muy, dropped) = if isa == Isa::Avx2Fma && isa.available() {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        unsafe { avx2::normalized4::<Q>(cells, p, eps_mul, eps_add) }
-    } else {
-        portable()
-    };
-    #[cfg(not(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma")))))]
-    let (c0, coef, muy, dropped) = {
-        let _ = isa;
-        portable()
-    };
+    let (c0, coef, muy, dropped) = normalized4_on::<Q>(isa, cells, p, eps_mul, eps_add);
     write_models4::<Q>(&c0, &coef, &muy, models);
     core::array::from_fn(|l| {
         if is_empty(cells[l * k], p) {
@@ -107,6 +92,26 @@ fn solve_cells4_on<const Q: usize>(isa: Isa, cells: &[f64], p: &SolveParams, mod
         }
         CellOutcome { empty: false, dropped: dropped[l] }
     })
+}
+
+/// Four cells' fits in `f64` lanes, as [`normalized`] returns them: the
+/// intercepts, the coefficients on `d = g − m`, the local means of y and
+/// each lane's number of dropped pivots.
+type Lanes4<const Q: usize> = ([f64x4; 3], [[f64x4; 3]; Q], [f64x4; 3], [u32; 4]);
+
+/// The four cells' normalized solve in `f64` lanes (`cells`: four cell
+/// layouts back to back) on the given instruction set.
+#[inline(always)]
+fn normalized4_on<const Q: usize>(isa: Isa, cells: &[f64], p: &SolveParams, eps_mul: f64, eps_add: f64) -> Lanes4<Q> {
+    #[cfg(target_arch = "x86_64")]
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
+        return unsafe { avx2::normalized4::<Q>(cells, p, eps_mul, eps_add) };
+    }
+    let _ = isa;
+    let k = CellLayout::new(Q).k;
+    let get = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    normalized::<f64x4, Q>(get, p, eps_mul, eps_add)
 }
 
 /// [`write_model`] for four cells at once: finiteness tested in lanes, each

@@ -7,7 +7,6 @@
 //! (`avx2`, chosen at run time: see [`Isa`]).
 
 #[cfg(target_arch = "x86_64")]
-#[cfg_attr(all(target_feature = "avx2", target_feature = "fma"), allow(dead_code))] // `wide` is AVX2 there
 mod avx2;
 
 use crate::error::Error;
