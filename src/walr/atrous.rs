@@ -681,6 +681,16 @@ fn sums8<S: Store, const KP: usize>(ctx: &Ctx<'_, S>, y: usize, s: usize, off: &
         let mut e0 = 0;
         for g in 0..ch.n {
             let c = base + 8 * g + o;
+            if k + 1 < KP {
+                // the next plane's three tap rows: one stream per plane
+                // would end at each chunk's end, and 3 × KP streams are
+                // more than the hardware prefetchers follow
+                let n = c + ctx.ps;
+                crate::image::prefetch(ctx.z, n.wrapping_add_signed(off[1]));
+                crate::image::prefetch(ctx.z, n);
+                crate::image::prefetch(ctx.z, n.wrapping_add_signed(off[6]));
+                crate::image::prefetch(zo, o + ctx.ps + ch.x0 + 8 * g);
+            }
             let mut acc = taps9(ld(c, 0), &ch.f[g], |d| ld(c, off[d]));
             let e1 = ch.ex_end[g];
             if e1 > e0 {

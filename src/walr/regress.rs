@@ -13,25 +13,27 @@ use wide::f32x8;
 /// colours' right-hand sides `E[x y_c]` (the first 3 of `R` columns of `b`,
 /// the others 0); returns them and the index in `z` of the next stored value.
 #[inline(always)]
-fn system<T: Lane, const M: usize, const R: usize>(z: &[T]) -> ([[T; M]; M], [[T; R]; M], usize) {
+fn system<T: Lane, const M: usize, const R: usize>(z: &impl Fn(usize) -> T) -> ([[T; M]; M], [[T; R]; M], usize) {
     let mut a = [[T::splat(1.0); M]; M];
     let mut k = 0;
     for q in 1..M {
-        a[q][0] = z[k];
-        a[0][q] = z[k];
+        let v = z(k);
+        a[q][0] = v;
+        a[0][q] = v;
         k += 1;
     }
     for p in 1..M {
         for q in p..M {
-            a[q][p] = z[k];
-            a[p][q] = z[k];
+            let v = z(k);
+            a[q][p] = v;
+            a[p][q] = v;
             k += 1;
         }
     }
     let mut b = [[T::splat(0.0); R]; M];
     for c in 0..3 {
         for p in 0..M {
-            b[p][c] = z[k];
+            b[p][c] = z(k);
             k += 1;
         }
     }
@@ -42,6 +44,13 @@ fn system<T: Lane, const M: usize, const R: usize>(z: &[T]) -> ([[T; M]; M], [[T
 /// `x` the pixel's features; returns the light (still divided by the scale).
 #[inline(always)]
 pub(crate) fn solve_pixel<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) -> [T; 3] {
+    solve_pixel_with::<T, M>(&|k| z[k], x, eps)
+}
+
+/// [`solve_pixel`] with average `k` read by `z(k)` (the lanes' path: loaded
+/// and divided by W where used, no copy of the averages).
+#[inline(always)]
+fn solve_pixel_with<T: Lane, const M: usize>(z: &impl Fn(usize) -> T, x: &[T; M], eps: T) -> [T; 3] {
     let one = T::splat(1.0);
     let (mut a, mut b, _) = system::<T, M, 3>(z);
     let mut eps_v = [eps; M];
@@ -75,6 +84,12 @@ pub(crate) struct WindowFit<T> {
 /// averages (sums over W; energy at `z[planes − 2]` = `z[k_energy]`).
 #[inline(always)]
 pub(crate) fn fit_stats<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) -> WindowFit<T> {
+    fit_stats_with::<T, M>(&|k| z[k], x, eps)
+}
+
+/// [`fit_stats`] with average `k` read by `z(k)` (as [`solve_pixel_with`]).
+#[inline(always)]
+fn fit_stats_with<T: Lane, const M: usize>(z: &impl Fn(usize) -> T, x: &[T; M], eps: T) -> WindowFit<T> {
     let one = T::splat(1.0);
     let zero = T::splat(0.0);
     // right-hand sides: the three colours, then the features themselves
@@ -82,7 +97,7 @@ pub(crate) fn fit_stats<T: Lane, const M: usize>(z: &[T], x: &[T; M], eps: T) ->
     for p in 0..M {
         b[p][3] = x[p];
     }
-    let energy = z[k] * T::splat(1.0 / super::features::ENERGY_SCALE);
+    let energy = z(k) * T::splat(1.0 / super::features::ENERGY_SCALE);
     let mut eps_v = [eps; M];
     eps_v[0] = one;
     let inv = factor_floor(&mut a, &eps_v);
@@ -230,55 +245,45 @@ impl Walr {
         let eps = self.cfg.epsilon;
         let mut fallback = 0u64;
         if n == 8 {
-            let mut zv = [f32x8::ZERO; 64];
-            for k in 0..kp {
-                zv[k] = S::load8(zrow, k * ps + x0);
-            }
-            // sums → averages (eq. 6: XX̄ = Σ w X Xᵀ / Σ w)
-            let wsum = zv[kp - 1];
+            // sums → averages (eq. 6: XX̄ = Σ w X Xᵀ / Σ w), each loaded and
+            // divided where the solve uses it (no copy: zeroing a copy cost
+            // a third of this stage)
+            let wsum = S::load8(zrow, (kp - 1) * ps + x0);
             let inv = wsum.simd_gt(f32x8::ZERO).select(f32x8::ONE / wsum, f32x8::ZERO);
-            for k in 0..kp - 1 {
-                zv[k] *= inv;
-            }
+            let z = |k: usize| S::load8(zrow, k * ps + x0) * inv;
             let mut xv = [f32x8::ONE; M];
             // unknown geometry (NaN/Inf guides, code −1): evaluate at the
             // window's mean features, i.e. output the weighted mean light
             let unknown = <f32 as Store>::load8(grow, G_VALID * ps + x0).simd_lt(f32x8::ZERO);
             for q in 1..M {
-                xv[q] = unknown.select(zv[q - 1], <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * ps + x0));
+                xv[q] = unknown.select(z(q - 1), <f32 as Store>::load8(grow, (GEO_FIXED + q - 1) * ps + x0));
             }
             fallback += unknown.to_bitmask().count_ones() as u64;
             let mut fit = if stats {
-                fit_stats::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(eps))
+                fit_stats_with::<f32x8, M>(&z, &xv, f32x8::splat(eps))
             } else {
-                WindowFit { y: solve_pixel::<f32x8, M>(&zv[..kp], &xv, f32x8::splat(eps)), rss: f32x8::ZERO, lev: f32x8::ZERO }
+                WindowFit { y: solve_pixel_with::<f32x8, M>(&z, &xv, f32x8::splat(eps)), rss: f32x8::ZERO, lev: f32x8::ZERO }
             };
-            let empty = zv[kp - 1].simd_le(f32x8::ZERO);
+            let empty = wsum.simd_le(f32x8::ZERO);
             fallback += empty.to_bitmask().count_ones() as u64;
             fit.y = fit.y.map(|c| empty.select(f32x8::ZERO, c));
             (fit, wsum, fallback)
         } else {
-            let mut zs = [0f32; 64];
-            for k in 0..kp {
-                zs[k] = S::get(zrow, k * ps + x0);
-            }
-            let wsum = zs[kp - 1];
+            let wsum = S::get(zrow, (kp - 1) * ps + x0);
             let inv = if wsum > 0.0 { 1.0 / wsum } else { 0.0 };
-            for k in 0..kp - 1 {
-                zs[k] *= inv;
-            }
+            let z = |k: usize| S::get(zrow, k * ps + x0) * inv;
             let mut xs = [1f32; M];
             let unknown = grow[G_VALID * ps + x0] < 0.0;
             for q in 1..M {
-                xs[q] = if unknown { zs[q - 1] } else { grow[(GEO_FIXED + q - 1) * ps + x0] };
+                xs[q] = if unknown { z(q - 1) } else { grow[(GEO_FIXED + q - 1) * ps + x0] };
             }
             fallback += unknown as u64;
             let fit = if stats {
-                fit_stats::<f32, M>(&zs[..kp], &xs, eps)
+                fit_stats_with::<f32, M>(&z, &xs, eps)
             } else {
-                WindowFit { y: solve_pixel::<f32, M>(&zs[..kp], &xs, eps), rss: 0.0, lev: 0.0 }
+                WindowFit { y: solve_pixel_with::<f32, M>(&z, &xs, eps), rss: 0.0, lev: 0.0 }
             };
-            let empty = !(zs[kp - 1] > 0.0);
+            let empty = !(wsum > 0.0);
             fallback += empty as u64;
             let lane0 = |v: f32| f32x8::from([v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
             let y = fit.y.map(|c| lane0(if empty { 0.0 } else { c }));
