@@ -239,9 +239,10 @@ mod tests {
     use super::*;
 
     /// The AVX2 + FMA Gaussian interiors (where this CPU has them) agree with
-    /// the portable lanes: bit for bit where `wide` is AVX2 + FMA, else to the
-    /// rounding of fused against separate products; for rows and bands of
-    /// awkward lengths (interior tails, borders, radii 1 to 6).
+    /// the portable lanes to the rounding of fused against separate products,
+    /// for rows and bands of awkward lengths (interior tails, borders, radii 1
+    /// to 6). (Where `wide` is AVX2 + FMA, [`Isa::intrinsics`] keeps its lanes
+    /// for both calls, which must then agree bit for bit.)
     #[test]
     fn avx2_blurs_match_portable() {
         if !Isa::Avx2Fma.available() {
