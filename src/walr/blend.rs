@@ -158,9 +158,13 @@ impl Walr {
                 let (small, ws, _) = self.fit_group::<S, M>(prow, grow, x0, n, true);
                 rep.fallback_pixels += fallback;
                 let stats = window_stats(&large, &small, wl * scale_l, ws * scale_s, M as f32);
-                let planes = large.y.iter().chain(&small.y).chain(&stats);
-                for (k, v) in planes.enumerate() {
-                    put(prow, k * ps + x0, n, *v);
+                // (plane by plane from registers: a chained iterator over the
+                // three arrays went through a stack copy, whose reloads
+                // stalled on store forwarding: a third of this pass)
+                for c in 0..3 {
+                    put(prow, c * ps + x0, n, large.y[c]);
+                    put(prow, (3 + c) * ps + x0, n, small.y[c]);
+                    put(prow, (6 + c) * ps + x0, n, stats[c]);
                 }
                 x0 += n;
             }
