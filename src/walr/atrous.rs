@@ -85,11 +85,18 @@ impl<S: Store> Ctx<'_, S> {
     }
     #[inline(always)]
     fn g8(&self, c: usize, x: usize, y: usize) -> f32x8 {
-        let i = (y * self.gp + c) * self.ps + x;
-        debug_assert!(c < self.gp && x + 8 <= self.w && y < self.h && self.geo.len() >= self.h * self.gp * self.ps);
-        // SAFETY: `iterate_rows` checked `geo.len() ≥ h · gp · ps` (ps ≥ w);
-        // callers pass y < h, c < gp and x + 8 ≤ w (a group's taps are checked
-        // in-row), so i + 8 ≤ geo.len(). An unaligned read of 8 f32 is a valid f32x8.
+        debug_assert!(c < self.gp && x + 8 <= self.w && y < self.h);
+        self.g8_at((y * self.gp + c) * self.ps + x)
+    }
+    /// Values `i..i + 8` of the geometry: `i = (y·gp + c)·ps + x` for a plane
+    /// `c < gp` of a point with `y < h` and `x + 8 ≤ w` (a group's taps are
+    /// checked in-row, and a trace's points lie between its centre and tap).
+    #[inline(always)]
+    fn g8_at(&self, i: usize) -> f32x8 {
+        debug_assert!(i + 8 <= self.geo.len());
+        // SAFETY: `iterate_rows` checked `geo.len() ≥ h · gp · ps` (ps ≥ w),
+        // and an index of the form above has i + 8 ≤ geo.len(). An unaligned
+        // read of 8 f32 is a valid f32x8.
         unsafe { core::ptr::read_unaligned(self.geo.as_ptr().add(i) as *const f32x8) }
     }
     fn centre(&self, x: usize, y: usize) -> Centre {
@@ -121,10 +128,19 @@ impl<S: Store> Ctx<'_, S> {
     }
     #[inline(always)]
     fn weight8(&self, c: &[f32x8; 9], x: usize, y: usize) -> f32x8 {
+        debug_assert!(x + 8 <= self.w && y < self.h);
+        self.weight8_at(c, y * self.gp * self.ps + x)
+    }
+    /// [`Ctx::weight8`] of the point whose plane-0 geometry index is `i`
+    /// (`y·gp·ps + x`): a trace's points advance by a fixed stride of it.
+    #[inline(always)]
+    fn weight8_at(&self, c: &[f32x8; 9], i: usize) -> f32x8 {
         // c: p (3), n (3), inv_scale / (far − near), |valid|, far / (far − near)
-        let d = c[3] * (self.g8(G_P, x, y) - c[0]) + c[4] * (self.g8(G_P + 1, x, y) - c[1]) + c[5] * (self.g8(G_P + 2, x, y) - c[2]);
+        let ps = self.ps;
+        let g = |plane: usize| self.g8_at(i + plane * ps);
+        let d = c[3] * (g(G_P) - c[0]) + c[4] * (g(G_P + 1) - c[1]) + c[5] * (g(G_P + 2) - c[2]);
         let v = (c[8] - d.abs() * c[6]).fast_max(f32x8::ZERO).fast_min(f32x8::ONE);
-        self.g8(G_VALID, x, y).simd_eq(c[7]).select(v, f32x8::ZERO)
+        g(G_VALID).simd_eq(c[7]).select(v, f32x8::ZERO)
     }
     #[inline(always)]
     fn step(&self, x: usize, y: usize) -> usize {
@@ -621,10 +637,14 @@ fn weights8<S: Store>(
         let pos = |k: usize| ((x0 as i64 + i * k as i64) as usize, (y as i64 + j * k as i64) as usize);
         let (mut wmin, mut lt1, mut zero_at) = (f32x8::ONE, sv, f32x8::ZERO);
         if ctx.tracing {
+            // point k's indices are the centre's plus k strides (no
+            // multiplication per plane on the chain of dependent steps);
+            // every point lies between the centre and the tap, so in the frame
+            let (g0, gs) = ((y * ctx.gp * ctx.ps + x0) as isize, j as isize * (ctx.gp * ctx.ps) as isize + i as isize);
+            let (f0, fs) = ((y * ctx.w + x0) as isize, j as isize * ctx.w as isize + i as isize);
             let mut k = 1;
             loop {
-                let (qx, qy) = pos(k);
-                let wq = ctx.weight8(&cv, qx, qy);
+                let wq = ctx.weight8_at(&cv, (g0 + k as isize * gs) as usize);
                 let kf = f32x8::splat(k as f32);
                 lt1 = (wq.simd_lt(f32x8::ONE) & lt1.simd_eq(sv)).select(kf, lt1);
                 zero_at = (wq.simd_le(f32x8::ZERO) & wmin.simd_gt(f32x8::ZERO)).select(kf, zero_at);
@@ -632,7 +652,8 @@ fn weights8<S: Store>(
                 if k == s || wmin.simd_gt(f32x8::ZERO).none() {
                     break;
                 }
-                k = (k + ctx.step(qx, qy)).min(s);
+                // (k < s, so t ≥ 1: the field exists)
+                k = (k + ctx.sdf[(f0 + k as isize * fs) as usize].max(1) as usize).min(s);
             }
         } else {
             let (qx, qy) = pos(s);
