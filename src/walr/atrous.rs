@@ -645,11 +645,18 @@ fn weights8<S: Store>(
             let mut k = 1;
             loop {
                 let wq = ctx.weight8_at(&cv, (g0 + k as isize * gs) as usize);
-                let kf = f32x8::splat(k as f32);
-                lt1 = (wq.simd_lt(f32x8::ONE) & lt1.simd_eq(sv)).select(kf, lt1);
-                zero_at = (wq.simd_le(f32x8::ZERO) & wmin.simd_gt(f32x8::ZERO)).select(kf, zero_at);
-                wmin = wmin.fast_min(wq);
-                if k == s || wmin.simd_gt(f32x8::ZERO).none() {
+                let below1 = wq.simd_lt(f32x8::ONE);
+                if below1.any() {
+                    // (on flat ground every weight is 1: nothing to record)
+                    let kf = f32x8::splat(k as f32);
+                    lt1 = (below1 & lt1.simd_eq(sv)).select(kf, lt1);
+                    zero_at = (wq.simd_le(f32x8::ZERO) & wmin.simd_gt(f32x8::ZERO)).select(kf, zero_at);
+                    wmin = wmin.fast_min(wq);
+                    if wmin.simd_gt(f32x8::ZERO).none() {
+                        break;
+                    }
+                }
+                if k == s {
                     break;
                 }
                 // (k < s, so t ≥ 1: the field exists)
