@@ -61,8 +61,6 @@ struct Ctx<'a, S> {
     far: f32,
     tracing: bool,
     replace: bool,
-    /// The field `sdf` exists (from the second iteration on).
-    has_field: bool,
     /// `sdf_step` of the configuration, for the field this iteration writes.
     sdf_step: f32,
     seed: u32,
@@ -142,13 +140,13 @@ impl<S: Store> Ctx<'_, S> {
         let v = (c[8] - d.abs() * c[6]).fast_max(f32x8::ZERO).fast_min(f32x8::ONE);
         g(G_VALID).simd_eq(c[7]).select(v, f32x8::ZERO)
     }
+    /// The trace step at field index `i` (`y·w + x`). Only a point short of
+    /// the tap steps (k < s = 3^t), so t ≥ 1 and the previous iteration wrote
+    /// the field; ≥ 1 even for a caller's field of zeros, so a trace always
+    /// advances.
     #[inline(always)]
-    fn step(&self, x: usize, y: usize) -> usize {
-        if !self.has_field {
-            return 1;
-        }
-        // (≥ 1 even for a caller's field of zeros: a trace always advances)
-        self.sdf[y * self.w + x].max(1) as usize
+    fn step_at(&self, i: usize) -> usize {
+        self.sdf[i].max(1) as usize
     }
     /// The step stored for an edge distance `e`: `max(1, ⌊sdf_step · e⌋)`.
     #[inline(always)]
@@ -201,7 +199,7 @@ impl<S: Store> Ctx<'_, S> {
                 if k == s {
                     break;
                 }
-                k = (k + self.step(qx, qy)).min(s);
+                k = (k + self.step_at(qy * self.w + qx)).min(s);
             }
         } else {
             wmin = self.weight(c, tx as usize, ty as usize);
@@ -345,8 +343,6 @@ impl Walr {
             far: cfg.far,
             tracing: cfg.tracing,
             replace: cfg.replace,
-            // The previous field only exists from the second iteration on.
-            has_field: t > 0,
             sdf_step: cfg.sdf_step,
             seed: p.seed,
             t,
@@ -659,8 +655,7 @@ fn weights8<S: Store>(
                 if k == s {
                     break;
                 }
-                // (k < s, so t ≥ 1: the field exists)
-                k = (k + ctx.sdf[(f0 + k as isize * fs) as usize].max(1) as usize).min(s);
+                k = (k + ctx.step_at((f0 + k as isize * fs) as usize)).min(s);
             }
         } else {
             let (qx, qy) = pos(s);
