@@ -211,9 +211,8 @@ impl<'a> ImageView<'a> {
                 }
             }
             Samples::F16(s) if ps == 1 => {
-                // contiguous halves: `half` converts them 4 or 8 at a time (F16C where enabled)
-                use half::slice::HalfFloatSliceExt;
-                s.get(start..start + dst.len())?.convert_to_f32_slice(dst);
+                // contiguous halves: converted 8 at a time (F16C where the CPU has it)
+                crate::convert::f16_to_f32(s.get(start..start + dst.len())?, dst);
             }
             Samples::F16(s) => {
                 for (i, d) in dst.iter_mut().enumerate() {
@@ -353,7 +352,6 @@ impl<'a> ImageView<'a> {
             Samples::F16(s) if cs == 1 && (ps == 3 || ps == 4) && N == 3 => {
                 // Interleaved RGB / RGBA halves: 16 pixels at a time converted in
                 // bulk into a small buffer, then de-interleaved as f32.
-                use half::slice::HalfFloatSliceExt;
                 const PX: usize = 16;
                 let src = s.get(start..start + (len - 1) * ps + N)?;
                 let [d0, d1, d2] = &mut dst[..] else { return None };
@@ -361,7 +359,7 @@ impl<'a> ImageView<'a> {
                 let mut i = 0;
                 while i + PX <= len && (i + PX) * ps <= src.len() {
                     let b = &mut buf[..PX * ps];
-                    src[i * ps..(i + PX) * ps].convert_to_f32_slice(b);
+                    crate::convert::f16_to_f32(&src[i * ps..(i + PX) * ps], b);
                     for (j, px) in b.chunks_exact(ps).enumerate() {
                         (d0[i + j], d1[i + j], d2[i + j]) = (px[0], px[1], px[2]);
                     }
@@ -478,6 +476,7 @@ impl<'a> ImageViewMut<'a> {
                     unsafe { *s.get_unchecked_mut(start + i * ps) = *v };
                 }
             }
+            SamplesMut::F16(s) if ps == 1 => crate::convert::f32_to_f16(src, s.get_mut(start..start + src.len())?),
             SamplesMut::F16(s) => {
                 for (i, v) in src.iter().enumerate() {
                     // SAFETY: as above.
@@ -514,6 +513,34 @@ impl<'a> ImageViewMut<'a> {
                         // SAFETY: validated at construction; i < len ≤ width − x0, c < N ≤ channels.
                         unsafe { *s.get_unchecked_mut(start + i * ps + c * cs) = *p.get_unchecked(i) };
                     }
+                }
+            }
+            SamplesMut::F16(s) if cs == 1 && (ps == 3 || ps == 4) && N == 3 => {
+                // Interleaved RGB / RGBA halves: 16 pixels at a time interleaved
+                // into a small f32 buffer, then converted in bulk (an RGBA
+                // pixel's fourth channel is left as it was).
+                const PX: usize = 16;
+                let dst = s.get_mut(start..start + (len - 1) * ps + N)?;
+                let [p0, p1, p2] = &src[..] else { return None };
+                let mut buf = [0f32; PX * 3];
+                let mut half = [f16::ZERO; PX * 3];
+                let mut i = 0;
+                while i < len {
+                    let e = (i + PX).min(len);
+                    let b = &mut buf[..3 * (e - i)];
+                    for (j, px) in b.chunks_exact_mut(3).enumerate() {
+                        px.copy_from_slice(&[p0[i + j], p1[i + j], p2[i + j]]);
+                    }
+                    let h = &mut half[..3 * (e - i)];
+                    crate::convert::f32_to_f16(b, h);
+                    if ps == 3 {
+                        dst[3 * i..3 * e].copy_from_slice(h);
+                    } else {
+                        for (j, px) in h.chunks_exact(3).enumerate() {
+                            dst[4 * (i + j)..4 * (i + j) + 3].copy_from_slice(px);
+                        }
+                    }
+                    i = e;
                 }
             }
             SamplesMut::F16(s) => {
@@ -598,6 +625,58 @@ fn extract_strided<const P: usize>(src: &[f32], dst: &mut [f32]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Half-precision rows: `read_row`, `read_row_n`, `write_row` and
+    /// `write_row_n` (bulk conversions, F16C where the CPU has it) give the
+    /// bits of `half`'s software conversion per element, for planar, RGB and
+    /// RGBA layouts, around the 8- and 16-value chunks; an RGBA pixel's fourth
+    /// channel is left as it was.
+    #[test]
+    fn f16_rows_match_per_element_conversion() {
+        const W: usize = 41;
+        let vals: [f32; 4 * W * 2] = core::array::from_fn(|i| ((i * 7919) % 997) as f32 * 0.37 - 150.0 + (i % 3) as f32 * 1e-3);
+        for ch in [3usize, 4] {
+            let halves: [f16; 4 * W * 2] = core::array::from_fn(|i| f16::from_f32_const(vals[i]));
+            let n = ch * W * 2;
+            let v = ImageView::f16(&halves[..n], W, 2, ch, Layout::interleaved(W, ch)).unwrap();
+            let planar = ImageView::f16(&halves[..n], W, 2, ch, Layout::planar(W, 2)).unwrap();
+            for (x0, len) in [(0usize, 1usize), (0, 8), (1, 15), (3, 16), (0, 17), (5, 33), (0, W)] {
+                let mut p = [[0f32; W]; 3];
+                let [a, b, c] = &mut p;
+                v.read_row_n(1, x0, [&mut a[..len], &mut b[..len], &mut c[..len]]).unwrap();
+                let mut r = [0f32; W];
+                planar.read_row(1, 2, x0, &mut r[..len]).unwrap();
+                for i in 0..len {
+                    for (k, plane) in p.iter().enumerate() {
+                        assert_eq!(plane[i].to_bits(), halves[W * ch + (x0 + i) * ch + k].to_f32_const().to_bits());
+                    }
+                    assert_eq!(r[i].to_bits(), halves[2 * W * 2 + W + x0 + i].to_f32_const().to_bits());
+                }
+                let mut out = [f16::from_f32_const(-7.0); 4 * W * 2];
+                let mut o = ImageViewMut::new(SamplesMut::F16(&mut out[..n]), W, 2, ch, Layout::interleaved(W, ch)).unwrap();
+                let src: [&[f32]; 3] = [&vals[..len], &vals[W..W + len], &vals[2 * W..2 * W + len]];
+                o.write_row_n(1, x0, src).unwrap();
+                for x in 0..W {
+                    for k in 0..ch {
+                        let got = out[W * ch + x * ch + k];
+                        let want = if (x0..x0 + len).contains(&x) && k < 3 {
+                            f16::from_f32_const(src[k][x - x0])
+                        } else {
+                            f16::from_f32_const(-7.0)
+                        };
+                        assert_eq!(got.to_bits(), want.to_bits(), "ch {ch} x0 {x0} len {len} x {x} k {k}");
+                    }
+                }
+                let mut out = [f16::from_f32_const(-7.0); 4 * W * 2];
+                let mut o = ImageViewMut::new(SamplesMut::F16(&mut out[..n]), W, 2, ch, Layout::planar(W, 2)).unwrap();
+                o.write_row(1, 1, x0, &vals[..len]).unwrap();
+                for x in 0..W {
+                    let want = if (x0..x0 + len).contains(&x) { f16::from_f32_const(vals[x - x0]) } else { f16::from_f32_const(-7.0) };
+                    assert_eq!(out[W * 2 + W + x].to_bits(), want.to_bits());
+                }
+            }
+        }
+    }
 
     /// The chunked RGB de-interleave (with its prefetches) equals element reads,
     /// for lengths and starts around its 64-pixel chunks.

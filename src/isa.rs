@@ -99,6 +99,47 @@ fn avx2_fma_available() -> bool {
     false
 }
 
+/// Whether the CPU converts halves in hardware: F16C, with the AVX state saved
+/// by the OS (its instructions are VEX-encoded). Used by `convert`, which
+/// `half` leaves to software in a `no_std` build without F16C compiled in.
+pub fn f16c_available() -> bool {
+    #[cfg(all(target_arch = "x86_64", target_feature = "f16c"))]
+    return true;
+    #[cfg(all(target_arch = "x86_64", not(target_feature = "f16c")))]
+    {
+        use core::sync::atomic::{AtomicU8, Ordering};
+        /// 0: not asked yet, 1: no, 2: yes.
+        static KNOWN: AtomicU8 = AtomicU8::new(0);
+        match KNOWN.load(Ordering::Relaxed) {
+            0 => {
+                let yes = cpu_has_f16c();
+                KNOWN.store(1 + yes as u8, Ordering::Relaxed);
+                yes
+            }
+            k => k == 2,
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// CPUID leaf 1: OSXSAVE (ECX bit 27), AVX (28), F16C (29); XCR0 bits 1 and 2:
+/// the OS saves the XMM and YMM registers.
+#[cfg(all(target_arch = "x86_64", not(target_feature = "f16c")))]
+#[allow(unused_unsafe)] // the CPUID intrinsics are safe in recent Rust, unsafe in older ones
+fn cpu_has_f16c() -> bool {
+    use core::arch::x86_64::{__cpuid, _xgetbv};
+    // SAFETY: every x86-64 CPU has CPUID leaf 1.
+    let l1 = unsafe { __cpuid(1) };
+    let bit = |b: u32| l1.ecx & (1 << b) != 0;
+    if !(bit(27) && bit(28) && bit(29)) {
+        return false;
+    }
+    // SAFETY: OSXSAVE (checked above) means the OS has enabled XGETBV.
+    let xcr0 = unsafe { _xgetbv(0) };
+    xcr0 & 0b110 == 0b110
+}
+
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
     extern crate std;
@@ -109,5 +150,6 @@ mod tests {
         let std_says = std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma");
         assert_eq!(super::Isa::Avx2Fma.available(), std_says);
         assert_eq!(super::Isa::detect() == super::Isa::Avx2Fma, std_says);
+        assert_eq!(super::f16c_available(), std::is_x86_feature_detected!("f16c"));
     }
 }

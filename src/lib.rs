@@ -37,6 +37,7 @@
 #[cfg(feature = "bmfr")]
 pub mod bmfr;
 pub mod config;
+mod convert;
 pub mod error;
 #[cfg(feature = "flnr")]
 pub mod flnr;

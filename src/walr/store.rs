@@ -1,7 +1,7 @@
 //! The two storage formats of the sums: f32, or f16 bits in `u16`.
 
 use half::f16;
-use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
+use half::slice::HalfBitsSliceExt;
 use wide::f32x8;
 
 /// A stored sample type (f32 or f16 bits).
@@ -66,8 +66,8 @@ impl Store for u16 {
     #[inline(always)]
     fn load8(s: &[Self], i: usize) -> f32x8 {
         let mut a = [0f32; 8];
-        // `half`'s slice conversion: F16C instructions where the build has them
-        s[i..i + 8].reinterpret_cast::<f16>().convert_to_f32_slice(&mut a);
+        // F16C where the CPU has it (`convert`)
+        crate::convert::f16_to_f32(s[i..i + 8].reinterpret_cast::<f16>(), &mut a);
         f32x8::from(a)
     }
     #[inline(always)]
@@ -76,11 +76,11 @@ impl Store for u16 {
         // SAFETY: the caller guarantees i + 8 ≤ s.len().
         let c = unsafe { s.get_unchecked(i..i + 8) };
         let mut a = [0f32; 8];
-        c.reinterpret_cast::<f16>().convert_to_f32_slice(&mut a);
+        crate::convert::f16_to_f32(c.reinterpret_cast::<f16>(), &mut a);
         f32x8::from(a)
     }
     #[inline(always)]
     fn store8(s: &mut [Self], i: usize, v: f32x8) {
-        s[i..i + 8].reinterpret_cast_mut::<f16>().convert_from_f32_slice(v.as_array());
+        crate::convert::f32_to_f16(v.as_array(), s[i..i + 8].reinterpret_cast_mut::<f16>());
     }
 }
