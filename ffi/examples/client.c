@@ -1,6 +1,7 @@
 /* A C99 client of liblrdenoise: builds a synthetic frame, queries sizes,
  * mallocs scratch, runs FLR whole-frame and tiled on two pthreads, checks the
- * two agree bit for bit, exercises error paths, prints the timing, and writes
+ * two agree bit for bit, runs it on half-float buffers (equal to the f32 run on
+ * the same values, rounded), exercises error paths, prints the timing, and writes
  * the whole-frame output (raw little-endian f32 RGB) to argv[1] if given. With
  * argv[2] (an FLNR weight blob, e.g. train/flnr.bin) it also runs FLNR.
  *
@@ -51,6 +52,51 @@ static LrdImage image(const float *data, uint32_t channels) {
     im.height = H;
     im.pixel_stride = channels * sizeof(float); /* interleaved; 0 would mean the same */
     return im;
+}
+
+/* IEEE half floats by hand (C99 has no half type): round to nearest, ties to
+ * even; the values here are finite and far from f16's overflow. */
+static uint16_t to_half(float f) {
+    uint32_t x;
+    memcpy(&x, &f, sizeof x);
+    uint32_t sign = (x >> 16) & 0x8000u, m = x & 0x7fffffu;
+    int32_t e = (int32_t)((x >> 23) & 0xffu) - 127 + 15;
+    if (e >= 31) return (uint16_t)(sign | 0x7c00u);
+    if (e < -10) return (uint16_t)sign;
+    uint32_t shift = 13, h;
+    if (e <= 0) { /* subnormal half */
+        m |= 0x800000u;
+        shift = (uint32_t)(14 - e);
+        h = m >> shift;
+    } else {
+        h = ((uint32_t)e << 10) | (m >> 13);
+    }
+    uint32_t rem = m & ((1u << shift) - 1), tie = 1u << (shift - 1);
+    if (rem > tie || (rem == tie && (h & 1u))) h++;
+    return (uint16_t)(sign | h);
+}
+
+static float from_half(uint16_t h) {
+    uint32_t sign = (uint32_t)(h & 0x8000u) << 16, e = (h >> 10) & 0x1fu, m = h & 0x3ffu, x;
+    if (e == 0) {
+        float v = (float)m / 16777216.0f; /* m * 2^-24 */
+        return sign ? -v : v;
+    }
+    x = sign | (e == 31 ? 0x7f800000u | (m << 13) : ((e - 15 + 127) << 23) | (m << 13));
+    float f;
+    memcpy(&f, &x, sizeof f);
+    return f;
+}
+
+/* n halves of src, and src rounded through them in place */
+static uint16_t *halves(float *src, size_t n) {
+    uint16_t *h = malloc(sizeof(uint16_t) * n);
+    if (!h) exit(2);
+    for (size_t i = 0; i < n; i++) {
+        h[i] = to_half(src[i]);
+        src[i] = from_half(h[i]);
+    }
+    return h;
 }
 
 static double now_ms(void) {
@@ -196,6 +242,51 @@ int main(int argc, char **argv) {
     }
     printf("FLR %dx%d: whole frame %.3f ms (best of 5, 1 thread), tiled %u tiles on 2 pthreads %.3f ms; identical\n",
            W, H, best, tiles, tiled_ms);
+
+    /* Half-float buffers in and out (LRD_FORMAT_F16; the library converts them
+     * with F16C where the CPU has it). Reading a half is exact, so the f16 run
+     * must equal the f32 run on the same values, rounded to half on output. */
+    {
+        size_t n = (size_t)W * H;
+        float *rn = malloc(sizeof(float) * 3 * n), *rnorm = malloc(sizeof(float) * 3 * n);
+        float *rd = malloc(sizeof(float) * n), *ra = malloc(sizeof(float) * n);
+        float *ref = malloc(sizeof(float) * 3 * n);
+        uint16_t *hout = malloc(sizeof(uint16_t) * 3 * n);
+        if (!rn || !rnorm || !rd || !ra || !ref || !hout) return 2;
+        memcpy(rn, noisy, sizeof(float) * 3 * n);
+        memcpy(rnorm, normal, sizeof(float) * 3 * n);
+        memcpy(rd, depth, sizeof(float) * n);
+        memcpy(ra, ao, sizeof(float) * n);
+        uint16_t *hn = halves(rn, 3 * n), *hnorm = halves(rnorm, 3 * n), *hd = halves(rd, n), *ha = halves(ra, n);
+        LrdFrame hf = frame;
+        LrdImage *ims[4] = {&hf.noisy, &hf.guides.normal, &hf.guides.depth, &hf.guides.ao};
+        const void *hdata[4] = {hn, hnorm, hd, ha};
+        for (int k = 0; k < 4; k++) {
+            ims[k]->data = hdata[k];
+            ims[k]->format = LRD_FORMAT_F16;
+            ims[k]->pixel_stride = (k < 2 ? 3 : 1) * sizeof(uint16_t);
+        }
+        LrdImageMut ho = out;
+        ho.data = hout;
+        ho.format = LRD_FORMAT_F16;
+        CHECK(lrd_flr_denoise(&cfg, &hf, &ho, scratch, bytes, NULL));
+        LrdFrame rf = frame;
+        rf.noisy.data = rn;
+        rf.guides.normal.data = rnorm;
+        rf.guides.depth.data = rd;
+        rf.guides.ao.data = ra;
+        LrdImageMut ro = out;
+        ro.data = ref;
+        CHECK(lrd_flr_denoise(&cfg, &rf, &ro, scratch, bytes, NULL));
+        for (size_t i = 0; i < 3 * n; i++) {
+            if (hout[i] != to_half(ref[i])) {
+                fprintf(stderr, "f16 output %zu: %#06x, f32 run rounded: %#06x (%g)\n", i, hout[i], to_half(ref[i]), ref[i]);
+                return 6;
+            }
+        }
+        printf("FLR f16 in and out: equal to the f32 run on the same values, rounded to half\n");
+        free(rn); free(rnorm); free(rd); free(ra); free(ref); free(hout); free(hn); free(hnorm); free(hd); free(ha);
+    }
 
     /* BMFR's temporal pipeline: caller-owned scratch and history, static camera
        (motion NULL); the client's frame has normals and depth, no positions. */
