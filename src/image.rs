@@ -250,7 +250,7 @@ impl<'a> ImageView<'a> {
     }
 
     /// The three single-channel views `v` as one 3-channel view, when they are
-    /// consecutive channels of one pixel-interleaved f32 image (interleaved
+    /// consecutive channels of one pixel-interleaved f32 or f16 image (interleaved
     /// RGB/RGBA normals or positions, split by [`ImageView::channels`]), so a
     /// row of all three is read in one de-interleaving pass
     /// ([`ImageView::read_row_n`]) instead of three strided ones. `None`
@@ -259,11 +259,14 @@ impl<'a> ImageView<'a> {
     /// view `c`'s offset.)
     pub fn merged3(v: [&ImageView<'a>; 3]) -> Option<ImageView<'a>> {
         let (a, l) = (v[0], v[0].layout);
-        let Samples::F32(s) = a.samples else { return None };
         let interleaved = l.channel_stride == 1 && (l.pixel_stride == 3 || l.pixel_stride == 4);
         let sibling = |c: usize| {
             let (b, m) = (v[c], v[c].layout);
-            let same_slice = matches!(b.samples, Samples::F32(t) if core::ptr::eq(t, s));
+            let same_slice = match (a.samples, b.samples) {
+                (Samples::F32(s), Samples::F32(t)) => core::ptr::eq(s, t),
+                (Samples::F16(s), Samples::F16(t)) => core::ptr::eq(s, t),
+                _ => false,
+            };
             same_slice
                 && b.channels == 1
                 && (b.width, b.height) == (a.width, a.height)
@@ -330,8 +333,31 @@ impl<'a> ImageView<'a> {
                         i = e;
                     }
                 } else {
-                    for (i, px) in src.chunks(4).enumerate().take(len) {
-                        (d0[i], d1[i], d2[i]) = (px[0], px[1], px[2]);
+                    // RGBA: the same, 16 lines per 64 pixels (the fourth channel is skipped)
+                    let src = &s[start..start + (len - 1) * 4 + 3];
+                    let mut i = 0;
+                    while i < len {
+                        let e = (i + 64).min(len);
+                        let ahead = 4 * (i + DEINTERLEAVE_AHEAD);
+                        let mut l = 0;
+                        while l < 4 * 64 {
+                            prefetch(src, ahead + l);
+                            l += 16;
+                        }
+                        let (a, (b, c)) = (&mut d0[i..e], (&mut d1[i..e], &mut d2[i..e]));
+                        if e < len {
+                            // whole pixels: the slice's last pixel has only 3 values
+                            let s4 = &src[4 * i..4 * e];
+                            for (((px, a), b), c) in s4.chunks_exact(4).zip(a.iter_mut()).zip(b.iter_mut()).zip(c.iter_mut()) {
+                                (*a, *b, *c) = (px[0], px[1], px[2]);
+                            }
+                        } else {
+                            for (j, ((a, b), c)) in a.iter_mut().zip(b.iter_mut()).zip(c.iter_mut()).enumerate() {
+                                let px = &src[4 * (i + j)..4 * (i + j) + 3];
+                                (*a, *b, *c) = (px[0], px[1], px[2]);
+                            }
+                        }
+                        i = e;
                     }
                 }
             }
@@ -358,6 +384,11 @@ impl<'a> ImageView<'a> {
                 let mut buf = [0f32; PX * 4];
                 let mut i = 0;
                 while i + PX <= len && (i + PX) * ps <= src.len() {
+                    // the lines `DEINTERLEAVE_AHEAD` pixels ahead (2 per chunk of 16
+                    // RGBA pixels): without, the conversion's loads waited on memory
+                    let ahead = (i + DEINTERLEAVE_AHEAD) * ps;
+                    prefetch(src, ahead);
+                    prefetch(src, ahead + 32);
                     let b = &mut buf[..PX * ps];
                     crate::convert::f16_to_f32(&src[i * ps..(i + PX) * ps], b);
                     for (j, px) in b.chunks_exact(ps).enumerate() {
@@ -494,6 +525,9 @@ impl<'a> ImageViewMut<'a> {
         if N == 0 || y >= self.height || N > self.channels || x0.checked_add(len)? > self.width || src.iter().any(|d| d.len() != len) {
             return None;
         }
+        if len == 0 {
+            return Some(());
+        }
         let l = &self.layout;
         let start = l.offset + y * l.row_stride + x0 * l.pixel_stride;
         let (ps, cs) = (l.pixel_stride, l.channel_stride);
@@ -506,6 +540,16 @@ impl<'a> ImageViewMut<'a> {
                 for (((px, a), b), c) in dst.chunks_exact_mut(3).zip(p0.iter()).zip(p1.iter()).zip(p2.iter()) {
                     px.copy_from_slice(&[*a, *b, *c]);
                 }
+            }
+            SamplesMut::F32(s) if cs == 1 && ps == 4 && N == 3 => {
+                // Interleaved RGBA: the same, the fourth channel left as it was.
+                let dst = &mut s[start..start + 4 * (len - 1) + 3];
+                let [p0, p1, p2] = &src[..] else { return None };
+                let whole = len - 1; // the last pixel's slice ends after its third value
+                for (((px, a), b), c) in dst.chunks_exact_mut(4).zip(&p0[..whole]).zip(&p1[..whole]).zip(&p2[..whole]) {
+                    px[..3].copy_from_slice(&[*a, *b, *c]);
+                }
+                dst[4 * whole..].copy_from_slice(&[p0[whole], p1[whole], p2[whole]]);
             }
             SamplesMut::F32(s) => {
                 for i in 0..len {
@@ -625,6 +669,38 @@ fn extract_strided<const P: usize>(src: &[f32], dst: &mut [f32]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// RGBA f32 rows (the fourth channel skipped on reads and left as it was
+    /// on writes) equal element access, around the 64-pixel read chunks, on a
+    /// buffer that ends right after the last pixel's third channel.
+    #[test]
+    fn rgba_rows_equal_element_access() {
+        const W: usize = 300;
+        const LEN: usize = W * 2 * 4 - 1;
+        let data: [f32; LEN] = core::array::from_fn(|i| i as f32 * 0.25);
+        let v = ImageView::f32(&data, W, 2, 3, Layout::interleaved(W, 4)).unwrap();
+        for x0 in [0usize, 1, 63, 64, 100] {
+            for len in [0usize, 1, 7, 63, 64, 65, 129, 200] {
+                let mut p = [[0f32; W]; 3];
+                let [a, b, c] = &mut p;
+                v.read_row_n(1, x0, [&mut a[..len], &mut b[..len], &mut c[..len]]).unwrap();
+                for i in 0..len {
+                    for (ch, plane) in p.iter().enumerate() {
+                        assert_eq!(Some(plane[i]), v.get(x0 + i, 1, ch), "x0 {x0} len {len} i {i}");
+                    }
+                }
+                let mut out = [-1f32; LEN];
+                let mut o = ImageViewMut::new(SamplesMut::F32(&mut out), W, 2, 3, Layout::interleaved(W, 4)).unwrap();
+                o.write_row_n(1, x0, [&p[0][..len], &p[1][..len], &p[2][..len]]).unwrap();
+                for (i, got) in out.iter().enumerate() {
+                    let (x, ch) = ((i % (4 * W)) / 4, i % 4);
+                    let written = i >= 4 * W && ch < 3 && (x0..x0 + len).contains(&x);
+                    let want = if written { data[i] } else { -1.0 };
+                    assert_eq!(*got, want, "x0 {x0} len {len} at {i}");
+                }
+            }
+        }
+    }
 
     /// Half-precision rows: `read_row`, `read_row_n`, `write_row` and
     /// `write_row_n` (bulk conversions, F16C where the CPU has it) give the

@@ -272,6 +272,91 @@ fn interleaved_triples_equal_planar() {
     }
 }
 
+/// The layouts engines hold frames in: RGBA light and RGBA normals, f32 or
+/// f16 (the f16 triples also read in one pass, `ImageView::merged3`), output
+/// into an RGBA buffer whose fourth channel must stay untouched. Bit-identical
+/// to the same values planar (an f16 value reads exactly), at sizes with a
+/// partial right-edge block and widths around the 64-pixel read chunks.
+#[test]
+fn rgba_and_f16_layouts_equal_planar() {
+    let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
+    for (w, h, b) in [(75, 41, 8), (129, 17, 8), (33, 17, 4)] {
+        let f = Owned::synthetic(w, h, 9, 0.5);
+        let c = cfg(set, b);
+        let n = w * h;
+        let h16 = |v: &[f32]| v.iter().map(|x| half::f16::from_f32(*x)).collect::<Vec<_>>();
+        let back = |v: &[half::f16]| v.iter().map(|x| x.to_f32()).collect::<Vec<_>>();
+        let rgba = |v: &[f32]| {
+            let mut o = vec![-5f32; 4 * n];
+            for i in 0..n {
+                o[4 * i..4 * i + 3].copy_from_slice(&v[3 * i..3 * i + 3]);
+            }
+            o
+        };
+        let planar3 = |v: &[f32]| {
+            let mut o = vec![0f32; 3 * n];
+            for i in 0..n {
+                for ch in 0..3 {
+                    o[ch * n + i] = v[3 * i + ch];
+                }
+            }
+            o
+        };
+        let pl = Layout::planar(w, h);
+        for half in [false, true] {
+            // the values both runs see: the inputs, or their f16 roundings
+            let vals = |v: &[f32]| if half { back(&h16(v)) } else { v.to_vec() };
+            let (noisy, normal, position, depth, ao) = (vals(&f.noisy), vals(&f.normal), vals(&f.position), vals(&f.depth), vals(&f.ao));
+            let (noisy4, normal4) = (rgba(&noisy), rgba(&normal));
+            let (noisy4_16, normal4_16, position_16, depth_16, ao_16) =
+                (h16(&noisy4), h16(&normal4), h16(&position), h16(&depth), h16(&ao));
+            fn view4<'a>(half: bool, v: &'a [f32], v16: &'a [half::f16], w: usize, h: usize) -> ImageView<'a> {
+                if half {
+                    ImageView::f16(v16, w, h, 3, Layout::interleaved(w, 4)).unwrap()
+                } else {
+                    ImageView::f32(v, w, h, 3, Layout::interleaved(w, 4)).unwrap()
+                }
+            }
+            let engine = Guides {
+                normal: Some(view4(half, &normal4, &normal4_16, w, h)),
+                position: Some(if half {
+                    ImageView::f16(&position_16, w, h, 3, Layout::interleaved(w, 3)).unwrap()
+                } else {
+                    ImageView::interleaved(&position, w, h, 3).unwrap()
+                }),
+                depth: Some(if half {
+                    ImageView::f16(&depth_16, w, h, 1, pl).unwrap()
+                } else {
+                    ImageView::f32(&depth, w, h, 1, pl).unwrap()
+                }),
+                ao: Some(if half { ImageView::f16(&ao_16, w, h, 1, pl).unwrap() } else { ImageView::f32(&ao, w, h, 1, pl).unwrap() }),
+                ..Default::default()
+            };
+            let flr = Flr::new(c, w, h).unwrap();
+            let mut scratch = vec![0f64; flr.scratch_len()];
+            let mut out4 = vec![7f32; 4 * n];
+            let mut ov = ImageViewMut::new(SamplesMut::F32(&mut out4), w, h, 3, Layout::interleaved(w, 4)).unwrap();
+            let ra = flr.denoise(&Frame::new(view4(half, &noisy4, &noisy4_16, w, h), engine), &mut scratch, &mut ov).unwrap();
+            let (normal_p, position_p, noisy_p) = (planar3(&normal), planar3(&position), planar3(&noisy));
+            let planar = Guides {
+                normal: Some(ImageView::f32(&normal_p, w, h, 3, pl).unwrap()),
+                position: Some(ImageView::f32(&position_p, w, h, 3, pl).unwrap()),
+                depth: Some(ImageView::f32(&depth, w, h, 1, pl).unwrap()),
+                ao: Some(ImageView::f32(&ao, w, h, 1, pl).unwrap()),
+                ..Default::default()
+            };
+            let (p, rp) = run_frame(c, w, h, &Frame::new(ImageView::f32(&noisy_p, w, h, 3, pl).unwrap(), planar));
+            assert_eq!(ra, rp);
+            for i in 0..n {
+                for ch in 0..3 {
+                    assert_eq!(out4[4 * i + ch].to_bits(), p[3 * i + ch].to_bits(), "{w}x{h} B{b} f16 {half}: pixel {i} channel {ch}");
+                }
+                assert_eq!(out4[4 * i + 3], 7.0, "{w}x{h} B{b} f16 {half}: the fourth channel was written");
+            }
+        }
+    }
+}
+
 #[test]
 fn interleaved_planar_and_f16_agree() {
     let f = Owned::synthetic(40, 24, 4, 0.5);
