@@ -335,9 +335,21 @@ fn merged3_joins_only_interleaved_siblings() {
     let p = ImageView::f32(&data[..3 * w * h], w, h, 3, Layout::planar(w, h)).unwrap();
     let pc = |c| p.channels(c, 1).unwrap();
     assert!(ImageView::merged3([&pc(0), &pc(1), &pc(2)]).is_none());
-    // f16 is not merged (its strided read converts per value)
-    let d16: Vec<half::f16> = data.iter().map(|x| half::f16::from_f32(*x)).collect();
-    let v16 = ImageView::f16(&d16, w, h, 3, Layout::interleaved(w, 3)).unwrap();
-    let hc = |c| v16.channels(c, 1).unwrap();
-    assert!(ImageView::merged3([&hc(0), &hc(1), &hc(2)]).is_none());
+    // f16 siblings merge too (one bulk-converting pass; until session 28 each
+    // channel was a strided read converting per value), but never with f32 ones
+    for ps in [3usize, 4] {
+        let d16: Vec<half::f16> = data.iter().map(|x| half::f16::from_f32(*x)).collect();
+        let v16 = ImageView::f16(&d16[..ps * w * h], w, h, 3, Layout::interleaved(w, ps)).unwrap();
+        let hc = |c| v16.channels(c, 1).unwrap();
+        let m = ImageView::merged3([&hc(0), &hc(1), &hc(2)]).expect("f16 siblings");
+        for y in 0..h {
+            let (mut a, mut b, mut c) = (vec![0f32; w - 1], vec![0f32; w - 1], vec![0f32; w - 1]);
+            m.read_row_n(y, 1, [&mut a, &mut b, &mut c]).unwrap();
+            for (k, row) in [a, b, c].iter().enumerate() {
+                assert!((0..w - 1).all(|i| row[i] == v16.get(1 + i, y, k).unwrap()), "f16 ps {ps} y {y} ch {k}");
+            }
+        }
+        let v32 = ImageView::f32(&data[..ps * w * h], w, h, 3, Layout::interleaved(w, ps)).unwrap();
+        assert!(ImageView::merged3([&hc(0), &hc(1), &v32.channels(2, 1).unwrap()]).is_none(), "f16 with f32");
+    }
 }
