@@ -107,6 +107,37 @@ fn prefetch_lines<T>(s: &[T], a: usize, b: usize) {
 /// How far ahead (pixels) [`ImageView::read_row_n`] asks for interleaved RGB.
 const DEINTERLEAVE_AHEAD: usize = 256;
 
+/// Channels 0..3 of `PS`-interleaved pixels (RGB or RGBA) into three planes of
+/// `d0.len()` values; `src` ends after the last pixel's third value. Constant
+/// strides, so the compiler vectorises it (a generic stride cannot be). 64
+/// pixels at a time, asking for the lines `DEINTERLEAVE_AHEAD` pixels ahead
+/// first: the hardware prefetchers alone left this loop waiting on memory.
+#[inline]
+fn deinterleave3<const PS: usize>(src: &[f32], d0: &mut [f32], d1: &mut [f32], d2: &mut [f32]) {
+    let len = d0.len();
+    let mut i = 0;
+    while i < len {
+        let e = (i + 64).min(len);
+        let ahead = PS * (i + DEINTERLEAVE_AHEAD);
+        let mut l = 0;
+        while l < PS * 64 {
+            prefetch(src, ahead + l);
+            l += 16;
+        }
+        // whole pixels; the row's last one may lack its fourth value
+        let whole = if e == len { e - 1 } else { e };
+        let (a, (b, c)) = (&mut d0[i..whole], (&mut d1[i..whole], &mut d2[i..whole]));
+        for (((px, a), b), c) in src[PS * i..PS * whole].chunks_exact(PS).zip(a.iter_mut()).zip(b.iter_mut()).zip(c.iter_mut()) {
+            (*a, *b, *c) = (px[0], px[1], px[2]);
+        }
+        if whole < e {
+            let px = &src[PS * whole..PS * whole + 3];
+            (d0[whole], d1[whole], d2[whole]) = (px[0], px[1], px[2]);
+        }
+        i = e;
+    }
+}
+
 /// Largest width or height accepted (keeps every index computation far from overflow).
 pub const MAX_DIM: usize = 1 << 16;
 
@@ -314,51 +345,9 @@ impl<'a> ImageView<'a> {
                 let src = &s[start..start + (len - 1) * ps + N];
                 let [d0, d1, d2] = &mut dst[..] else { return None };
                 if ps == 3 {
-                    // 64 pixels (12 lines) at a time, asking for the lines
-                    // `DEINTERLEAVE_AHEAD` pixels ahead first: the hardware
-                    // prefetchers alone left this loop waiting on memory
-                    let mut i = 0;
-                    while i < len {
-                        let e = (i + 64).min(len);
-                        let ahead = 3 * (i + DEINTERLEAVE_AHEAD);
-                        let mut l = 0;
-                        while l < 3 * 64 {
-                            prefetch(src, ahead + l);
-                            l += 16;
-                        }
-                        let (s3, (a, (b, c))) = (&src[3 * i..3 * e], (&mut d0[i..e], (&mut d1[i..e], &mut d2[i..e])));
-                        for (((px, a), b), c) in s3.chunks_exact(3).zip(a.iter_mut()).zip(b.iter_mut()).zip(c.iter_mut()) {
-                            (*a, *b, *c) = (px[0], px[1], px[2]);
-                        }
-                        i = e;
-                    }
+                    deinterleave3::<3>(src, d0, d1, d2);
                 } else {
-                    // RGBA: the same, 16 lines per 64 pixels (the fourth channel is skipped)
-                    let src = &s[start..start + (len - 1) * 4 + 3];
-                    let mut i = 0;
-                    while i < len {
-                        let e = (i + 64).min(len);
-                        let ahead = 4 * (i + DEINTERLEAVE_AHEAD);
-                        let mut l = 0;
-                        while l < 4 * 64 {
-                            prefetch(src, ahead + l);
-                            l += 16;
-                        }
-                        let (a, (b, c)) = (&mut d0[i..e], (&mut d1[i..e], &mut d2[i..e]));
-                        if e < len {
-                            // whole pixels: the slice's last pixel has only 3 values
-                            let s4 = &src[4 * i..4 * e];
-                            for (((px, a), b), c) in s4.chunks_exact(4).zip(a.iter_mut()).zip(b.iter_mut()).zip(c.iter_mut()) {
-                                (*a, *b, *c) = (px[0], px[1], px[2]);
-                            }
-                        } else {
-                            for (j, ((a, b), c)) in a.iter_mut().zip(b.iter_mut()).zip(c.iter_mut()).enumerate() {
-                                let px = &src[4 * (i + j)..4 * (i + j) + 3];
-                                (*a, *b, *c) = (px[0], px[1], px[2]);
-                            }
-                        }
-                        i = e;
-                    }
+                    deinterleave3::<4>(src, d0, d1, d2);
                 }
             }
             Samples::F32(s) => {
@@ -567,7 +556,7 @@ impl<'a> ImageViewMut<'a> {
                 let dst = s.get_mut(start..start + (len - 1) * ps + N)?;
                 let [p0, p1, p2] = &src[..] else { return None };
                 let mut buf = [0f32; PX * 3];
-                let mut half = [f16::ZERO; PX * 3];
+                let mut halves = [f16::ZERO; PX * 3];
                 let mut i = 0;
                 while i < len {
                     let e = (i + PX).min(len);
@@ -575,7 +564,7 @@ impl<'a> ImageViewMut<'a> {
                     for (j, px) in b.chunks_exact_mut(3).enumerate() {
                         px.copy_from_slice(&[p0[i + j], p1[i + j], p2[i + j]]);
                     }
-                    let h = &mut half[..3 * (e - i)];
+                    let h = &mut halves[..3 * (e - i)];
                     crate::convert::f32_to_f16(b, h);
                     if ps == 3 {
                         dst[3 * i..3 * e].copy_from_slice(h);

@@ -1,6 +1,9 @@
 //! Which vector instruction set a kernel may use on this CPU, detected at run
 //! time with `core::arch` (so `no_std` builds get it too).
 
+#[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma", target_feature = "f16c"))))]
+use core::sync::atomic::{AtomicU8, Ordering};
+
 /// The instruction set of a kernel's 8-lane loops: the network's 3×3 layers
 /// (`nn::conv`), the QR's column updates (`kernels::qr`), and FLR's block
 /// accumulation (`kernels::moments`), four-cell solve (`kernels::solve`, in
@@ -63,35 +66,19 @@ fn avx2_fma_available() -> bool {
 
 #[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma"))))]
 fn avx2_fma_available() -> bool {
-    use core::sync::atomic::{AtomicU8, Ordering};
-    /// 0: not asked yet, 1: no, 2: yes (CPUID is slow in virtual machines).
     static KNOWN: AtomicU8 = AtomicU8::new(0);
-    match KNOWN.load(Ordering::Relaxed) {
-        0 => {
-            let yes = cpu_has_avx2_fma();
-            KNOWN.store(1 + yes as u8, Ordering::Relaxed);
-            yes
-        }
-        k => k == 2,
-    }
+    cached(&KNOWN, cpu_has_avx2_fma)
 }
 
-/// CPUID leaf 1: FMA (ECX bit 12), OSXSAVE (27), AVX (28); XCR0 bits 1 and 2:
-/// the OS saves the XMM and YMM registers; CPUID leaf 7: AVX2 (EBX bit 5).
+/// CPUID leaf 1: FMA (ECX bit 12) with AVX usable; CPUID leaf 7: AVX2 (EBX bit 5).
 #[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma"))))]
 #[allow(unused_unsafe)] // the CPUID intrinsics are safe in recent Rust, unsafe in older ones
 fn cpu_has_avx2_fma() -> bool {
-    use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
-    // SAFETY: every x86-64 CPU has CPUID (leaves 0 and 1 always exist).
-    let (max_leaf, l1) = unsafe { (__cpuid(0).eax, __cpuid(1)) };
-    let bit = |r: u32, b: u32| r & (1 << b) != 0;
-    if !(bit(l1.ecx, 12) && bit(l1.ecx, 27) && bit(l1.ecx, 28)) || max_leaf < 7 {
-        return false;
-    }
-    // SAFETY: OSXSAVE (checked above) means the OS has enabled XGETBV.
-    let xcr0 = unsafe { _xgetbv(0) };
-    // SAFETY: leaf 7 exists (max_leaf >= 7, checked above).
-    xcr0 & 0b110 == 0b110 && bit(unsafe { __cpuid_count(7, 0) }.ebx, 5)
+    use core::arch::x86_64::{__cpuid, __cpuid_count};
+    // SAFETY: every x86-64 CPU has CPUID leaf 0.
+    let max_leaf = unsafe { __cpuid(0) }.eax;
+    // SAFETY: leaf 7 exists (max_leaf >= 7, checked first).
+    avx_ecx().is_some_and(|ecx| ecx & (1 << 12) != 0) && max_leaf >= 7 && unsafe { __cpuid_count(7, 0) }.ebx & (1 << 5) != 0
 }
 
 #[cfg(not(target_arch = "x86_64"))]
@@ -107,37 +94,41 @@ pub fn f16c_available() -> bool {
     return true;
     #[cfg(all(target_arch = "x86_64", not(target_feature = "f16c")))]
     {
-        use core::sync::atomic::{AtomicU8, Ordering};
-        /// 0: not asked yet, 1: no, 2: yes.
         static KNOWN: AtomicU8 = AtomicU8::new(0);
-        match KNOWN.load(Ordering::Relaxed) {
-            0 => {
-                let yes = cpu_has_f16c();
-                KNOWN.store(1 + yes as u8, Ordering::Relaxed);
-                yes
-            }
-            k => k == 2,
-        }
+        // CPUID leaf 1: F16C (ECX bit 29) with AVX usable.
+        cached(&KNOWN, || avx_ecx().is_some_and(|ecx| ecx & (1 << 29) != 0))
     }
     #[cfg(not(target_arch = "x86_64"))]
     false
 }
 
-/// CPUID leaf 1: OSXSAVE (ECX bit 27), AVX (28), F16C (29); XCR0 bits 1 and 2:
-/// the OS saves the XMM and YMM registers.
-#[cfg(all(target_arch = "x86_64", not(target_feature = "f16c")))]
+/// `detect()`, asked once per process: its answer is kept in `known` (0: not
+/// asked yet, 1: no, 2: yes), since CPUID is slow in virtual machines.
+#[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma", target_feature = "f16c"))))]
+fn cached(known: &AtomicU8, detect: fn() -> bool) -> bool {
+    match known.load(Ordering::Relaxed) {
+        0 => {
+            let yes = detect();
+            known.store(1 + yes as u8, Ordering::Relaxed);
+            yes
+        }
+        k => k == 2,
+    }
+}
+
+/// CPUID leaf 1's ECX when AVX is usable: the CPU has OSXSAVE (ECX bit 27) and
+/// AVX (28), and XCR0 bits 1 and 2 say the OS saves the XMM and YMM registers.
+#[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma", target_feature = "f16c"))))]
 #[allow(unused_unsafe)] // the CPUID intrinsics are safe in recent Rust, unsafe in older ones
-fn cpu_has_f16c() -> bool {
+fn avx_ecx() -> Option<u32> {
     use core::arch::x86_64::{__cpuid, _xgetbv};
     // SAFETY: every x86-64 CPU has CPUID leaf 1.
-    let l1 = unsafe { __cpuid(1) };
-    let bit = |b: u32| l1.ecx & (1 << b) != 0;
-    if !(bit(27) && bit(28) && bit(29)) {
-        return false;
+    let ecx = unsafe { __cpuid(1) }.ecx;
+    if ecx & (0b11 << 27) != 0b11 << 27 {
+        return None;
     }
     // SAFETY: OSXSAVE (checked above) means the OS has enabled XGETBV.
-    let xcr0 = unsafe { _xgetbv(0) };
-    xcr0 & 0b110 == 0b110
+    (unsafe { _xgetbv(0) } & 0b110 == 0b110).then_some(ecx)
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]
