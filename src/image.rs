@@ -107,6 +107,65 @@ fn prefetch_lines<T>(s: &[T], a: usize, b: usize) {
 /// How far ahead (pixels) [`ImageView::read_row_n`] asks for interleaved RGB.
 const DEINTERLEAVE_AHEAD: usize = 256;
 
+/// Widest pixel (in values) whose interleaved halves [`halves_strided`] converts
+/// in bulk; wider pixels waste most of each conversion and go value by value.
+const MAX_BULK_STRIDE: usize = 8;
+
+/// Channels `0..N` of `ps`-interleaved halves into `N` f32 planes of
+/// `dst[0].len()` values (`1 ≤ N ≤ ps ≤ MAX_BULK_STRIDE`): channel `c` of pixel `i`
+/// is `src[i * ps + c]`, and `src` ends after the last pixel's channel `N − 1`.
+/// Exact, like every f16 → f32. See [`halves_strided_ps`].
+#[inline]
+fn halves_strided<const N: usize>(src: &[f16], ps: usize, dst: [&mut [f32]; N]) {
+    match ps {
+        2 => halves_strided_ps::<N, 2>(src, dst),
+        3 => halves_strided_ps::<N, 3>(src, dst),
+        4 => halves_strided_ps::<N, 4>(src, dst),
+        5 => halves_strided_ps::<N, 5>(src, dst),
+        6 => halves_strided_ps::<N, 6>(src, dst),
+        7 => halves_strided_ps::<N, 7>(src, dst),
+        _ => halves_strided_ps::<N, 8>(src, dst),
+    }
+}
+
+/// [`halves_strided`] for a pixel stride `PS` known at compile time: 64 pixels
+/// at a time are converted in bulk into a small buffer (F16C where the CPU has
+/// it; [`crate::convert`]), then picked with a constant stride, which the
+/// compiler vectorises. (A conversion per value cannot be vectorised across a
+/// stride: it took 20 % of FLR's time on RGBA16F inputs, session 29.)
+#[inline]
+fn halves_strided_ps<const N: usize, const PS: usize>(src: &[f16], mut dst: [&mut [f32]; N]) {
+    const PX: usize = 64;
+    let len = dst[0].len();
+    debug_assert!(N <= PS && PS <= MAX_BULK_STRIDE && dst.iter().all(|d| d.len() == len));
+    let mut buf = [0f32; PX * MAX_BULK_STRIDE];
+    let b = &mut buf[..PX * PS];
+    let mut i = 0;
+    // whole chunks of pixels (the row's last pixel may end after channel N − 1)
+    while i + PX <= len && (i + PX) * PS <= src.len() {
+        // the lines `DEINTERLEAVE_AHEAD` pixels ahead: without, the conversion's
+        // loads waited on memory
+        let ahead = (i + DEINTERLEAVE_AHEAD) * PS;
+        let mut l = 0;
+        while l < PX * PS {
+            prefetch(src, ahead + l);
+            l += 32;
+        }
+        crate::convert::f16_to_f32(&src[i * PS..(i + PX) * PS], b);
+        for (c, d) in dst.iter_mut().enumerate() {
+            for (d, px) in d[i..i + PX].iter_mut().zip(b.chunks_exact(PS)) {
+                *d = px[c];
+            }
+        }
+        i += PX;
+    }
+    for i in i..len {
+        for (c, d) in dst.iter_mut().enumerate() {
+            d[i] = f16_to_f32(src[i * PS + c]);
+        }
+    }
+}
+
 /// Channels 0..3 of `PS`-interleaved pixels (RGB or RGBA) into three planes of
 /// `d0.len()` values; `src` ends after the last pixel's third value. Constant
 /// strides, so the compiler vectorises it (a generic stride cannot be). 64
@@ -245,6 +304,12 @@ impl<'a> ImageView<'a> {
                 // contiguous halves: converted 8 at a time (F16C where the CPU has it)
                 crate::convert::f16_to_f32(s.get(start..start + dst.len())?, dst);
             }
+            Samples::F16(s) if (2..=MAX_BULK_STRIDE).contains(&ps) && !dst.is_empty() => {
+                // one channel of interleaved halves (e.g. depth in an RGBA16F
+                // normal buffer's fourth channel): converted in bulk, then picked
+                let n = dst.len();
+                halves_strided(s.get(start..start + (n - 1) * ps + 1)?, ps, [dst]);
+            }
             Samples::F16(s) => {
                 for (i, d) in dst.iter_mut().enumerate() {
                     // SAFETY: as above.
@@ -364,31 +429,10 @@ impl<'a> ImageView<'a> {
                     self.read_row(y, c, x0, d)?;
                 }
             }
-            Samples::F16(s) if cs == 1 && (ps == 3 || ps == 4) && N == 3 => {
-                // Interleaved RGB / RGBA halves: 16 pixels at a time converted in
-                // bulk into a small buffer, then de-interleaved as f32.
-                const PX: usize = 16;
-                let src = s.get(start..start + (len - 1) * ps + N)?;
-                let [d0, d1, d2] = &mut dst[..] else { return None };
-                let mut buf = [0f32; PX * 4];
-                let mut i = 0;
-                while i + PX <= len && (i + PX) * ps <= src.len() {
-                    // the lines `DEINTERLEAVE_AHEAD` pixels ahead (2 per chunk of 16
-                    // RGBA pixels): without, the conversion's loads waited on memory
-                    let ahead = (i + DEINTERLEAVE_AHEAD) * ps;
-                    prefetch(src, ahead);
-                    prefetch(src, ahead + 32);
-                    let b = &mut buf[..PX * ps];
-                    crate::convert::f16_to_f32(&src[i * ps..(i + PX) * ps], b);
-                    for (j, px) in b.chunks_exact(ps).enumerate() {
-                        (d0[i + j], d1[i + j], d2[i + j]) = (px[0], px[1], px[2]);
-                    }
-                    i += PX;
-                }
-                for i in i..len {
-                    let px = &src[i * ps..i * ps + N];
-                    (d0[i], d1[i], d2[i]) = (f16_to_f32(px[0]), f16_to_f32(px[1]), f16_to_f32(px[2]));
-                }
+            Samples::F16(s) if cs == 1 && N <= ps && ps <= MAX_BULK_STRIDE => {
+                // Interleaved halves (RGB, RGBA, RG, ...): converted in bulk, then
+                // de-interleaved as f32.
+                halves_strided(s.get(start..start + (len - 1) * ps + N)?, ps, dst);
             }
             Samples::F16(s) => {
                 for i in 0..len {
@@ -686,6 +730,62 @@ mod tests {
                     let written = i >= 4 * W && ch < 3 && (x0..x0 + len).contains(&x);
                     let want = if written { data[i] } else { -1.0 };
                     assert_eq!(*got, want, "x0 {x0} len {len} at {i}");
+                }
+            }
+        }
+    }
+
+    /// One channel, and the first N channels, of interleaved halves with any
+    /// pixel stride (the bulk path up to 8 values per pixel, value by value
+    /// beyond): the bits of `half`'s software conversion of each element,
+    /// around the 16-pixel chunks, on buffers that end right after the last
+    /// value the view covers, for every kind of half (NaN, ±∞, subnormal).
+    #[test]
+    fn f16_strided_rows_match_per_element_conversion() {
+        const W: usize = 37;
+        const H: usize = 2;
+        let all: [f16; 9 * W * H] = core::array::from_fn(|i| f16::from_bits(((i as u32).wrapping_mul(2_654_435_761) >> 16) as u16));
+        let same = |got: f32, h: f16| {
+            let want = h.to_f32_const();
+            if want.is_nan() {
+                got.is_nan()
+            } else {
+                got.to_bits() == want.to_bits()
+            }
+        };
+        for ps in [2usize, 3, 4, 5, 8, 9] {
+            for channels in 1..=ps.min(4) {
+                // the view's channels start at `offset` (e.g. depth in an RGBA
+                // buffer's fourth value: ps 4, offset 3, one channel)
+                for offset in [0usize, ps - channels] {
+                    let layout = Layout { offset, ..Layout::interleaved(W, ps) };
+                    let n = offset + (H - 1) * W * ps + (W - 1) * ps + channels;
+                    let v = ImageView::f16(&all[..n], W, H, channels, layout).unwrap();
+                    for (x0, len) in [(0usize, 0usize), (0, 1), (1, 15), (3, 16), (0, 17), (4, 33), (0, W)] {
+                        for c in 0..channels {
+                            let mut r = [0f32; W];
+                            v.read_row(H - 1, c, x0, &mut r[..len]).unwrap();
+                            for (i, &got) in r[..len].iter().enumerate() {
+                                let at = offset + (H - 1) * W * ps + (x0 + i) * ps + c;
+                                assert!(same(got, all[at]), "ps {ps} ch {channels} offset {offset} c {c} x0 {x0} i {i}");
+                            }
+                        }
+                        let mut p = [[0f32; W]; 4];
+                        let [a, b, c, d] = &mut p;
+                        match channels {
+                            1 => v.read_row_n(H - 1, x0, [&mut a[..len]]),
+                            2 => v.read_row_n(H - 1, x0, [&mut a[..len], &mut b[..len]]),
+                            3 => v.read_row_n(H - 1, x0, [&mut a[..len], &mut b[..len], &mut c[..len]]),
+                            _ => v.read_row_n(H - 1, x0, [&mut a[..len], &mut b[..len], &mut c[..len], &mut d[..len]]),
+                        }
+                        .unwrap();
+                        for (k, plane) in p[..channels].iter().enumerate() {
+                            for (i, &got) in plane[..len].iter().enumerate() {
+                                let at = offset + (H - 1) * W * ps + (x0 + i) * ps + k;
+                                assert!(same(got, all[at]), "N: ps {ps} ch {channels} offset {offset} k {k} x0 {x0} i {i}");
+                            }
+                        }
+                    }
                 }
             }
         }

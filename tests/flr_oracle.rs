@@ -272,8 +272,9 @@ fn interleaved_triples_equal_planar() {
     }
 }
 
-/// The layouts engines hold frames in: RGBA light and RGBA normals, f32 or
-/// f16 (the f16 triples also read in one pass, `ImageView::merged3`), output
+/// The layouts engines hold frames in: RGBA light and RGBA normals with depth
+/// in their fourth value, f32 or f16 (the f16 triples also read in one pass,
+/// `ImageView::merged3`; depth picked from the converted pixels), output
 /// into an RGBA buffer whose fourth channel must stay untouched. Bit-identical
 /// to the same values planar (an f16 value reads exactly), at sizes with a
 /// partial right-edge block and widths around the 64-pixel read chunks.
@@ -307,9 +308,13 @@ fn rgba_and_f16_layouts_equal_planar() {
             // the values both runs see: the inputs, or their f16 roundings
             let vals = |v: &[f32]| if half { back(&h16(v)) } else { v.to_vec() };
             let (noisy, normal, position, depth, ao) = (vals(&f.noisy), vals(&f.normal), vals(&f.position), vals(&f.depth), vals(&f.ao));
-            let (noisy4, normal4) = (rgba(&noisy), rgba(&normal));
-            let (noisy4_16, normal4_16, position_16, depth_16, ao_16) =
-                (h16(&noisy4), h16(&normal4), h16(&position), h16(&depth), h16(&ao));
+            // the normal buffer carries depth in its fourth value (a common G-buffer)
+            let mut normal4 = rgba(&normal);
+            for i in 0..n {
+                normal4[4 * i + 3] = depth[i];
+            }
+            let noisy4 = rgba(&noisy);
+            let (noisy4_16, normal4_16, position_16, ao_16) = (h16(&noisy4), h16(&normal4), h16(&position), h16(&ao));
             fn view4<'a>(half: bool, v: &'a [f32], v16: &'a [half::f16], w: usize, h: usize) -> ImageView<'a> {
                 if half {
                     ImageView::f16(v16, w, h, 3, Layout::interleaved(w, 4)).unwrap()
@@ -324,10 +329,13 @@ fn rgba_and_f16_layouts_equal_planar() {
                 } else {
                     ImageView::interleaved(&position, w, h, 3).unwrap()
                 }),
-                depth: Some(if half {
-                    ImageView::f16(&depth_16, w, h, 1, pl).unwrap()
-                } else {
-                    ImageView::f32(&depth, w, h, 1, pl).unwrap()
+                depth: Some({
+                    let w_of_normal = Layout { offset: 3, ..Layout::interleaved(w, 4) };
+                    if half {
+                        ImageView::f16(&normal4_16, w, h, 1, w_of_normal).unwrap()
+                    } else {
+                        ImageView::f32(&normal4, w, h, 1, w_of_normal).unwrap()
+                    }
                 }),
                 ao: Some(if half { ImageView::f16(&ao_16, w, h, 1, pl).unwrap() } else { ImageView::f32(&ao, w, h, 1, pl).unwrap() }),
                 ..Default::default()

@@ -7,6 +7,8 @@ use lrdenoise::*;
 
 fn main() {
     let half = f16_asked();
+    // `packed`: depth in the normal buffer's fourth channel (a common G-buffer)
+    let packed = std::env::args().any(|a| a == "packed");
     let (w, h) = (1920usize, 1080usize);
     let n = w * h;
     let noisy: Vec<f32> = (0..4 * n).map(|i| ((i * 7919) % 1000) as f32 / 1000.0).collect();
@@ -16,7 +18,11 @@ fn main() {
     let planar = |ch: usize| Layout { offset: ch * n, ..Layout::planar(w, h) };
     let guides = Guides {
         normal: Some(view(half, &normal, &normal16, (w, h), 3, Layout::interleaved(w, 4))),
-        depth: Some(view(half, &da, &da16, (w, h), 1, planar(0))),
+        depth: Some(if packed {
+            view(half, &normal, &normal16, (w, h), 1, Layout { offset: 3, ..Layout::interleaved(w, 4) })
+        } else {
+            view(half, &da, &da16, (w, h), 1, planar(0))
+        }),
         ao: Some(view(half, &da, &da16, (w, h), 1, planar(1))),
         ..Default::default()
     };
@@ -29,5 +35,6 @@ fn main() {
         flr.denoise(&frame, &mut scratch, &mut ov).unwrap();
     });
     let kind = if half { "f16" } else { "f32" };
+    let kind = if packed { format!("{kind}, depth in normal.w") } else { kind.to_string() };
     println!("RGBA {kind} 1080p q5 defaults: median {median:.2} ms (min {min:.2})  checksum {}", checksum(&out));
 }
