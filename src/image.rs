@@ -107,6 +107,61 @@ fn prefetch_lines<T>(s: &[T], a: usize, b: usize) {
 /// How far ahead (pixels) [`ImageView::read_row_n`] asks for interleaved RGB.
 const DEINTERLEAVE_AHEAD: usize = 256;
 
+/// Output images of at least this many bytes get their interleaved RGB f32
+/// rows written with non-temporal (streaming) stores: far larger than the
+/// caches, so writing around them saves reading each line in before it is
+/// overwritten (a third of the apply stage's memory traffic). Smaller outputs
+/// may well be read again from cache, so they are stored as usual.
+pub const STREAM_MIN_BYTES: usize = 8 << 20;
+
+/// `dst = [p0[0], p1[0], p2[0], p0[1], …]` (RGB interleave, `dst.len() ==
+/// 3 * p0.len()`) with SSE non-temporal stores on the 16-byte aligned part;
+/// ends with a store fence, so later stores (e.g. a flag telling another
+/// thread the row is done) are ordered after these.
+#[cfg(target_arch = "x86_64")]
+fn interleave3_streaming(dst: &mut [f32], p0: &[f32], p1: &[f32], p2: &[f32]) {
+    use core::arch::x86_64::{_mm_loadu_ps, _mm_sfence, _mm_shuffle_ps, _mm_stream_ps, _mm_unpackhi_ps, _mm_unpacklo_ps};
+    let len = p0.len().min(p1.len()).min(p2.len()).min(dst.len() / 3);
+    let scalar = |dst: &mut [f32], i: usize| dst[3 * i..3 * i + 3].copy_from_slice(&[p0[i], p1[i], p2[i]]);
+    // Pixels up to the first whose start is 16-byte aligned (f32s are 4-byte
+    // aligned, so one of the first four is); groups of four pixels (48 bytes)
+    // from there stay aligned.
+    let head = (0..4).find(|k| (dst.as_ptr() as usize + 12 * k).is_multiple_of(16)).unwrap_or(len).min(len);
+    for i in 0..head {
+        scalar(dst, i);
+    }
+    let mut i = head;
+    while i + 4 <= len {
+        // SAFETY: SSE is part of x86-64; the loads read p0/p1/p2[i..i + 4] and the
+        // stores write dst[3i..3i + 12], all inside the slices (i + 4 <= len); each
+        // store address is 16-byte aligned (dst + 12·head is, and 48 · n keeps it).
+        unsafe {
+            let (a, b, c) = (_mm_loadu_ps(p0.as_ptr().add(i)), _mm_loadu_ps(p1.as_ptr().add(i)), _mm_loadu_ps(p2.as_ptr().add(i)));
+            let ab_lo = _mm_unpacklo_ps(a, b); // a0 b0 a1 b1
+            let ab_hi = _mm_unpackhi_ps(a, b); // a2 b2 a3 b3
+
+            // _mm_shuffle_ps::<imm>(x, y) = [x[i0], x[i1], y[i2], y[i3]], imm = i3 i2 i1 i0 (2 bits each)
+            let c0a1 = _mm_shuffle_ps::<0b10_10_00_00>(c, ab_lo); // c0 c0 a1 a1
+            let o0 = _mm_shuffle_ps::<0b10_00_01_00>(ab_lo, c0a1); // a0 b0 c0 a1
+            let b1c1 = _mm_shuffle_ps::<0b01_01_11_11>(ab_lo, c); // b1 b1 c1 c1
+            let o1 = _mm_shuffle_ps::<0b01_00_10_00>(b1c1, ab_hi); // b1 c1 a2 b2
+            let c2a3 = _mm_shuffle_ps::<0b10_10_10_10>(c, ab_hi); // c2 c2 a3 a3
+            let b3c3 = _mm_shuffle_ps::<0b11_11_11_11>(ab_hi, c); // b3 b3 c3 c3
+            let o2 = _mm_shuffle_ps::<0b10_00_10_00>(c2a3, b3c3); // c2 a3 b3 c3
+            let d = dst.as_mut_ptr().add(3 * i);
+            _mm_stream_ps(d, o0);
+            _mm_stream_ps(d.add(4), o1);
+            _mm_stream_ps(d.add(8), o2);
+        }
+        i += 4;
+    }
+    for i in i..len {
+        scalar(dst, i);
+    }
+    // SAFETY: a store fence has no operands and no preconditions.
+    unsafe { _mm_sfence() };
+}
+
 /// Widest pixel (in values) whose interleaved halves [`halves_strided`] converts
 /// in bulk; wider pixels waste most of each conversion and go value by value.
 const MAX_BULK_STRIDE: usize = 8;
@@ -567,9 +622,16 @@ impl<'a> ImageViewMut<'a> {
         match &mut self.samples {
             SamplesMut::F32(s) if cs == 1 && ps == 3 && N == 3 => {
                 // Interleaved RGB: constant strides, vectorised interleave.
+                #[cfg(target_arch = "x86_64")]
+                let streaming = core::mem::size_of_val(*s) >= STREAM_MIN_BYTES;
                 let dst = &mut s[start..start + 3 * len];
                 let [p0, p1, p2] = &src[..] else { return None };
                 // (An AVX2 permute/blend version measured no faster: the stores wait on memory.)
+                #[cfg(target_arch = "x86_64")]
+                if streaming {
+                    interleave3_streaming(dst, p0, p1, p2);
+                    return Some(());
+                }
                 for (((px, a), b), c) in dst.chunks_exact_mut(3).zip(p0.iter()).zip(p1.iter()).zip(p2.iter()) {
                     px.copy_from_slice(&[*a, *b, *c]);
                 }
@@ -732,6 +794,38 @@ mod tests {
                     assert_eq!(*got, want, "x0 {x0} len {len} at {i}");
                 }
             }
+        }
+    }
+
+    /// RGB rows of an output large enough for streaming stores
+    /// ([`STREAM_MIN_BYTES`]) land exactly where element access puts them, and
+    /// nothing else changes, at every alignment of the buffer and of the row
+    /// start, and at lengths around the 4-pixel groups.
+    #[test]
+    fn streamed_rgb_rows_equal_element_access() {
+        const W: usize = 1024;
+        let h = STREAM_MIN_BYTES / (3 * 4 * W) + 1;
+        let vals: [f32; 3 * 67] = core::array::from_fn(|i| i as f32 + 0.5);
+        extern crate std;
+        let mut buf = std::vec![-1f32; 3 * W * h + 4];
+        for shift in 0..4 {
+            let data = &mut buf[shift..shift + 3 * W * h];
+            let mut o = ImageViewMut::interleaved(data, W, h, 3).unwrap();
+            let cases = [(0usize, 0usize), (0, 1), (1, 3), (2, 4), (3, 5), (5, 9), (0, 64), (7, 67)];
+            for (row, &(x0, len)) in cases.iter().enumerate() {
+                let [a, b, c] = [&vals[..len], &vals[67..67 + len], &vals[134..134 + len]];
+                o.write_row_n(row, x0, [a, b, c]).unwrap();
+            }
+            for (row, &(x0, len)) in cases.iter().enumerate() {
+                for x in 0..W {
+                    for ch in 0..3 {
+                        let want = if (x0..x0 + len).contains(&x) { vals[67 * ch + x - x0] } else { -1.0 };
+                        assert_eq!(data[3 * (row * W + x) + ch], want, "shift {shift} row {row} x {x} ch {ch}");
+                    }
+                }
+            }
+            assert!(data[3 * W * cases.len()..].iter().all(|&v| v == -1.0), "shift {shift}: rows below were written");
+            data.fill(-1.0);
         }
     }
 
