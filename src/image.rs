@@ -92,6 +92,19 @@ pub(crate) fn prefetch<T>(s: &[T], i: usize) {
     let _ = (s, i);
 }
 
+/// [`prefetch`] into the L2 cache only (a line further ahead than L1 can hold
+/// in flight).
+#[inline(always)]
+pub(crate) fn prefetch_l2<T>(s: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if i < s.len() {
+        // SAFETY: as in `prefetch`.
+        unsafe { core::arch::x86_64::_mm_prefetch(s.as_ptr().add(i) as *const i8, core::arch::x86_64::_MM_HINT_T1) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (s, i);
+}
+
 /// [`prefetch`] of every 64-byte line of `s[a..b]`.
 #[inline]
 fn prefetch_lines<T>(s: &[T], a: usize, b: usize) {

@@ -14,7 +14,7 @@ mod avx2;
 
 use super::CellLayout;
 use crate::guides::MAX_GUIDES;
-use crate::image::prefetch;
+use crate::image::{prefetch, prefetch_l2};
 use crate::isa::Isa;
 use wide::f32x8;
 
@@ -211,8 +211,14 @@ fn load_at(s: &[f32], i: usize) -> f32x8 {
 
 /// How far ahead (values) the in-place path asks for its guide rows. The
 /// band has `rows × Q` guide streams advancing by one block each: more than
-/// the hardware prefetchers follow, so every block's loads would wait on DRAM.
+/// the hardware prefetchers follow, so every block's loads would wait on DRAM
+/// (14.3 ms instead of 7.7 for 1080p's moments without). Two distances: into
+/// L1 three lines ahead, and into L2 eight lines ahead, which lets more
+/// misses be in flight than L1 alone can track (session 29, x86-64-v3, 1080p,
+/// Q = 5, `examples/stages`: 7.3–7.8 → 6.8–6.9 ms; L1 alone at 24–192 values
+/// ahead made no difference).
 const PREFETCH_AHEAD: usize = 48;
+const PREFETCH_L2_AHEAD: usize = 128;
 
 /// Group vectors of a block assuming every pixel valid: `e = (g − m) − r`
 /// (the value the gathered plane holds, minus the reference, times weight 1).
@@ -234,6 +240,7 @@ fn groups_plain<const Q: usize>(
     for row in &band.planes[..band.rows] {
         for q in 0..Q {
             prefetch(row[3 + q], x0 + PREFETCH_AHEAD);
+            prefetch_l2(row[3 + q], x0 + PREFETCH_L2_AHEAD);
         }
         for x in (x0..x0 + block).step_by(8) {
             let vg = &mut v[ng];
