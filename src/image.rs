@@ -105,16 +105,17 @@ pub(crate) fn prefetch_l2<T>(s: &[T], i: usize) {
     let _ = (s, i);
 }
 
-/// [`prefetch`] of every 64-byte line of `s[a..b]`.
+/// [`prefetch`] (or with `l2`, [`prefetch_l2`]) of every 64-byte line of `s[a..b]`.
 #[inline]
-fn prefetch_lines<T>(s: &[T], a: usize, b: usize) {
+fn prefetch_lines<T>(s: &[T], a: usize, b: usize, l2: bool) {
     let line = (64 / core::mem::size_of::<T>()).max(1);
+    let one = |i| if l2 { prefetch_l2(s, i) } else { prefetch(s, i) };
     let mut i = a;
     while i < b {
-        prefetch(s, i);
+        one(i);
         i += line;
     }
-    prefetch(s, b.saturating_sub(1));
+    one(b.saturating_sub(1));
 }
 
 /// How far ahead (pixels) [`ImageView::read_row_n`] asks for interleaved RGB.
@@ -394,6 +395,18 @@ impl<'a> ImageView<'a> {
     /// more row streams than the hardware prefetchers follow (BMFR's blocks).
     #[inline]
     pub fn prefetch_span(&self, y: usize, x0: usize, len: usize) {
+        self.prefetch_span_to(y, x0, len, false);
+    }
+
+    /// [`ImageView::prefetch_span`] into the L2 cache only: for lines wanted
+    /// later than the next few thousand cycles (FLR's next band of rows).
+    #[inline]
+    pub fn prefetch_span_l2(&self, y: usize, x0: usize, len: usize) {
+        self.prefetch_span_to(y, x0, len, true);
+    }
+
+    #[inline]
+    fn prefetch_span_to(&self, y: usize, x0: usize, len: usize, l2: bool) {
         let x1 = x0.saturating_add(len).min(self.width);
         if y >= self.height || x0 >= x1 {
             return;
@@ -407,8 +420,8 @@ impl<'a> ImageView<'a> {
         for c in 0..ranges {
             let a = start + c * cs;
             match self.samples {
-                Samples::F32(s) => prefetch_lines(s, a, a + span + extra),
-                Samples::F16(s) => prefetch_lines(s, a, a + span + extra),
+                Samples::F32(s) => prefetch_lines(s, a, a + span + extra, l2),
+                Samples::F16(s) => prefetch_lines(s, a, a + span + extra, l2),
             }
         }
     }

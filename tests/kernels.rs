@@ -243,7 +243,7 @@ fn rows_match_planes<const Q: usize>(seed: u64, block: usize, offset: f32, bad: 
     let k = CellLayout::new(Q).k;
     let mut scratch = BlockScratch::default();
     let mut a = vec![0f64; nb * k];
-    let counts = moments_rows::<Q>(&band, block, &mut a, &mut scratch);
+    let counts = moments_rows::<Q>(&band, block, &mut a, &mut scratch, |_, _| {});
     // the same band as the driver gathers it: weight, colours, guides − m, zeros where invalid
     let pw = nb * block;
     let mut planes = vec![0f32; BandPlanes::len(Q, rows, pw)];
@@ -299,7 +299,7 @@ fn moments_in_place_whole_block_invalid() {
         }
     }
     let mut cells = vec![1f64; 2 * CellLayout::new(1).k];
-    let c = moments_rows::<1>(&band, 8, &mut cells, &mut BlockScratch::default());
+    let c = moments_rows::<1>(&band, 8, &mut cells, &mut BlockScratch::default(), |_, _| {});
     assert_eq!((c.empty_blocks, c.nonfinite_noisy, c.nonfinite_guides), (2, 128, 128));
     assert!(cells.iter().all(|v| *v == 0.0));
 }

@@ -159,7 +159,17 @@ pub const fn rows_supported(block: usize, rows: usize) -> bool {
 /// masks. If a plain sum comes out non-finite the block holds a NaN/Inf and is
 /// redone with per-pixel validity (and counted). Unsupported shapes
 /// ([`rows_supported`], short rows) give zero cells, all counted empty.
-pub fn moments_rows<const Q: usize>(band: &BandRows<'_>, block: usize, cells: &mut [f64], scratch: &mut BlockScratch) -> RowsCounts {
+///
+/// `before_block(i, n)` is called before block `i` of the `n` whole blocks (a
+/// hook for the caller to spread its own work over the band, such as asking
+/// for its next band's rows: [`crate::flr`] does); `|_, _| {}` for nothing.
+pub fn moments_rows<const Q: usize>(
+    band: &BandRows<'_>,
+    block: usize,
+    cells: &mut [f64],
+    scratch: &mut BlockScratch,
+    mut before_block: impl FnMut(usize, usize),
+) -> RowsCounts {
     let lay = CellLayout::new(Q);
     let k = lay.k.max(1);
     let nb = cells.len() / k;
@@ -182,6 +192,7 @@ pub fn moments_rows<const Q: usize>(band: &BandRows<'_>, block: usize, cells: &m
         for q in 0..Q {
             r[q] = band.planes[0][3 + q][x0] - band.reference[q];
         }
+        before_block(cx, nb);
         let ng = groups_plain::<Q>(band, x0, block, &r, &mut scratch.groups);
         // every lane of every group has weight 1
         let wsum = f32x8::splat(ng as f32);
