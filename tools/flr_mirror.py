@@ -1,0 +1,263 @@
+"""FLR in numpy, op for op like the library's defaults (a port of train/flnr.py's torch
+mirror: 8×8 block moments, Gaussian blur of the block grid, the normalized-correlation
+regularized solve, the adaptive window σ 6/12/20 px with the larger two on the 2×2-pooled
+grid, bilinear model interpolation), for trying estimator changes without torch or a
+rebuild. With no options it gives `lrd eval`'s FLR PSNR on frames that fill whole blocks
+(e.g. the 256×256 renders of tools/render.py).
+
+    python3 tools/flr_mirror.py frames/train/*.exr [--sigmas 6,12,20] [--lattice 32]
+        [--shrink K] [--basis chol|eig] [--shrink-variance] [--mse-blur CELLS]
+        [--weight-power P] [--chroma WINDOW]
+
+Experiments (session 29, docs/PERFORMANCE.md; none kept):
+  --lattice N       frame guide mean/std from an N×N lattice of samples, not all pixels
+  --shrink K        Wiener shrinkage of the guide coefficients, q²/(q² + K r/N) per
+                    component of the whitened basis (--basis), every window
+  --shrink-variance the blend's variance counts the shrunk components (1 + Σf) not Q + 1
+  --mse-blur C      blur the blend's per-cell MSE estimates over C cells (Gaussian σ)
+  --weight-power P  blend weights 1 / MSE^P
+  --chroma S        one chromaticity per cell, from window S; only luminance per pixel
+Training frames only: never tune on the test split (tools/render.py --split test).
+"""
+import math
+import glob
+import numpy as np
+import OpenEXR
+
+B = 8
+LUMA = np.array((0.2126, 0.7152, 0.0722))
+BIAS_DISCOUNT = 0.5
+
+
+def load(path):
+    with OpenEXR.File(path) as f:
+        ch = f.channels()
+
+        def layer(name, comps):
+            if name in ch:
+                a = np.asarray(ch[name].pixels, dtype=np.float32)
+                return a[None] if a.ndim == 2 else np.moveaxis(a, -1, 0)
+            return np.stack([np.asarray(ch[f"{name}.{c}"].pixels, dtype=np.float32) for c in comps], 0)
+
+        return {k: layer(k, c) for k, c in [("noisy", "RGB"), ("reference", "RGB"), ("albedo", "RGB"), ("normal", "XYZ"), ("depth", "Z"), ("ao", "Y")]}
+
+
+def psnr(est, fr):
+    albedo, ref = fr["albedo"].astype(np.float64), fr["reference"].astype(np.float64)
+    i, r = albedo * est, albedo * ref
+    lum = np.mean(LUMA[0] * r[0] + LUMA[1] * r[1] + LUMA[2] * r[2])
+    tm = lambda v: (np.maximum(v, 0) * 0.5 / lum / (1 + np.maximum(v, 0) * 0.5 / lum)) ** (1 / 2.2)
+    return -10 * np.log10(np.mean((np.clip(tm(i), 0, 1) - np.clip(tm(r), 0, 1)) ** 2))
+
+
+def block_sum(x, b):
+    c, h, w = x.shape
+    return x.reshape(c, h // b, b, w // b, b).sum((2, 4))
+
+
+def moments(y, z):
+    q = z.shape[0]
+    ones = np.ones_like(y[:1])
+    l = np.tensordot(LUMA, y, 1)[None]
+    zz = (z[:, None] * z[None]).reshape(q * q, *z.shape[1:])
+    zy = (z[:, None] * y[None]).reshape(q * 3, *z.shape[1:])
+    feats = np.concatenate([ones, z, zz, y, zy, l * l], 0).astype(np.float64)
+    return block_sum(feats, B)
+
+
+def conv1d(m, k, axis):
+    r = len(k) // 2
+    pad = [(0, 0)] * m.ndim
+    pad[axis] = (r, r)
+    p = np.pad(m, pad)
+    out = np.zeros_like(m)
+    n = m.shape[axis]
+    for i, kw in enumerate(k):
+        out += kw * np.take(p, np.arange(i, i + n), axis=axis)
+    return out
+
+
+def blur(m, sigma):
+    sc = sigma / B
+    radius = max(1, int(math.ceil(3 * sc)))
+    t = np.arange(-radius, radius + 1, dtype=np.float64)
+    k = np.exp(-0.5 * (t / sc) ** 2)
+    k /= k.sum()
+    return conv1d(conv1d(m, k, 2), k, 1)
+
+
+def solve(m, q, eps_mul, eps_add, shrink=0.0, sigma=None, cell=B * B, basis="chol"):
+    m = np.moveaxis(m, 0, -1)  # gh gw C
+    gh, gw = m.shape[:2]
+    nn_ = np.maximum(m[..., 0:1], 1e-6)
+    mu = m[..., 1:1 + q] / nn_
+    ss = m[..., 1 + q:1 + q + q * q].reshape(gh, gw, q, q) / nn_[..., None]
+    muy = m[..., 1 + q + q * q:4 + q + q * q] / nn_
+    p = m[..., 4 + q + q * q:4 + 4 * q + q * q].reshape(gh, gw, q, 3) / nn_[..., None]
+    e = m[..., 4 + 4 * q + q * q] / nn_[..., 0]
+    cov = ss - mu[..., :, None] * mu[..., None, :]
+    eye = np.eye(q)
+    wh = cov + eps_mul * mu[..., :, None] * mu[..., None, :]
+    wh = wh + eye * (eps_mul * mu * mu + eps_add)[..., None]
+    isig = 1.0 / np.sqrt(np.maximum(np.diagonal(wh, axis1=-2, axis2=-1), 1e-30))
+    wh = wh * isig[..., :, None] * isig[..., None, :] + eye * eps_add
+    cxy = p - mu[..., :, None] * muy[..., None, :]
+    rhs = cxy * isig[..., :, None]
+    fsum = np.full((gh, gw), float(q))
+    if shrink > 0:
+        # residual variance of the luminance after the plain fit
+        bs = np.linalg.solve(wh, rhs)
+        mean = muy @ LUMA
+        explained = ((bs @ LUMA) * (rhs @ LUMA)).sum(-1)
+        resid = np.maximum(e - mean * mean - explained, 0.0)
+        area = 4 * math.pi * sigma * sigma
+        nsamp = np.maximum(area * np.minimum(m[..., 0] / cell, 1.0), 1.0)
+        noise = resid / nsamp
+        if basis == "chol":
+            L = np.linalg.cholesky(wh)
+            qv = np.linalg.solve(L, rhs)  # gh gw q 3
+            ql = qv @ LUMA
+            f = ql * ql / (ql * ql + shrink * noise[..., None] + 1e-300)
+            bs = np.linalg.solve(np.swapaxes(L, -1, -2), qv * f[..., None])
+        else:
+            w, V = np.linalg.eigh(wh)
+            qv = np.swapaxes(V, -1, -2) @ rhs / np.sqrt(w)[..., None]
+            ql = qv @ LUMA
+            f = ql * ql / (ql * ql + shrink * noise[..., None] + 1e-300)
+            bs = V @ (qv * f[..., None] / np.sqrt(w)[..., None])
+        fsum = f.sum(-1)
+        beta = bs * isig[..., :, None]
+    else:
+        beta = np.linalg.solve(wh, rhs) * isig[..., :, None]
+    c0 = muy - (beta * mu[..., :, None]).sum(-2)
+    return dict(c0=c0, beta=beta, n=m[..., 0], mu=mu, cov=cov, muy=muy, cxy=cxy, e=e, fsum=fsum)
+
+
+def variance(s, q, sigma, cell=B * B, use_f=False):
+    mean = s["muy"] @ LUMA
+    explained = ((s["beta"] @ LUMA) * (s["cxy"] @ LUMA)).sum(-1)
+    residual = np.maximum(s["e"] - mean * mean - explained, 0.0)
+    area = 4 * math.pi * sigma * sigma
+    samples = np.maximum(area * np.minimum(s["n"] / cell, 1.0), 1.0)
+    k = (1 + s["fsum"]) if use_f else (q + 1)
+    return residual * k / samples
+
+
+def gap(s, first):
+    dc = (s["c0"] - first["c0"]) @ LUMA
+    db = (s["beta"] - first["beta"]) @ LUMA
+    at_mean = dc + (db * first["mu"]).sum(-1)
+    spread = np.maximum(np.einsum("...a,...ab,...b->...", db, first["cov"], db), 0.0)
+    return at_mean * at_mean + spread
+
+
+def resize_bilinear(x, oh, ow, sh, sw):
+    """align_corners=False bilinear, x: (..., h, w) → (..., oh, ow) with scale sh, sw (out/in)."""
+    h, w = x.shape[-2:]
+
+    def idx(n_out, n_in, s):
+        c = (np.arange(n_out) + 0.5) / s - 0.5
+        c = np.maximum(c, 0)
+        i0 = np.minimum(np.floor(c).astype(int), n_in - 1)
+        i1 = np.minimum(i0 + 1, n_in - 1)
+        t = c - i0
+        return i0, i1, t
+
+    y0, y1, ty = idx(oh, h, sh)
+    x0, x1, tx = idx(ow, w, sw)
+    a = x[..., y0, :] * (1 - ty)[:, None] + x[..., y1, :] * ty[:, None]
+    return a[..., x0] * (1 - tx) + a[..., x1] * tx
+
+
+def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, shrink=(0.0, 0.0, 0.0), basis="chol", use_f=False, mse_blur=0.0, K=BIAS_DISCOUNT, wpow=1.0, chroma=None, lattice=0):
+    q, h, w = g.shape
+    gs = g
+    if lattice:
+        ys = ((2 * np.arange(lattice) + 1) * h) // (2 * lattice)
+        xs = ((2 * np.arange(lattice) + 1) * w) // (2 * lattice)
+        gs = g[:, ys][:, :, xs]
+    mean = gs.mean(axis=(1, 2), keepdims=True)
+    std = np.maximum(gs.std(axis=(1, 2), ddof=1, keepdims=True), 1e-6)
+    z = (g - mean) / std
+    m = moments(y, z)
+    gh, gw = m.shape[1:]
+    fits, v = [], []
+    for k, sg in enumerate(sigmas):
+        pooled = k > 0 and sg >= 1.5 * B
+        if not pooled:
+            f = solve(blur(m, sg), q, eps_mul, eps_add, shrink[k], sg, basis=basis)
+            fits.append(f)
+            v.append(variance(f, q, sg, use_f=use_f))
+            continue
+        mp = block_sum(m, 2)
+        f = solve(blur(mp, sg / 2), q, eps_mul, eps_add, shrink[k], sg, cell=4 * B * B, basis=basis)
+        vp = variance(f, q, sg, cell=4 * B * B, use_f=use_f)
+        pgh, pgw = mp.shape[1:]
+        cb = np.concatenate([f["c0"], f["beta"].reshape(pgh, pgw, q * 3), vp[..., None]], -1)
+        cb = np.moveaxis(resize_bilinear(np.moveaxis(cb, -1, 0), gh, gw, 2, 2), 0, -1)
+        fits.append(dict(c0=cb[..., :3], beta=cb[..., 3:3 + 3 * q].reshape(gh, gw, q, 3)))
+        v.append(cb[..., -1])
+    if len(sigmas) == 1:
+        c0, beta = fits[0]["c0"], fits[0]["beta"]
+    else:
+        mse = [v[0]]
+        for k in range(1, len(sigmas)):
+            seen = np.maximum(v[0] - v[k], 0.0)
+            mse.append(np.maximum(gap(fits[k], fits[0]) - K * seen, 0.0) + v[k])
+        if mse_blur > 0:
+            mse = [blur(x[None], mse_blur * B)[0] / blur(np.ones_like(x)[None], mse_blur * B)[0] for x in mse]
+        wts = [1.0 / np.maximum(x, 1e-30) ** wpow for x in mse]
+        tot = sum(wts)
+        c0 = sum(wk[..., None] * f["c0"] for wk, f in zip(wts, fits)) / tot[..., None]
+        beta = sum(wk[..., None, None] * f["beta"] for wk, f in zip(wts, fits)) / tot[..., None, None]
+    if chroma is not None:
+        # the window's mean colour, c0 + β·μ at window 0's guide mean (a pooled
+        # window's fit, interpolated, keeps only c0 and β)
+        src = fits[chroma]
+        mc = src["c0"] + (src["beta"] * fits[0]["mu"][..., :, None]).sum(-2)
+        ratio = mc / np.maximum((mc @ LUMA)[..., None], 1e-12)
+        ratio = np.where((mc @ LUMA)[..., None] > 1e-12, ratio, 1.0)
+        c0 = (c0 @ LUMA)[..., None] * ratio
+        beta = (beta @ LUMA)[..., None] * ratio[..., None, :]
+    model = np.concatenate([c0, beta.reshape(gh, gw, q * 3)], -1).astype(np.float32)
+    model = resize_bilinear(np.moveaxis(model, -1, 0), h, w, B, B)
+    c0 = model[:3]
+    beta = model[3:].reshape(q, 3, h, w)
+    return np.maximum(c0 + (beta * z[:, None]).sum(0), 0)
+
+
+def prep(fr):
+    noisy = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
+    d = fr["depth"]
+    g = np.concatenate([fr["normal"], d, fr["ao"]], 0).astype(np.float64)
+    return noisy.astype(np.float64), g
+
+
+def main():
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("frames", nargs="+")
+    ap.add_argument("--sigmas", default="6,12,20")
+    ap.add_argument("--lattice", type=int, default=0)
+    ap.add_argument("--shrink", type=float, default=0.0)
+    ap.add_argument("--basis", choices=["chol", "eig"], default="chol")
+    ap.add_argument("--shrink-variance", action="store_true")
+    ap.add_argument("--mse-blur", type=float, default=0.0)
+    ap.add_argument("--weight-power", type=float, default=1.0)
+    ap.add_argument("--chroma", type=int, default=None)
+    a = ap.parse_args()
+    sigmas = tuple(float(v) for v in a.sigmas.split(","))
+    kw = dict(sigmas=sigmas, shrink=(a.shrink,) * len(sigmas), basis=a.basis, use_f=a.shrink_variance,
+              mse_blur=a.mse_blur, wpow=a.weight_power, chroma=a.chroma, lattice=a.lattice)
+    scores = []
+    for f in sorted(sum((glob.glob(p) for p in a.frames), [])):
+        fr = load(f)
+        y, g = prep(fr)
+        scores.append(psnr(flr(y, g, **kw), fr))
+        print(f"{f}: {scores[-1]:.2f} dB", flush=True)
+    print(f"mean of {len(scores)}: {np.mean(scores):.3f} dB")
+
+
+if __name__ == "__main__":
+    main()
