@@ -82,24 +82,31 @@ pub fn f16_to_f32(h: f16) -> f32 {
 /// Hints that `s[i]` will be read soon (nothing when out of range or not x86-64).
 #[inline(always)]
 pub(crate) fn prefetch<T>(s: &[T], i: usize) {
-    #[cfg(target_arch = "x86_64")]
-    if i < s.len() {
-        // SAFETY: `i < s.len()`, so the pointer is inside the slice; a prefetch
-        // reads nothing architecturally and cannot fault.
-        unsafe { core::arch::x86_64::_mm_prefetch(s.as_ptr().add(i) as *const i8, core::arch::x86_64::_MM_HINT_T0) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (s, i);
+    prefetch_into::<T, false>(s, i);
 }
 
 /// [`prefetch`] into the L2 cache only (a line further ahead than L1 can hold
 /// in flight).
 #[inline(always)]
 pub(crate) fn prefetch_l2<T>(s: &[T], i: usize) {
+    prefetch_into::<T, true>(s, i);
+}
+
+#[inline(always)]
+fn prefetch_into<T, const L2: bool>(s: &[T], i: usize) {
     #[cfg(target_arch = "x86_64")]
     if i < s.len() {
-        // SAFETY: as in `prefetch`.
-        unsafe { core::arch::x86_64::_mm_prefetch(s.as_ptr().add(i) as *const i8, core::arch::x86_64::_MM_HINT_T1) };
+        use core::arch::x86_64::{_mm_prefetch, _MM_HINT_T0, _MM_HINT_T1};
+        let p = s[i..].as_ptr() as *const i8;
+        // SAFETY: `p` points into the slice; a prefetch reads nothing
+        // architecturally and cannot fault.
+        unsafe {
+            if L2 {
+                _mm_prefetch(p, _MM_HINT_T1)
+            } else {
+                _mm_prefetch(p, _MM_HINT_T0)
+            }
+        };
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = (s, i);
