@@ -798,6 +798,20 @@ fn extract_strided<const P: usize>(src: &[f32], dst: &mut [f32]) {
 mod tests {
     use super::*;
 
+    /// Reads channels 0..3 of row 1, pixels `x0..x0 + len`, with `read_row_n`
+    /// and asserts each value equals element access (`get`); returns the planes.
+    fn read3_equals_get<const W: usize>(v: &ImageView<'_>, x0: usize, len: usize) -> [[f32; W]; 3] {
+        let mut p = [[0f32; W]; 3];
+        let [a, b, c] = &mut p;
+        v.read_row_n(1, x0, [&mut a[..len], &mut b[..len], &mut c[..len]]).unwrap();
+        for i in 0..len {
+            for (ch, plane) in p.iter().enumerate() {
+                assert_eq!(Some(plane[i]), v.get(x0 + i, 1, ch), "x0 {x0} len {len} i {i}");
+            }
+        }
+        p
+    }
+
     /// RGBA f32 rows (the fourth channel skipped on reads and left as it was
     /// on writes) equal element access, around the 64-pixel read chunks, on a
     /// buffer that ends right after the last pixel's third channel.
@@ -809,14 +823,7 @@ mod tests {
         let v = ImageView::f32(&data, W, 2, 3, Layout::interleaved(W, 4)).unwrap();
         for x0 in [0usize, 1, 63, 64, 100] {
             for len in [0usize, 1, 7, 63, 64, 65, 129, 200] {
-                let mut p = [[0f32; W]; 3];
-                let [a, b, c] = &mut p;
-                v.read_row_n(1, x0, [&mut a[..len], &mut b[..len], &mut c[..len]]).unwrap();
-                for i in 0..len {
-                    for (ch, plane) in p.iter().enumerate() {
-                        assert_eq!(Some(plane[i]), v.get(x0 + i, 1, ch), "x0 {x0} len {len} i {i}");
-                    }
-                }
+                let p = read3_equals_get::<W>(&v, x0, len);
                 let mut out = [-1f32; LEN];
                 let mut o = ImageViewMut::new(SamplesMut::F32(&mut out), W, 2, 3, Layout::interleaved(W, 4)).unwrap();
                 o.write_row_n(1, x0, [&p[0][..len], &p[1][..len], &p[2][..len]]).unwrap();
@@ -979,14 +986,7 @@ mod tests {
         let v = ImageView::interleaved(&data, W, 2, 3).unwrap();
         for x0 in [0usize, 1, 63, 64, 100] {
             for len in [1usize, 7, 63, 64, 65, 129, 200] {
-                let mut p = [[0f32; W]; 3];
-                let [a, b, c] = &mut p;
-                v.read_row_n(1, x0, [&mut a[..len], &mut b[..len], &mut c[..len]]).unwrap();
-                for i in 0..len {
-                    for (ch, plane) in p.iter().enumerate() {
-                        assert_eq!(Some(plane[i]), v.get(x0 + i, 1, ch), "x0 {x0} len {len} i {i}");
-                    }
-                }
+                read3_equals_get::<W>(&v, x0, len);
             }
         }
         let mut p = [[0f32; W]; 3];

@@ -1,7 +1,7 @@
 //! Shared by the binaries: views over f32 or f16 copies of the same values,
 //! and the timing loop.
 use half::f16;
-use lrdenoise::{ImageView, Layout};
+use lrdenoise::{Flr, FlrConfig, Frame, ImageView, ImageViewMut, Layout, SamplesMut};
 use std::time::Instant;
 
 /// Whether the command line asks for f16 inputs (argument `f16`).
@@ -39,4 +39,19 @@ pub fn time_runs(runs: usize, mut f: impl FnMut()) -> (f64, f64) {
 /// Sum of the output, to compare two builds' results.
 pub fn checksum(out: &[f32]) -> f64 {
     out.iter().map(|&v| v as f64).sum()
+}
+
+/// FLR's defaults on the `w`×`h` `frame`, written into an f32 output of
+/// `stride` values per pixel (the first three: RGB, or RGBA with the fourth
+/// left alone), 21 timed runs: median and minimum (ms), and the output's
+/// checksum.
+pub fn time_flr_defaults(frame: &Frame<'_>, (w, h): (usize, usize), stride: usize) -> (f64, f64, f64) {
+    let flr = Flr::new(FlrConfig::default(), w, h).unwrap();
+    let mut scratch = vec![0f64; flr.scratch_len()];
+    let mut out = vec![0f32; stride * w * h];
+    let (median, min) = time_runs(21, || {
+        let mut ov = ImageViewMut::new(SamplesMut::F32(&mut out), w, h, 3, Layout::interleaved(w, stride)).unwrap();
+        flr.denoise(frame, &mut scratch, &mut ov).unwrap();
+    });
+    (median, min, checksum(&out))
 }

@@ -20,13 +20,7 @@ fn main() {
         ..Default::default()
     };
     let frame = Frame::new(view(half, &noisy, &noisy16, (w, h), 3, Layout::interleaved(w, 3)), guides);
-    let flr = Flr::new(FlrConfig::default(), w, h).unwrap();
-    let mut scratch = vec![0f64; flr.scratch_len()];
-    let mut out = vec![0f32; 3 * n];
-    let (median, min) = time_runs(21, || {
-        let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-        flr.denoise(&frame, &mut scratch, &mut ov).unwrap();
-    });
+    let (median, min, sum) = time_flr_defaults(&frame, (w, h), 3);
     let kind = if half { "f16" } else { "f32" };
-    println!("{kind} 1080p q5 defaults: median {median:.2} ms (min {min:.2})  checksum {}", checksum(&out));
+    println!("{kind} 1080p q5 defaults: median {median:.2} ms (min {min:.2})  checksum {sum}");
 }

@@ -27,14 +27,8 @@ fn main() {
         ..Default::default()
     };
     let frame = Frame::new(view(half, &noisy, &noisy16, (w, h), 3, Layout::interleaved(w, 4)), guides);
-    let flr = Flr::new(FlrConfig::default(), w, h).unwrap();
-    let mut scratch = vec![0f64; flr.scratch_len()];
-    let mut out = vec![0f32; 4 * n];
-    let (median, min) = time_runs(21, || {
-        let mut ov = ImageViewMut::new(SamplesMut::F32(&mut out), w, h, 3, Layout::interleaved(w, 4)).unwrap();
-        flr.denoise(&frame, &mut scratch, &mut ov).unwrap();
-    });
+    let (median, min, sum) = time_flr_defaults(&frame, (w, h), 4);
     let kind = if half { "f16" } else { "f32" };
     let kind = if packed { format!("{kind}, depth in normal.w") } else { kind.to_string() };
-    println!("RGBA {kind} 1080p q5 defaults: median {median:.2} ms (min {min:.2})  checksum {}", checksum(&out));
+    println!("RGBA {kind} 1080p q5 defaults: median {median:.2} ms (min {min:.2})  checksum {sum}");
 }
