@@ -132,15 +132,11 @@ fn gaps_lanes<T: F64Lanes, const Q: usize>(cell: impl Fn(usize) -> T, model: imp
     let mu: [T; crate::MAX_GUIDES] = core::array::from_fn(|a| if a < Q { cell(lay.s + a) * inv } else { s(0.0) });
     // Windows 1 and 2 side by side (two independent chains; the sums are
     // the same, in the same order, as one window at a time).
-    let dl = |w: usize, j: usize| {
-        let d = |c: usize| s(L[c]) * (model(w, j + c) - model(0, j + c));
-        s(0.0) + d(0) + d(1) + d(2)
-    };
-    let mut at_mean = [dl(1, 0), dl(2, 0)];
+    let mut at_mean = [luma_gap(&model, 1, 0), luma_gap(&model, 2, 0)];
     let mut dc = [[s(0.0); crate::MAX_GUIDES]; 2];
     for a in 0..Q {
         for w in 0..2 {
-            dc[w][a] = dl(w + 1, 3 + 3 * a);
+            dc[w][a] = luma_gap(&model, w + 1, 3 + 3 * a);
             at_mean[w] = at_mean[w] + dc[w][a] * mu[a];
         }
     }
@@ -164,6 +160,16 @@ fn gaps_lanes<T: F64Lanes, const Q: usize>(cell: impl Fn(usize) -> T, model: imp
         gaps[w + 1] = d2.set_where(d2.not_above(s(-1.0)), f64::INFINITY).set_where(empty, 0.0);
     }
     gaps
+}
+
+/// The luminance of the difference between window `w`'s and window 0's
+/// coefficient triple `j..j + 3`: `0 + L₀Δ₀ + L₁Δ₁ + L₂Δ₂`, in that order.
+/// (A function rather than a closure: as a closure it was not inlined, and
+/// the call per coefficient cost more than its arithmetic.)
+#[inline(always)]
+fn luma_gap<T: F64Lanes>(model: &impl Fn(usize, usize) -> T, w: usize, j: usize) -> T {
+    let d = |c: usize| T::splat(L[c]) * (model(w, j + c) - model(0, j + c));
+    T::splat(0.0) + d(0) + d(1) + d(2)
 }
 
 /// The blend weights `1 / (b_s² + v_s)` of the three windows from their
