@@ -1,7 +1,7 @@
 //! Times the adaptive window's per-cell arithmetic (gaps, variance, blend) on
 //! synthetic cells, one cell at a time and four per f64x4 lane (what `Flr`
 //! runs), in the same run: `cargo run --release --example adaptive_cells`.
-use lrdenoise::flr::adaptive::{blend, blend4, prediction_gaps, variance, variances4};
+use lrdenoise::flr::adaptive::{blend, blend4, prediction_gaps, variance, variances4, ModelLanes};
 use std::time::Instant;
 
 fn main() {
@@ -51,6 +51,7 @@ fn main() {
     let mut best4 = [f64::MAX; 2];
     let mut vs = vec![0f64; n];
     let mut out4 = vec![0f32; n * ml];
+    let mut lanes = ModelLanes::default();
     for _ in 0..30 {
         let t = Instant::now();
         for (q, v) in vs.chunks_exact_mut(4).enumerate() {
@@ -70,7 +71,7 @@ fn main() {
                 std::array::from_fn(|w| &models[w][c * ml..(c + 1) * ml])
             });
             let v: [[f64; 4]; 3] = std::array::from_fn(|w| std::array::from_fn(|l| vs[4 * q + l] * [1.0, 0.5, 0.25][w]));
-            blend4::<Q>(&cells[4 * q * k..4 * (q + 1) * k], m, v, 1e-9, &mut out4[4 * q * ml..4 * (q + 1) * ml]);
+            blend4::<Q>(&cells[4 * q * k..4 * (q + 1) * k], m, v, 1e-9, &mut lanes, &mut out4[4 * q * ml..4 * (q + 1) * ml]);
         }
         best4[1] = best4[1].min(t.elapsed().as_secs_f64());
     }

@@ -19,7 +19,7 @@
 
 use crate::kernels::cholesky::F64Lanes;
 use crate::kernels::{model_len, CellLayout, LUMA};
-use wide::f64x4;
+use wide::{f32x4, f64x4};
 
 /// `K`: the share of the variance difference `v₀ − v_s` that `d_s²` is taken
 /// to contain (0.5 measured best of 0.25 / 0.5 / 1 on the training scenes;
@@ -73,8 +73,9 @@ pub fn variance<const Q: usize>(cell: &[f64], model: &[f32], norm: f64, area: f6
 pub fn variances4<const Q: usize>(cells: &[f64], models: &[f32], norm: f64, area: f64, min_weight: f64) -> [f64; 4] {
     let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
     let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
-    let model = |j: usize| f64x4::from([models[j] as f64, models[ml + j] as f64, models[2 * ml + j] as f64, models[3 * ml + j] as f64]);
-    variance_lanes::<f64x4, Q>(cell, model, norm, area, min_weight).to_array()
+    let mut lanes = [[0f32; 4]; GAP_VALUES];
+    transpose_values::<Q>(core::array::from_fn(|l| &models[l * ml..(l + 1) * ml]), &mut lanes);
+    variance_lanes::<f64x4, Q>(cell, |j| lane_values(&lanes, j), norm, area, min_weight).to_array()
 }
 
 /// [`variance`] of one cell (`T = f64`) or four (`f64x4`); `cell(m)` reads
@@ -218,15 +219,80 @@ fn blend_with(models: [&[f32]; 3], w: Option<[f64; 3]>, out: &mut [f32]) {
     }
 }
 
+/// Model values the prediction gaps read: the constant and guide coefficient
+/// triples of the largest guide count, rounded up to whole 4-lane groups.
+const GAP_VALUES: usize = (3 * (crate::MAX_GUIDES + 1)).div_ceil(4) * 4;
+
+/// Working space of [`blend4`]: four cells' models lane-major, `[window][value][cell]`,
+/// so that one value of the four cells is one `f64x4` conversion. Make one
+/// and reuse it for every group of four cells.
+#[derive(Clone, Debug)]
+pub struct ModelLanes([[[f32; 4]; GAP_VALUES]; 3]);
+
+impl Default for ModelLanes {
+    fn default() -> Self {
+        ModelLanes([[[0.0; 4]; GAP_VALUES]; 3])
+    }
+}
+
+impl ModelLanes {
+    /// The three windows' [`transpose_values`].
+    #[inline(always)]
+    fn fill<const Q: usize>(&mut self, models: &[[&[f32]; 3]; 4]) {
+        for (w, lanes) in self.0.iter_mut().enumerate() {
+            transpose_values::<Q>(models.map(|m| m[w]), lanes);
+        }
+    }
+    /// Value `j` of window `w` at the four cells.
+    #[inline(always)]
+    fn get(&self, w: usize, j: usize) -> f64x4 {
+        lane_values(&self.0[w], j)
+    }
+}
+
+/// Transposes values `0..3(Q + 1)` (the constant and guide coefficients) of
+/// four cells' models, 4 × 4 at a time, into `lanes[value][cell]`. (Read one
+/// lane at a time from model-major storage, as before session 30, each of the
+/// ~50 model reads of the gaps, or ~20 of a variance, was 4 scalar loads,
+/// conversions and inserts.)
+#[inline(always)]
+fn transpose_values<const Q: usize>(models: [&[f32]; 4], lanes: &mut [[f32; 4]; GAP_VALUES]) {
+    // a model holds 3(Q + 1) + 3 values, so the 4-wide reads at j < 3(Q + 1) stay inside
+    for j in (0..3 * (Q + 1)).step_by(4) {
+        let rows: [f32x4; 4] = core::array::from_fn(|l| {
+            let m = &models[l][j..j + 4];
+            f32x4::from([m[0], m[1], m[2], m[3]])
+        });
+        for (c, v) in f32x4::transpose(rows).iter().enumerate() {
+            lanes[j + c] = v.to_array();
+        }
+    }
+}
+
+/// Value `j` of the four cells in `lanes`, as f64.
+#[inline(always)]
+fn lane_values(lanes: &[[f32; 4]; GAP_VALUES], j: usize) -> f64x4 {
+    let v = lanes[j];
+    f64x4::from([v[0] as f64, v[1] as f64, v[2] as f64, v[3] as f64])
+}
+
 /// [`prediction_gaps`] and [`blend`] of four cells at once, one per `f64x4`
 /// lane: `cells` holds 4 × `k` moments, `models[l]` cell `l`'s three window
 /// models, `variances[w]` window `w`'s four variances, `out` 4 ×
-/// `model_len(Q)` values. Bit-identical to four scalar calls.
-pub fn blend4<const Q: usize>(cells: &[f64], models: [[&[f32]; 3]; 4], variances: [[f64; 4]; 3], min_weight: f64, out: &mut [f32]) {
+/// `model_len(Q)` values; `lanes` is working space. Bit-identical to four
+/// scalar calls.
+pub fn blend4<const Q: usize>(
+    cells: &[f64],
+    models: [[&[f32]; 3]; 4],
+    variances: [[f64; 4]; 3],
+    min_weight: f64,
+    lanes: &mut ModelLanes,
+    out: &mut [f32],
+) {
     let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
     let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
-    let model = |w: usize, j: usize| f64x4::from(core::array::from_fn::<f64, 4, _>(|l| models[l][w][j] as f64));
-    let gaps = gaps_lanes::<f64x4, Q>(cell, model, min_weight);
+    lanes.fill::<Q>(&models);
+    let gaps = gaps_lanes::<f64x4, Q>(cell, |w, j| lanes.get(w, j), min_weight);
     let (w, fallback) = weights_lanes::<f64x4>(variances.map(f64x4::from), gaps);
     let w = w.map(|x| x.to_array());
     for (l, o) in out.chunks_exact_mut(ml).take(4).enumerate() {
@@ -238,8 +304,6 @@ pub fn blend4<const Q: usize>(cells: &[f64], models: [[&[f32]; 3]; 4], variances
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    const Q: usize = 5;
 
     /// A small deterministic generator (no dependency in the core's tests).
     struct Lcg(u64);
@@ -253,16 +317,19 @@ mod tests {
     /// Four cells' moments and three windows' models each, with the awkward
     /// lanes of real frames: an empty cell, a non-finite moment, a huge model
     /// value, negative energy (a residual clamped to 0).
-    type Case = ([f64; 4 * 64], [[[f32; 32]; 3]; 4], [[f64; 4]; 3]);
+    type Case = ([f64; 4 * K], [[[f32; ML]; 3]; 4], [[f64; 4]; 3]);
+    /// Room for Q ≤ 12.
+    const K: usize = CellLayout::new(crate::MAX_GUIDES).k;
+    const ML: usize = model_len(crate::MAX_GUIDES);
 
-    fn cases(seed: u64) -> Case {
+    fn cases<const Q: usize>(seed: u64) -> Case {
         let k = CellLayout::new(Q).k;
         let mut r = Lcg(seed);
-        let mut cells = [0f64; 4 * 64];
+        let mut cells = [0f64; 4 * K];
         for (i, c) in cells[..4 * k].iter_mut().enumerate() {
             *c = if i % k == 0 { 1.0 + 100.0 * r.next() } else { 20.0 * r.next() - 5.0 };
         }
-        let mut models = [[[0f32; 32]; 3]; 4];
+        let mut models = [[[0f32; ML]; 3]; 4];
         for m in models.iter_mut().flatten() {
             for v in m.iter_mut() {
                 *v = (4.0 * r.next() - 2.0) as f32;
@@ -287,27 +354,40 @@ mod tests {
         (cells, models, var)
     }
 
+    /// Every guide count the lanes' transposes see: 0 (a partial 4 × 4
+    /// group only), 1, 2, 5 (the defaults), 7 and 12 (the most).
     #[test]
     fn four_lanes_equal_four_cells() {
+        check::<0>();
+        check::<1>();
+        check::<2>();
+        check::<5>();
+        check::<7>();
+        check::<12>();
+    }
+
+    fn check<const Q: usize>() {
         let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
+        let mut lanes = ModelLanes::default();
         for seed in 0..64 {
-            let (cells, models, var) = cases(seed);
-            let flat: [f32; 4 * 32] = core::array::from_fn(|i| models[(i / ml) % 4][0][i % ml]);
+            let (cells, models, var) = cases::<Q>(seed);
+            let flat: [f32; 4 * ML] = core::array::from_fn(|i| models[(i / ml) % 4][0][i % ml]);
             let got = variances4::<Q>(&cells, &flat[..4 * ml], 0.01, 1800.0, 1e-9);
             for l in 0..4 {
                 let want = variance::<Q>(&cells[l * k..(l + 1) * k], &flat[l * ml..(l + 1) * ml], 0.01, 1800.0, 1e-9);
-                assert_eq!(got[l].to_bits(), want.to_bits(), "seed {seed} lane {l}");
+                assert_eq!(got[l].to_bits(), want.to_bits(), "Q {Q} seed {seed} lane {l}");
             }
             let m: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &models[l][w][..ml]));
-            let mut out = [0f32; 4 * 32];
-            blend4::<Q>(&cells, m, var, 1e-9, &mut out[..4 * ml]);
+            let mut out = [0f32; 4 * ML];
+            // (`lanes` reused from the previous seed, as `Flr` does)
+            blend4::<Q>(&cells, m, var, 1e-9, &mut lanes, &mut out[..4 * ml]);
             for l in 0..4 {
                 let cell = &cells[l * k..(l + 1) * k];
                 let gaps = prediction_gaps::<Q>(cell, m[l], 1e-9);
-                let mut want = [0f32; 32];
+                let mut want = [0f32; ML];
                 blend(m[l], [var[0][l], var[1][l], var[2][l]], gaps, &mut want[..ml]);
                 for (a, b) in out[l * ml..(l + 1) * ml].iter().zip(&want[..ml]) {
-                    assert_eq!(a.to_bits(), b.to_bits(), "seed {seed} lane {l}");
+                    assert_eq!(a.to_bits(), b.to_bits(), "Q {Q} seed {seed} lane {l}");
                 }
             }
         }

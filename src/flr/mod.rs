@@ -1323,6 +1323,7 @@ fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0:
     let quads = if simd { n / 4 } else { 0 };
     let mut buf = [[[0f32; model_len(MAX_GUIDES)]; MAX_SCALES]; 4];
     let mut readers = windows.map(WindowReader::new);
+    let mut lanes = adaptive::ModelLanes::default();
     for q in 0..quads {
         let mut v = [[0f64; 4]; MAX_SCALES];
         for (l, b) in buf.iter_mut().enumerate() {
@@ -1333,7 +1334,14 @@ fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0:
             }
         }
         let models: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &buf[l][w][..ml]));
-        adaptive::blend4::<Q>(&first[4 * q * k..4 * (q + 1) * k], models, v, min_weight, &mut out[4 * q * ml..4 * (q + 1) * ml]);
+        adaptive::blend4::<Q>(
+            &first[4 * q * k..4 * (q + 1) * k],
+            models,
+            v,
+            min_weight,
+            &mut lanes,
+            &mut out[4 * q * ml..4 * (q + 1) * ml],
+        );
     }
     for idx in 4 * quads..n {
         let (cell, o) = (&first[idx * k..(idx + 1) * k], &mut out[idx * ml..(idx + 1) * ml]);
