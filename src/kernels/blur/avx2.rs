@@ -6,7 +6,7 @@
 //! version in an `x86-64-v3` build (bit-identical there); `blur::tests`
 //! compares the two.
 
-use super::{LANES, VECS};
+use super::{col_chunk, ColLanes, LANES, VECS};
 use core::arch::x86_64::{
     __m256d, _mm256_add_pd, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
 };
@@ -69,8 +69,35 @@ pub(super) unsafe fn row_interior(w: &[f64], r: usize, k: usize, src: &[f64], ds
     x
 }
 
-/// The vertical pass for one output chunk: `out[c..c + LANES] = Σ_j w_{|j − centre|} row(j)[c..]`
-/// over the rows `rows` (each `row_len` values of `src`, from row `first`).
+/// Four f64 lanes in one AVX register for [`col_chunk`]. Made only inside
+/// [`cols_strip`], a `#[target_feature(enable = "avx2,fma")]` function that
+/// runs only where the CPU has them: that is what makes its safe methods (AVX
+/// and FMA instructions, `#[inline(always)]` into that function) sound.
+#[derive(Clone, Copy)]
+struct Lanes(__m256d);
+
+impl ColLanes for Lanes {
+    #[inline(always)]
+    fn scale(self, w: f64) -> Self {
+        // SAFETY: only inside `cols_strip`, where AVX2 and FMA are enabled (see the type).
+        Lanes(unsafe { _mm256_mul_pd(self.0, _mm256_set1_pd(w)) })
+    }
+    #[inline(always)]
+    fn pair_add(self, other: Self, w: f64, acc: Self) -> Self {
+        // SAFETY: as above.
+        Lanes(unsafe { _mm256_fmadd_pd(_mm256_add_pd(self.0, other.0), _mm256_set1_pd(w), acc.0) })
+    }
+    #[inline(always)]
+    fn one_add(self, w: f64, acc: Self) -> Self {
+        // SAFETY: as above.
+        Lanes(unsafe { _mm256_fmadd_pd(self.0, _mm256_set1_pd(w), acc.0) })
+    }
+}
+
+/// The vertical pass's chunks `c..` in steps of `LANES` while `c + LANES ≤
+/// end`, of output row `j` into `out` and, unless `next` is empty, of row
+/// `j + 1` into `next` ([`col_chunk`]); `src` is the whole grid of `cells_y`
+/// rows. Returns the first value not done.
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.
@@ -78,28 +105,25 @@ pub(super) unsafe fn row_interior(w: &[f64], r: usize, k: usize, src: &[f64], ds
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn cols_strip(
     w: &[f64],
+    r: usize,
     src: &[f64],
     row_len: usize,
+    cells_y: usize,
     j: isize,
-    lo: isize,
-    hi: isize,
     out: &mut [f64],
+    next: &mut [f64],
     mut c: usize,
     end: usize,
 ) -> usize {
+    // SAFETY (every `load`/`store`): AVX2 and FMA are enabled in this function.
+    let row = |jj: isize, c: usize| unsafe { load(&src[jj as usize * row_len + c..]) }.map(Lanes);
     while c + LANES <= end {
-        let mut acc = [_mm256_setzero_pd(); VECS];
-        for jj in lo..=hi {
-            let wk = _mm256_set1_pd(w[(jj - j).unsigned_abs()]);
-            let start = jj as usize * row_len + c;
-            // SAFETY: AVX2 and FMA are enabled in this function.
-            let a = unsafe { load(&src[start..]) };
-            for l in 0..VECS {
-                acc[l] = _mm256_fmadd_pd(a[l], wk, acc[l]);
-            }
+        let acc = col_chunk::<Lanes>(w, r, cells_y as isize, j, |jj| row(jj, c));
+        unsafe { store(&acc.map(|v| v.0), &mut out[c..]) };
+        if !next.is_empty() {
+            let acc = col_chunk::<Lanes>(w, r, cells_y as isize, j + 1, |jj| row(jj, c));
+            unsafe { store(&acc.map(|v| v.0), &mut next[c..]) };
         }
-        // SAFETY: as above.
-        unsafe { store(&acc, &mut out[c..]) };
         c += LANES;
     }
     c
