@@ -6,7 +6,7 @@
 //! version in an `x86-64-v3` build (bit-identical there); `blur::tests`
 //! compares the two.
 
-use super::{col_chunk, ColLanes, LANES, VECS};
+use super::{col_chunk, row_pairs, ColLanes, LANES, VECS};
 use core::arch::x86_64::{
     __m256d, _mm256_add_pd, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
 };
@@ -49,7 +49,19 @@ unsafe fn store(a: &[__m256d; VECS], d: &mut [f64]) {
 /// (the slices are bounds-checked regardless).
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn row_interior(w: &[f64], r: usize, k: usize, src: &[f64], dst: &mut [f64], mut x: usize, end: usize) -> usize {
-    // SAFETY (every `load`/`store`): AVX2 and FMA are enabled in this function.
+    // SAFETY (every load and store): AVX2 and FMA are enabled in this function;
+    // the slices are bounds-checked.
+    let load2 = |i: usize| {
+        let s = &src[i..i + 8];
+        unsafe { [Lanes(_mm256_loadu_pd(s.as_ptr())), Lanes(_mm256_loadu_pd(s[4..].as_ptr()))] }
+    };
+    x = row_pairs::<Lanes>(w, r, k, x, end, load2, |i, v: [Lanes; 2]| {
+        let d = &mut dst[i..i + 8];
+        unsafe {
+            _mm256_storeu_pd(d.as_mut_ptr(), v[0].0);
+            _mm256_storeu_pd(d[4..].as_mut_ptr(), v[1].0);
+        }
+    });
     while x + LANES <= end {
         let w0 = _mm256_set1_pd(w[0]);
         let mut acc = unsafe { load(&src[x..]) };
@@ -69,17 +81,18 @@ pub(super) unsafe fn row_interior(w: &[f64], r: usize, k: usize, src: &[f64], ds
     x
 }
 
-/// Four f64 lanes in one AVX register for [`col_chunk`]. Made only inside
-/// [`cols_strip`], a `#[target_feature(enable = "avx2,fma")]` function that
-/// runs only where the CPU has them: that is what makes its safe methods (AVX
-/// and FMA instructions, `#[inline(always)]` into that function) sound.
+/// Four f64 lanes in one AVX register for [`col_chunk`] and [`row_pairs`].
+/// Made only inside [`cols_strip`] and [`row_interior`],
+/// `#[target_feature(enable = "avx2,fma")]` functions that run only where the
+/// CPU has them: that is what makes its safe methods (AVX and FMA
+/// instructions, `#[inline(always)]` into those functions) sound.
 #[derive(Clone, Copy)]
 struct Lanes(__m256d);
 
 impl ColLanes for Lanes {
     #[inline(always)]
     fn scale(self, w: f64) -> Self {
-        // SAFETY: only inside `cols_strip`, where AVX2 and FMA are enabled (see the type).
+        // SAFETY: only inside `cols_strip` and `row_interior`, where AVX2 and FMA are enabled (see the type).
         Lanes(unsafe { _mm256_mul_pd(self.0, _mm256_set1_pd(w)) })
     }
     #[inline(always)]
