@@ -30,7 +30,7 @@ use crate::config::{Blur, FlrConfig, Kernel};
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
-use crate::kernels::apply::{apply_row, model_rows, RowGuides};
+use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
 use crate::kernels::blur::{blur_cols_band, blur_row, Taps};
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cells4, CellOutcome, SolveParams};
@@ -428,7 +428,7 @@ impl Flr {
         // in place: colour rows, guide rows that are not planar f32, the edge block gathered
         let in_place = (3 + self.q) * self.bin * self.in_w + BandPlanes::len(self.q, self.bin, self.bin);
         let moments = gathered.max(in_place);
-        let apply = self.q * self.width + 3 * self.width;
+        let apply = self.q * self.width + 2 * self.cells_x * self.ml + 3 * self.width;
         moments.max(apply)
     }
     /// Scratch length in f64 elements for `workers` concurrent workers.
@@ -1036,6 +1036,8 @@ impl Flr {
         }
         let w = self.width;
         let (gbuf, rest) = worker.split_at_mut(self.q * w);
+        let (row_models, rest) = rest.split_at_mut(self.cells_x * self.ml);
+        let (row_slopes, rest) = rest.split_at_mut(self.cells_x * self.ml);
         let outbuf = &mut rest[..3 * w];
         let mut rep = Report::default();
         let simd = self.kernel_simd();
@@ -1063,10 +1065,11 @@ impl Flr {
                     g += 1;
                 }
             }
-            let rows_y = model_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y);
+            lerp_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y, row_models, row_slopes);
             let guides = RowGuides { rows, reference: stats.reference, width: w };
             let clamp = self.cfg.clamp_negative;
-            let fallback = dispatch_q!(self.q, apply_row(rows_y, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
+            let fallback =
+                dispatch_q!(self.q, apply_row(row_models, row_slopes, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
             rep.fallback_pixels += fallback as u64;
             let (r, gb) = outbuf.split_at(w);
             let (g, b) = gb.split_at(w);

@@ -6,7 +6,7 @@
 //! `x86-64-v3` build (bit-identical there); against an SSE2 build the
 //! products round separately. `apply::tests` compares the two.
 
-use super::{ModelRows, RowGuides, Span, Spans};
+use super::{RowGuides, Span};
 use crate::guides::MAX_GUIDES;
 use core::arch::x86_64::{
     __m256, _mm256_add_ps, _mm256_and_ps, _mm256_andnot_ps, _mm256_blendv_ps, _mm256_castsi256_ps, _mm256_cmp_ps, _mm256_fmadd_ps,
@@ -22,7 +22,8 @@ use core::arch::x86_64::{
 /// The CPU must support AVX2 and FMA ([`crate::isa::Isa::Avx2Fma`] available).
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn simd_spans<const Q: usize, const CLAMP: bool>(
-    rows: ModelRows<'_>,
+    row_models: &[f32],
+    row_slopes: &[f32],
     sp: &Span,
     guides: &RowGuides<'_>,
     outs: &mut [&mut [f32]; 3],
@@ -35,43 +36,34 @@ pub(super) unsafe fn simd_spans<const Q: usize, const CLAMP: bool>(
         reference[q] = _mm256_set1_ps(guides.reference[q]);
     }
     let (mut fallback, mut x) = (0, sp.half.min(w));
-    let mut spans = Spans::new(rows, ml, sp.cells_x);
-    let mut i0 = 0;
     // (the portable version's two loops, for the same reason: see there)
     if sp.block == 8 {
-        while i0 < sp.cells_x - 1 {
-            let n = spans.fill(i0);
-            for c in 0..n {
-                let x0 = (i0 + c) * 8 + sp.half;
-                if x0 + 8 > w {
-                    return (fallback, x);
-                }
-                let (base, slope) = spans.span(c);
-                // SAFETY: AVX2 and FMA are enabled in this function; x0 + 8 ≤ w.
-                fallback += unsafe { group::<Q, CLAMP>(base, slope, fx0, &reference, guides, x0, outs) };
-                x = x0 + 8;
+        for i in 0..sp.cells_x - 1 {
+            let x0 = i * 8 + sp.half;
+            if x0 + 8 > w {
+                break;
             }
-            i0 += n;
+            let (base, slope) = (&row_models[i * ml..(i + 1) * ml], &row_slopes[i * ml..(i + 1) * ml]);
+            // SAFETY: AVX2 and FMA are enabled in this function; x0 + 8 ≤ w.
+            fallback += unsafe { group::<Q, CLAMP>(base, slope, fx0, &reference, guides, x0, outs) };
+            x = x0 + 8;
         }
         return (fallback, x);
     }
-    while i0 < sp.cells_x - 1 {
-        let n = spans.fill(i0);
-        for c in 0..n {
-            let start = (i0 + c) * sp.block + sp.half;
-            let (base, slope) = spans.span(c);
-            for g in 0..sp.block / 8 {
-                let x0 = start + 8 * g;
-                if x0 + 8 > w {
-                    return (fallback, x);
-                }
-                let fx = if g == 0 { fx0 } else { _mm256_add_ps(fx0, _mm256_mul_ps(_mm256_set1_ps((8 * g) as f32), inv_b)) };
-                // SAFETY: AVX2 and FMA are enabled in this function; x0 + 8 ≤ w.
-                fallback += unsafe { group::<Q, CLAMP>(base, slope, fx, &reference, guides, x0, outs) };
-                x = x0 + 8;
+    for i in 0..sp.cells_x - 1 {
+        let start = i * sp.block + sp.half;
+        let base = &row_models[i * ml..(i + 1) * ml];
+        let slope = &row_slopes[i * ml..(i + 1) * ml];
+        for g in 0..sp.block / 8 {
+            let x0 = start + 8 * g;
+            if x0 + 8 > w {
+                return (fallback, x);
             }
+            let fx = if g == 0 { fx0 } else { _mm256_add_ps(fx0, _mm256_mul_ps(_mm256_set1_ps((8 * g) as f32), inv_b)) };
+            // SAFETY: AVX2 and FMA are enabled in this function; x0 + 8 ≤ w.
+            fallback += unsafe { group::<Q, CLAMP>(base, slope, fx, &reference, guides, x0, outs) };
+            x = x0 + 8;
         }
-        i0 += n;
     }
     (fallback, x)
 }

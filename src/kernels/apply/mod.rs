@@ -2,11 +2,11 @@
 //! cell centres and application to the full-resolution guides (paper §3.2).
 //!
 //! Cell `i` covers pixels `i·B .. i·B + B`; its centre is at `i·B + B/2 − ½`.
-//! [`model_rows`] picks the two model rows an output row lies between;
-//! [`apply_row`] interpolates each cell's model vertically to the row as it
-//! reaches it, then horizontally per pixel, and evaluates `ŷ = c0 + Σ c_q d_q`
-//! (eq. 23 in raw coordinates). With B a multiple of 8 each span between two
-//! centres is whole `f32x8` groups with fixed lane weights.
+//! Rows are done in two steps: [`lerp_rows`] interpolates the model grid
+//! vertically to the output row, [`apply_row`] interpolates horizontally and
+//! evaluates `ŷ = c0 + Σ c_q d_q` (eq. 23 in raw coordinates). With B a
+//! multiple of 8 each span between two centres is whole `f32x8` groups with
+//! fixed lane weights.
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -29,93 +29,25 @@ pub fn cell_pos(x: usize, block: usize, cells: usize) -> (usize, f32) {
     (i, c - i as f32)
 }
 
-/// The two rows of the model grid output row `y` interpolates between: cell
-/// row `a`, and `b` with weight `fy` ([`model_rows`]). Each holds `cells_x ·
-/// model_len(Q)` values.
-#[derive(Clone, Copy, Debug)]
-pub struct ModelRows<'a> {
-    pub a: &'a [f32],
-    pub b: &'a [f32],
-    pub fy: f32,
-}
-
-/// The model rows output row `y` interpolates between, in a grid of `cells_y`
-/// rows of `cells_x · ml` values.
-pub fn model_rows(models: &[f32], cells_x: usize, cells_y: usize, ml: usize, block: usize, y: usize) -> ModelRows<'_> {
+/// Vertically interpolated model row for output row `y` into `out` (`cells_x * ml`),
+/// and the horizontal differences `slopes[i] = out[i + 1] − out[i]` per cell
+/// (`(cells_x − 1) * ml`), so the SIMD path splats both straight from memory.
+#[allow(clippy::too_many_arguments)]
+pub fn lerp_rows(models: &[f32], cells_x: usize, cells_y: usize, ml: usize, block: usize, y: usize, out: &mut [f32], slopes: &mut [f32]) {
     let (j, fy) = cell_pos(y, block, cells_y);
     let row = cells_x * ml;
     let a = &models[j * row..(j + 1) * row];
-    let b = if fy == 0.0 { a } else { &models[(j + 1) * row..(j + 2) * row] };
-    ModelRows { a, b, fy }
-}
-
-impl ModelRows<'_> {
-    /// Cell `i`'s model at this output row, `a + (b − a)·fy`, into `out[..ml]`.
-    #[inline(always)]
-    fn cell(&self, i: usize, ml: usize, out: &mut [f32]) {
-        self.cells(i, 1, ml, out);
-    }
-    /// The models of cells `i..i + n` at this output row into `out[..n · ml]`.
-    #[inline(always)]
-    fn cells(&self, i: usize, n: usize, ml: usize, out: &mut [f32]) {
-        let r = i * ml..(i + n) * ml;
-        let (a, out) = (&self.a[r.clone()], &mut out[..n * ml]);
-        if self.fy == 0.0 {
-            out.copy_from_slice(a);
-            return;
-        }
-        for ((o, a), b) in out.iter_mut().zip(a).zip(&self.b[r]) {
-            *o = a + (b - a) * self.fy;
+    if fy == 0.0 {
+        out.copy_from_slice(a);
+    } else {
+        let b = &models[(j + 1) * row..(j + 2) * row];
+        for ((o, a), b) in out.iter_mut().zip(a).zip(b) {
+            *o = a + (b - a) * fy;
         }
     }
-}
-
-/// Most model values (`model_len(MAX_GUIDES)`).
-const MAX_ML: usize = super::model_len(MAX_GUIDES);
-
-/// Spans whose models [`Spans`] interpolates at once.
-const CHUNK: usize = 16;
-
-/// The spans between consecutive cell centres of one output row, `CHUNK` at
-/// a time: [`Spans::fill`] interpolates the models of spans `i0..` to the row
-/// into buffers that stay in L1 (a few KB), then [`Spans::span`] gives span
-/// `i0 + c`'s model `c_i` (its left cell's) and slope `c_{i+1} − c_i`, which
-/// the groups splat. (Before session 30 a whole row of models and slopes was
-/// interpolated first: two ~20 KB arrays per row at 1080p, ~1 ms per frame
-/// more. Filling inside the group loop, one span or one chunk at a time, was
-/// slower still: the compiler then kept the group's constants on the stack.)
-pub(super) struct Spans<'r> {
-    rows: ModelRows<'r>,
-    ml: usize,
-    cells_x: usize,
-    models: [f32; (CHUNK + 1) * MAX_ML],
-    slopes: [f32; CHUNK * MAX_ML],
-}
-
-impl<'r> Spans<'r> {
-    #[inline(always)]
-    pub(super) fn new(rows: ModelRows<'r>, ml: usize, cells_x: usize) -> Self {
-        Spans { rows, ml, cells_x, models: [0.0; (CHUNK + 1) * MAX_ML], slopes: [0.0; CHUNK * MAX_ML] }
-    }
-    /// Interpolates spans `i0..i0 + n` (`i0 < cells_x − 1`) and returns `n`,
-    /// at most `CHUNK`.
-    #[inline(always)]
-    pub(super) fn fill(&mut self, i0: usize) -> usize {
-        let ml = self.ml;
-        let n = CHUNK.min(self.cells_x - 1 - i0);
-        // cells i0..=i0 + n, one flat run of values
-        self.rows.cells(i0, n + 1, ml, &mut self.models);
-        let (m, next) = (&self.models[..n * ml], &self.models[ml..(n + 1) * ml]);
-        for ((s, a), b) in self.slopes[..n * ml].iter_mut().zip(m).zip(next) {
-            *s = b - a;
-        }
-        n
-    }
-    /// Model and slope of the filled chunk's span `c`.
-    #[inline(always)]
-    pub(super) fn span(&self, c: usize) -> (&[f32], &[f32]) {
-        let ml = self.ml;
-        (&self.models[c * ml..(c + 1) * ml], &self.slopes[c * ml..(c + 1) * ml])
+    let n = (cells_x - 1) * ml;
+    for ((s, a), b) in slopes[..n].iter_mut().zip(&out[..n]).zip(&out[ml..]) {
+        *s = b - a;
     }
 }
 
@@ -129,12 +61,13 @@ pub struct RowGuides<'a> {
     pub width: usize,
 }
 
-/// Evaluates one output row into `out` (3 planes of `width`), interpolating
-/// the models of `rows` ([`model_rows`]). A pixel with a non-finite guide gets
-/// the local mean; returns how many did.
+/// Evaluates one output row into `out` (3 planes of `width`). A pixel with a
+/// non-finite guide gets the local mean; returns how many did. `row_slopes`
+/// are the differences of consecutive cells' models ([`lerp_rows`]).
 #[allow(clippy::too_many_arguments)]
 pub fn apply_row<const Q: usize>(
-    rows: ModelRows<'_>,
+    row_models: &[f32],
+    row_slopes: &[f32],
     cells_x: usize,
     block: usize,
     guides: RowGuides<'_>,
@@ -144,69 +77,46 @@ pub fn apply_row<const Q: usize>(
 ) -> usize {
     let w = guides.width;
     let ml = super::model_len(Q);
-    if guides.rows[..Q].iter().any(|r| r.len() < w) || out.len() < 3 * w || rows.a.len() < cells_x * ml || rows.b.len() < cells_x * ml {
+    if guides.rows[..Q].iter().any(|r| r.len() < w)
+        || out.len() < 3 * w
+        || row_models.len() < cells_x * ml
+        || row_slopes.len() < (cells_x - 1) * ml
+    {
         return 0; // unreachable from the FLR driver, which sizes every buffer
     }
     let (o0, rest) = out.split_at_mut(w);
     let (o1, o2) = rest.split_at_mut(w);
     let mut outs = [o0, o1, &mut o2[..w]];
     let mut fallback = 0;
-    let mut pair = CellPair::new();
 
     let mut x = 0;
     if simd && block.is_multiple_of(8) && cells_x > 1 {
         // Left edge: pixels before the first centre use cell 0 alone (scalar below).
         let half = block / 2;
         while x < half.min(w) {
-            fallback += scalar_px::<Q>(&rows, &mut pair, cells_x, block, ml, &guides, clamp, x, &mut outs);
+            fallback += scalar_px::<Q>(row_models, cells_x, block, ml, &guides, clamp, x, &mut outs);
             x += 1;
         }
         let span = Span { ml, block, half, cells_x };
         let (f, end) = if clamp {
-            simd_spans_on::<Q, true>(Isa::detect(), rows, &span, &guides, &mut outs)
+            simd_spans_on::<Q, true>(Isa::detect(), row_models, row_slopes, &span, &guides, &mut outs)
         } else {
-            simd_spans_on::<Q, false>(Isa::detect(), rows, &span, &guides, &mut outs)
+            simd_spans_on::<Q, false>(Isa::detect(), row_models, row_slopes, &span, &guides, &mut outs)
         };
         fallback += f;
         x = end;
     }
     while x < w {
-        fallback += scalar_px::<Q>(&rows, &mut pair, cells_x, block, ml, &guides, clamp, x, &mut outs);
+        fallback += scalar_px::<Q>(row_models, cells_x, block, ml, &guides, clamp, x, &mut outs);
         x += 1;
     }
     fallback
 }
 
-/// The models of cells `i` and `i + 1` at one output row, for the pixels
-/// done one at a time: kept while consecutive pixels lie in the same span.
-struct CellPair {
-    i: usize,
-    m: [[f32; MAX_ML]; 2],
-}
-
-impl CellPair {
-    fn new() -> Self {
-        CellPair { i: usize::MAX, m: [[0.0; MAX_ML]; 2] }
-    }
-    /// Cell `i`'s model and, if `i + 1 < cells_x`, cell `i + 1`'s.
-    #[inline(always)]
-    fn get(&mut self, rows: &ModelRows<'_>, i: usize, cells_x: usize, ml: usize) -> &[[f32; MAX_ML]; 2] {
-        if self.i != i {
-            self.i = i;
-            rows.cell(i, ml, &mut self.m[0]);
-            if i + 1 < cells_x {
-                rows.cell(i + 1, ml, &mut self.m[1]);
-            }
-        }
-        &self.m
-    }
-}
-
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn scalar_px<const Q: usize>(
-    rows: &ModelRows<'_>,
-    pair: &mut CellPair,
+    row_models: &[f32],
     cells_x: usize,
     block: usize,
     ml: usize,
@@ -216,10 +126,8 @@ fn scalar_px<const Q: usize>(
     outs: &mut [&mut [f32]; 3],
 ) -> usize {
     let (i, fx) = cell_pos(x, block, cells_x);
-    // (fx > 0 only where cell i + 1 exists)
-    let m = pair.get(rows, i, cells_x, ml);
-    let a = &m[0][..ml];
-    let b = if fx == 0.0 { a } else { &m[1][..ml] };
+    let a = &row_models[i * ml..(i + 1) * ml];
+    let b = if fx == 0.0 { a } else { &row_models[(i + 1) * ml..(i + 2) * ml] };
     let lerp = |j: usize| a[j] + (b[j] - a[j]) * fx;
     let mut d = [0f32; MAX_GUIDES];
     let mut valid = true;
@@ -255,7 +163,8 @@ struct Span {
 #[inline(always)]
 fn simd_spans_on<const Q: usize, const CLAMP: bool>(
     isa: Isa,
-    rows: ModelRows<'_>,
+    row_models: &[f32],
+    row_slopes: &[f32],
     sp: &Span,
     guides: &RowGuides<'_>,
     outs: &mut [&mut [f32]; 3],
@@ -263,17 +172,18 @@ fn simd_spans_on<const Q: usize, const CLAMP: bool>(
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
         // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
-        return unsafe { avx2::simd_spans::<Q, CLAMP>(rows, sp, guides, outs) };
+        return unsafe { avx2::simd_spans::<Q, CLAMP>(row_models, row_slopes, sp, guides, outs) };
     }
     let _ = isa;
-    simd_spans::<Q, CLAMP>(rows, sp, guides, outs)
+    simd_spans::<Q, CLAMP>(row_models, row_slopes, sp, guides, outs)
 }
 
 /// Every whole 8-pixel group between the first and last cell centres; returns
 /// the fallback count and the first pixel not done.
 #[inline(always)]
 fn simd_spans<const Q: usize, const CLAMP: bool>(
-    rows: ModelRows<'_>,
+    row_models: &[f32],
+    row_slopes: &[f32],
     sp: &Span,
     guides: &RowGuides<'_>,
     outs: &mut [&mut [f32]; 3],
@@ -286,44 +196,35 @@ fn simd_spans<const Q: usize, const CLAMP: bool>(
         reference[q] = f32x8::splat(guides.reference[q]);
     }
     let (mut fallback, mut x) = (0, sp.half.min(w));
-    let mut spans = Spans::new(rows, ml, sp.cells_x);
-    let mut i0 = 0;
     if sp.block == 8 {
         // One group per span. Kept apart from the general loop: there the
         // compiler hoists the span's 2·ml splats out of the group loop and,
         // with too few registers, spills them: ~2× the instructions per group.
-        while i0 < sp.cells_x - 1 {
-            let n = spans.fill(i0);
-            for c in 0..n {
-                let x0 = (i0 + c) * 8 + sp.half;
-                if x0 + 8 > w {
-                    return (fallback, x);
-                }
-                let (base, slope) = spans.span(c);
-                fallback += simd_group::<Q, CLAMP>(base, slope, fx0, &reference, guides, x0, outs);
-                x = x0 + 8;
+        for i in 0..sp.cells_x - 1 {
+            let x0 = i * 8 + sp.half;
+            if x0 + 8 > w {
+                break;
             }
-            i0 += n;
+            let (base, slope) = (&row_models[i * ml..(i + 1) * ml], &row_slopes[i * ml..(i + 1) * ml]);
+            fallback += simd_group::<Q, CLAMP>(base, slope, fx0, &reference, guides, x0, outs);
+            x = x0 + 8;
         }
         return (fallback, x);
     }
-    while i0 < sp.cells_x - 1 {
-        let n = spans.fill(i0);
-        for c in 0..n {
-            let start = (i0 + c) * sp.block + sp.half;
-            // The span's model is `a + fx·(b − a)`: both splatted from memory per group.
-            let (base, slope) = spans.span(c);
-            for g in 0..sp.block / 8 {
-                let x0 = start + 8 * g;
-                if x0 + 8 > w {
-                    return (fallback, x);
-                }
-                let fx = if g == 0 { fx0 } else { fx0 + f32x8::splat((8 * g) as f32) * inv_b };
-                fallback += simd_group::<Q, CLAMP>(base, slope, fx, &reference, guides, x0, outs);
-                x = x0 + 8;
+    for i in 0..sp.cells_x - 1 {
+        let start = i * sp.block + sp.half;
+        // The span's model is `a + fx·(b − a)`: both splatted from memory per group.
+        let base = &row_models[i * ml..(i + 1) * ml];
+        let slope = &row_slopes[i * ml..(i + 1) * ml];
+        for g in 0..sp.block / 8 {
+            let x0 = start + 8 * g;
+            if x0 + 8 > w {
+                return (fallback, x);
             }
+            let fx = if g == 0 { fx0 } else { fx0 + f32x8::splat((8 * g) as f32) * inv_b };
+            fallback += simd_group::<Q, CLAMP>(base, slope, fx, &reference, guides, x0, outs);
+            x = x0 + 8;
         }
-        i0 += n;
     }
     (fallback, x)
 }
@@ -407,7 +308,7 @@ mod tests {
         fn case<const Q: usize>(rows: &[[f32; W]; MAX_GUIDES], models: &[f32], block: usize, clamp: bool) {
             let ml = crate::kernels::model_len(Q);
             let cells_x = W.div_ceil(block);
-            let mrows = ModelRows { a: &models[..cells_x * ml], b: &models[ml..(cells_x + 1) * ml], fy: 0.375 };
+            let (base, slopes) = (&models[..cells_x * ml], &models[ml..(cells_x + 1) * ml]);
             let guides =
                 RowGuides { rows: core::array::from_fn(|q| &rows[q][..]), reference: core::array::from_fn(|q| 0.25 * q as f32), width: W };
             let span = Span { ml, block, half: block / 2, cells_x };
@@ -416,12 +317,12 @@ mod tests {
                 let [a, b, c] = &mut out;
                 let mut outs = [&mut a[..], &mut b[..], &mut c[..]];
                 let r = match (isa, clamp) {
-                    (Isa::Portable, true) => simd_spans::<Q, true>(mrows, &span, &guides, &mut outs),
-                    (Isa::Portable, false) => simd_spans::<Q, false>(mrows, &span, &guides, &mut outs),
+                    (Isa::Portable, true) => simd_spans::<Q, true>(base, slopes, &span, &guides, &mut outs),
+                    (Isa::Portable, false) => simd_spans::<Q, false>(base, slopes, &span, &guides, &mut outs),
                     // SAFETY: the test returned early unless the CPU has AVX2 and FMA.
-                    (Isa::Avx2Fma, true) => unsafe { avx2::simd_spans::<Q, true>(mrows, &span, &guides, &mut outs) },
+                    (Isa::Avx2Fma, true) => unsafe { avx2::simd_spans::<Q, true>(base, slopes, &span, &guides, &mut outs) },
                     // SAFETY: as above.
-                    (Isa::Avx2Fma, false) => unsafe { avx2::simd_spans::<Q, false>(mrows, &span, &guides, &mut outs) },
+                    (Isa::Avx2Fma, false) => unsafe { avx2::simd_spans::<Q, false>(base, slopes, &span, &guides, &mut outs) },
                 };
                 (r, out)
             };
