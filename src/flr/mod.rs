@@ -31,7 +31,7 @@ use crate::error::{Arg, Error};
 use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
-use crate::kernels::blur::{blur_cols_band, blur_row, Taps};
+use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, Taps};
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cells4, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
@@ -842,15 +842,24 @@ impl Flr {
     /// `pooled` for a pooled window ([`Flr::window_pooled`]); `tmp_tile` is
     /// `window_cells_tile_range(s, t)` of `tmp`.
     pub fn blur_rows_tile_at(&self, s: usize, t: usize, src: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
+        let (r0, r1) = self.window_tile_rows(self.scale(s)?, t)?;
+        let row_len = self.grids[s].cells_x * self.lay.k;
+        if src.len() != self.window_grid_len(s) {
+            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
+        }
+        self.blur_rows_band_at(s, t, &src[r0 * row_len..r1 * row_len], tmp_tile)
+    }
+
+    /// [`Flr::blur_rows_tile_at`] given tile `t`'s band of `src` alone.
+    fn blur_rows_band_at(&self, s: usize, t: usize, band: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
         let taps = &self.taps[self.scale(s)?];
         let (r0, r1) = self.window_tile_rows(s, t)?;
         let row_len = self.grids[s].cells_x * self.lay.k;
-        if src.len() != self.window_grid_len(s) || tmp_tile.len() != (r1 - r0) * row_len {
+        if band.len() != (r1 - r0) * row_len || tmp_tile.len() != (r1 - r0) * row_len {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
         }
-        for (b, dst) in tmp_tile.chunks_exact_mut(row_len).enumerate() {
-            let j = r0 + b;
-            blur_row(taps, self.lay.k, &src[j * row_len..(j + 1) * row_len], dst);
+        for (src, dst) in band.chunks_exact(row_len).zip(tmp_tile.chunks_exact_mut(row_len)) {
+            blur_row(taps, self.lay.k, src, dst);
         }
         Ok(())
     }
@@ -1099,24 +1108,45 @@ impl Flr {
         // into `first` with the adaptive window (whose other windows still
         // read the raw moments).
         let lag = self.taps[0].radius.div_ceil(TILE_CELL_ROWS);
+        // Rings: the vertical blur of tile u reads the horizontally blurred
+        // tiles u − lag ..= u + lag, so `tmp` need only hold 2·lag + 1 of them
+        // (rounded up to a power of two), and with the larger windows all
+        // pooled the raw moments are needed only while their own tile is
+        // processed: one tile of `cells`. Both then stay in L2 instead of
+        // leaving two frame-sized grids (10 MB each at 1080p) for memory to
+        // write back (session 30). The Gaussian only: the box blur's sliding
+        // window restarts per tile from the whole grid.
+        let row_len = self.cells_x * self.lay.k;
+        let ring = (2 * lag + 1).next_power_of_two() * TILE_CELL_ROWS;
+        let tmp_ring = !self.taps[0].is_box && ring < self.cells_y;
+        let cells_ring = tmp_ring && !single && (1..self.scale_count()).all(|s| self.window_pooled(s));
         let mut sums = StatsSums::default();
         for t in 0..tiles + lag {
             if t < tiles {
                 let c = self.cells_tile_range(t)?;
-                rep += self.moments_tile(&f, &stats, t, &mut parts.cells[c.clone()], parts.workers)?;
-                self.stats_tile(t, &parts.cells[c.clone()], &mut sums)?;
+                let (r0, r1) = self.tile_rows(t)?;
+                let band = if cells_ring { 0..c.len() } else { c.clone() };
+                rep += self.moments_tile(&f, &stats, t, &mut parts.cells[band.clone()], parts.workers)?;
+                self.stats_tile(t, &parts.cells[band.clone()], &mut sums)?;
                 if let Some(s) = self.pooled_window() {
                     // Pool while the band is in cache.
-                    self.pool_tile(t, &parts.cells[c.clone()], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
+                    self.pool_tile(t, &parts.cells[band.clone()], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
                 }
                 // The horizontal blur reads only its own band.
-                self.blur_rows_tile(t, parts.cells, &mut parts.tmp[c])?;
+                let at = if tmp_ring { (r0 % ring) * row_len..(r0 % ring + r1 - r0) * row_len } else { c };
+                self.blur_rows_band_at(0, t, &parts.cells[band], &mut parts.tmp[at])?;
             }
             if t >= lag {
                 let u = t - lag;
                 let c = self.cells_tile_range(u)?;
                 let dst = if single { &mut parts.cells[c] } else { &mut parts.first[c] };
-                self.blur_cols_tiles(u..u + 1, parts.tmp, dst)?;
+                if tmp_ring {
+                    let (taps, r0) = (&self.taps[0], self.tile_rows(u)?.0);
+                    let bad = Error::InvalidTile { index: u, count: tiles };
+                    blur_cols_band_ring(taps, row_len, self.cells_y, r0, &parts.tmp[..ring * row_len], ring, dst).ok_or(bad)?;
+                } else {
+                    self.blur_cols_tiles(u..u + 1, parts.tmp, dst)?;
+                }
             }
         }
         self.finish_stats_sums(&sums, &mut stats);
