@@ -310,7 +310,8 @@ pub(super) fn row_pairs<T: ColLanes>(
     x
 }
 
-/// Lanes the vertical pass accumulates: `f64x4` here, AVX registers in [`avx2`].
+/// Lanes the Gaussian loops shared by both instruction sets ([`row_pairs`],
+/// [`col_chunk`]) accumulate in: `f64x4` here, AVX registers in [`avx2`].
 pub(super) trait ColLanes: Copy {
     fn scale(self, w: f64) -> Self;
     /// `(self + other)·w + acc`, fused where the target has it.
