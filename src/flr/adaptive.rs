@@ -165,8 +165,8 @@ fn gaps_lanes<T: F64Lanes, const Q: usize>(cell: impl Fn(usize) -> T, model: imp
 
 /// The luminance of the difference between window `w`'s and window 0's
 /// coefficient triple `j..j + 3`: `0 + L₀Δ₀ + L₁Δ₁ + L₂Δ₂`, in that order.
-/// (A function rather than a closure: as a closure it was not inlined, and
-/// the call per coefficient cost more than its arithmetic.)
+/// (A function rather than a closure, which the compiler had left as a call
+/// per coefficient.)
 #[inline(always)]
 fn luma_gap<T: F64Lanes>(model: &impl Fn(usize, usize) -> T, w: usize, j: usize) -> T {
     let d = |c: usize| T::splat(L[c]) * (model(w, j + c) - model(0, j + c));
