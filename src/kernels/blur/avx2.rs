@@ -6,7 +6,7 @@
 //! version in an `x86-64-v3` build (bit-identical there); `blur::tests`
 //! compares the two.
 
-use super::{col_chunk, row_pairs, ColLanes, LANES, VECS};
+use super::{row_pairs, tap_chunk, ColLanes, ALL, LANES, VECS};
 use core::arch::x86_64::{
     __m256d, _mm256_add_pd, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd,
 };
@@ -40,8 +40,9 @@ unsafe fn store(a: &[__m256d; VECS], d: &mut [f64]) {
     }
 }
 
-/// The horizontal pass's interior, values `x..` in steps of `LANES` while
-/// `x + LANES ≤ end`: `dst[x] = w0·src[x] + Σ_o w_o (src[x − o·k] + src[x + o·k])`.
+/// The horizontal pass's interior, values `x..` while `x + LANES ≤ end`:
+/// `dst[x] = w0·src[x] + Σ_o w_o (src[x − o·k] + src[x + o·k])`, two cells at a
+/// time ([`row_pairs`]), then `LANES` values at a time ([`tap_chunk`]).
 /// Returns the first value not done.
 ///
 /// # Safety
@@ -63,25 +64,14 @@ pub(super) unsafe fn row_interior(w: &[f64], r: usize, k: usize, src: &[f64], ds
         }
     });
     while x + LANES <= end {
-        let w0 = _mm256_set1_pd(w[0]);
-        let mut acc = unsafe { load(&src[x..]) };
-        for v in acc.iter_mut() {
-            *v = _mm256_mul_pd(*v, w0);
-        }
-        for o in 1..=r {
-            let (a, b) = unsafe { (load(&src[x - o * k..]), load(&src[x + o * k..])) };
-            let wo = _mm256_set1_pd(w[o]);
-            for l in 0..VECS {
-                acc[l] = _mm256_fmadd_pd(_mm256_add_pd(a[l], b[l]), wo, acc[l]);
-            }
-        }
-        unsafe { store(&acc, &mut dst[x..]) };
+        let acc = tap_chunk::<Lanes>(w, r, ALL, 0, |o| unsafe { load(&src[(x as isize + o * k as isize) as usize..]) }.map(Lanes));
+        unsafe { store(&acc.map(|v| v.0), &mut dst[x..]) };
         x += LANES;
     }
     x
 }
 
-/// Four f64 lanes in one AVX register for [`col_chunk`] and [`row_pairs`].
+/// Four f64 lanes in one AVX register for [`tap_chunk`] and [`row_pairs`].
 /// Made only inside [`cols_strip`] and [`row_interior`],
 /// `#[target_feature(enable = "avx2,fma")]` functions that run only where the
 /// CPU has them: that is what makes its safe methods (AVX and FMA
@@ -109,7 +99,7 @@ impl ColLanes for Lanes {
 
 /// The vertical pass's chunks `c..` in steps of `LANES` while `c + LANES ≤
 /// end`, of output row `j` into `out` and, unless `next` is empty, of row
-/// `j + 1` into `next` ([`col_chunk`]); `src` holds the grid's `cells_y`
+/// `j + 1` into `next` ([`tap_chunk`]); `src` holds the grid's `cells_y`
 /// rows, row `j` at `j & wrap`. Returns the first value not done.
 ///
 /// # Safety
@@ -132,10 +122,10 @@ pub(super) unsafe fn cols_strip(
     // SAFETY (every `load`/`store`): AVX2 and FMA are enabled in this function.
     let row = |jj: isize, c: usize| unsafe { load(&src[(jj as usize & wrap) * row_len + c..]) }.map(Lanes);
     while c + LANES <= end {
-        let acc = col_chunk::<Lanes>(w, r, cells_y as isize, j, |jj| row(jj, c));
+        let acc = tap_chunk::<Lanes>(w, r, 0..cells_y as isize, j, |jj| row(jj, c));
         unsafe { store(&acc.map(|v| v.0), &mut out[c..]) };
         if !next.is_empty() {
-            let acc = col_chunk::<Lanes>(w, r, cells_y as isize, j + 1, |jj| row(jj, c));
+            let acc = tap_chunk::<Lanes>(w, r, 0..cells_y as isize, j + 1, |jj| row(jj, c));
             unsafe { store(&acc.map(|v| v.0), &mut next[c..]) };
         }
         c += LANES;

@@ -11,6 +11,7 @@ mod avx2;
 
 use crate::config::MAX_RADIUS_CELLS;
 use crate::isa::Isa;
+use core::ops::Range;
 use wide::f64x4;
 
 /// Gaussian taps `w[0..=r]` for offsets `0..=r` (symmetric), normalised so the
@@ -91,7 +92,6 @@ fn blur_row_on(isa: Isa, taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     // range: out[x] = w0·src[x] + Σ_o w_o (src[x − o·k] + src[x + o·k]),
     // accumulated in registers `LANES` values at a time and stored once.
     let r = taps.radius;
-    let at = |x: usize, o: usize, left: bool| if left { src[x - o * k] } else { src[x + o * k] };
     let (i0, i1) = if cx > 2 * r { (r, cx - r) } else { (cx, cx) };
     let mut x = i0 * k;
     #[cfg(target_arch = "x86_64")]
@@ -102,27 +102,15 @@ fn blur_row_on(isa: Isa, taps: &Taps, k: usize, src: &[f64], dst: &mut [f64]) {
     }
     let _ = isa;
     x = row_pairs::<f64x4>(&taps.w, r, k, x, i1 * k, |i| load::<2>(&src[i..]), |i, v| store(&v, &mut dst[i..]));
+    // An odd interior cell left over: LANES values at a time, then value by value.
+    let cell = |x: usize, o: isize| (x as isize + o * k as isize) as usize;
     while x + LANES <= i1 * k {
-        let w0 = f64x4::splat(taps.w[0]);
-        let mut acc = load::<VECS>(&src[x..]).map(|v| v * w0);
-        for o in 1..=r {
-            let (a, b) = (load::<VECS>(&src[x - o * k..]), load::<VECS>(&src[x + o * k..]));
-            let wo = f64x4::splat(taps.w[o]);
-            for l in 0..VECS {
-                acc[l] = (a[l] + b[l]).mul_add(wo, acc[l]);
-            }
-        }
+        let acc = tap_chunk::<f64x4>(&taps.w, r, ALL, 0, |o| load::<VECS>(&src[cell(x, o)..]));
         store(&acc, &mut dst[x..]);
         x += LANES;
     }
-    // The interior's tail (fewer than LANES values), value by value.
     for x in x..i1 * k {
-        let mut acc = src[x] * taps.w[0];
-        for o in 1..=r {
-            acc += taps.w[o] * at(x, o, true);
-            acc += taps.w[o] * at(x, o, false);
-        }
-        dst[x] = acc;
+        dst[x] = tap_value(&taps.w, r, ALL, 0, |o| src[cell(x, o)]);
     }
     // Border cells (taps beyond the row are zero), a whole cell at a time so
     // the k values vectorise; same operations in the same order per value.
@@ -243,18 +231,18 @@ fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0
                 c = unsafe { avx2::cols_strip(&taps.w, r, src, row_len, wrap, cells_y, j, out, next, c, s1) };
             }
             while c + LANES <= s1 {
-                let acc = col_chunk::<f64x4>(&taps.w, r, cells_y as isize, j, |jj| load::<VECS>(&row(jj)[c..]));
+                let acc = tap_chunk::<f64x4>(&taps.w, r, 0..cells_y as isize, j, |jj| load::<VECS>(&row(jj)[c..]));
                 store(&acc, &mut out[c..]);
                 if two {
-                    let acc = col_chunk::<f64x4>(&taps.w, r, cells_y as isize, j + 1, |jj| load::<VECS>(&row(jj)[c..]));
+                    let acc = tap_chunk::<f64x4>(&taps.w, r, 0..cells_y as isize, j + 1, |jj| load::<VECS>(&row(jj)[c..]));
                     store(&acc, &mut next[c..]);
                 }
                 c += LANES;
             }
             for cc in c..s1 {
-                out[cc] = col_value(&taps.w, r, cells_y as isize, j, |jj| row(jj)[cc]);
+                out[cc] = tap_value(&taps.w, r, 0..cells_y as isize, j, |jj| row(jj)[cc]);
                 if two {
-                    next[cc] = col_value(&taps.w, r, cells_y as isize, j + 1, |jj| row(jj)[cc]);
+                    next[cc] = tap_value(&taps.w, r, 0..cells_y as isize, j + 1, |jj| row(jj)[cc]);
                 }
             }
             b += if two { 2 } else { 1 };
@@ -311,7 +299,7 @@ pub(super) fn row_pairs<T: ColLanes>(
 }
 
 /// Lanes the Gaussian loops shared by both instruction sets ([`row_pairs`],
-/// [`col_chunk`]) accumulate in: `f64x4` here, AVX registers in [`avx2`].
+/// [`tap_chunk`]) accumulate in: `f64x4` here, AVX registers in [`avx2`].
 pub(super) trait ColLanes: Copy {
     fn scale(self, w: f64) -> Self;
     /// `(self + other)·w + acc`, fused where the target has it.
@@ -335,22 +323,28 @@ impl ColLanes for f64x4 {
     }
 }
 
-/// One output chunk of the vertical pass at row `j`: `row(jj)` loads input row
-/// `jj`'s chunk. The same operations in the same order in every lane type.
+/// Positions every tap of a row's interior may read (no border).
+const ALL: Range<isize> = isize::MIN..isize::MAX;
+
+/// One output chunk of a Gaussian pass about position `j`: `w0·x_j + Σ_o w_o
+/// (x_{j−o} + x_{j+o})`, positions outside `valid` left out, `at(p)` loading
+/// position `p`'s chunk (a row of the grid for the vertical pass; for the
+/// horizontal pass's interior, `valid` is [`ALL`] and `p` an offset in cells).
+/// The same operations in the same order in every lane type.
 #[inline(always)]
-pub(super) fn col_chunk<T: ColLanes>(w: &[f64], r: usize, cells_y: isize, j: isize, row: impl Fn(isize) -> [T; VECS]) -> [T; VECS] {
-    let mut acc = row(j).map(|v| v.scale(w[0]));
+pub(super) fn tap_chunk<T: ColLanes>(w: &[f64], r: usize, valid: Range<isize>, j: isize, at: impl Fn(isize) -> [T; VECS]) -> [T; VECS] {
+    let mut acc = at(j).map(|v| v.scale(w[0]));
     for o in 1..=r {
         let (up, down) = (j - o as isize, j + o as isize);
-        match (up >= 0, down < cells_y) {
+        match (valid.contains(&up), valid.contains(&down)) {
             (true, true) => {
-                let (a, b) = (row(up), row(down));
+                let (a, b) = (at(up), at(down));
                 for l in 0..VECS {
                     acc[l] = a[l].pair_add(b[l], w[o], acc[l]);
                 }
             }
             (true, false) | (false, true) => {
-                let a = row(if up >= 0 { up } else { down });
+                let a = at(if valid.contains(&up) { up } else { down });
                 for l in 0..VECS {
                     acc[l] = a[l].one_add(w[o], acc[l]);
                 }
@@ -361,16 +355,16 @@ pub(super) fn col_chunk<T: ColLanes>(w: &[f64], r: usize, cells_y: isize, j: isi
     acc
 }
 
-/// [`col_chunk`] of one value (the strip's tail), unfused.
+/// [`tap_chunk`] of one value (a strip's or an interior's tail), unfused.
 #[inline(always)]
-fn col_value(w: &[f64], r: usize, cells_y: isize, j: isize, row: impl Fn(isize) -> f64) -> f64 {
-    let mut acc = row(j) * w[0];
+fn tap_value(w: &[f64], r: usize, valid: Range<isize>, j: isize, at: impl Fn(isize) -> f64) -> f64 {
+    let mut acc = at(j) * w[0];
     for o in 1..=r {
         let (up, down) = (j - o as isize, j + o as isize);
-        let pair = match (up >= 0, down < cells_y) {
-            (true, true) => row(up) + row(down),
-            (true, false) => row(up),
-            (false, true) => row(down),
+        let pair = match (valid.contains(&up), valid.contains(&down)) {
+            (true, true) => at(up) + at(down),
+            (true, false) => at(up),
+            (false, true) => at(down),
             (false, false) => continue,
         };
         acc += pair * w[o];
