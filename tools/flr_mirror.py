@@ -7,7 +7,7 @@ rebuild. With no options it gives `lrd eval`'s FLR PSNR on frames that fill whol
 
     python3 tools/flr_mirror.py frames/train/*.exr [--sigmas 6,12,20] [--lattice 32]
         [--shrink K] [--basis chol|eig] [--shrink-variance] [--mse-blur CELLS]
-        [--weight-power P] [--chroma WINDOW]
+        [--weight-power P] [--chroma WINDOW] [--subsets 0123;... --subset-windows 0,1]
 
 Experiments (session 29, docs/PERFORMANCE.md; none kept):
   --lattice N       frame guide mean/std from an N×N lattice of samples, not all pixels
@@ -17,6 +17,11 @@ Experiments (session 29, docs/PERFORMANCE.md; none kept):
   --mse-blur C      blur the blend's per-cell MSE estimates over C cells (Gaussian σ)
   --weight-power P  blend weights 1 / MSE^P
   --chroma S        one chromaticity per cell, from window S; only luminance per pixel
+Session 31 (docs/PERFORMANCE.md, "Guide-subset candidates"; not in the library yet):
+  --subsets 0123 --subset-windows 0
+                    also fit window 0 without AO (guides 0..3 of normal xyz, depth, ao),
+                    a candidate blended like a window: variance r (Q' + 1) / N with its
+                    own Q', bias² from its gap to window 0's full fit
 Training frames only: never tune on the test split (tools/render.py --split test).
 """
 import math
@@ -63,6 +68,25 @@ def moments(y, z):
     zy = (z[:, None] * y[None]).reshape(q * 3, *z.shape[1:])
     feats = np.concatenate([ones, z, zz, y, zy, l * l], 0).astype(np.float64)
     return block_sum(feats, B)
+
+
+def sub_moments(m, q, keep):
+    """Moment vector of the guide subset `keep` (indices into the q guides)."""
+    keep = list(keep)
+    idx = [0] + [1 + i for i in keep]
+    idx += [1 + q + i * q + j for i in keep for j in keep]
+    idx += [1 + q + q * q + c for c in range(3)]
+    idx += [4 + q + q * q + i * 3 + c for i in keep for c in range(3)]
+    idx += [4 + 4 * q + q * q]
+    return m[idx]
+
+
+def expand(f, q, keep):
+    """A subset fit's model with zero coefficients for the dropped guides."""
+    gh, gw = f["c0"].shape[:2]
+    beta = np.zeros((gh, gw, q, 3))
+    beta[..., list(keep), :] = f["beta"]
+    return dict(c0=f["c0"], beta=beta)
 
 
 def conv1d(m, k, axis):
@@ -169,7 +193,7 @@ def resize_bilinear(x, oh, ow, sh, sw):
     return a[..., x0] * (1 - tx) + a[..., x1] * tx
 
 
-def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, shrink=(0.0, 0.0, 0.0), basis="chol", use_f=False, mse_blur=0.0, K=BIAS_DISCOUNT, wpow=1.0, chroma=None, lattice=0):
+def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, shrink=(0.0, 0.0, 0.0), basis="chol", use_f=False, mse_blur=0.0, K=BIAS_DISCOUNT, wpow=1.0, chroma=None, lattice=0, subsets=(), subset_windows=(0, 1, 2)):
     q, h, w = g.shape
     gs = g
     if lattice:
@@ -182,21 +206,28 @@ def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, shrink=(0.0,
     m = moments(y, z)
     gh, gw = m.shape[1:]
     fits, v = [], []
-    for k, sg in enumerate(sigmas):
+    cands = [(k, sg, tuple(range(q))) for k, sg in enumerate(sigmas)]
+    for keep in subsets:
+        cands += [(k, sg, keep) for k, sg in enumerate(sigmas) if k in subset_windows]
+    for k, sg, keep in cands:
+        qq = len(keep)
         pooled = k > 0 and sg >= 1.5 * B
+        mm = m if qq == q else sub_moments(m, q, keep)
         if not pooled:
-            f = solve(blur(m, sg), q, eps_mul, eps_add, shrink[k], sg, basis=basis)
-            fits.append(f)
-            v.append(variance(f, q, sg, use_f=use_f))
+            f = solve(blur(mm, sg), qq, eps_mul, eps_add, shrink[k], sg, basis=basis)
+            v.append(variance(f, qq, sg, use_f=use_f))
+            fits.append(f if qq == q else expand(f, q, keep))
             continue
-        mp = block_sum(m, 2)
-        f = solve(blur(mp, sg / 2), q, eps_mul, eps_add, shrink[k], sg, cell=4 * B * B, basis=basis)
-        vp = variance(f, q, sg, cell=4 * B * B, use_f=use_f)
+        mp = block_sum(mm, 2)
+        f = solve(blur(mp, sg / 2), qq, eps_mul, eps_add, shrink[k], sg, cell=4 * B * B, basis=basis)
+        vp = variance(f, qq, sg, cell=4 * B * B, use_f=use_f)
+        f = f if qq == q else expand(f, q, keep)
         pgh, pgw = mp.shape[1:]
         cb = np.concatenate([f["c0"], f["beta"].reshape(pgh, pgw, q * 3), vp[..., None]], -1)
         cb = np.moveaxis(resize_bilinear(np.moveaxis(cb, -1, 0), gh, gw, 2, 2), 0, -1)
         fits.append(dict(c0=cb[..., :3], beta=cb[..., 3:3 + 3 * q].reshape(gh, gw, q, 3)))
         v.append(cb[..., -1])
+    sigmas = [c[1] for c in cands]  # the blend below weighs every candidate like a window
     if len(sigmas) == 1:
         c0, beta = fits[0]["c0"], fits[0]["beta"]
     else:
@@ -246,10 +277,13 @@ def main():
     ap.add_argument("--mse-blur", type=float, default=0.0)
     ap.add_argument("--weight-power", type=float, default=1.0)
     ap.add_argument("--chroma", type=int, default=None)
+    ap.add_argument("--subsets", default="", help="extra candidate guide subsets, e.g. 0123;012 (indices into normal x, y, z, depth, ao)")
+    ap.add_argument("--subset-windows", default="0,1,2", help="the windows (indices into --sigmas) fitted with each subset too")
     a = ap.parse_args()
     sigmas = tuple(float(v) for v in a.sigmas.split(","))
     kw = dict(sigmas=sigmas, shrink=(a.shrink,) * len(sigmas), basis=a.basis, use_f=a.shrink_variance,
-              mse_blur=a.mse_blur, wpow=a.weight_power, chroma=a.chroma, lattice=a.lattice)
+              mse_blur=a.mse_blur, wpow=a.weight_power, chroma=a.chroma, lattice=a.lattice,
+              subsets=[tuple(int(c) for c in t) for t in a.subsets.split(';') if t], subset_windows=tuple(int(x) for x in a.subset_windows.split(',')))
     scores = []
     for f in sorted(sum((glob.glob(p) for p in a.frames), [])):
         fr = load(f)
