@@ -24,7 +24,7 @@ fn main() {
         let mut gs = Vec::with_capacity(n);
         for c in 0..n {
             let m = [&models[0][c * ml..(c + 1) * ml], &models[1][c * ml..(c + 1) * ml], &models[2][c * ml..(c + 1) * ml]];
-            gs.push(prediction_gaps::<Q>(&cells[c * k..(c + 1) * k], m, 1e-9));
+            gs.push(prediction_gaps::<Q, 3>(&cells[c * k..(c + 1) * k], m, 1e-9));
         }
         best[0] = best[0].min(t.elapsed().as_secs_f64());
         let t = Instant::now();
@@ -71,7 +71,7 @@ fn main() {
                 std::array::from_fn(|w| &models[w][c * ml..(c + 1) * ml])
             });
             let v: [[f64; 4]; 3] = std::array::from_fn(|w| std::array::from_fn(|l| vs[4 * q + l] * [1.0, 0.5, 0.25][w]));
-            blend4::<Q>(&cells[4 * q * k..4 * (q + 1) * k], m, v, 1e-9, &mut lanes, &mut out4[4 * q * ml..4 * (q + 1) * ml]);
+            blend4::<Q, 3>(&cells[4 * q * k..4 * (q + 1) * k], m, v, 1e-9, &mut lanes, &mut out4[4 * q * ml..4 * (q + 1) * ml]);
         }
         best4[1] = best4[1].min(t.elapsed().as_secs_f64());
     }

@@ -1,7 +1,8 @@
-//! Times `Flr::denoise` with the defaults (adaptive window) and with one
-//! σ = 12 px window on the synthetic 1920×1080 frame of `examples/stages`
+//! Times `Flr::denoise` with the defaults (adaptive window), with one
+//! σ = 12 px window and with the defaults plus the AO-free candidate
+//! (`adaptive_without_ao`) on the synthetic 1920×1080 frame of `examples/stages`
 //! (planar normal + depth + AO, interleaved RGB in and out), one thread; the
-//! fastest of RUNS (default 15) each, alternating the two configurations.
+//! fastest of RUNS (default 15) each, alternating the configurations.
 //! `cargo run --release --example frame_time [WIDTH HEIGHT [RUNS]]`
 use lrdenoise::*;
 use std::time::Instant;
@@ -22,6 +23,7 @@ fn main() {
     let configs = [
         ("defaults", FlrConfig::default()),
         ("sigma 12", FlrConfig { blur: Blur::Gaussian { sigma: config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::default() }),
+        ("without ao", FlrConfig { adaptive_without_ao: true, ..FlrConfig::default() }),
     ];
     let flrs: Vec<Flr> = configs.iter().map(|(_, c)| Flr::new(*c, w, h).unwrap()).collect();
     let mut scratch: Vec<Vec<f64>> = flrs.iter().map(|f| vec![0f64; f.scratch_len()]).collect();

@@ -74,6 +74,15 @@ pub struct FlrConfig {
     pub clamp_negative: bool,
     /// Kernel implementation.
     pub kernel: Kernel,
+    /// Adaptive window only, with AO among the guides: also fit the smallest
+    /// window without the AO channel (from the same blurred moments: one more
+    /// solve per cell, no blur) and blend that fit as a fourth candidate, with
+    /// the variance of its one coefficient fewer and its bias measured like a
+    /// larger window's (`flr::adaptive`). AO helps some scenes and costs
+    /// others up to half a dB; this lets each cell choose. Off by default
+    /// until the GPU path has it; on the training scenes +0.1–0.2 dB, on the
+    /// held-out scenes +0.05 dB (README, "Towards FLR = OIDN").
+    pub adaptive_without_ao: bool,
 }
 
 // Defaults tuned on the training scenes (tools/render.py --split train, 256×256,
@@ -104,6 +113,7 @@ impl Default for FlrConfig {
             upsample: 1,
             clamp_negative: true,
             kernel: Kernel::Simd,
+            adaptive_without_ao: false,
         }
     }
 }
@@ -151,6 +161,9 @@ impl FlrConfig {
                     return Err(Error::InvalidConfig("adaptive sigmas (must be finite, > 0 and increasing)"));
                 }
             }
+        }
+        if self.adaptive_without_ao && !(matches!(self.blur, Blur::Adaptive { .. }) && self.guides.ao) {
+            return Err(Error::InvalidConfig("adaptive_without_ao needs the adaptive window and AO among the guides"));
         }
         let reg_ok = |v: f64| (0.0..1.0).contains(&v);
         match self.regularization {

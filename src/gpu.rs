@@ -336,6 +336,9 @@ impl GpuPlan {
         if q > GPU_MAX_GUIDES {
             return Err(Error::TooManyGuides { got: q });
         }
+        if cfg.adaptive_without_ao {
+            return Err(Error::Unsupported("adaptive_without_ao is not on the GPU path yet"));
+        }
         let plan = GpuPlan { flr };
         if (0..plan.windows()).any(|s| plan.taps(s).radius >= TAPS) {
             return Err(Error::Unsupported("the GPU path blurs at most 67 cells wide"));

@@ -38,6 +38,16 @@ impl GuideSet {
         3 * self.normal as usize + self.depth as usize + 3 * self.position as usize + self.ao as usize + self.user as usize
     }
 
+    /// The AO channel's index among the `Q` guide channels (they come in the
+    /// order normal, depth, position, AO, user), if AO is in the set.
+    pub const fn ao_channel(&self) -> Option<usize> {
+        if self.ao {
+            Some(3 * self.normal as usize + self.depth as usize + 3 * self.position as usize)
+        } else {
+            None
+        }
+    }
+
     pub(crate) fn validate(&self) -> Result<(), Error> {
         if self.user as usize > MAX_USER_GUIDES {
             return Err(Error::InvalidConfig("guides.user (at most 4 user guides)"));

@@ -30,10 +30,19 @@ fn lerp_corners(p: usize, n: usize) -> [(usize, f64); 2] {
 
 /// Window `sigma` of the adaptive reference at B = 1, pooled (cells of 2×2
 /// pixels, the Gaussian over cell offsets with σ/2 and ⌈3σ/2⌉ cells) or not.
-fn window_fit(cfg: &FlrConfig, sigma: f32, pooled: bool, (w, h): (usize, usize), guides: &[Vec<f64>], y: &[f32]) -> WindowFit {
+/// `valid`: the pixels the library fits (every guide finite, also those a
+/// guide subset leaves out).
+fn window_fit(
+    cfg: &FlrConfig,
+    sigma: f32,
+    pooled: bool,
+    (w, h): (usize, usize),
+    guides: &[Vec<f64>],
+    valid: &[bool],
+    y: &[f32],
+) -> WindowFit {
     let q = guides.len();
-    let valid = valid_pixels(w, h, guides, y);
-    let scales = frame_scales(w, h, guides, &valid);
+    let scales = frame_scales(w, h, guides, valid);
     let g = |i: usize| (0..q).map(|a| guides[a][i]).collect::<Vec<_>>();
     let luma = |m: &PixelModel, i: usize| (0..3).map(|c| L[c] * m.predict(&g(i), c)).sum::<f64>();
     let light = |i: usize| (0..3).map(|c| L[c] * y[3 * i + c] as f64).sum::<f64>();
@@ -99,22 +108,33 @@ fn window_fit(cfg: &FlrConfig, sigma: f32, pooled: bool, (w, h): (usize, usize),
 
 /// The adaptive estimator written out per pixel in f64: each window's models
 /// fitted directly (on 2×2-pixel cells for the windows the library pools, and
-/// interpolated to the pixel); residual variances measured directly over the
-/// window; the bias term from the predictions' squared difference over the
-/// smallest window; weights 1 / (bias² + variance).
+/// interpolated to the pixel); with `adaptive_without_ao`, window 0 fitted
+/// again on the guides without AO; residual variances measured directly over
+/// the window (with each fit's own coefficient count); the bias term from the
+/// predictions' squared difference over the smallest window; weights 1 /
+/// (bias² + variance).
 fn adaptive_reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
     let Blur::Adaptive { sigmas } = cfg.blur else { panic!("adaptive only") };
     assert_eq!(cfg.block, 1);
     let q = guides.len();
     let pooled = |s: usize| s > 0 && lrdenoise::flr::adaptive::pooled(sigmas[s], 1);
-    let fits: Vec<_> = (0..3).map(|s| window_fit(cfg, sigmas[s], pooled(s), (w, h), guides, y)).collect();
-    let first = window_kernel(Blur::Gaussian { sigma: sigmas[0], radius: None });
     let valid = valid_pixels(w, h, guides, y);
-    let g = |i: usize| (0..q).map(|a| guides[a][i]).collect::<Vec<_>>();
-    // window `s`'s prediction of channel `c` at pixel `i` with pixel `k`'s model
+    // each candidate's fit and the guides it uses
+    let all: Vec<usize> = (0..q).collect();
+    let mut fits: Vec<_> = (0..3).map(|s| (window_fit(cfg, sigmas[s], pooled(s), (w, h), guides, &valid, y), all.clone())).collect();
+    if cfg.adaptive_without_ao {
+        let ao = cfg.guides.ao_channel().expect("AO");
+        let keep: Vec<usize> = all.iter().copied().filter(|&a| a != ao).collect();
+        let sub: Vec<Vec<f64>> = keep.iter().map(|&a| guides[a].clone()).collect();
+        fits.push((window_fit(cfg, sigmas[0], false, (w, h), &sub, &valid, y), keep));
+    }
+    let n = fits.len();
+    let first = window_kernel(Blur::Gaussian { sigma: sigmas[0], radius: None });
+    // candidate `s`'s prediction of channel `c` at pixel `i` with pixel `k`'s model
     let predict = |s: usize, k: usize, i: usize, c: usize| -> Option<f64> {
-        let f = &fits[s];
-        f.corners[k].iter().map(|&(cell, wt)| f.models[cell].as_ref().map(|m| wt * m.predict(&g(i), c))).sum()
+        let (f, keep) = &fits[s];
+        let g: Vec<f64> = keep.iter().map(|&a| guides[a][i]).collect();
+        f.corners[k].iter().map(|&(cell, wt)| f.models[cell].as_ref().map(|m| wt * m.predict(&g, c))).sum()
     };
     let luma = |s: usize, k: usize, i: usize| (0..3).map(|c| predict(s, k, i, c).map(|p| L[c] * p)).sum::<Option<f64>>();
     let mut out = vec![0.0; 3 * w * h];
@@ -122,25 +142,26 @@ fn adaptive_reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], 
         let (px, py) = ((k % w) as isize, (k / w) as isize);
         let taps0 = window_taps(&first.0, first.1, (w, h), &valid, (px, py));
         let n0: f64 = taps0.iter().map(|t| t.1).sum();
-        let mut v = [f64::INFINITY; 3];
-        let mut gap = [0.0; 3];
-        for s in 0..3 {
+        let mut v = vec![f64::INFINITY; n];
+        let mut gap = vec![0.0; n];
+        for s in 0..n {
             if luma(s, k, k).is_none() {
                 continue;
             }
-            v[s] = fits[s].corners[k].iter().map(|&(cell, wt)| wt * fits[s].variances[cell]).sum();
+            let f = &fits[s].0;
+            v[s] = f.corners[k].iter().map(|&(cell, wt)| wt * f.variances[cell]).sum();
             if s > 0 && luma(0, k, k).is_some() {
                 gap[s] = taps0.iter().map(|&(i, wt)| wt * (luma(s, k, i).unwrap() - luma(0, k, i).unwrap()).powi(2)).sum::<f64>() / n0;
             }
         }
-        let mut wts = [0.0; 3];
-        for s in 0..3 {
+        let mut wts = vec![0.0; n];
+        for s in 0..n {
             let mse = if s == 0 { v[0] } else { (gap[s] - BIAS_DISCOUNT * (v[0] - v[s]).max(0.0)).max(0.0) + v[s] };
             wts[s] = if mse.is_finite() { 1.0 / mse.max(1e-300) } else { 0.0 };
         }
         let total: f64 = wts.iter().sum();
         for c in 0..3 {
-            out[3 * k + c] = (0..3).filter(|&s| wts[s] > 0.0).map(|s| wts[s] * predict(s, k, k, c).unwrap()).sum::<f64>() / total;
+            out[3 * k + c] = (0..n).filter(|&s| wts[s] > 0.0).map(|s| wts[s] * predict(s, k, k, c).unwrap()).sum::<f64>() / total;
         }
     }
     out
@@ -173,6 +194,17 @@ fn block1_matches_reference() {
             let want = adaptive_reference(&c, f.w, f.h, &ch, &f.noisy);
             let (max, mean) = diff(&out, &want);
             assert!(max < 1e-3 && mean < 1e-5, "{sigmas:?} {set:?}: max {max} mean {mean}");
+            if set.ao {
+                // window 0 without AO as a fourth candidate: the reference with it,
+                // and far from the three-window blend
+                let c4 = FlrConfig { adaptive_without_ao: true, ..c };
+                let (out4, _) = run(c4, &f);
+                let (max4, mean4) = diff(&out4, &adaptive_reference(&c4, f.w, f.h, &ch, &f.noisy));
+                assert!(max4 < 1e-3 && mean4 < 1e-5, "{sigmas:?} without AO: max {max4} mean {mean4}");
+                let three: Vec<f64> = out.iter().map(|&v| v as f64).collect();
+                let (m, _) = diff(&out4, &three);
+                assert!(m > 20.0 * max4, "{sigmas:?}: the AO-free candidate moves the blend only {m}");
+            }
             // sensitivity: each single window is far from the blend
             for s in [sigmas[0], sigmas[2]] {
                 let single = reference(&FlrConfig { blur: Blur::Gaussian { sigma: s, radius: None }, ..c }, f.w, f.h, &ch, &f.noisy);
@@ -234,9 +266,19 @@ fn tiled_equals_whole_frame() {
         (256, 9, 8, d),
         (257, 9, 8, d),
     ] {
+        for without_ao in [false, true] {
+            tiled_case(w, h, block, sigmas, without_ao);
+        }
+    }
+}
+
+/// One case of [`tiled_equals_whole_frame`]: every stage tile by tile,
+/// bottom to top, against `denoise`; the scalar kernels against SIMD.
+fn tiled_case(w: usize, h: usize, block: usize, sigmas: [f32; 3], without_ao: bool) {
+    {
         let f = Owned::synthetic(w, h, 5, 0.5);
         let set = GuideSet::NORMAL_DEPTH_AO;
-        let c = adaptive(set, block, sigmas);
+        let c = FlrConfig { adaptive_without_ao: without_ao, ..adaptive(set, block, sigmas) };
         let (whole, _) = run(c, &f);
         let flr = Flr::new(c, w, h).unwrap();
         let frame = f.frame(set);
@@ -273,7 +315,7 @@ fn tiled_equals_whole_frame() {
         }
         for t in (0..nt).rev() {
             let r = flr.cells_tile_range(t).unwrap();
-            flr.blend_tile(t, &p.first[r], p.scale_models, p.variances, &mut p.models[flr.models_tile_range(t).unwrap()]).unwrap();
+            flr.blend_tile(&stats, t, &p.first[r], p.scale_models, p.variances, &mut p.models[flr.models_tile_range(t).unwrap()]).unwrap();
         }
         let mut out = vec![0f32; 3 * w * h];
         for t in (0..nt).rev() {
@@ -282,10 +324,10 @@ fn tiled_equals_whole_frame() {
             flr.apply_tile(&cf, &stats, t, p.models, p.workers, &mut band).unwrap();
         }
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&out), bits(&whole), "{w}x{h} B={block}");
+        assert_eq!(bits(&out), bits(&whole), "{w}x{h} B={block} without_ao {without_ao}");
         let (scalar, _) = run(FlrConfig { kernel: Kernel::Scalar, ..c }, &f);
         let worst = scalar.iter().zip(&whole).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-        assert!(worst < 1e-4, "{w}x{h} B={block}: scalar vs SIMD {worst}");
+        assert!(worst < 1e-4, "{w}x{h} B={block} without_ao {without_ao}: scalar vs SIMD {worst}");
     }
 }
 
@@ -346,16 +388,26 @@ fn configuration_errors() {
     assert!(matches!(unpooled.pool_tile(0, &cells, &mut pooled), Err(Error::InvalidTile { .. })));
     let single = Flr::new(FlrConfig::default(), 64, 64).unwrap();
     let mut m = vec![0f32; single.models_tile_len(0).unwrap()];
-    assert!(matches!(single.blend_tile(0, &cells, &[], &[], &mut m), Err(Error::InvalidTile { .. })));
+    assert!(matches!(single.blend_tile(&Stats::default(), 0, &cells, &[], &[], &mut m), Err(Error::InvalidTile { .. })));
+    // the AO-free candidate needs the adaptive window and AO
+    for bad in [
+        FlrConfig { adaptive_without_ao: true, ..cfg(GuideSet::NORMAL_DEPTH_AO, 8) },
+        FlrConfig { adaptive_without_ao: true, ..adaptive(GuideSet::NORMAL_DEPTH, 8, [6.0, 12.0, 20.0]) },
+    ] {
+        assert!(matches!(Flr::new(bad, 64, 64), Err(Error::InvalidConfig(_))), "{bad:?}");
+    }
     assert!(matches!(single.blur_rows_tile_at(1, 0, &cells, &mut tmp), Err(Error::InvalidTile { .. })));
 }
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
     /// Garbage in (NaN, ±Inf, HDR 1e-8..1e6, offsets, duplicated or constant
-    /// guides): the adaptive window's output is finite and non-negative.
+    /// guides): the adaptive window's output is finite and non-negative,
+    /// with and without the AO-free candidate.
     #[test]
-    fn output_is_finite(seed in 0u64..1000, scale in -8i32..7, offset in 0f32..1e4, nan_every in 0usize..40, dup in any::<bool>()) {
+    fn output_is_finite(
+        seed in 0u64..1000, scale in -8i32..7, offset in 0f32..1e4, nan_every in 0usize..40, dup in any::<bool>(), without_ao in any::<bool>(),
+    ) {
         let (w, h) = (37, 29);
         let mut f = Owned::synthetic(w, h, seed, 0.8);
         let s = 10f32.powi(scale);
@@ -367,7 +419,7 @@ proptest! {
             for v in f.normal.iter_mut().step_by(nan_every * 11 + 3) { *v = f32::NAN; }
         }
         let c = adaptive(GuideSet::NORMAL_DEPTH_AO, 8, [6.0, 12.0, 20.0]);
-        let (out, _) = run(FlrConfig { clamp_negative: true, ..c }, &f);
+        let (out, _) = run(FlrConfig { clamp_negative: true, adaptive_without_ao: without_ao, ..c }, &f);
         prop_assert!(out.iter().all(|v| v.is_finite() && *v >= 0.0));
     }
 }

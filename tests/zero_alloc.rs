@@ -45,8 +45,9 @@ fn denoise_allocates_nothing() {
         (GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 }, 4, Regularization::Tikhonov { eps: 1e-4 }),
         (GuideSet::NONE, 16, Regularization::Normalized { eps_mul: 1e-4, eps_add: 1e-4 }),
     ] {
-        for blur in [Blur::Gaussian { sigma: 12.0, radius: None }, Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] }] {
-            let c = FlrConfig { regularization: reg, block, blur, ..FlrConfig::with_guides(set) };
+        let adaptive = Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] };
+        for (blur, without_ao) in [(Blur::Gaussian { sigma: 12.0, radius: None }, false), (adaptive, false), (adaptive, set.ao)] {
+            let c = FlrConfig { regularization: reg, block, blur, adaptive_without_ao: without_ao, ..FlrConfig::with_guides(set) };
             let flr = Flr::new(c, f.w, f.h).unwrap();
             let mut scratch = vec![0f64; flr.scratch_len()];
             let mut out = vec![0f32; f.w * f.h * 3];
@@ -56,7 +57,7 @@ fn denoise_allocates_nothing() {
                 let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
                 flr.denoise(&frame, &mut scratch, &mut ov).unwrap();
             }
-            assert_eq!(mine() - before, 0, "{set:?} {blur:?}");
+            assert_eq!(mine() - before, 0, "{set:?} {blur:?} without_ao {without_ao}");
         }
     }
 }

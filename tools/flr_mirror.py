@@ -17,7 +17,7 @@ Experiments (session 29, docs/PERFORMANCE.md; none kept):
   --mse-blur C      blur the blend's per-cell MSE estimates over C cells (Gaussian σ)
   --weight-power P  blend weights 1 / MSE^P
   --chroma S        one chromaticity per cell, from window S; only luminance per pixel
-Session 31 (docs/PERFORMANCE.md, "Guide-subset candidates"; not in the library yet):
+Session 31 (README, "Towards FLR = OIDN"; in the library as FlrConfig::adaptive_without_ao, off by default):
   --subsets 0123 --subset-windows 0
                     also fit window 0 without AO (guides 0..3 of normal xyz, depth, ao),
                     a candidate blended like a window: variance r (Q' + 1) / N with its

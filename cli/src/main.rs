@@ -242,6 +242,7 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(FlrArgs { box_radius: Some(16.0), ..Default::default() }),
         Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
         Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
+        Variant::flr(FlrArgs { without_ao: true, ..Default::default() }),
         Variant::flr(FlrArgs::default()).on("noisy4"),
         Variant::method("bmfr", FlrArgs::default()),
         Variant::method("bmfr", FlrArgs { shrinkage: Some(0.0), ..Default::default() }),
@@ -337,12 +338,17 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         let gs = if g.is_empty() { "none".to_string() } else { g.join(",") };
         for block in [4, 8, 16] {
             for sigma in ["6", "12", "24", "6,12,20"] {
-                variants.push(Variant::flr(FlrArgs {
-                    guides: Some(gs.clone()),
-                    block: Some(block),
-                    sigma: Some(sigma.into()),
-                    ..Default::default()
-                }));
+                // the adaptive window with AO also without AO as a candidate (`--without-ao`)
+                let with_ao = sigma.contains(',') && g.contains(&"ao");
+                for without_ao in [false, true].into_iter().take(1 + with_ao as usize) {
+                    variants.push(Variant::flr(FlrArgs {
+                        guides: Some(gs.clone()),
+                        block: Some(block),
+                        sigma: Some(sigma.into()),
+                        without_ao,
+                        ..Default::default()
+                    }));
+                }
             }
         }
     }
@@ -389,6 +395,23 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
         let without = flr.iter().filter(|r| !uses(r, gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
         let verdict = if with - without > 0.1 { "keep" } else { "can drop" };
         println!("  guide {gname:<8}: best with {with:.2} dB, without {without:.2} dB ({:+.2} dB) -> {verdict}", with - without);
+    }
+    // The AO-free candidate: the best adaptive configuration with AO, with and without it
+    let adaptive_ao = |free: bool| {
+        flr.iter()
+            .filter(|r| uses(r, "ao") && r.flags.contains("--sigma 6,12,20") && r.flags.contains("--without-ao") == free)
+            .max_by(|a, b| a.psnr.total_cmp(&b.psnr))
+    };
+    if let (Some(d), Some(f)) = (adaptive_ao(false), adaptive_ao(true)) {
+        let verdict = if f.psnr - d.psnr > 0.1 { "use it (--without-ao)" } else { "skip it" };
+        println!(
+            "  flr without-ao   : best adaptive with AO {:.2} dB in {:.3} ms, with the AO-free candidate {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
+            d.psnr,
+            d.ms,
+            f.psnr,
+            f.ms,
+            f.psnr - d.psnr
+        );
     }
     // BMFR and WALR, each against its own default
     let find = |method: &str, flag: &str| records.iter().find(|r| r.method == method && r.flags.contains(flag));

@@ -45,6 +45,9 @@ pub struct FlrArgs {
     /// Joint denoise + upsample: trace at 1/2 or 1/4 resolution (emulated by taking every 2nd/4th pixel of the noisy layer)
     #[arg(long)]
     pub upsample: Option<usize>,
+    /// Adaptive window with AO: also fit the smallest window without AO and let each cell's blend weigh that fit too (CPU only; off by default)
+    #[arg(long)]
+    pub without_ao: bool,
     /// WALR: à-trous iterations (1..=5; 4 = an 81x81 window)
     #[arg(long)]
     pub iterations: Option<u8>,
@@ -97,6 +100,7 @@ impl FlrArgs {
             || self.box_radius.is_some()
             || self.regularization.is_some()
             || self.upsample.is_some()
+            || self.without_ao
     }
     fn has_walr_flags(&self) -> bool {
         self.iterations.is_some()
@@ -208,6 +212,10 @@ impl FlrArgs {
         if let Some(u) = self.upsample {
             c.upsample = u;
         }
+        if self.without_ao && !(matches!(c.blur, Blur::Adaptive { .. }) && c.guides.ao) {
+            return Err("--without-ao needs the adaptive window (the default, or three --sigma values) and the ao guide".into());
+        }
+        c.adaptive_without_ao = self.without_ao;
         c.validate().map_err(|e| format!("flr flags: {e}"))?;
         Ok(c)
     }
@@ -215,9 +223,16 @@ impl FlrArgs {
 
 /// BMFR's configuration from the shared flags.
 pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
-    if a.sigma.is_some() || a.radius.is_some() || a.box_radius.is_some() || a.regularization.is_some() || a.upsample.is_some() {
+    if a.sigma.is_some()
+        || a.radius.is_some()
+        || a.box_radius.is_some()
+        || a.regularization.is_some()
+        || a.upsample.is_some()
+        || a.without_ao
+    {
         return Err(
-            "--sigma, --radius, --box, --regularization and --upsample are FLR flags; bmfr takes --guides, --block and --shrinkage".into(),
+            "--sigma, --radius, --box, --regularization, --upsample and --without-ao are FLR flags; bmfr takes --guides, --block and --shrinkage"
+                .into(),
         );
     }
     if a.has_walr_flags() {
@@ -252,8 +267,9 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
         || a.upsample.is_some()
         || a.block.is_some()
         || a.shrinkage.is_some()
+        || a.without_ao
     {
-        return Err("--block, --sigma, --radius, --box, --regularization, --upsample and --shrinkage are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
+        return Err("--block, --sigma, --radius, --box, --regularization, --upsample, --without-ao and --shrinkage are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
     }
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
@@ -371,6 +387,9 @@ pub fn flag_line(c: &FlrConfig) -> String {
     if c.upsample > 1 {
         s += &format!(" --upsample {}", c.upsample);
     }
+    if c.adaptive_without_ao {
+        s += " --without-ao";
+    }
     s
 }
 
@@ -387,7 +406,8 @@ pub fn label(c: &FlrConfig) -> String {
         _ => "",
     };
     let up = if c.upsample > 1 { format!(" up{}", c.upsample) } else { String::new() };
-    format!("flr {g} b{} {blur}{reg}{up}", c.block)
+    let ao = if c.adaptive_without_ao { " -ao" } else { "" };
+    format!("flr {g} b{} {blur}{ao}{reg}{up}", c.block)
 }
 
 /// A runnable method on one frame size.

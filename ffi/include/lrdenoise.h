@@ -295,6 +295,12 @@ typedef struct LrdFlrConfig {
    * Use the portable scalar kernels (testing).
    */
   bool scalar_kernels;
+  /**
+   * LRD_BLUR_ADAPTIVE with LRD_GUIDE_AO: also fit the smallest window
+   * without AO and blend it as a fourth candidate (off by default; see
+   * `FlrConfig::adaptive_without_ao`). Not on the GPU path yet.
+   */
+  bool adaptive_without_ao;
 } LrdFlrConfig;
 
 /**

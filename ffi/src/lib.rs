@@ -165,6 +165,10 @@ pub struct LrdFlrConfig {
     pub clamp_negative: bool,
     /// Use the portable scalar kernels (testing).
     pub scalar_kernels: bool,
+    /// LRD_BLUR_ADAPTIVE with LRD_GUIDE_AO: also fit the smallest window
+    /// without AO and blend it as a fourth candidate (off by default; see
+    /// `FlrConfig::adaptive_without_ao`). Not on the GPU path yet.
+    pub adaptive_without_ao: bool,
 }
 
 /// What happened during a run (added to by every call that takes one).
@@ -371,6 +375,7 @@ fn config(c: &LrdFlrConfig) -> Result<FlrConfig, LrdStatus> {
         upsample: c.upsample as usize,
         clamp_negative: c.clamp_negative,
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
+        adaptive_without_ao: c.adaptive_without_ao,
     };
     cfg.validate().map_err(status_of)?;
     Ok(cfg)
@@ -464,6 +469,7 @@ pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
         upsample: 1,
         clamp_negative: d.clamp_negative,
         scalar_kernels: false,
+        adaptive_without_ao: d.adaptive_without_ao,
     }
 }
 
@@ -772,7 +778,8 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
                     let nv = flr.scale_variances_tile_range(windows - 1, nt - 1).map_err(st)?.end;
                     let m = flr.models_tile_range(tile).map_err(st)?;
                     let models = raw.f32s_mut(l.models.start, m.start, m.len());
-                    flr.blend_tile(tile, first, raw.f32s(l.scale_models.start, 0, nm), raw.f64s(l.variances.start, nv), models)
+                    let stats = raw.stats.read();
+                    flr.blend_tile(&stats, tile, first, raw.f32s(l.scale_models.start, 0, nm), raw.f64s(l.variances.start, nv), models)
                         .map_err(st)?;
                     Report::default()
                 }

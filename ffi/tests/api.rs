@@ -406,25 +406,34 @@ fn walr_matches_the_rust_api() {
 
 /// LRD_BLUR_ADAPTIVE runs through lrd_flr_denoise (same output as the Rust
 /// API) and through the tiled stages (BLEND included; tiles in reverse order
-/// on two alternating workers), bit-identical, with and without pooled windows.
+/// on two alternating workers), bit-identical, with and without pooled
+/// windows, and with an AO guide with and without `adaptive_without_ao`.
 #[test]
 fn adaptive_window_whole_frame_and_tiled() {
     // σ 6/12/20 px at B = 8: windows 1 and 2 on the pooled grid; 3/6/10: none pooled
     for (w, h, sigmas) in [(101u32, 75u32, [6.0, 12.0, 20.0]), (45, 33, [3.0, 6.0, 10.0])] {
-        adaptive_case(w, h, sigmas);
+        for (ao, without_ao) in [(false, false), (true, false), (true, true)] {
+            adaptive_case(w, h, sigmas, ao, without_ao);
+        }
     }
 }
 
-fn adaptive_case(w: u32, h: u32, sigmas: [f32; 3]) {
+fn adaptive_case(w: u32, h: u32, sigmas: [f32; 3], ao: bool, without_ao: bool) {
     use lrdenoise_core::{Blur, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut};
     let n = (w * h) as usize;
     let noisy: Vec<f32> = (0..3 * n).map(|i| ((i * 7919) % 13) as f32 * 0.1).collect();
     let depth = depth_ramp(w, h);
+    // an AO guide that varies across the rows, where the depth varies down them
+    let occlusion: Vec<f32> = (0..n).map(|i| 0.5 + 0.4 * ((i % w as usize) as f32 * 0.3).sin()).collect();
     let mut cfg = lrd_flr_config_default();
-    cfg.guides = LRD_GUIDE_DEPTH;
+    cfg.guides = if ao { LRD_GUIDE_DEPTH | LRD_GUIDE_AO } else { LRD_GUIDE_DEPTH };
     cfg.blur = LrdBlur::LRD_BLUR_ADAPTIVE as u32;
     cfg.sigmas = sigmas;
-    let frame = depth_frame(&noisy, &depth, w, h);
+    cfg.adaptive_without_ao = without_ao;
+    let mut frame = depth_frame(&noisy, &depth, w, h);
+    if ao {
+        frame.guides.ao = img(occlusion.as_ptr(), w, h, 1);
+    }
     let mut out = vec![0f32; 3 * n];
     let o = packed_out(&mut out, w, h);
     let (mut scratch, bytes) = flr_scratch(&cfg, w, h);
@@ -456,10 +465,11 @@ fn adaptive_case(w: u32, h: u32, sigmas: [f32; 3]) {
         assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
     }
     assert!(out.iter().zip(&tiled).all(|(a, b)| a.to_bits() == b.to_bits()), "{w}x{h} tiled != whole");
-    let set = GuideSet { depth: true, ..GuideSet::NONE };
-    let c = FlrConfig { blur: Blur::Adaptive { sigmas }, ..FlrConfig::with_guides(set) };
+    let set = GuideSet { depth: true, ao, ..GuideSet::NONE };
+    let c = FlrConfig { blur: Blur::Adaptive { sigmas }, adaptive_without_ao: without_ao, ..FlrConfig::with_guides(set) };
     let flr = Flr::new(c, w as usize, h as usize).unwrap();
-    let guides = Guides { depth: Some(ImageView::interleaved(&depth, w as usize, h as usize, 1).unwrap()), ..Guides::default() };
+    let view = |v| Some(ImageView::interleaved(v, w as usize, h as usize, 1).unwrap());
+    let guides = Guides { depth: view(&depth[..]), ao: if ao { view(&occlusion[..]) } else { None }, ..Guides::default() };
     let f = Frame::new(ImageView::interleaved(&noisy, w as usize, h as usize, 3).unwrap(), guides);
     let mut want = vec![0f32; 3 * n];
     let mut scratch = vec![0f64; flr.scratch_len()];

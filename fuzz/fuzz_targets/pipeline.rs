@@ -19,13 +19,21 @@ fuzz_target!(|d: &[u8]| {
     };
     let guides = GuideSet { normal: d[7] & 1 != 0, depth: d[7] & 2 != 0, position: d[7] & 4 != 0, ao: d[7] & 8 != 0, user: 0 };
     let pad = d[8] as usize % 3; // extra elements per pixel (RGBA-like strides)
-    let blur = if d[9] & 1 == 0 { Blur::Gaussian { sigma, radius: None } } else { Blur::Box { radius: sigma } };
+    // the adaptive window (with the AO-free candidate when AO is a guide and
+    // bit 3 is set) is checked whole-frame only: its staged order is longer
+    let adaptive = d[9] & 4 != 0;
+    let blur = match (adaptive, d[9] & 1) {
+        (true, _) => Blur::Adaptive { sigmas: [sigma, 2.0 * sigma, 3.5 * sigma] },
+        (false, 0) => Blur::Gaussian { sigma, radius: None },
+        _ => Blur::Box { radius: sigma },
+    };
     let cfg = FlrConfig {
         guides,
         block,
         blur,
         regularization: reg,
         kernel: if d[9] & 2 == 0 { Kernel::Simd } else { Kernel::Scalar },
+        adaptive_without_ao: adaptive && guides.ao && d[9] & 8 != 0,
         ..FlrConfig::default()
     };
     let body = &d[12..];
@@ -64,6 +72,9 @@ fuzz_target!(|d: &[u8]| {
     let mut whole = vec![0f32; 3 * n];
     flr.denoise(&frame, &mut scratch, &mut ImageViewMut::interleaved(&mut whole, w, h, 3).unwrap()).unwrap();
     assert!(whole.iter().all(|v| v.is_finite()));
+    if adaptive {
+        return;
+    }
     // tiled, reverse order
     let p = flr.split_scratch(&mut scratch, 1).unwrap();
     let f = flr.check_frame(&frame).unwrap();

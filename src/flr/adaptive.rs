@@ -58,6 +58,10 @@ pub fn pooled_taps(i: usize, n: usize) -> [(usize, f64); 2] {
     }
 }
 
+/// Most candidates a cell's blend weighs: the three windows and the AO-free
+/// fit of window 0 ([`crate::FlrConfig::adaptive_without_ao`]).
+pub const MAX_CANDIDATES: usize = 4;
+
 /// Luminance weights in f64.
 const L: [f64; 3] = [LUMA[0] as f64, LUMA[1] as f64, LUMA[2] as f64];
 
@@ -112,50 +116,59 @@ fn variance_lanes<T: F64Lanes, const Q: usize>(
     v.set_where(empty | v.not_above(s(-1.0)), f64::INFINITY)
 }
 
-/// `d_s²` for windows 1 and 2: the mean squared difference between the
+/// `d_s²` for candidates `1..N` (windows 1 and 2, then the AO-free fit of
+/// window 0 when there is one): the mean squared difference between the
 /// luminance predictions of `models[s]` and `models[0]` (the smallest
 /// window's) over the smallest window, whose blurred moments are `cell`:
 /// `(Δc₀ + Δcᵀμ)² + Δcᵀ Σ Δc`. `gaps[0]` is 0.
-pub fn prediction_gaps<const Q: usize>(cell: &[f64], models: [&[f32]; 3], min_weight: f64) -> [f64; 3] {
-    gaps_lanes::<f64, Q>(|m| cell[m], |w, j| models[w][j] as f64, min_weight)
+pub fn prediction_gaps<const Q: usize, const N: usize>(cell: &[f64], models: [&[f32]; N], min_weight: f64) -> [f64; N] {
+    gaps_lanes::<f64, Q, N>(|m| cell[m], |w, j| models[w][j] as f64, min_weight)
 }
 
 /// [`prediction_gaps`] of one cell (`T = f64`) or four (`f64x4`); `cell(m)`
 /// reads moment `m`, `model(w, j)` value `j` of window `w`'s model. Empty
 /// lanes get 0, non-finite gaps `+∞`.
 #[inline(always)]
-fn gaps_lanes<T: F64Lanes, const Q: usize>(cell: impl Fn(usize) -> T, model: impl Fn(usize, usize) -> T, min_weight: f64) -> [T; 3] {
+fn gaps_lanes<T: F64Lanes, const Q: usize, const N: usize>(
+    cell: impl Fn(usize) -> T,
+    model: impl Fn(usize, usize) -> T,
+    min_weight: f64,
+) -> [T; N] {
     let lay = CellLayout::new(Q);
     let s = T::splat;
     let n = cell(0);
     let empty = n.not_above(s(min_weight));
     let inv = s(1.0) / n;
     let mu: [T; crate::MAX_GUIDES] = core::array::from_fn(|a| if a < Q { cell(lay.s + a) * inv } else { s(0.0) });
-    // Windows 1 and 2 side by side (two independent chains; the sums are
-    // the same, in the same order, as one window at a time).
-    let mut at_mean = [luma_gap(&model, 1, 0), luma_gap(&model, 2, 0)];
-    let mut dc = [[s(0.0); crate::MAX_GUIDES]; 2];
+    // Candidates 1..N side by side (independent chains; the sums are the
+    // same, in the same order, as one candidate at a time). Slot `w` is
+    // candidate `w + 1`; slots past `N − 1` stay unused.
+    let mut at_mean = [s(0.0); MAX_CANDIDATES - 1];
+    for (w, a) in at_mean.iter_mut().enumerate().take(N - 1) {
+        *a = luma_gap(&model, w + 1, 0);
+    }
+    let mut dc = [[s(0.0); crate::MAX_GUIDES]; MAX_CANDIDATES - 1];
     for a in 0..Q {
-        for w in 0..2 {
+        for w in 0..N - 1 {
             dc[w][a] = luma_gap(&model, w + 1, 3 + 3 * a);
             at_mean[w] = at_mean[w] + dc[w][a] * mu[a];
         }
     }
     // Δcᵀ Σ Δc with Σ (packed upper triangle) formed on the fly.
-    let mut spread = [s(0.0); 2];
+    let mut spread = [s(0.0); MAX_CANDIDATES - 1];
     let mut p = 0;
     for a in 0..Q {
         for b in a..Q {
             let cov = cell(lay.ss + p) * inv - mu[a] * mu[b];
-            for w in 0..2 {
+            for w in 0..N - 1 {
                 let term = if a == b { dc[w][a] * dc[w][a] * cov } else { s(2.0) * dc[w][a] * dc[w][b] * cov };
                 spread[w] = spread[w] + term;
             }
             p += 1;
         }
     }
-    let mut gaps = [s(0.0); 3];
-    for w in 0..2 {
+    let mut gaps = [s(0.0); N];
+    for w in 0..N - 1 {
         let d2 = at_mean[w] * at_mean[w] + spread[w].max_(s(0.0));
         // d2 ≥ 0 where finite
         gaps[w + 1] = d2.set_where(d2.not_above(s(-1.0)), f64::INFINITY).set_where(empty, 0.0);
@@ -173,15 +186,15 @@ fn luma_gap<T: F64Lanes>(model: &impl Fn(usize, usize) -> T, w: usize, j: usize)
     T::splat(0.0) + d(0) + d(1) + d(2)
 }
 
-/// The blend weights `1 / (b_s² + v_s)` of the three windows from their
+/// The blend weights `1 / (b_s² + v_s)` of the `N` candidates from their
 /// `variances` and `gaps` (`gaps[0]` unused), divided by their sum; lanes
 /// whose sum is not positive and finite are flagged in the returned mask
 /// (bit `l`: use the middle window's model).
 #[inline(always)]
-fn weights_lanes<T: F64Lanes>(variances: [T; 3], gaps: [T; 3]) -> ([T; 3], u32) {
+fn weights_lanes<T: F64Lanes, const N: usize>(variances: [T; N], gaps: [T; N]) -> ([T; N], u32) {
     let s = T::splat;
-    let mut w = [s(0.0); 3];
-    for i in 0..3 {
+    let mut w = [s(0.0); N];
+    for i in 0..N {
         let mse = if i == 0 {
             variances[0]
         } else {
@@ -192,30 +205,53 @@ fn weights_lanes<T: F64Lanes>(variances: [T; 3], gaps: [T; 3]) -> ([T; 3], u32) 
         };
         w[i] = (s(1.0) / mse.max_(s(1e-300))).set_where(mse.not_above(s(-1.0)), 0.0);
     }
-    let total = w[0] + w[1] + w[2];
+    let mut total = w[0];
+    for x in &w[1..] {
+        total = total + *x;
+    }
     let fallback = total.not_above(s(0.0));
     (w.map(|x| x / total), fallback)
 }
 
-/// Blends the three windows' models of one cell into `out`: weights
+/// Blends the `N` candidates' models of one cell (the three windows, then
+/// the AO-free fit of window 0 when there is one) into `out`: weights
 /// `1 / (b_s² + v_s)` from `variances` and the gaps `gaps[s]` (`gaps[0]` unused).
 /// Falls back to the middle window's model where no weight is usable.
-pub fn blend(models: [&[f32]; 3], variances: [f64; 3], gaps: [f64; 3], out: &mut [f32]) {
-    let (w, fallback) = weights_lanes::<f64>(variances, gaps);
+pub fn blend<const N: usize>(models: [&[f32]; N], variances: [f64; N], gaps: [f64; N], out: &mut [f32]) {
+    let (w, fallback) = weights_lanes::<f64, N>(variances, gaps);
     blend_with(models, (fallback == 0).then_some(w), out);
 }
 
-/// Blends the windows' models of one cell with the normalised weights `w`
+/// Blends the candidates' models of one cell with the normalised weights `w`
 /// (`None`: the middle window's model).
 #[inline(always)]
-fn blend_with(models: [&[f32]; 3], w: Option<[f64; 3]>, out: &mut [f32]) {
+fn blend_with<const N: usize>(models: [&[f32]; N], w: Option<[f64; N]>, out: &mut [f32]) {
     let Some(w) = w else {
         out.copy_from_slice(models[1]);
         return;
     };
-    // zipped (no bounds checks), so it vectorises
-    for (((o, a), b), c) in out.iter_mut().zip(models[0]).zip(models[1]).zip(models[2]) {
-        *o = (w[0] * *a as f64 + w[1] * *b as f64 + w[2] * *c as f64) as f32;
+    match N {
+        // zipped (no bounds checks), so it vectorises
+        3 => {
+            for (((o, a), b), c) in out.iter_mut().zip(models[0]).zip(models[1]).zip(models[2]) {
+                *o = (w[0] * *a as f64 + w[1] * *b as f64 + w[2] * *c as f64) as f32;
+            }
+        }
+        4 => {
+            let pairs = models[0].iter().zip(models[1]).zip(models[2].iter().zip(models[3]));
+            for (o, ((a, b), (c, d))) in out.iter_mut().zip(pairs) {
+                *o = (w[0] * *a as f64 + w[1] * *b as f64 + w[2] * *c as f64 + w[3] * *d as f64) as f32;
+            }
+        }
+        _ => {
+            for (j, o) in out.iter_mut().enumerate() {
+                let mut v = w[0] * models[0][j] as f64;
+                for i in 1..N {
+                    v += w[i] * models[i][j] as f64;
+                }
+                *o = v as f32;
+            }
+        }
     }
 }
 
@@ -223,23 +259,23 @@ fn blend_with(models: [&[f32]; 3], w: Option<[f64; 3]>, out: &mut [f32]) {
 /// triples of the largest guide count, rounded up to whole 4-lane groups.
 const GAP_VALUES: usize = (3 * (crate::MAX_GUIDES + 1)).div_ceil(4) * 4;
 
-/// Working space of [`blend4`]: four cells' models lane-major, `[window][value][cell]`,
+/// Working space of [`blend4`]: four cells' models lane-major, `[candidate][value][cell]`,
 /// so that one value of the four cells is one `f64x4` conversion. Make one
 /// and reuse it for every group of four cells.
 #[derive(Clone, Debug)]
-pub struct ModelLanes([[[f32; 4]; GAP_VALUES]; 3]);
+pub struct ModelLanes([[[f32; 4]; GAP_VALUES]; MAX_CANDIDATES]);
 
 impl Default for ModelLanes {
     fn default() -> Self {
-        ModelLanes([[[0.0; 4]; GAP_VALUES]; 3])
+        ModelLanes([[[0.0; 4]; GAP_VALUES]; MAX_CANDIDATES])
     }
 }
 
 impl ModelLanes {
-    /// The three windows' [`transpose_values`].
+    /// The `N` candidates' [`transpose_values`].
     #[inline(always)]
-    fn fill<const Q: usize>(&mut self, models: &[[&[f32]; 3]; 4]) {
-        for (w, lanes) in self.0.iter_mut().enumerate() {
+    fn fill<const Q: usize, const N: usize>(&mut self, models: &[[&[f32]; N]; 4]) {
+        for (w, lanes) in self.0.iter_mut().enumerate().take(N) {
             transpose_values::<Q>(models.map(|m| m[w]), lanes);
         }
     }
@@ -277,26 +313,26 @@ fn lane_values(lanes: &[[f32; 4]; GAP_VALUES], j: usize) -> f64x4 {
 }
 
 /// [`prediction_gaps`] and [`blend`] of four cells at once, one per `f64x4`
-/// lane: `cells` holds 4 × `k` moments, `models[l]` cell `l`'s three window
-/// models, `variances[w]` window `w`'s four variances, `out` 4 ×
+/// lane: `cells` holds 4 × `k` moments, `models[l]` cell `l`'s `N` candidate
+/// models, `variances[w]` candidate `w`'s four variances, `out` 4 ×
 /// `model_len(Q)` values; `lanes` is working space. Bit-identical to four
 /// scalar calls.
-pub fn blend4<const Q: usize>(
+pub fn blend4<const Q: usize, const N: usize>(
     cells: &[f64],
-    models: [[&[f32]; 3]; 4],
-    variances: [[f64; 4]; 3],
+    models: [[&[f32]; N]; 4],
+    variances: [[f64; 4]; N],
     min_weight: f64,
     lanes: &mut ModelLanes,
     out: &mut [f32],
 ) {
     let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
     let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
-    lanes.fill::<Q>(&models);
-    let gaps = gaps_lanes::<f64x4, Q>(cell, |w, j| lanes.get(w, j), min_weight);
-    let (w, fallback) = weights_lanes::<f64x4>(variances.map(f64x4::from), gaps);
+    lanes.fill::<Q, N>(&models);
+    let gaps = gaps_lanes::<f64x4, Q, N>(cell, |w, j| lanes.get(w, j), min_weight);
+    let (w, fallback) = weights_lanes::<f64x4, N>(variances.map(f64x4::from), gaps);
     let w = w.map(|x| x.to_array());
     for (l, o) in out.chunks_exact_mut(ml).take(4).enumerate() {
-        let wl = (fallback >> l & 1 == 0).then(|| [w[0][l], w[1][l], w[2][l]]);
+        let wl = (fallback >> l & 1 == 0).then(|| core::array::from_fn(|i| w[i][l]));
         blend_with(models[l], wl, o);
     }
 }
@@ -314,10 +350,10 @@ mod tests {
         }
     }
 
-    /// Four cells' moments and three windows' models each, with the awkward
-    /// lanes of real frames: an empty cell, a non-finite moment, a huge model
-    /// value, negative energy (a residual clamped to 0).
-    type Case = ([f64; 4 * K], [[[f32; ML]; 3]; 4], [[f64; 4]; 3]);
+    /// Four cells' moments and the models of the most candidates each, with
+    /// the awkward lanes of real frames: an empty cell, a non-finite moment, a
+    /// huge model value, negative energy (a residual clamped to 0).
+    type Case = ([f64; 4 * K], [[[f32; ML]; MAX_CANDIDATES]; 4], [[f64; 4]; MAX_CANDIDATES]);
     /// Room for Q ≤ 12.
     const K: usize = CellLayout::new(crate::MAX_GUIDES).k;
     const ML: usize = model_len(crate::MAX_GUIDES);
@@ -329,13 +365,13 @@ mod tests {
         for (i, c) in cells[..4 * k].iter_mut().enumerate() {
             *c = if i % k == 0 { 1.0 + 100.0 * r.next() } else { 20.0 * r.next() - 5.0 };
         }
-        let mut models = [[[0f32; ML]; 3]; 4];
+        let mut models = [[[0f32; ML]; MAX_CANDIDATES]; 4];
         for m in models.iter_mut().flatten() {
             for v in m.iter_mut() {
                 *v = (4.0 * r.next() - 2.0) as f32;
             }
         }
-        let mut var = [[0f64; 4]; 3];
+        let mut var = [[0f64; 4]; MAX_CANDIDATES];
         for v in var.iter_mut().flatten() {
             *v = r.next() * 0.1;
         }
@@ -355,18 +391,22 @@ mod tests {
     }
 
     /// Every guide count the lanes' transposes see: 0 (a partial 4 × 4
-    /// group only), 1, 2, 5 (the defaults), 7 and 12 (the most).
+    /// group only), 1, 2, 5 (the defaults), 7 and 12 (the most); three
+    /// candidates (the windows) and four (with the AO-free fit).
     #[test]
     fn four_lanes_equal_four_cells() {
-        check::<0>();
-        check::<1>();
-        check::<2>();
-        check::<5>();
-        check::<7>();
-        check::<12>();
+        check::<0, 3>();
+        check::<1, 3>();
+        check::<2, 3>();
+        check::<5, 3>();
+        check::<7, 3>();
+        check::<12, 3>();
+        check::<1, 4>();
+        check::<5, 4>();
+        check::<12, 4>();
     }
 
-    fn check<const Q: usize>() {
+    fn check<const Q: usize, const N: usize>() {
         let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
         let mut lanes = ModelLanes::default();
         for seed in 0..64 {
@@ -377,17 +417,18 @@ mod tests {
                 let want = variance::<Q>(&cells[l * k..(l + 1) * k], &flat[l * ml..(l + 1) * ml], 0.01, 1800.0, 1e-9);
                 assert_eq!(got[l].to_bits(), want.to_bits(), "Q {Q} seed {seed} lane {l}");
             }
-            let m: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &models[l][w][..ml]));
+            let m: [[&[f32]; N]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &models[l][w][..ml]));
+            let var: [[f64; 4]; N] = core::array::from_fn(|w| var[w]);
             let mut out = [0f32; 4 * ML];
             // (`lanes` reused from the previous seed, as `Flr` does)
-            blend4::<Q>(&cells, m, var, 1e-9, &mut lanes, &mut out[..4 * ml]);
+            blend4::<Q, N>(&cells, m, var, 1e-9, &mut lanes, &mut out[..4 * ml]);
             for l in 0..4 {
                 let cell = &cells[l * k..(l + 1) * k];
-                let gaps = prediction_gaps::<Q>(cell, m[l], 1e-9);
+                let gaps = prediction_gaps::<Q, N>(cell, m[l], 1e-9);
                 let mut want = [0f32; ML];
-                blend(m[l], [var[0][l], var[1][l], var[2][l]], gaps, &mut want[..ml]);
+                blend::<N>(m[l], core::array::from_fn(|w| var[w][l]), gaps, &mut want[..ml]);
                 for (a, b) in out[l * ml..(l + 1) * ml].iter().zip(&want[..ml]) {
-                    assert_eq!(a.to_bits(), b.to_bits(), "Q {Q} seed {seed} lane {l}");
+                    assert_eq!(a.to_bits(), b.to_bits(), "Q {Q} N {N} seed {seed} lane {l}");
                 }
             }
         }

@@ -22,7 +22,9 @@
 //! variances into `scale_models` / `variances`), and [`Flr::blend_tile`] then
 //! writes `models` from them. The larger windows are fitted on the moment grid
 //! pooled 2×2 ([`Flr::pool_tile`]: `cells` band → `pooled` band, after stage 1;
-//! [`Flr::window_pooled`], [`Flr::window_grid`]). See [`adaptive`].
+//! [`Flr::window_pooled`], [`Flr::window_grid`]). With
+//! [`FlrConfig::adaptive_without_ao`] the blend also refits window 0 without
+//! AO from `first` and weighs it as a fourth candidate. See [`adaptive`].
 
 pub mod adaptive;
 
@@ -38,6 +40,7 @@ use crate::kernels::{dispatch_q, model_len, CellLayout};
 
 /// Most window sizes one run fits ([`Blur::Adaptive`]).
 pub const MAX_SCALES: usize = 3;
+use adaptive::MAX_CANDIDATES;
 
 /// Cell rows per tile. Small enough for parallelism at 720p, large enough to
 /// amortise the vertical box-window initialisation. Even, so that a tile is
@@ -990,8 +993,12 @@ impl Flr {
     /// `models_tile`. `first_tile` is window 0's blurred band, `scale_models`
     /// and `variances` the whole window-major grids (a pooled window's model
     /// and variance are interpolated bilinearly to each block-grid cell).
+    /// With [`FlrConfig::adaptive_without_ao`] it also solves window 0 without
+    /// AO from `first_tile` (hence `stats`) as a fourth candidate; that solve's
+    /// empty cells and dropped pivots are not counted again.
     pub fn blend_tile(
         &self,
+        stats: &Stats,
         t: usize,
         first_tile: &[f64],
         scale_models: &[f32],
@@ -1017,8 +1024,20 @@ impl Flr {
             vo += n;
         }
         let (r0, _) = self.tile_rows(t)?;
-        dispatch_q!(self.q, blend_band(first_tile, windows, r0, self.min_weight(0), self.kernel_simd(), models_tile));
+        let without_ao = self.without_ao(stats);
+        let without_ao = without_ao.as_ref();
+        dispatch_q!(self.q, blend_band(first_tile, windows, without_ao, r0, self.min_weight(0), self.kernel_simd(), models_tile));
         Ok(())
+    }
+
+    /// Window 0's solve without the AO channel, when the config asks for it.
+    fn without_ao(&self, stats: &Stats) -> Option<WithoutAo> {
+        let ao = self.cfg.guides.ao_channel().filter(|_| self.cfg.adaptive_without_ao)?;
+        let mut params = self.solve_params(stats, 0);
+        params.reference.copy_within(ao + 1.., ao);
+        params.mean.copy_within(ao + 1.., ao);
+        params.scale.copy_within(ao + 1.., ao);
+        Some(WithoutAo::new(self.q, ao, params, self.window_area(0)))
     }
 
     /// Stage 6: apply the models to the output rows of tile `t`. `out_band`
@@ -1160,7 +1179,7 @@ impl Flr {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
                 let (m0, v0) = (self.scale_models_tile_range(0, t)?, self.scale_variances_tile_range(0, t)?);
                 rep += self.solve_tile_at(0, &stats, t, &parts.first[c.clone()], &mut parts.scale_models[m0], &mut parts.variances[v0])?;
-                self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
+                self.blend_tile(&stats, t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
                 if t + 1 < tiles {
                     rep += self.apply_band(&f, &stats, t + 1, parts.models, parts.workers, out)?;
                 }
@@ -1344,18 +1363,149 @@ impl<'a> WindowReader<'a> {
     }
 }
 
+/// Window 0 refitted without the AO channel ([`FlrConfig::adaptive_without_ao`]):
+/// window 0's solve constants without AO's entries, window 0's area for the
+/// variance, and where each value of the `Q − 1`-guide cell and model comes
+/// from in the `Q`-guide ones.
+#[derive(Clone, Copy, Debug)]
+struct WithoutAo {
+    params: SolveParams,
+    area: f64,
+    /// `cell_map[j]`: the moment of `Q` guides that is moment `j` of `Q − 1`.
+    cell_map: [u8; MAX_K],
+    /// `model_map[j]`: the value of the `Q − 1`-guide model that is value `j`
+    /// of the `Q`-guide one (`NO_VALUE`: AO's coefficients, 0).
+    model_map: [u8; model_len(MAX_GUIDES)],
+}
+
+/// A model value with no source ([`WithoutAo::model_map`]).
+const NO_VALUE: u8 = u8::MAX;
+
+/// Most moments of a cell.
+const MAX_K: usize = CellLayout::new(MAX_GUIDES).k;
+
+impl WithoutAo {
+    /// For `q` guides of which `ao` is AO's index.
+    fn new(q: usize, ao: usize, params: SolveParams, area: f64) -> Self {
+        let lay = CellLayout::new(q);
+        let mut cell_map = [0u8; MAX_K];
+        let mut o = 0;
+        let mut put = |m: usize| {
+            cell_map[o] = m as u8; // m < MAX_K = 131
+            o += 1;
+        };
+        put(0);
+        (0..q).filter(|&a| a != ao).for_each(|a| put(lay.s + a));
+        let mut p = lay.ss;
+        for a in 0..q {
+            for b in a..q {
+                if a != ao && b != ao {
+                    put(p);
+                }
+                p += 1;
+            }
+        }
+        (0..3).for_each(|c| put(lay.t + c));
+        for a in (0..q).filter(|&a| a != ao) {
+            (0..3).for_each(|c| put(lay.p + 3 * a + c));
+        }
+        put(lay.e);
+        let mut model_map = [NO_VALUE; model_len(MAX_GUIDES)];
+        let mut i = 0u8;
+        for (j, m) in model_map.iter_mut().enumerate().take(model_len(q)) {
+            if j / 3 != 1 + ao || j >= 3 + 3 * q {
+                *m = i;
+                i += 1;
+            }
+        }
+        WithoutAo { params, area, cell_map, model_map }
+    }
+}
+
+/// Working space of [`fit_without_ao`] (5 KB): make one per band.
+struct WithoutAoScratch {
+    cells: [f64; 4 * MAX_K],
+    models: [f32; 4 * model_len(MAX_GUIDES)],
+}
+
+/// The AO-free fit of `n` (1 or 4) cells of window 0 (`first`: their blurred
+/// moments) as models of all `Q` guides into `models[l]`, and their variances.
+fn fit_without_ao<const Q: usize>(
+    first: &[f64],
+    n: usize,
+    w: &WithoutAo,
+    scratch: &mut WithoutAoScratch,
+    models: &mut [[f32; model_len(MAX_GUIDES)]; 4],
+) -> [f64; 4] {
+    if Q == 0 {
+        return [f64::INFINITY; 4]; // unreachable: AO is a guide
+    }
+    let (k, ml, k1, ml1) = (CellLayout::new(Q).k, model_len(Q), CellLayout::new(Q - 1).k, model_len(Q - 1));
+    for l in 0..n {
+        let (src, dst) = (&first[l * k..(l + 1) * k], &mut scratch.cells[l * k1..(l + 1) * k1]);
+        for (d, &m) in dst.iter_mut().zip(&w.cell_map[..k1]) {
+            *d = src[m as usize];
+        }
+    }
+    let mut v = [0f64; 4];
+    let (cells, sub) = (&scratch.cells[..n * k1], &mut scratch.models[..n * ml1]);
+    fn solve<const Q1: usize>(cells: &[f64], n: usize, w: &WithoutAo, sub: &mut [f32], v: &mut [f64; 4]) {
+        let p = &w.params;
+        if n == 4 {
+            solve_cells4::<Q1>(cells, p, sub);
+            *v = adaptive::variances4::<Q1>(cells, sub, p.weight_norm, w.area, p.min_weight);
+        } else {
+            solve_cell::<Q1>(cells, p, sub);
+            v[0] = adaptive::variance::<Q1>(cells, sub, p.weight_norm, w.area, p.min_weight);
+        }
+    }
+    // Q − 1 as a constant (AO is a guide, so Q ≥ 1)
+    match Q - 1 {
+        0 => solve::<0>(cells, n, w, sub, &mut v),
+        1 => solve::<1>(cells, n, w, sub, &mut v),
+        2 => solve::<2>(cells, n, w, sub, &mut v),
+        3 => solve::<3>(cells, n, w, sub, &mut v),
+        4 => solve::<4>(cells, n, w, sub, &mut v),
+        5 => solve::<5>(cells, n, w, sub, &mut v),
+        6 => solve::<6>(cells, n, w, sub, &mut v),
+        7 => solve::<7>(cells, n, w, sub, &mut v),
+        8 => solve::<8>(cells, n, w, sub, &mut v),
+        9 => solve::<9>(cells, n, w, sub, &mut v),
+        10 => solve::<10>(cells, n, w, sub, &mut v),
+        _ => solve::<11>(cells, n, w, sub, &mut v),
+    }
+    for (l, m) in models.iter_mut().enumerate().take(n) {
+        let src = &sub[l * ml1..(l + 1) * ml1];
+        for (d, &j) in m[..ml].iter_mut().zip(&w.model_map[..ml]) {
+            *d = if j == NO_VALUE { 0.0 } else { src[j as usize] };
+        }
+    }
+    v
+}
+
 /// Blends one band of cells, whose first row is block-grid row `r0`
-/// ([`adaptive::blend`]; with `simd`, four cells per `f64x4`, bit-identical).
-fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0: usize, min_weight: f64, simd: bool, out: &mut [f32]) {
+/// ([`adaptive::blend`]; with `simd`, four cells per `f64x4`, bit-identical),
+/// with window 0's AO-free fit as a fourth candidate when `without_ao` is given.
+fn blend_band<const Q: usize>(
+    first: &[f64],
+    windows: [WindowModels<'_>; 3],
+    without_ao: Option<&WithoutAo>,
+    r0: usize,
+    min_weight: f64,
+    simd: bool,
+    out: &mut [f32],
+) {
     let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
     let cx = windows[0].grid.cells_x;
     let n = out.len() / ml;
     let quads = if simd { n / 4 } else { 0 };
-    let mut buf = [[[0f32; model_len(MAX_GUIDES)]; MAX_SCALES]; 4];
+    let mut buf = [[[0f32; model_len(MAX_GUIDES)]; MAX_CANDIDATES]; 4];
+    let mut free = [[0f32; model_len(MAX_GUIDES)]; 4];
+    let mut free_scratch = WithoutAoScratch { cells: [0.0; 4 * MAX_K], models: [0.0; 4 * model_len(MAX_GUIDES)] };
     let mut readers = windows.map(WindowReader::new);
     let mut lanes = adaptive::ModelLanes::default();
     for q in 0..quads {
-        let mut v = [[0f64; 4]; MAX_SCALES];
+        let mut v = [[0f64; 4]; MAX_CANDIDATES];
         for (l, b) in buf.iter_mut().enumerate() {
             let idx = 4 * q + l;
             let ij = (r0 + idx / cx, idx % cx);
@@ -1363,15 +1513,16 @@ fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0:
                 v[w][l] = win.at::<Q>(ij, &mut b[w]);
             }
         }
-        let models: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &buf[l][w][..ml]));
-        adaptive::blend4::<Q>(
-            &first[4 * q * k..4 * (q + 1) * k],
-            models,
-            v,
-            min_weight,
-            &mut lanes,
-            &mut out[4 * q * ml..4 * (q + 1) * ml],
-        );
+        let cells = &first[4 * q * k..4 * (q + 1) * k];
+        let o = &mut out[4 * q * ml..4 * (q + 1) * ml];
+        if let Some(w) = without_ao {
+            v[3] = fit_without_ao::<Q>(cells, 4, w, &mut free_scratch, &mut free);
+            let models: [[&[f32]; 4]; 4] = core::array::from_fn(|l| [&buf[l][0][..ml], &buf[l][1][..ml], &buf[l][2][..ml], &free[l][..ml]]);
+            adaptive::blend4::<Q, 4>(cells, models, v, min_weight, &mut lanes, o);
+        } else {
+            let models: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &buf[l][w][..ml]));
+            adaptive::blend4::<Q, 3>(cells, models, [v[0], v[1], v[2]], min_weight, &mut lanes, o);
+        }
     }
     for idx in 4 * quads..n {
         let (cell, o) = (&first[idx * k..(idx + 1) * k], &mut out[idx * ml..(idx + 1) * ml]);
@@ -1381,7 +1532,14 @@ fn blend_band<const Q: usize>(first: &[f64], windows: [WindowModels<'_>; 3], r0:
             *v = w.at::<Q>(ij, b);
         }
         let m = [&buf[0][0][..ml], &buf[0][1][..ml], &buf[0][2][..ml]];
-        let gaps = adaptive::prediction_gaps::<Q>(cell, m, min_weight);
-        adaptive::blend(m, v, gaps, o);
+        if let Some(w) = without_ao {
+            let v3 = fit_without_ao::<Q>(cell, 1, w, &mut free_scratch, &mut free)[0];
+            let m = [m[0], m[1], m[2], &free[0][..ml]];
+            let gaps = adaptive::prediction_gaps::<Q, 4>(cell, m, min_weight);
+            adaptive::blend(m, [v[0], v[1], v[2], v3], gaps, o);
+        } else {
+            let gaps = adaptive::prediction_gaps::<Q, 3>(cell, m, min_weight);
+            adaptive::blend(m, v, gaps, o);
+        }
     }
 }
