@@ -37,10 +37,10 @@ use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, Taps};
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cells4, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
+use adaptive::MAX_CANDIDATES;
 
 /// Most window sizes one run fits ([`Blur::Adaptive`]).
 pub const MAX_SCALES: usize = 3;
-use adaptive::MAX_CANDIDATES;
 
 /// Cell rows per tile. Small enough for parallelism at 720p, large enough to
 /// amortise the vertical box-window initialisation. Even, so that a tile is
@@ -1412,8 +1412,9 @@ impl WithoutAo {
         put(lay.e);
         let mut model_map = [NO_VALUE; model_len(MAX_GUIDES)];
         let mut i = 0u8;
+        // values 3 + 3·ao .. 6 + 3·ao are AO's coefficients
         for (j, m) in model_map.iter_mut().enumerate().take(model_len(q)) {
-            if j / 3 != 1 + ao || j >= 3 + 3 * q {
+            if j / 3 != 1 + ao {
                 *m = i;
                 i += 1;
             }
