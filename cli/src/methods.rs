@@ -212,10 +212,7 @@ impl FlrArgs {
         if let Some(u) = self.upsample {
             c.upsample = u;
         }
-        if self.without_ao && !(matches!(c.blur, Blur::Adaptive { .. }) && c.guides.ao) {
-            return Err("--without-ao needs the adaptive window (the default, or three --sigma values) and the ao guide".into());
-        }
-        c.adaptive_without_ao = self.without_ao;
+        c.adaptive_without_ao = self.without_ao; // validate() says when it cannot apply
         c.validate().map_err(|e| format!("flr flags: {e}"))?;
         Ok(c)
     }

@@ -1429,14 +1429,19 @@ struct WithoutAoScratch {
     models: [f32; 4 * model_len(MAX_GUIDES)],
 }
 
+/// Per cell of a group of four, each candidate's model (window-major as in
+/// [`adaptive::blend4`]; room for the most guides).
+type CandidateModels = [[[f32; model_len(MAX_GUIDES)]; MAX_CANDIDATES]; 4];
+
 /// The AO-free fit of `n` (1 or 4) cells of window 0 (`first`: their blurred
-/// moments) as models of all `Q` guides into `models[l]`, and their variances.
+/// moments) as models of all `Q` guides into candidate 3 of `models[l]`, and
+/// their variances.
 fn fit_without_ao<const Q: usize>(
     first: &[f64],
     n: usize,
     w: &WithoutAo,
     scratch: &mut WithoutAoScratch,
-    models: &mut [[f32; model_len(MAX_GUIDES)]; 4],
+    models: &mut CandidateModels,
 ) -> [f64; 4] {
     if Q == 0 {
         return [f64::INFINITY; 4]; // unreachable: AO is a guide
@@ -1460,28 +1465,24 @@ fn fit_without_ao<const Q: usize>(
             v[0] = adaptive::variance::<Q1>(cells, sub, p.weight_norm, w.area, p.min_weight);
         }
     }
-    // Q − 1 as a constant (AO is a guide, so Q ≥ 1)
-    match Q - 1 {
-        0 => solve::<0>(cells, n, w, sub, &mut v),
-        1 => solve::<1>(cells, n, w, sub, &mut v),
-        2 => solve::<2>(cells, n, w, sub, &mut v),
-        3 => solve::<3>(cells, n, w, sub, &mut v),
-        4 => solve::<4>(cells, n, w, sub, &mut v),
-        5 => solve::<5>(cells, n, w, sub, &mut v),
-        6 => solve::<6>(cells, n, w, sub, &mut v),
-        7 => solve::<7>(cells, n, w, sub, &mut v),
-        8 => solve::<8>(cells, n, w, sub, &mut v),
-        9 => solve::<9>(cells, n, w, sub, &mut v),
-        10 => solve::<10>(cells, n, w, sub, &mut v),
-        _ => solve::<11>(cells, n, w, sub, &mut v),
-    }
+    // Q − 1 as a constant (AO is a guide, so 0 ≤ Q − 1 < 12: never an error)
+    let dispatched = (|| -> Result<(), Error> {
+        dispatch_q!(Q - 1, solve(cells, n, w, sub, &mut v));
+        Ok(())
+    })();
+    debug_assert!(dispatched.is_ok());
     for (l, m) in models.iter_mut().enumerate().take(n) {
         let src = &sub[l * ml1..(l + 1) * ml1];
-        for (d, &j) in m[..ml].iter_mut().zip(&w.model_map[..ml]) {
+        for (d, &j) in m[3][..ml].iter_mut().zip(&w.model_map[..ml]) {
             *d = if j == NO_VALUE { 0.0 } else { src[j as usize] };
         }
     }
     v
+}
+
+/// The first `N` candidates' models of each of the four cells, `ml` values each.
+fn views<const N: usize>(buf: &CandidateModels, ml: usize) -> [[&[f32]; N]; 4] {
+    core::array::from_fn(|l| core::array::from_fn(|w| &buf[l][w][..ml]))
 }
 
 /// Blends one band of cells, whose first row is block-grid row `r0`
@@ -1500,8 +1501,7 @@ fn blend_band<const Q: usize>(
     let cx = windows[0].grid.cells_x;
     let n = out.len() / ml;
     let quads = if simd { n / 4 } else { 0 };
-    let mut buf = [[[0f32; model_len(MAX_GUIDES)]; MAX_CANDIDATES]; 4];
-    let mut free = [[0f32; model_len(MAX_GUIDES)]; 4];
+    let mut buf: CandidateModels = [[[0f32; model_len(MAX_GUIDES)]; MAX_CANDIDATES]; 4];
     let mut free_scratch = WithoutAoScratch { cells: [0.0; 4 * MAX_K], models: [0.0; 4 * model_len(MAX_GUIDES)] };
     let mut readers = windows.map(WindowReader::new);
     let mut lanes = adaptive::ModelLanes::default();
@@ -1517,12 +1517,10 @@ fn blend_band<const Q: usize>(
         let cells = &first[4 * q * k..4 * (q + 1) * k];
         let o = &mut out[4 * q * ml..4 * (q + 1) * ml];
         if let Some(w) = without_ao {
-            v[3] = fit_without_ao::<Q>(cells, 4, w, &mut free_scratch, &mut free);
-            let models: [[&[f32]; 4]; 4] = core::array::from_fn(|l| [&buf[l][0][..ml], &buf[l][1][..ml], &buf[l][2][..ml], &free[l][..ml]]);
-            adaptive::blend4::<Q, 4>(cells, models, v, min_weight, &mut lanes, o);
+            v[3] = fit_without_ao::<Q>(cells, 4, w, &mut free_scratch, &mut buf);
+            adaptive::blend4::<Q, 4>(cells, views(&buf, ml), v, min_weight, &mut lanes, o);
         } else {
-            let models: [[&[f32]; 3]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &buf[l][w][..ml]));
-            adaptive::blend4::<Q, 3>(cells, models, [v[0], v[1], v[2]], min_weight, &mut lanes, o);
+            adaptive::blend4::<Q, 3>(cells, views(&buf, ml), [v[0], v[1], v[2]], min_weight, &mut lanes, o);
         }
     }
     for idx in 4 * quads..n {
@@ -1532,13 +1530,13 @@ fn blend_band<const Q: usize>(
         for ((w, b), v) in readers.iter_mut().zip(buf[0].iter_mut()).zip(v.iter_mut()) {
             *v = w.at::<Q>(ij, b);
         }
-        let m = [&buf[0][0][..ml], &buf[0][1][..ml], &buf[0][2][..ml]];
         if let Some(w) = without_ao {
-            let v3 = fit_without_ao::<Q>(cell, 1, w, &mut free_scratch, &mut free)[0];
-            let m = [m[0], m[1], m[2], &free[0][..ml]];
+            let v3 = fit_without_ao::<Q>(cell, 1, w, &mut free_scratch, &mut buf)[0];
+            let m = views::<4>(&buf, ml)[0];
             let gaps = adaptive::prediction_gaps::<Q, 4>(cell, m, min_weight);
             adaptive::blend(m, [v[0], v[1], v[2], v3], gaps, o);
         } else {
+            let m = views::<3>(&buf, ml)[0];
             let gaps = adaptive::prediction_gaps::<Q, 3>(cell, m, min_weight);
             adaptive::blend(m, v, gaps, o);
         }
