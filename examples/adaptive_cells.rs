@@ -30,7 +30,7 @@ fn main() {
         let t = Instant::now();
         let mut vs = Vec::with_capacity(n);
         for c in 0..n {
-            vs.push(variance::<Q>(&cells[c * k..(c + 1) * k], &models[0][c * ml..(c + 1) * ml], 0.01, 1800.0, 1e-9));
+            vs.push(variance::<Q>(&cells[c * k..(c + 1) * k], &models[0][c * ml..(c + 1) * ml], Q + 1, 0.01, 1800.0, 1e-9));
         }
         best[1] = best[1].min(t.elapsed().as_secs_f64());
         let t = Instant::now();
@@ -55,13 +55,16 @@ fn main() {
     for _ in 0..30 {
         let t = Instant::now();
         for (q, v) in vs.chunks_exact_mut(4).enumerate() {
-            v.copy_from_slice(&variances4::<Q>(
-                &cells[4 * q * k..4 * (q + 1) * k],
-                &models[0][4 * q * ml..4 * (q + 1) * ml],
-                0.01,
-                1800.0,
-                1e-9,
-            ));
+            v.copy_from_slice(
+                &variances4::<Q, 1>(
+                    &cells[4 * q * k..4 * (q + 1) * k],
+                    std::array::from_fn(|l| [&models[0][(4 * q + l) * ml..(4 * q + l + 1) * ml]]),
+                    [Q + 1],
+                    0.01,
+                    1800.0,
+                    1e-9,
+                )[0],
+            );
         }
         best4[0] = best4[0].min(t.elapsed().as_secs_f64());
         let t = Instant::now();

@@ -75,8 +75,8 @@ pub struct FlrConfig {
     /// Kernel implementation.
     pub kernel: Kernel,
     /// Adaptive window only, with AO among the guides: also fit the smallest
-    /// window without the AO channel (from the same blurred moments: one more
-    /// solve per cell, no blur) and blend that fit as a fourth candidate, with
+    /// window without the AO channel (from its own Cholesky factor: one more
+    /// substitution per cell, no blur) and blend that fit as a fourth candidate, with
     /// the variance of its one coefficient fewer and its bias measured like a
     /// larger window's (`flr::adaptive`). AO helps some scenes and costs
     /// others up to half a dB; this lets each cell choose. Off by default

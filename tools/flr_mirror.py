@@ -8,6 +8,7 @@ rebuild. With no options it gives `lrd eval`'s FLR PSNR on frames that fill whol
     python3 tools/flr_mirror.py frames/train/*.exr [--sigmas 6,12,20] [--lattice 32]
         [--shrink K] [--basis chol|eig] [--shrink-variance] [--mse-blur CELLS]
         [--weight-power P] [--chroma WINDOW] [--subsets 0123;... --subset-windows 0,1]
+        [--area-box C] [--eps-windows a,b,c] [--shared-residual] [--leverage]
 
 Experiments (session 29, docs/PERFORMANCE.md; none kept):
   --lattice N       frame guide mean/std from an N×N lattice of samples, not all pixels
@@ -22,9 +23,19 @@ Session 31 (README, "Towards FLR = OIDN"; in the library as FlrConfig::adaptive_
                     also fit window 0 without AO (guides 0..3 of normal xyz, depth, ao),
                     a candidate blended like a window: variance r (Q' + 1) / N with its
                     own Q', bias² from its gap to window 0's full fit
+Session 32 (none kept; 26 training frames, train + train3, mean 31.138 dB with no options):
+  --area-box C      variance area 4π(σ² + C b²/12), b the grid's cell side (C = 1: the
+                    cell box's own spread): 31.177 (C = 1), 31.242 (C = 4); a knob that
+                    moves weight to the small window, not a better estimate
+  --eps-windows a,b,c  ϵ per window: 0.003,0.01,0.03 31.176 / 0.03,0.01,0.01 31.096
+  --shared-residual every window's variance from window 0's residual: 31.125
+  --leverage        each candidate's variance r (1 + E_cell[(x − μ)ᵀ M (x − μ)]) / N, the
+                    cell's own leverage under the regularized inverse M (LEV_SCALE=s
+                    scales it): box +0.27, clutter +0.13, colonnade −0.22, room −0.18
 Training frames only: never tune on the test split (tools/render.py --split test).
 """
 import math
+import os
 import glob
 import numpy as np
 import OpenEXR
@@ -154,17 +165,38 @@ def solve(m, q, eps_mul, eps_add, shrink=0.0, sigma=None, cell=B * B, basis="cho
     else:
         beta = np.linalg.solve(wh, rhs) * isig[..., :, None]
     c0 = muy - (beta * mu[..., :, None]).sum(-2)
-    return dict(c0=c0, beta=beta, n=m[..., 0], mu=mu, cov=cov, muy=muy, cxy=cxy, e=e, fsum=fsum)
+    M = isig[..., :, None] * np.linalg.inv(wh) * isig[..., None, :]
+    return dict(c0=c0, beta=beta, n=m[..., 0], mu=mu, cov=cov, muy=muy, cxy=cxy, e=e, fsum=fsum, M=M)
 
 
+AREA_BOX = 0.0  # experiment: area 4π(σ² + AREA_BOX · b²/12) with b the grid's cell side
 def variance(s, q, sigma, cell=B * B, use_f=False):
     mean = s["muy"] @ LUMA
     explained = ((s["beta"] @ LUMA) * (s["cxy"] @ LUMA)).sum(-1)
     residual = np.maximum(s["e"] - mean * mean - explained, 0.0)
-    area = 4 * math.pi * sigma * sigma
+    s["residual"] = residual
+    area = 4 * math.pi * (sigma * sigma + AREA_BOX * cell / 12)
     samples = np.maximum(area * np.minimum(s["n"] / cell, 1.0), 1.0)
     k = (1 + s["fsum"]) if use_f else (q + 1)
     return residual * k / samples
+
+
+LEVERAGE = False  # experiment: each candidate's variance r (1 + E_cell[(x − μ)ᵀ M (x − μ)]) / N at the block cell
+LEV_SCALE = float(os.environ.get("LEV_SCALE", "1"))
+
+
+def cell_stats(m, q):
+    """The raw block cells' guide mean and covariance (unblurred moments)."""
+    mm = np.moveaxis(m, 0, -1)
+    n = np.maximum(mm[..., 0:1], 1e-6)
+    mu = mm[..., 1:1 + q] / n
+    ss = mm[..., 1 + q:1 + q + q * q].reshape(*mm.shape[:2], q, q) / n[..., None]
+    return mu, ss - mu[..., :, None] * mu[..., None, :]
+
+
+def leverage(mu_s, M, mu_c, cov_c):
+    d = mu_c - mu_s
+    return np.einsum("...a,...ab,...b->...", d, M, d) + np.einsum("...ab,...ba->...", M, cov_c)
 
 
 def gap(s, first):
@@ -193,7 +225,7 @@ def resize_bilinear(x, oh, ow, sh, sw):
     return a[..., x0] * (1 - tx) + a[..., x1] * tx
 
 
-def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, shrink=(0.0, 0.0, 0.0), basis="chol", use_f=False, mse_blur=0.0, K=BIAS_DISCOUNT, wpow=1.0, chroma=None, lattice=0, subsets=(), subset_windows=(0, 1, 2)):
+def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, eps_windows=None, shared_residual=False, shrink=(0.0, 0.0, 0.0), basis="chol", use_f=False, mse_blur=0.0, K=BIAS_DISCOUNT, wpow=1.0, chroma=None, lattice=0, subsets=(), subset_windows=(0, 1, 2)):
     q, h, w = g.shape
     gs = g
     if lattice:
@@ -213,20 +245,38 @@ def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, shrink=(0.0,
         qq = len(keep)
         pooled = k > 0 and sg >= 1.5 * B
         mm = m if qq == q else sub_moments(m, q, keep)
+        ea = eps_windows[k] if eps_windows else eps_add
         if not pooled:
-            f = solve(blur(mm, sg), qq, eps_mul, eps_add, shrink[k], sg, basis=basis)
-            v.append(variance(f, qq, sg, use_f=use_f))
+            f = solve(blur(mm, sg), qq, eps_mul, ea, shrink[k], sg, basis=basis)
+            vv = variance(f, qq, sg, use_f=use_f)
+            if LEVERAGE:
+                mu_c, cov_c = cell_stats(mm, qq)
+                vv = vv / (qq + 1) * LEV_SCALE * (1 + leverage(f["mu"], f["M"], mu_c, cov_c))
+            v.append(vv)
             fits.append(f if qq == q else expand(f, q, keep))
             continue
         mp = block_sum(mm, 2)
-        f = solve(blur(mp, sg / 2), qq, eps_mul, eps_add, shrink[k], sg, cell=4 * B * B, basis=basis)
+        f = solve(blur(mp, sg / 2), qq, eps_mul, ea, shrink[k], sg, cell=4 * B * B, basis=basis)
         vp = variance(f, qq, sg, cell=4 * B * B, use_f=use_f)
+        fM, fmu = f["M"], f["mu"]
         f = f if qq == q else expand(f, q, keep)
         pgh, pgw = mp.shape[1:]
         cb = np.concatenate([f["c0"], f["beta"].reshape(pgh, pgw, q * 3), vp[..., None]], -1)
+        if LEVERAGE:
+            cb = np.concatenate([cb, fmu, fM.reshape(pgh, pgw, qq * qq)], -1)
         cb = np.moveaxis(resize_bilinear(np.moveaxis(cb, -1, 0), gh, gw, 2, 2), 0, -1)
+        if LEVERAGE:
+            base = 3 + 3 * q + 1
+            mu_s, M_s = cb[..., base:base + qq], cb[..., base + qq:].reshape(gh, gw, qq, qq)
+            mu_c, cov_c = cell_stats(mm, qq)
+            cb[..., base - 1] = cb[..., base - 1] / (qq + 1) * LEV_SCALE * (1 + leverage(mu_s, M_s, mu_c, cov_c))
         fits.append(dict(c0=cb[..., :3], beta=cb[..., 3:3 + 3 * q].reshape(gh, gw, q, 3)))
-        v.append(cb[..., -1])
+        v.append(cb[..., 3 + 3 * q])
+    if shared_residual:
+        a0 = sigmas[0] ** 2 + AREA_BOX * B * B / 12
+        for i, (k, sg, keep) in enumerate(cands[1:], 1):
+            ak = sg ** 2 + AREA_BOX * (4 if (k > 0 and sg >= 1.5 * B) else 1) * B * B / 12
+            v[i] = v[0] * a0 / ak * (len(keep) + 1) / (q + 1)
     sigmas = [c[1] for c in cands]  # the blend below weighs every candidate like a window
     if len(sigmas) == 1:
         c0, beta = fits[0]["c0"], fits[0]["beta"]
@@ -279,11 +329,18 @@ def main():
     ap.add_argument("--chroma", type=int, default=None)
     ap.add_argument("--subsets", default="", help="extra candidate guide subsets, e.g. 0123;012 (indices into normal x, y, z, depth, ao)")
     ap.add_argument("--subset-windows", default="0,1,2", help="the windows (indices into --sigmas) fitted with each subset too")
+    ap.add_argument("--eps-windows", default="", help="ϵ per window (experiment)")
+    ap.add_argument("--area-box", type=float, default=0.0)
+    ap.add_argument("--shared-residual", action="store_true")
+    ap.add_argument("--leverage", action="store_true")
     a = ap.parse_args()
+    global AREA_BOX, LEVERAGE
+    AREA_BOX, LEVERAGE = a.area_box, a.leverage
     sigmas = tuple(float(v) for v in a.sigmas.split(","))
     kw = dict(sigmas=sigmas, shrink=(a.shrink,) * len(sigmas), basis=a.basis, use_f=a.shrink_variance,
               mse_blur=a.mse_blur, wpow=a.weight_power, chroma=a.chroma, lattice=a.lattice,
-              subsets=[tuple(int(c) for c in t) for t in a.subsets.split(';') if t], subset_windows=tuple(int(x) for x in a.subset_windows.split(',')))
+              subsets=[tuple(int(c) for c in t) for t in a.subsets.split(';') if t], subset_windows=tuple(int(x) for x in a.subset_windows.split(',')),
+              eps_windows=tuple(float(x) for x in a.eps_windows.split(',')) if a.eps_windows else None, shared_residual=a.shared_residual)
     scores = []
     for f in sorted(sum((glob.glob(p) for p in a.frames), [])):
         fr = load(f)

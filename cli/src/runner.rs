@@ -281,7 +281,7 @@ pub fn denoise_parallel(
         let (first, sm, vars): (&[f64], &[f32], &[f64]) = (p.first, p.scale_models, p.variances);
         let items: Vec<_> = split_lens(&mut *p.models, &ml).into_iter().enumerate().collect();
         par_groups(pool, items, &mut units, &|(t, m), _| {
-            flr.blend_tile(&st, t, &first[flr.cells_tile_range(t)?], sm, vars, m).map(|_| Report::default())
+            flr.blend_tile(t, &first[flr.cells_tile_range(t)?], sm, vars, m).map(|_| Report::default())
         })?;
     } else {
         {

@@ -778,8 +778,7 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
                     let nv = flr.scale_variances_tile_range(windows - 1, nt - 1).map_err(st)?.end;
                     let m = flr.models_tile_range(tile).map_err(st)?;
                     let models = raw.f32s_mut(l.models.start, m.start, m.len());
-                    let stats = raw.stats.read();
-                    flr.blend_tile(&stats, tile, first, raw.f32s(l.scale_models.start, 0, nm), raw.f64s(l.variances.start, nv), models)
+                    flr.blend_tile(tile, first, raw.f32s(l.scale_models.start, 0, nm), raw.f64s(l.variances.start, nv), models)
                         .map_err(st)?;
                     Report::default()
                 }

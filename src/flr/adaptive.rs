@@ -66,33 +66,48 @@ pub const MAX_CANDIDATES: usize = 4;
 const L: [f64; 3] = [LUMA[0] as f64, LUMA[1] as f64, LUMA[2] as f64];
 
 /// Estimated variance `v_s` of the prediction of `model` at a cell whose
-/// blurred moments are `cell`; `norm` turns the window weight into its valid
+/// blurred moments are `cell`: `r · coefficients / N` for a model fitted with
+/// `coefficients` coefficients (`Q + 1`; `Q` for the AO-free fit, whose
+/// coefficients on AO are 0); `norm` turns the window weight into its valid
 /// fraction, `area` is `4πσ²` in input pixels. `+∞` for an empty window.
-pub fn variance<const Q: usize>(cell: &[f64], model: &[f32], norm: f64, area: f64, min_weight: f64) -> f64 {
-    variance_lanes::<f64, Q>(|m| cell[m], |j| model[j] as f64, norm, area, min_weight)
+pub fn variance<const Q: usize>(cell: &[f64], model: &[f32], coefficients: usize, norm: f64, area: f64, min_weight: f64) -> f64 {
+    let [v] = variance_lanes::<f64, Q, 1>(|m| cell[m], |_, j| model[j] as f64, [coefficients], norm, area, min_weight);
+    v
 }
 
 /// [`variance`] of four cells at once, one per `f64x4` lane (`cells`: 4 ×
-/// `k` moments, `models`: 4 × `model_len(Q)`): bit-identical to four calls.
-pub fn variances4<const Q: usize>(cells: &[f64], models: &[f32], norm: f64, area: f64, min_weight: f64) -> [f64; 4] {
-    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
-    let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
-    let mut lanes = [[0f32; 4]; GAP_VALUES];
-    transpose_values::<Q>(core::array::from_fn(|l| &models[l * ml..(l + 1) * ml]), &mut lanes);
-    variance_lanes::<f64x4, Q>(cell, |j| lane_values(&lanes, j), norm, area, min_weight).to_array()
-}
-
-/// [`variance`] of one cell (`T = f64`) or four (`f64x4`); `cell(m)` reads
-/// moment `m`, `model(j)` model value `j`. Empty lanes and non-finite
-/// results are `+∞`.
-#[inline(always)]
-fn variance_lanes<T: F64Lanes, const Q: usize>(
-    cell: impl Fn(usize) -> T,
-    model: impl Fn(usize) -> T,
+/// `k` moments), for `F` models of each cell (`models[l][f]`, with
+/// `coefficients[f]`) from one pass over the moments: `[f][l]` is
+/// bit-identical to `variance(cell l, models[l][f], coefficients[f], …)`.
+pub fn variances4<const Q: usize, const F: usize>(
+    cells: &[f64],
+    models: [[&[f32]; F]; 4],
+    coefficients: [usize; F],
     norm: f64,
     area: f64,
     min_weight: f64,
-) -> T {
+) -> [[f64; 4]; F] {
+    let k = CellLayout::new(Q).k;
+    let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let mut lanes = [[[0f32; 4]; GAP_VALUES]; F];
+    for (f, lanes) in lanes.iter_mut().enumerate() {
+        transpose_values::<Q>(core::array::from_fn(|l| models[l][f]), lanes);
+    }
+    variance_lanes::<f64x4, Q, F>(cell, |f, j| lane_values(&lanes[f], j), coefficients, norm, area, min_weight).map(|v| v.to_array())
+}
+
+/// [`variance`] of one cell (`T = f64`) or four (`f64x4`) for `F` models at
+/// once (sharing the moments' terms); `cell(m)` reads moment `m`, `model(f,
+/// j)` value `j` of model `f`. Empty lanes and non-finite results are `+∞`.
+#[inline(always)]
+fn variance_lanes<T: F64Lanes, const Q: usize, const F: usize>(
+    cell: impl Fn(usize) -> T,
+    model: impl Fn(usize, usize) -> T,
+    coefficients: [usize; F],
+    norm: f64,
+    area: f64,
+    min_weight: f64,
+) -> [T; F] {
     let lay = CellLayout::new(Q);
     let s = T::splat;
     let n = cell(0);
@@ -100,20 +115,25 @@ fn variance_lanes<T: F64Lanes, const Q: usize>(
     let inv = s(1.0) / n;
     let luma = |at: usize| (s(L[0]) * cell(at) + s(L[1]) * cell(at + 1) + s(L[2]) * cell(at + 2)) * inv;
     let mean = luma(lay.t);
-    let mut explained = s(0.0);
+    let mut explained = [s(0.0); F];
     for a in 0..Q {
         let cov = luma(lay.p + 3 * a) - cell(lay.s + a) * inv * mean;
         let j = 3 + 3 * a;
-        let beta = s(L[0]) * model(j) + s(L[1]) * model(j + 1) + s(L[2]) * model(j + 2);
-        explained = explained + beta * cov;
+        for (f, e) in explained.iter_mut().enumerate() {
+            let beta = s(L[0]) * model(f, j) + s(L[1]) * model(f, j + 1) + s(L[2]) * model(f, j + 2);
+            *e = *e + beta * cov;
+        }
     }
-    let residual = (cell(lay.e) * inv - mean * mean - explained).max_(s(0.0));
+    let spread = cell(lay.e) * inv - mean * mean;
     // min(n · norm, 1) as −max(−n · norm, −1) (exact; NaN → 1)
     let valid = s(0.0) - (s(0.0) - n * s(norm)).max_(s(-1.0));
     let samples = (s(area) * valid).max_(s(1.0));
-    let v = residual * s((Q + 1) as f64) / samples;
-    // v ≥ 0 where finite: "not above −1" means not finite
-    v.set_where(empty | v.not_above(s(-1.0)), f64::INFINITY)
+    core::array::from_fn(|f| {
+        let residual = (spread - explained[f]).max_(s(0.0));
+        let v = residual * s(coefficients[f] as f64) / samples;
+        // v ≥ 0 where finite: "not above −1" means not finite
+        v.set_where(empty | v.not_above(s(-1.0)), f64::INFINITY)
+    })
 }
 
 /// `d_s²` for candidates `1..N` (windows 1 and 2, then the AO-free fit of
@@ -412,10 +432,19 @@ mod tests {
         for seed in 0..64 {
             let (cells, models, var) = cases::<Q>(seed);
             let flat: [f32; 4 * ML] = core::array::from_fn(|i| models[(i / ml) % 4][0][i % ml]);
-            let got = variances4::<Q>(&cells, &flat[..4 * ml], 0.01, 1800.0, 1e-9);
+            // one model per cell, and two (the second as the AO-free fit's, one coefficient fewer)
+            let each: [[&[f32]; 1]; 4] = core::array::from_fn(|l| [&flat[l * ml..(l + 1) * ml]]);
+            let [got] = variances4::<Q, 1>(&cells, each, [Q + 1], 0.01, 1800.0, 1e-9);
+            let pairs: [[&[f32]; 2]; 4] = core::array::from_fn(|l| [&models[l][0][..ml], &models[l][1][..ml]]);
+            let two = variances4::<Q, 2>(&cells, pairs, [Q + 1, Q], 0.01, 1800.0, 1e-9);
             for l in 0..4 {
-                let want = variance::<Q>(&cells[l * k..(l + 1) * k], &flat[l * ml..(l + 1) * ml], 0.01, 1800.0, 1e-9);
+                let cell = &cells[l * k..(l + 1) * k];
+                let want = variance::<Q>(cell, each[l][0], Q + 1, 0.01, 1800.0, 1e-9);
                 assert_eq!(got[l].to_bits(), want.to_bits(), "Q {Q} seed {seed} lane {l}");
+                for f in 0..2 {
+                    let want = variance::<Q>(cell, pairs[l][f], Q + 1 - f, 0.01, 1800.0, 1e-9);
+                    assert_eq!(two[f][l].to_bits(), want.to_bits(), "Q {Q} seed {seed} lane {l} fit {f}");
+                }
             }
             let m: [[&[f32]; N]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &models[l][w][..ml]));
             let var: [[f64; 4]; N] = core::array::from_fn(|w| var[w]);

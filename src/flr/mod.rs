@@ -23,8 +23,9 @@
 //! writes `models` from them. The larger windows are fitted on the moment grid
 //! pooled 2×2 ([`Flr::pool_tile`]: `cells` band → `pooled` band, after stage 1;
 //! [`Flr::window_pooled`], [`Flr::window_grid`]). With
-//! [`FlrConfig::adaptive_without_ao`] the blend also refits window 0 without
-//! AO from `first` and weighs it as a fourth candidate. See [`adaptive`].
+//! [`FlrConfig::adaptive_without_ao`] window 0's solve also fits each cell
+//! without AO (from the same Cholesky factor, [`Flr::fits_per_cell`]) and the
+//! blend weighs that fit as a fourth candidate. See [`adaptive`].
 
 pub mod adaptive;
 
@@ -35,7 +36,7 @@ use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
 use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, Taps};
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
-use crate::kernels::solve::{solve_cell, solve_cells4, CellOutcome, SolveParams};
+use crate::kernels::solve::{solve_cell, solve_cell_without, solve_cells4, solve_cells4_without, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
 use adaptive::MAX_CANDIDATES;
 
@@ -390,19 +391,31 @@ impl Flr {
         self.grids[s].cell_count() * self.lay.k
     }
     /// Where tile `t` of window `s` lies in `scale_models` (windows one after another).
+    /// With [`FlrConfig::adaptive_without_ao`], window 0 holds two models per
+    /// cell ([`Flr::fits_per_cell`]).
     pub fn scale_models_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
-        let row = self.grids[s].cells_x * self.ml;
-        let o: usize = (0..s).map(|u| self.grids[u].cell_count() * self.ml).sum();
+        let row = self.grids[s].cells_x * self.ml * self.fits_per_cell(s);
+        let o: usize = (0..s).map(|u| self.grids[u].cell_count() * self.ml * self.fits_per_cell(u)).sum();
         Ok(o + a * row..o + b * row)
     }
     /// Where tile `t` of window `s` lies in `variances` (one f64 per cell of
     /// the window's grid, windows one after another).
     pub fn scale_variances_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
-        let row = self.grids[s].cells_x;
-        let o: usize = (0..s).map(|u| self.grids[u].cell_count()).sum();
+        let row = self.grids[s].cells_x * self.fits_per_cell(s);
+        let o: usize = (0..s).map(|u| self.grids[u].cell_count() * self.fits_per_cell(u)).sum();
         Ok(o + a * row..o + b * row)
+    }
+    /// Fits per cell in window `s`'s model and variance grids: 2 for window 0
+    /// with [`FlrConfig::adaptive_without_ao`] (per cell its model, then its
+    /// AO-free fit's; its variance, then the AO-free fit's), else 1.
+    pub fn fits_per_cell(&self, s: usize) -> usize {
+        1 + usize::from(s == 0 && self.without_guide().is_some())
+    }
+    /// The guide window 0 is also fitted without ([`FlrConfig::adaptive_without_ao`]: AO).
+    fn without_guide(&self) -> Option<usize> {
+        self.cfg.guides.ao_channel().filter(|_| self.cfg.adaptive_without_ao && self.scale_count() > 1)
     }
     /// Lengths of the adaptive window's regions: `first`, `blurred`, `pooled`
     /// (f64), `scale_models` (f32), `variances` (f64); all 0 for one window.
@@ -413,7 +426,7 @@ impl Flr {
         }
         let blurred = (1..n).map(|s| self.window_grid_len(s)).max().unwrap_or(0);
         let pooled = (1..n).filter(|&s| self.window_pooled(s)).map(|s| self.window_grid_len(s)).max().unwrap_or(0);
-        let cells: usize = (0..n).map(|s| self.grids[s].cell_count()).sum();
+        let cells: usize = (0..n).map(|s| self.grids[s].cell_count() * self.fits_per_cell(s)).sum();
         [self.grid_len(), blurred, pooled, cells * self.ml, cells]
     }
     /// f64 values of the adaptive window's extra regions (0 for one window).
@@ -959,10 +972,11 @@ impl Flr {
         variances_tile: &mut [f64],
     ) -> Result<Report, Error> {
         let s = self.scale(s)?;
-        let cells_n = self.scale_variances_tile_range(s, t)?.len();
+        let fits = self.fits_per_cell(s);
+        let cells_n = self.scale_variances_tile_range(s, t)?.len() / fits;
         if cells_tile.len() != cells_n * self.lay.k
-            || models_tile.len() != cells_n * self.ml
-            || !(variances_tile.is_empty() || variances_tile.len() == cells_n)
+            || models_tile.len() != cells_n * self.ml * fits
+            || !(variances_tile.is_empty() || variances_tile.len() == cells_n * fits)
         {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
         }
@@ -974,17 +988,33 @@ impl Flr {
             rep.dropped_pivots += o.dropped as u64;
         };
         // Four cells per f64x4 (bit-identical to one at a time), then the rest.
+        let stride = ml * fits;
         let quads = if self.kernel_simd() { cells_tile.len() / (4 * k) } else { 0 };
         let (cq, cr) = cells_tile.split_at(4 * k * quads);
-        let (mq, mr) = models_tile.split_at_mut(4 * ml * quads);
-        for (cells, models) in cq.chunks_exact(4 * k).zip(mq.chunks_exact_mut(4 * ml)) {
-            dispatch_q!(self.q, solve_cells4(cells, &p, models)).into_iter().for_each(&mut count);
-        }
-        for (cell, model) in cr.chunks_exact(k).zip(mr.chunks_exact_mut(ml)) {
-            count(dispatch_q!(self.q, solve_cell(cell, &p, model)));
+        let (mq, mr) = models_tile.split_at_mut(4 * stride * quads);
+        let quad_cells = cq.chunks_exact(4 * k).zip(mq.chunks_exact_mut(4 * stride));
+        let rest = cr.chunks_exact(k).zip(mr.chunks_exact_mut(stride));
+        match self.without_guide().filter(|_| fits == 2) {
+            None => {
+                for (cells, models) in quad_cells {
+                    dispatch_q!(self.q, solve_cells4(cells, &p, models)).into_iter().for_each(&mut count);
+                }
+                for (cell, model) in rest {
+                    count(dispatch_q!(self.q, solve_cell(cell, &p, model)));
+                }
+            }
+            Some(drop) => {
+                for (cells, models) in quad_cells {
+                    dispatch_q!(self.q, solve_cells4_without(cells, &p, drop, models)).into_iter().for_each(&mut count);
+                }
+                for (cell, model) in rest {
+                    count(dispatch_q!(self.q, solve_cell_without(cell, &p, drop, model)));
+                }
+            }
         }
         if !variances_tile.is_empty() {
-            dispatch_q!(self.q, variances_of(cells_tile, models_tile, &p, self.window_area(s), self.kernel_simd(), variances_tile));
+            let (area, simd) = (self.window_area(s), self.kernel_simd());
+            dispatch_q!(self.q, variances_of(cells_tile, models_tile, fits, &p, area, simd, variances_tile));
         }
         Ok(rep)
     }
@@ -993,12 +1023,10 @@ impl Flr {
     /// `models_tile`. `first_tile` is window 0's blurred band, `scale_models`
     /// and `variances` the whole window-major grids (a pooled window's model
     /// and variance are interpolated bilinearly to each block-grid cell).
-    /// With [`FlrConfig::adaptive_without_ao`] it also solves window 0 without
-    /// AO from `first_tile` (hence `stats`) as a fourth candidate; that solve's
-    /// empty cells and dropped pivots are not counted again.
+    /// With [`FlrConfig::adaptive_without_ao`], window 0's AO-free fit (made
+    /// by its solve, [`Flr::fits_per_cell`]) is blended as a fourth candidate.
     pub fn blend_tile(
         &self,
-        stats: &Stats,
         t: usize,
         first_tile: &[f64],
         scale_models: &[f32],
@@ -1006,38 +1034,28 @@ impl Flr {
         models_tile: &mut [f32],
     ) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: t, count: self.tile_count() };
-        let cells: usize = self.grids.iter().map(|g| g.cell_count()).sum();
+        let fits: usize = (0..MAX_SCALES).map(|s| self.grids[s].cell_count() * self.fits_per_cell(s)).sum();
         if self.scale_count() != MAX_SCALES
             || first_tile.len() != self.cells_tile_len(t)?
-            || scale_models.len() != cells * self.ml
-            || variances.len() != cells
+            || scale_models.len() != fits * self.ml
+            || variances.len() != fits
             || models_tile.len() != self.models_tile_len(t)?
         {
             return Err(bad);
         }
-        let mut windows = [WindowModels { models: &[], variances: &[], grid: self.grids[0] }; MAX_SCALES];
+        let mut windows = [WindowModels { models: &[], variances: &[], grid: self.grids[0], fits: 1 }; MAX_SCALES];
         let (mut mo, mut vo) = (0, 0);
-        for (w, g) in windows.iter_mut().zip(&self.grids) {
-            let n = g.cell_count();
-            *w = WindowModels { models: &scale_models[mo..mo + n * self.ml], variances: &variances[vo..vo + n], grid: *g };
+        for (s, (w, g)) in windows.iter_mut().zip(&self.grids).enumerate() {
+            let fits = self.fits_per_cell(s);
+            let n = g.cell_count() * fits;
+            *w = WindowModels { models: &scale_models[mo..mo + n * self.ml], variances: &variances[vo..vo + n], grid: *g, fits };
             mo += n * self.ml;
             vo += n;
         }
         let (r0, _) = self.tile_rows(t)?;
-        let without_ao = self.without_ao(stats);
-        let without_ao = without_ao.as_ref();
-        dispatch_q!(self.q, blend_band(first_tile, windows, without_ao, r0, self.min_weight(0), self.kernel_simd(), models_tile));
+        let candidate = self.fits_per_cell(0) == 2;
+        dispatch_q!(self.q, blend_band(first_tile, windows, candidate, r0, self.min_weight(0), self.kernel_simd(), models_tile));
         Ok(())
-    }
-
-    /// Window 0's solve without the AO channel, when the config asks for it.
-    fn without_ao(&self, stats: &Stats) -> Option<WithoutAo> {
-        let ao = self.cfg.guides.ao_channel().filter(|_| self.cfg.adaptive_without_ao)?;
-        let mut params = self.solve_params(stats, 0);
-        params.reference.copy_within(ao + 1.., ao);
-        params.mean.copy_within(ao + 1.., ao);
-        params.scale.copy_within(ao + 1.., ao);
-        Some(WithoutAo::new(self.q, ao, params, self.window_area(0)))
     }
 
     /// Stage 6: apply the models to the output rows of tile `t`. `out_band`
@@ -1179,7 +1197,7 @@ impl Flr {
                 let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
                 let (m0, v0) = (self.scale_models_tile_range(0, t)?, self.scale_variances_tile_range(0, t)?);
                 rep += self.solve_tile_at(0, &stats, t, &parts.first[c.clone()], &mut parts.scale_models[m0], &mut parts.variances[v0])?;
-                self.blend_tile(&stats, t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
+                self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
                 if t + 1 < tiles {
                     rep += self.apply_band(&f, &stats, t + 1, parts.models, parts.workers, out)?;
                 }
@@ -1254,16 +1272,43 @@ fn merged3<'a>(views: &[Option<ImageView<'a>>; MAX_GUIDES], g: usize, q: usize) 
 
 /// Each cell's variance estimate ([`adaptive::variance`]; with `simd`, four
 /// cells per `f64x4`, bit-identical).
-fn variances_of<const Q: usize>(cells: &[f64], models: &[f32], p: &SolveParams, area: f64, simd: bool, out: &mut [f64]) {
-    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
-    let quads = if simd { out.len() / 4 } else { 0 };
-    let (oq, or) = out.split_at_mut(4 * quads);
-    for ((cells, models), v) in cells.chunks_exact(4 * k).zip(models.chunks_exact(4 * ml)).zip(oq.chunks_exact_mut(4)) {
-        v.copy_from_slice(&adaptive::variances4::<Q>(cells, models, p.weight_norm, area, p.min_weight));
+fn variances_of<const Q: usize>(cells: &[f64], models: &[f32], fits: usize, p: &SolveParams, area: f64, simd: bool, out: &mut [f64]) {
+    // fit 1 (window 0's AO-free fit) has one coefficient fewer
+    if fits == 2 {
+        variances_of_n::<Q, 2>(cells, models, [Q + 1, Q], p, area, simd, out);
+    } else {
+        variances_of_n::<Q, 1>(cells, models, [Q + 1], p, area, simd, out);
     }
-    let (cells, models) = (&cells[4 * quads * k..], &models[4 * quads * ml..]);
-    for ((cell, model), v) in cells.chunks_exact(k).zip(models.chunks_exact(ml)).zip(or) {
-        *v = adaptive::variance::<Q>(cell, model, p.weight_norm, area, p.min_weight);
+}
+
+/// [`variances_of`] with `F` fits per cell (models and variances cell-major).
+fn variances_of_n<const Q: usize, const F: usize>(
+    cells: &[f64],
+    models: &[f32],
+    coefficients: [usize; F],
+    p: &SolveParams,
+    area: f64,
+    simd: bool,
+    out: &mut [f64],
+) {
+    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
+    let quads = if simd { out.len() / (4 * F) } else { 0 };
+    let (oq, or) = out.split_at_mut(4 * F * quads);
+    let (mq, mr) = models.split_at(4 * F * ml * quads);
+    for ((cells, models), v) in cells.chunks_exact(4 * k).zip(mq.chunks_exact(4 * F * ml)).zip(oq.chunks_exact_mut(4 * F)) {
+        let m = core::array::from_fn(|l| core::array::from_fn(|f| &models[(l * F + f) * ml..(l * F + f + 1) * ml]));
+        let lanes = adaptive::variances4::<Q, F>(cells, m, coefficients, p.weight_norm, area, p.min_weight);
+        for (f, lanes) in lanes.into_iter().enumerate() {
+            for (l, x) in lanes.into_iter().enumerate() {
+                v[l * F + f] = x;
+            }
+        }
+    }
+    let cells = &cells[4 * quads * k..];
+    for ((cell, models), v) in cells.chunks_exact(k).zip(mr.chunks_exact(F * ml)).zip(or.chunks_exact_mut(F)) {
+        for f in 0..F {
+            v[f] = adaptive::variance::<Q>(cell, &models[f * ml..(f + 1) * ml], coefficients[f], p.weight_norm, area, p.min_weight);
+        }
     }
 }
 
@@ -1273,6 +1318,8 @@ struct WindowModels<'a> {
     models: &'a [f32],
     variances: &'a [f64],
     grid: Grid,
+    /// Fits per cell ([`Flr::fits_per_cell`]; 2 only on the block grid).
+    fits: usize,
 }
 
 /// Reads one window's model and variance at block-grid cells, visited in
@@ -1314,10 +1361,9 @@ impl<'a> WindowReader<'a> {
         let (g, ml) = (self.win.grid, model_len(Q));
         let out = &mut out[..ml];
         if g.factor == 1 {
-            let c = i * g.cells_x + j;
-            out.copy_from_slice(&self.win.models[c * ml..(c + 1) * ml]);
-            return self.win.variances[c];
+            return self.fit::<Q>((i, j), 0, out);
         }
+        debug_assert_eq!(self.win.fits, 1, "a pooled window has one fit per cell");
         if i != self.row {
             self.row = i;
             self.ys = adaptive::pooled_taps(i, g.cells_y);
@@ -1338,6 +1384,16 @@ impl<'a> WindowReader<'a> {
             *o = wa * a + wb * b;
         }
         w0 * self.variances[s0] + w1 * self.variances[s1]
+    }
+
+    /// Fit `f` of block-grid cell `(i, j)` of a window on the block grid: its
+    /// model (into `out`) and variance.
+    #[inline]
+    fn fit<const Q: usize>(&self, (i, j): (usize, usize), f: usize, out: &mut [f32]) -> f64 {
+        let (ml, fits) = (model_len(Q), self.win.fits);
+        let c = (i * self.win.grid.cells_x + j) * fits + f;
+        out[..ml].copy_from_slice(&self.win.models[c * ml..(c + 1) * ml]);
+        self.win.variances[c]
     }
 
     /// The slot holding pooled column `x` interpolated to the current row,
@@ -1363,135 +1419,42 @@ impl<'a> WindowReader<'a> {
     }
 }
 
-/// Window 0 refitted without the AO channel ([`FlrConfig::adaptive_without_ao`]):
-/// window 0's solve constants without AO's entries, window 0's area for the
-/// variance, and where each value of the `Q − 1`-guide cell and model comes
-/// from in the `Q`-guide ones.
-#[derive(Clone, Copy, Debug)]
-struct WithoutAo {
-    params: SolveParams,
-    area: f64,
-    /// `cell_map[j]`: the moment of `Q` guides that is moment `j` of `Q − 1`.
-    cell_map: [u8; MAX_K],
-    /// `model_map[j]`: the value of the `Q − 1`-guide model that is value `j`
-    /// of the `Q`-guide one (`NO_VALUE`: AO's coefficients, 0).
-    model_map: [u8; model_len(MAX_GUIDES)],
-}
-
-/// A model value with no source ([`WithoutAo::model_map`]).
-const NO_VALUE: u8 = u8::MAX;
-
-/// Most moments of a cell.
-const MAX_K: usize = CellLayout::new(MAX_GUIDES).k;
-
-impl WithoutAo {
-    /// For `q` guides of which `ao` is AO's index.
-    fn new(q: usize, ao: usize, params: SolveParams, area: f64) -> Self {
-        let lay = CellLayout::new(q);
-        let mut cell_map = [0u8; MAX_K];
-        let mut o = 0;
-        let mut put = |m: usize| {
-            cell_map[o] = m as u8; // m < MAX_K = 131
-            o += 1;
-        };
-        put(0);
-        (0..q).filter(|&a| a != ao).for_each(|a| put(lay.s + a));
-        let mut p = lay.ss;
-        for a in 0..q {
-            for b in a..q {
-                if a != ao && b != ao {
-                    put(p);
-                }
-                p += 1;
-            }
-        }
-        (0..3).for_each(|c| put(lay.t + c));
-        for a in (0..q).filter(|&a| a != ao) {
-            (0..3).for_each(|c| put(lay.p + 3 * a + c));
-        }
-        put(lay.e);
-        let mut model_map = [NO_VALUE; model_len(MAX_GUIDES)];
-        let mut i = 0u8;
-        // values 3 + 3·ao .. 6 + 3·ao are AO's coefficients
-        for (j, m) in model_map.iter_mut().enumerate().take(model_len(q)) {
-            if j / 3 != 1 + ao {
-                *m = i;
-                i += 1;
-            }
-        }
-        WithoutAo { params, area, cell_map, model_map }
-    }
-}
-
-/// Working space of [`fit_without_ao`] (5 KB): make one per band.
-struct WithoutAoScratch {
-    cells: [f64; 4 * MAX_K],
-    models: [f32; 4 * model_len(MAX_GUIDES)],
-}
-
 /// Per cell of a group of four, each candidate's model (window-major as in
 /// [`adaptive::blend4`]; room for the most guides).
 type CandidateModels = [[[f32; model_len(MAX_GUIDES)]; MAX_CANDIDATES]; 4];
-
-/// The AO-free fit of `n` (1 or 4) cells of window 0 (`first`: their blurred
-/// moments) as models of all `Q` guides into candidate 3 of `models[l]`, and
-/// their variances.
-fn fit_without_ao<const Q: usize>(
-    first: &[f64],
-    n: usize,
-    w: &WithoutAo,
-    scratch: &mut WithoutAoScratch,
-    models: &mut CandidateModels,
-) -> [f64; 4] {
-    if Q == 0 {
-        return [f64::INFINITY; 4]; // unreachable: AO is a guide
-    }
-    let (k, ml, k1, ml1) = (CellLayout::new(Q).k, model_len(Q), CellLayout::new(Q - 1).k, model_len(Q - 1));
-    for l in 0..n {
-        let (src, dst) = (&first[l * k..(l + 1) * k], &mut scratch.cells[l * k1..(l + 1) * k1]);
-        for (d, &m) in dst.iter_mut().zip(&w.cell_map[..k1]) {
-            *d = src[m as usize];
-        }
-    }
-    let mut v = [0f64; 4];
-    let (cells, sub) = (&scratch.cells[..n * k1], &mut scratch.models[..n * ml1]);
-    fn solve<const Q1: usize>(cells: &[f64], n: usize, w: &WithoutAo, sub: &mut [f32], v: &mut [f64; 4]) {
-        let p = &w.params;
-        if n == 4 {
-            solve_cells4::<Q1>(cells, p, sub);
-            *v = adaptive::variances4::<Q1>(cells, sub, p.weight_norm, w.area, p.min_weight);
-        } else {
-            solve_cell::<Q1>(cells, p, sub);
-            v[0] = adaptive::variance::<Q1>(cells, sub, p.weight_norm, w.area, p.min_weight);
-        }
-    }
-    // Q − 1 as a constant (AO is a guide, so 0 ≤ Q − 1 < 12: never an error)
-    let dispatched = (|| -> Result<(), Error> {
-        dispatch_q!(Q - 1, solve(cells, n, w, sub, &mut v));
-        Ok(())
-    })();
-    debug_assert!(dispatched.is_ok());
-    for (l, m) in models.iter_mut().enumerate().take(n) {
-        let src = &sub[l * ml1..(l + 1) * ml1];
-        for (d, &j) in m[3][..ml].iter_mut().zip(&w.model_map[..ml]) {
-            *d = if j == NO_VALUE { 0.0 } else { src[j as usize] };
-        }
-    }
-    v
-}
 
 /// The first `N` candidates' models of each of the four cells, `ml` values each.
 fn views<const N: usize>(buf: &CandidateModels, ml: usize) -> [[&[f32]; N]; 4] {
     core::array::from_fn(|l| core::array::from_fn(|w| &buf[l][w][..ml]))
 }
 
+/// Every candidate's model (into `models`) and variance at block-grid cell
+/// `ij`: the three windows', then with `candidate` window 0's AO-free fit.
+#[inline(always)]
+fn read_candidates<const Q: usize>(
+    readers: &mut [WindowReader<'_>; MAX_SCALES],
+    candidate: bool,
+    ij: (usize, usize),
+    models: &mut [[f32; model_len(MAX_GUIDES)]; MAX_CANDIDATES],
+) -> [f64; MAX_CANDIDATES] {
+    let mut v = [0f64; MAX_CANDIDATES];
+    for (w, win) in readers.iter_mut().enumerate() {
+        v[w] = win.at::<Q>(ij, &mut models[w]);
+    }
+    if candidate {
+        v[3] = readers[0].fit::<Q>(ij, 1, &mut models[3]);
+    }
+    v
+}
+
 /// Blends one band of cells, whose first row is block-grid row `r0`
 /// ([`adaptive::blend`]; with `simd`, four cells per `f64x4`, bit-identical),
-/// with window 0's AO-free fit as a fourth candidate when `without_ao` is given.
+/// with window 0's AO-free fit (its second fit per cell) as a fourth
+/// candidate when `candidate`.
 fn blend_band<const Q: usize>(
     first: &[f64],
     windows: [WindowModels<'_>; 3],
-    without_ao: Option<&WithoutAo>,
+    candidate: bool,
     r0: usize,
     min_weight: f64,
     simd: bool,
@@ -1502,22 +1465,20 @@ fn blend_band<const Q: usize>(
     let n = out.len() / ml;
     let quads = if simd { n / 4 } else { 0 };
     let mut buf: CandidateModels = [[[0f32; model_len(MAX_GUIDES)]; MAX_CANDIDATES]; 4];
-    let mut free_scratch = WithoutAoScratch { cells: [0.0; 4 * MAX_K], models: [0.0; 4 * model_len(MAX_GUIDES)] };
     let mut readers = windows.map(WindowReader::new);
     let mut lanes = adaptive::ModelLanes::default();
     for q in 0..quads {
         let mut v = [[0f64; 4]; MAX_CANDIDATES];
         for (l, b) in buf.iter_mut().enumerate() {
             let idx = 4 * q + l;
-            let ij = (r0 + idx / cx, idx % cx);
-            for (w, win) in readers.iter_mut().enumerate() {
-                v[w][l] = win.at::<Q>(ij, &mut b[w]);
+            let vl = read_candidates::<Q>(&mut readers, candidate, (r0 + idx / cx, idx % cx), b);
+            for (w, x) in vl.into_iter().enumerate() {
+                v[w][l] = x;
             }
         }
         let cells = &first[4 * q * k..4 * (q + 1) * k];
         let o = &mut out[4 * q * ml..4 * (q + 1) * ml];
-        if let Some(w) = without_ao {
-            v[3] = fit_without_ao::<Q>(cells, 4, w, &mut free_scratch, &mut buf);
+        if candidate {
             adaptive::blend4::<Q, 4>(cells, views(&buf, ml), v, min_weight, &mut lanes, o);
         } else {
             adaptive::blend4::<Q, 3>(cells, views(&buf, ml), [v[0], v[1], v[2]], min_weight, &mut lanes, o);
@@ -1525,20 +1486,15 @@ fn blend_band<const Q: usize>(
     }
     for idx in 4 * quads..n {
         let (cell, o) = (&first[idx * k..(idx + 1) * k], &mut out[idx * ml..(idx + 1) * ml]);
-        let ij = (r0 + idx / cx, idx % cx);
-        let mut v = [0f64; MAX_SCALES];
-        for ((w, b), v) in readers.iter_mut().zip(buf[0].iter_mut()).zip(v.iter_mut()) {
-            *v = w.at::<Q>(ij, b);
-        }
-        if let Some(w) = without_ao {
-            let v3 = fit_without_ao::<Q>(cell, 1, w, &mut free_scratch, &mut buf)[0];
+        let v = read_candidates::<Q>(&mut readers, candidate, (r0 + idx / cx, idx % cx), &mut buf[0]);
+        if candidate {
             let m = views::<4>(&buf, ml)[0];
             let gaps = adaptive::prediction_gaps::<Q, 4>(cell, m, min_weight);
-            adaptive::blend(m, [v[0], v[1], v[2], v3], gaps, o);
+            adaptive::blend(m, v, gaps, o);
         } else {
             let m = views::<3>(&buf, ml)[0];
             let gaps = adaptive::prediction_gaps::<Q, 3>(cell, m, min_weight);
-            adaptive::blend(m, v, gaps, o);
+            adaptive::blend(m, [v[0], v[1], v[2]], gaps, o);
         }
     }
 }

@@ -198,7 +198,17 @@ pub fn factor_n<T: F64Lanes, const N: usize>(a: &mut [[T; N]; N], rel_floor: f64
 /// reciprocal diagonal from [`factor_n`] (0 for dropped variables → 0).
 #[inline(always)]
 pub fn solve_n<T: F64Lanes, const N: usize>(l: &[[T; N]; N], inv_diag: &[T; N], b: &mut [[T; 3]; N]) {
-    for i in 0..N {
+    solve_lead_n(l, inv_diag, b, N);
+}
+
+/// [`solve_n`] on the leading `m × m` block (`m ≤ N`): the factor of a
+/// matrix's leading principal block is the leading block of its factor, so
+/// this solves the system of the first `m` variables alone (the rest of `b`
+/// is left as it was). FLR's fit without its last guide ([`crate::flr`]).
+#[inline(always)]
+pub fn solve_lead_n<T: F64Lanes, const N: usize>(l: &[[T; N]; N], inv_diag: &[T; N], b: &mut [[T; 3]; N], m: usize) {
+    let m = m.min(N);
+    for i in 0..m {
         let mut s = b[i];
         for p in 0..i {
             for c in 0..3 {
@@ -209,9 +219,9 @@ pub fn solve_n<T: F64Lanes, const N: usize>(l: &[[T; N]; N], inv_diag: &[T; N], 
             b[i][c] = s[c] * inv_diag[i];
         }
     }
-    for i in (0..N).rev() {
+    for i in (0..m).rev() {
         let mut s = b[i];
-        for p in i + 1..N {
+        for p in i + 1..m {
             for c in 0..3 {
                 s[c] = s[c] - l[p][i] * b[p][c];
             }

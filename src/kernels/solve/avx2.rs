@@ -6,7 +6,7 @@
 //! lane (no fused multiply-adds), so the result is bit-identical to the
 //! portable lanes and to the scalar path; `solve::tests` checks it.
 
-use super::{F64Lanes, SolveParams};
+use super::{F64Lanes, Fit, SolveParams, Solved};
 use crate::kernels::CellLayout;
 use core::arch::x86_64::{
     __m256d, _mm256_add_pd, _mm256_and_pd, _mm256_andnot_pd, _mm256_blendv_pd, _mm256_cmp_pd, _mm256_div_pd, _mm256_movemask_pd,
@@ -94,18 +94,39 @@ impl F64Lanes for F64x4 {
 ///
 /// # Safety
 /// The CPU must support AVX2 ([`crate::isa::Isa::Avx2Fma`] available).
-#[allow(clippy::type_complexity)]
 #[target_feature(enable = "avx2")]
-pub(super) unsafe fn normalized4<const Q: usize>(
+pub(super) unsafe fn normalized4<const Q: usize>(cells: &[f64], p: &SolveParams, eps_mul: f64, eps_add: f64) -> (Fit<f64x4, Q>, [u32; 4]) {
+    let (full, dropped, _) = super::normalized::<F64x4, Q, false>(lanes(cells, CellLayout::new(Q).k), p, eps_mul, eps_add, 0);
+    (full.map(wide), dropped)
+}
+
+/// [`normalized4`] with the fit without guide `drop` too (a function of its
+/// own, so that [`normalized4`] returns no second fit it would not use).
+///
+/// # Safety
+/// The CPU must support AVX2 ([`crate::isa::Isa::Avx2Fma`] available).
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn normalized4_without<const Q: usize>(
     cells: &[f64],
     p: &SolveParams,
     eps_mul: f64,
     eps_add: f64,
-) -> ([f64x4; 3], [[f64x4; 3]; Q], [f64x4; 3], [u32; 4]) {
-    let k = CellLayout::new(Q).k;
-    let get = |m: usize| F64x4(_mm256_setr_pd(cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]));
-    let (c0, coef, muy, dropped) = super::normalized::<F64x4, Q>(get, p, eps_mul, eps_add);
-    // (`f64x4` and `__m256d` are both 32 plain bytes: bytemuck checks it)
-    let w = |v: F64x4| -> f64x4 { bytemuck::cast(v.0) };
-    (c0.map(w), coef.map(|c| c.map(w)), muy.map(w), dropped)
+    drop: usize,
+) -> Solved<f64x4, Q> {
+    let (full, dropped, sub) = super::normalized::<F64x4, Q, true>(lanes(cells, CellLayout::new(Q).k), p, eps_mul, eps_add, drop);
+    (full.map(wide), dropped, sub.map(wide))
+}
+
+/// Moment `m` of the four cells as one register.
+#[inline(always)]
+fn lanes(cells: &[f64], k: usize) -> impl Fn(usize) -> F64x4 + '_ {
+    // SAFETY: only called inside `normalized4*`, where AVX2 is enabled (see the type).
+    move |m: usize| F64x4(unsafe { _mm256_setr_pd(cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]) })
+}
+
+/// `wide` lanes of the same four values (`f64x4` and `__m256d` are both 32
+/// plain bytes: bytemuck checks it).
+#[inline(always)]
+fn wide(v: F64x4) -> f64x4 {
+    bytemuck::cast(v.0)
 }

@@ -46,22 +46,40 @@ pub struct CellOutcome {
 
 /// Solves one cell. `cell` has `CellLayout::new(Q).k` values, `model` has `model_len(Q)`.
 pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f32]) -> CellOutcome {
+    solve_cell_at::<Q, false>(cell, p, 0, model)
+}
+
+/// [`solve_cell`] that also fits the cell without guide `drop` (< `Q`):
+/// `model` holds two models of `model_len(Q)` values, the full fit and then
+/// the fit without `drop`, whose coefficients on it are 0 (its `μ_y` is the
+/// same). Both come from one factorization: with `drop` ordered last, the
+/// system without it is the full system's leading principal block, whose
+/// Cholesky factor is the leading block of the full factor (every entry of
+/// the normalized and the Tikhonov systems depends only on its two guides).
+pub fn solve_cell_without<const Q: usize>(cell: &[f64], p: &SolveParams, drop: usize, model: &mut [f32]) -> CellOutcome {
+    solve_cell_at::<Q, true>(cell, p, drop, model)
+}
+
+fn solve_cell_at<const Q: usize, const SUB: bool>(cell: &[f64], p: &SolveParams, drop: usize, model: &mut [f32]) -> CellOutcome {
     let lay = CellLayout::new(Q);
-    let n = cell[0];
-    if is_empty(n, p) {
+    let ml = super::model_len(Q);
+    let model = &mut model[..if SUB { 2 * ml } else { ml }];
+    if is_empty(cell[0], p) {
         model.fill(0.0);
         return CellOutcome { empty: true, dropped: 0 };
     }
-    let (c0, coef, muy, dropped) = match p.regularization {
+    let (full, dropped, sub) = match p.regularization {
         Regularization::Normalized { eps_mul, eps_add } => {
-            let (c0, c, muy, dropped) = normalized::<f64, Q>(|m| cell[m], p, eps_mul, eps_add);
-            let mut coef = [[0f64; 3]; MAX_GUIDES];
-            coef[..Q].copy_from_slice(&c);
-            (c0, coef, muy, dropped[0])
+            let (full, dropped, sub) = normalized::<f64, Q, SUB>(|m| cell[m], p, eps_mul, eps_add, drop);
+            (full, dropped[0], sub)
         }
-        Regularization::Tikhonov { eps } => tikhonov::<Q>(cell, &lay, p, eps),
+        Regularization::Tikhonov { eps } => tikhonov::<Q, SUB>(cell, &lay, p, eps, drop),
     };
-    write_model::<Q>(&c0, &coef[..Q], &muy, model);
+    let (a, b) = model.split_at_mut(ml);
+    write_model::<Q>(&full.c0, &full.coef, &full.muy, a);
+    if SUB {
+        write_model::<Q>(&sub.c0, &sub.coef, &sub.muy, b);
+    }
     CellOutcome { empty: false, dropped }
 }
 
@@ -71,81 +89,129 @@ pub fn solve_cell<const Q: usize>(cell: &[f64], p: &SolveParams, model: &mut [f3
 /// (`avx2::normalized4`; same result), which matters in a default build,
 /// whose `f64x4` is two SSE2 halves.
 pub fn solve_cells4<const Q: usize>(cells: &[f64], p: &SolveParams, models: &mut [f32]) -> [CellOutcome; 4] {
-    solve_cells4_on::<Q>(Isa::detect(), cells, p, models)
+    solve_cells4_on::<Q, false>(Isa::detect(), cells, p, 0, models)
 }
 
-/// [`solve_cells4`] on the given instruction set (the intrinsics file where
-/// [`Isa::intrinsics`], otherwise the portable lanes).
-fn solve_cells4_on<const Q: usize>(isa: Isa, cells: &[f64], p: &SolveParams, models: &mut [f32]) -> [CellOutcome; 4] {
+/// [`solve_cells4`] with each cell's fit without guide `drop` too, as in
+/// [`solve_cell_without`]: `models` holds 4 × 2·`model_len(Q)` values (per
+/// cell the full model, then the one without `drop`); bit-identical to four
+/// [`solve_cell_without`] calls.
+pub fn solve_cells4_without<const Q: usize>(cells: &[f64], p: &SolveParams, drop: usize, models: &mut [f32]) -> [CellOutcome; 4] {
+    solve_cells4_on::<Q, true>(Isa::detect(), cells, p, drop, models)
+}
+
+/// [`solve_cells4`] (with `SUB`, [`solve_cells4_without`]) on the given
+/// instruction set (the intrinsics file where [`Isa::intrinsics`], otherwise
+/// the portable lanes).
+fn solve_cells4_on<const Q: usize, const SUB: bool>(
+    isa: Isa,
+    cells: &[f64],
+    p: &SolveParams,
+    drop: usize,
+    models: &mut [f32],
+) -> [CellOutcome; 4] {
     let lay = CellLayout::new(Q);
-    let (k, ml) = (lay.k, super::model_len(Q));
+    let k = lay.k;
+    let stride = super::model_len(Q) * if SUB { 2 } else { 1 };
     let Regularization::Normalized { eps_mul, eps_add } = p.regularization else {
-        return core::array::from_fn(|l| solve_cell::<Q>(&cells[l * k..(l + 1) * k], p, &mut models[l * ml..(l + 1) * ml]));
+        return core::array::from_fn(|l| {
+            solve_cell_at::<Q, SUB>(&cells[l * k..(l + 1) * k], p, drop, &mut models[l * stride..(l + 1) * stride])
+        });
     };
     let cells = &cells[..4 * k];
-    let (c0, coef, muy, dropped) = normalized4_on::<Q>(isa, cells, p, eps_mul, eps_add);
-    write_models4::<Q>(&c0, &coef, &muy, models);
+    let (full, dropped, sub) = normalized4_on::<Q, SUB>(isa, cells, p, eps_mul, eps_add, drop);
+    write_models4::<Q>(&full, stride, models);
+    if SUB {
+        write_models4::<Q>(&sub, stride, &mut models[super::model_len(Q)..]);
+    }
     core::array::from_fn(|l| {
         if is_empty(cells[l * k], p) {
-            models[l * ml..(l + 1) * ml].fill(0.0);
+            models[l * stride..(l + 1) * stride].fill(0.0);
             return CellOutcome { empty: true, dropped: 0 };
         }
         CellOutcome { empty: false, dropped: dropped[l] }
     })
 }
 
-/// Four cells' fits in `f64` lanes, as [`normalized`] returns them: the
-/// intercepts, the coefficients on `d = g − m`, the local means of y and
-/// each lane's number of dropped pivots.
-type Lanes4<const Q: usize> = ([f64x4; 3], [[f64x4; 3]; Q], [f64x4; 3], [u32; 4]);
+/// One fit of one cell (`T = f64`) or four (`f64x4`): the intercepts, the
+/// coefficients on `d = g − m` and the local means of y.
+#[derive(Clone, Copy, Debug)]
+struct Fit<T, const Q: usize> {
+    c0: [T; 3],
+    coef: [[T; 3]; Q],
+    muy: [T; 3],
+}
+
+impl<T: Copy, const Q: usize> Fit<T, Q> {
+    fn map<U>(self, f: impl Fn(T) -> U + Copy) -> Fit<U, Q> {
+        Fit { c0: self.c0.map(f), coef: self.coef.map(|c| c.map(f)), muy: self.muy.map(f) }
+    }
+}
+
+/// What [`normalized`] returns: the fit, each lane's number of dropped
+/// pivots, and (with `SUB`) the fit without the dropped guide.
+type Solved<T, const Q: usize> = (Fit<T, Q>, [u32; 4], Fit<T, Q>);
 
 /// The four cells' normalized solve in `f64` lanes (`cells`: four cell
 /// layouts back to back) on the given instruction set.
 #[inline(always)]
-fn normalized4_on<const Q: usize>(isa: Isa, cells: &[f64], p: &SolveParams, eps_mul: f64, eps_add: f64) -> Lanes4<Q> {
+fn normalized4_on<const Q: usize, const SUB: bool>(
+    isa: Isa,
+    cells: &[f64],
+    p: &SolveParams,
+    eps_mul: f64,
+    eps_add: f64,
+    drop: usize,
+) -> Solved<f64x4, Q> {
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
         // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
-        return unsafe { avx2::normalized4::<Q>(cells, p, eps_mul, eps_add) };
+        return unsafe {
+            if SUB {
+                avx2::normalized4_without::<Q>(cells, p, eps_mul, eps_add, drop)
+            } else {
+                let (full, dropped) = avx2::normalized4::<Q>(cells, p, eps_mul, eps_add);
+                (full, dropped, full)
+            }
+        };
     }
     let _ = isa;
     let k = CellLayout::new(Q).k;
     let get = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
-    normalized::<f64x4, Q>(get, p, eps_mul, eps_add)
+    normalized::<f64x4, Q, SUB>(get, p, eps_mul, eps_add, drop)
 }
 
-/// [`write_model`] for four cells at once: finiteness tested in lanes, each
-/// value transposed straight into its cell's model; the rare lane with a
-/// non-finite value is redone by [`write_model`] (same result).
+/// [`write_model`] for four cells at once, cell `l`'s model at `models[l *
+/// stride..]`: finiteness tested in lanes, each value transposed straight
+/// into its cell's model; the rare lane with a non-finite value is redone by
+/// [`write_model`] (same result).
 #[inline(always)]
-fn write_models4<const Q: usize>(c0: &[f64x4; 3], coef: &[[f64x4; 3]; Q], muy: &[f64x4; 3], models: &mut [f32]) {
+fn write_models4<const Q: usize>(fit: &Fit<f64x4, Q>, stride: usize, models: &mut [f32]) {
     let ml = super::model_len(Q);
+    // (one bounds check here instead of one per value)
+    let models = &mut models[..3 * stride + ml];
     let limit = f64x4::splat(f32::MAX as f64);
     let mut ok = f64x4::splat(f64::from_bits(u64::MAX));
     let mut put = |j: usize, v: f64x4, ok: &mut f64x4| {
         *ok &= v.abs().simd_lt(limit);
         for (l, x) in v.to_array().into_iter().enumerate() {
-            models[l * ml + j] = x as f32;
+            models[l * stride + j] = x as f32;
         }
     };
     for c in 0..3 {
-        put(c, c0[c], &mut ok);
-        put(3 + 3 * Q + c, muy[c], &mut ok);
+        put(c, fit.c0[c], &mut ok);
+        put(3 + 3 * Q + c, fit.muy[c], &mut ok);
     }
     for a in 0..Q {
         for c in 0..3 {
-            put(3 + 3 * a + c, coef[a][c], &mut ok);
+            put(3 + 3 * a + c, fit.coef[a][c], &mut ok);
         }
     }
     let ok = ok.to_bitmask();
     for l in 0..4 {
         if ok & (1 << l) == 0 {
-            let lane = |v: f64x4| v.to_array()[l];
-            let mut coefl = [[0f64; 3]; MAX_GUIDES];
-            for a in 0..Q {
-                coefl[a] = coef[a].map(lane);
-            }
-            write_model::<Q>(&c0.map(lane), &coefl[..Q], &muy.map(lane), &mut models[l * ml..(l + 1) * ml]);
+            let one = fit.map(|v: f64x4| v.to_array()[l]);
+            write_model::<Q>(&one.c0, &one.coef, &one.muy, &mut models[l * stride..l * stride + ml]);
         }
     }
 }
@@ -155,24 +221,36 @@ fn is_empty(n: f64, p: &SolveParams) -> bool {
     !(n > p.min_weight) || !n.is_finite()
 }
 
+/// Position of guide `a` in a system that orders guide `drop` last (the
+/// others keep their order): `a` itself unless `SUB`.
+#[inline(always)]
+const fn moved<const Q: usize, const SUB: bool>(a: usize, drop: usize) -> usize {
+    if !SUB || a < drop {
+        a
+    } else if a == drop {
+        Q - 1
+    } else {
+        a - 1
+    }
+}
+
 /// The normalized-correlation regularized solve (appendix eqs. 12–23) of one
 /// cell (`f64`) or four (`f64x4`); `get(m)` reads moment `m`. Returns the
-/// intercept, coefficients on `d = g − m`, the local mean of y and the number
-/// of dropped pivots per lane.
-#[allow(clippy::type_complexity)]
+/// fit (intercept, coefficients on `d = g − m`, local mean of y), the number
+/// of dropped pivots per lane and, with `SUB`, the fit without guide `drop`
+/// from the same factor ([`solve_cell_without`]; else a copy of the fit).
 #[inline(always)]
-fn normalized<T: F64Lanes, const Q: usize>(
+fn normalized<T: F64Lanes, const Q: usize, const SUB: bool>(
     get: impl Fn(usize) -> T,
     p: &SolveParams,
     eps_mul: f64,
     eps_add: f64,
-) -> ([T; 3], [[T; 3]; Q], [T; 3], [u32; 4]) {
+    drop: usize,
+) -> Solved<T, Q> {
     let lay = CellLayout::new(Q);
     let s = T::splat;
     let inv_n = s(1.0) / get(0);
     let muy = [get(lay.t) * inv_n, get(lay.t + 1) * inv_n, get(lay.t + 2) * inv_n];
-    let mut c0 = muy;
-    let mut coef = [[s(0.0); 3]; Q];
     let mut mu = [s(0.0); Q];
     let mut muz = [s(0.0); Q];
     let mut inv_scale = [0f64; Q];
@@ -183,7 +261,9 @@ fn normalized<T: F64Lanes, const Q: usize>(
         mu[a] = get(lay.s + a) * inv_n;
         muz[a] = (mu[a] - s(p.mean[a])) * s(inv_scale[a]);
     }
-    // Ŵ (eq. 18) on standardised guides; W = S/n − μμᵀ in f64.
+    // Ŵ (eq. 18) on standardised guides; W = S/n − μμᵀ in f64. With `SUB`,
+    // guide `a` sits at row and column `moved(a)` (`drop` last).
+    let at = |a: usize| moved::<Q, SUB>(a, drop);
     let mut wh = [[s(0.0); Q]; Q];
     let mut idx = lay.ss;
     for a in 0..Q {
@@ -193,56 +273,68 @@ fn normalized<T: F64Lanes, const Q: usize>(
             if a == b {
                 v = v + s(eps_mul) * muz[a] * muz[a] + s(eps_add);
             }
-            wh[a][b] = v;
-            wh[b][a] = v;
+            wh[at(a)][at(b)] = v;
+            wh[at(b)][at(a)] = v;
             idx += 1;
         }
     }
     // σ̂ (eq. 19), Ĉ + ϵI (eqs. 20, 22), B̂ (eq. 21).
     let mut isig = [s(0.0); Q];
     for a in 0..Q {
-        isig[a] = s(1.0) / wh[a][a].max_(s(1e-300)).sqrt_();
+        isig[a] = s(1.0) / wh[at(a)][at(a)].max_(s(1e-300)).sqrt_();
     }
     let mut bh = [[s(0.0); 3]; Q];
     for a in 0..Q {
         for b in 0..Q {
-            wh[a][b] = wh[a][b] * isig[a] * isig[b];
+            wh[at(a)][at(b)] = wh[at(a)][at(b)] * isig[a] * isig[b];
         }
-        wh[a][a] = wh[a][a] + s(eps_add);
+        wh[at(a)][at(a)] = wh[at(a)][at(a)] + s(eps_add);
         for c in 0..3 {
             let cxy = get(lay.p + 3 * a + c) * inv_n - mu[a] * muy[c];
-            bh[a][c] = cxy * isig[a] * s(inv_scale[a]);
+            bh[at(a)][c] = cxy * isig[a] * s(inv_scale[a]);
         }
     }
     let mut inv_diag = [s(0.0); Q];
     let dropped = cholesky::factor_n(&mut wh, 1e-12, &mut inv_diag);
+    let mut sub = bh;
     cholesky::solve_n(&wh, &inv_diag, &mut bh);
-    // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
-    for a in 0..Q {
-        for c in 0..3 {
-            let beta = bh[a][c] * isig[a] * s(inv_scale[a]);
-            coef[a][c] = beta;
-            c0[c] = c0[c] - beta * mu[a];
-        }
+    if SUB && Q > 0 {
+        cholesky::solve_lead_n(&wh, &inv_diag, &mut sub, Q - 1);
+        sub[Q - 1] = [s(0.0); 3];
     }
-    (c0, coef, muy, dropped)
+    // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
+    let raw = |x: &[[T; 3]; Q]| {
+        let mut fit = Fit { c0: muy, coef: [[s(0.0); 3]; Q], muy };
+        for a in 0..Q {
+            for c in 0..3 {
+                let beta = x[at(a)][c] * isig[a] * s(inv_scale[a]);
+                fit.coef[a][c] = beta;
+                fit.c0[c] = fit.c0[c] - beta * mu[a];
+            }
+        }
+        fit
+    };
+    let full = raw(&bh);
+    (full, dropped, if SUB { raw(&sub) } else { full })
 }
 
-/// Textbook Tikhonov (eq. 11) on the guides exactly as given.
-#[allow(clippy::type_complexity)]
-fn tikhonov<const Q: usize>(
+/// Textbook Tikhonov (eq. 11) on the guides exactly as given: the fit, its
+/// number of dropped pivots and, with `SUB`, the fit without guide `drop`
+/// from the same factor (as in [`normalized`]; else a copy of the fit).
+fn tikhonov<const Q: usize, const SUB: bool>(
     cell: &[f64],
     lay: &CellLayout,
     p: &SolveParams,
     eps: f64,
-) -> ([f64; 3], [[f64; 3]; MAX_GUIDES], [f64; 3], u32) {
+    drop: usize,
+) -> (Fit<f64, Q>, u32, Fit<f64, Q>) {
     let n = cell[0];
     let inv_n = 1.0 / n;
     let muy = [cell[lay.t] * inv_n, cell[lay.t + 1] * inv_n, cell[lay.t + 2] * inv_n];
-    let mut c0 = [0f64; 3];
-    let mut coef = [[0f64; 3]; MAX_GUIDES];
     let wn = p.weight_norm;
     let m = &p.reference;
+    // unknowns: the intercept, then guide `a` at `1 + moved(a)` (`drop` last with `SUB`)
+    let at = |a: usize| 1 + moved::<Q, SUB>(a, drop);
     let mut xx = [0f64; N1 * N1];
     let mut xy = [0f64; N1 * 3];
     xx[0] = n * wn + eps;
@@ -250,8 +342,8 @@ fn tikhonov<const Q: usize>(
     for a in 0..Q {
         let s_a = cell[lay.s + a];
         let s_raw = s_a + n * m[a];
-        xx[a + 1] = s_raw * wn;
-        xx[(a + 1) * N1] = s_raw * wn;
+        xx[at(a)] = s_raw * wn;
+        xx[at(a) * N1] = s_raw * wn;
         for b in a..Q {
             let s_b = cell[lay.s + b];
             let raw = cell[idx] + m[a] * s_b + s_a * m[b] + n * m[a] * m[b];
@@ -259,8 +351,8 @@ fn tikhonov<const Q: usize>(
             if a == b {
                 v += eps;
             }
-            xx[(a + 1) * N1 + b + 1] = v;
-            xx[(b + 1) * N1 + a + 1] = v;
+            xx[at(a) * N1 + at(b)] = v;
+            xx[at(b) * N1 + at(a)] = v;
             idx += 1;
         }
     }
@@ -268,20 +360,31 @@ fn tikhonov<const Q: usize>(
         let t = cell[lay.t + c];
         xy[c] = t * wn;
         for a in 0..Q {
-            xy[(a + 1) * 3 + c] = (cell[lay.p + 3 * a + c] + m[a] * t) * wn;
+            xy[at(a) * 3 + c] = (cell[lay.p + 3 * a + c] + m[a] * t) * wn;
         }
     }
     let dropped = cholesky::factor(&mut xx, Q + 1, N1, 1e-15);
+    let mut sub = xy;
     cholesky::solve(&xx, Q + 1, N1, &mut xy, 3);
-    for c in 0..3 {
-        c0[c] = xy[c];
-        for a in 0..Q {
-            let v = xy[(a + 1) * 3 + c];
-            coef[a][c] = v;
-            c0[c] += v * m[a];
+    let raw = |x: &[f64; N1 * 3], without: Option<usize>| {
+        let mut fit = Fit { c0: [0.0; 3], coef: [[0.0; 3]; Q], muy };
+        for c in 0..3 {
+            fit.c0[c] = x[c];
+            for a in (0..Q).filter(|&a| Some(a) != without) {
+                let v = x[at(a) * 3 + c];
+                fit.coef[a][c] = v;
+                fit.c0[c] += v * m[a];
+            }
         }
+        fit
+    };
+    let full = raw(&xy, None);
+    if !SUB {
+        return (full, dropped.count_ones(), full);
     }
-    (c0, coef, muy, dropped.count_ones())
+    // the leading Q × Q block: the intercept and every guide but `drop`
+    cholesky::solve(&xx, Q, N1, &mut sub, 3);
+    (full, dropped.count_ones(), raw(&sub, Some(drop)))
 }
 
 fn write_model<const Q: usize>(c0: &[f64; 3], coef: &[[f64; 3]], muy: &[f64; 3], model: &mut [f32]) {
@@ -365,7 +468,7 @@ mod tests {
             }
             let run = |isa: Isa| {
                 let mut m = [0f32; 4 * 48];
-                let o = solve_cells4_on::<Q>(isa, &cells[..4 * k], &p, &mut m[..4 * ml]);
+                let o = solve_cells4_on::<Q, false>(isa, &cells[..4 * k], &p, 0, &mut m[..4 * ml]);
                 (o, m)
             };
             let (po, pm) = run(Isa::Portable);
@@ -389,5 +492,99 @@ mod tests {
         check::<5>(&mut rnd);
         check::<8>(&mut rnd);
         check::<MAX_GUIDES>(&mut rnd);
+    }
+
+    /// The fit without one guide from the full factor ([`solve_cell_without`])
+    /// equals a solve of that guide's moments left out, for every dropped
+    /// guide position (last, first, middle), both regularizations; the four-
+    /// cell version is bit-identical on either instruction set and to four
+    /// single cells, and the full fit beside it is bit-identical to
+    /// [`solve_cell`]'s.
+    #[test]
+    fn fit_without_a_guide_matches_a_smaller_solve() {
+        let mut seed = 7u32;
+        let mut rnd = move || crate::hash::uniform(&mut seed);
+        fn check<const Q: usize, const Q1: usize>(rnd: &mut impl FnMut() -> f64, reg: Regularization) {
+            let (k, ml, k1, ml1) =
+                (CellLayout::new(Q).k, crate::kernels::model_len(Q), CellLayout::new(Q1).k, crate::kernels::model_len(Q1));
+            let vals: [f64; 64 * 16] = core::array::from_fn(|_| rnd());
+            // guides: a smooth mix plus noise; light depends on all of them
+            let g = |i: usize, q: usize| vals[i * 16 + q] + 0.3 * (q as f64) + 0.1 * vals[i * 16 + (q + 1) % 8];
+            let y = |i: usize, c: usize| 1.0 + vals[i * 16 + 12 + c] + (0..Q).map(|q| 0.2 * (q as f64 + 1.0) * g(i, q)).sum::<f64>();
+            for drop in [Q - 1, 0, Q / 2] {
+                let p = SolveParams {
+                    reference: core::array::from_fn(|q| 0.05 * q as f64),
+                    mean: core::array::from_fn(|q| 0.5 + 0.3 * q as f64),
+                    scale: core::array::from_fn(|q| 0.3 + 0.01 * q as f64),
+                    regularization: reg,
+                    weight_norm: 1.0 / 64.0,
+                    min_weight: 0.5,
+                };
+                let keep = |q1: usize| if q1 < drop { q1 } else { q1 + 1 };
+                let cell = cell_of::<Q>(64, g, y);
+                let small = cell_of::<Q1>(64, |i, q1| g(i, keep(q1)), y);
+                let mut p1 = p;
+                for q1 in 0..Q1 {
+                    p1.reference[q1] = p.reference[keep(q1)];
+                    p1.mean[q1] = p.mean[keep(q1)];
+                    p1.scale[q1] = p.scale[keep(q1)];
+                }
+                let mut want = [0f32; 48];
+                solve_cell::<Q1>(&small[..k1], &p1, &mut want[..ml1]);
+                let mut both = [0f32; 96];
+                solve_cell_without::<Q>(&cell[..k], &p, drop, &mut both[..2 * ml]);
+                let mut full = [0f32; 48];
+                solve_cell::<Q>(&cell[..k], &p, &mut full[..ml]);
+                for j in 0..ml {
+                    assert_eq!(both[j].to_bits(), full[j].to_bits(), "Q {Q} drop {drop} full value {j}");
+                }
+                let sub = &both[ml..2 * ml];
+                let close = |a: f32, b: f32| (a - b).abs() <= 2e-4 * (1.0 + b.abs());
+                for c in 0..3 {
+                    assert!(close(sub[c], want[c]), "Q {Q} drop {drop} c0 {c}: {} vs {}", sub[c], want[c]);
+                    assert_eq!(sub[3 + 3 * Q + c], full[3 + 3 * Q + c], "μ_y");
+                    assert_eq!(sub[3 + 3 * drop + c], 0.0, "no coefficient on the dropped guide");
+                    for q1 in 0..Q1 {
+                        let (a, b) = (sub[3 + 3 * keep(q1) + c], want[3 + 3 * q1 + c]);
+                        assert!(close(a, b), "Q {Q} drop {drop} guide {} c {c}: {a} vs {b}", keep(q1));
+                    }
+                }
+                // the full fit does use the dropped guide: the two fits differ
+                assert!((0..3).any(|c| full[3 + 3 * drop + c] != 0.0));
+                if let Regularization::Normalized { .. } = reg {
+                    let mut cells = [0f64; 4 * 160];
+                    for l in 0..4 {
+                        cells[l * k..(l + 1) * k].copy_from_slice(&cell[..k]);
+                        cells[l * k + lay_t::<Q>()] += l as f64; // four different cells
+                    }
+                    cells[3 * k + lay_t::<Q>() + 1] = f64::NAN;
+                    let run = |isa: Isa| {
+                        let mut m = [0f32; 4 * 96];
+                        let o = solve_cells4_on::<Q, true>(isa, &cells[..4 * k], &p, drop, &mut m[..8 * ml]);
+                        (o, m)
+                    };
+                    let ((po, pm), (ao, am)) = (run(Isa::Portable), run(Isa::Avx2Fma));
+                    assert_eq!(po, ao);
+                    for l in 0..4 {
+                        let mut one = [0f32; 96];
+                        assert_eq!(solve_cell_without::<Q>(&cells[l * k..(l + 1) * k], &p, drop, &mut one[..2 * ml]), po[l]);
+                        for j in 0..2 * ml {
+                            let (a, b, c) = (pm[l * 2 * ml + j], am[l * 2 * ml + j], one[j]);
+                            assert_eq!(a.to_bits(), b.to_bits(), "Q {Q} drop {drop} cell {l} value {j}");
+                            assert_eq!(a.to_bits(), c.to_bits(), "Q {Q} drop {drop} cell {l} value {j}");
+                        }
+                    }
+                }
+            }
+        }
+        fn lay_t<const Q: usize>() -> usize {
+            CellLayout::new(Q).t
+        }
+        for reg in [Regularization::Normalized { eps_mul: 1e-3, eps_add: 1e-2 }, Regularization::Tikhonov { eps: 1e-4 }] {
+            check::<1, 0>(&mut rnd, reg);
+            check::<3, 2>(&mut rnd, reg);
+            check::<5, 4>(&mut rnd, reg);
+            check::<8, 7>(&mut rnd, reg);
+        }
     }
 }
