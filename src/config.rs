@@ -79,9 +79,10 @@ pub struct FlrConfig {
     /// substitution per cell, no blur) and blend that fit as a fourth candidate, with
     /// the variance of its one coefficient fewer and its bias measured like a
     /// larger window's (`flr::adaptive`). AO helps some scenes and costs
-    /// others up to half a dB; this lets each cell choose. Off by default
-    /// until the GPU path has it; on the training scenes +0.1–0.2 dB, on the
-    /// held-out scenes +0.05 dB (README, "Towards FLR = OIDN").
+    /// others up to half a dB; this lets each cell choose. Off by default:
+    /// on the training scenes +0.1–0.2 dB, on the held-out scenes +0.05 dB
+    /// (scene-dependent: −0.12 to +0.23) for ~7 % more time (README,
+    /// "Towards FLR = OIDN"). CPU and GPU paths.
     pub adaptive_without_ao: bool,
 }
 

@@ -86,6 +86,13 @@ pub struct GpuParams {
     pub win: [GpuWindow; 3],
     /// Taps of windows 1 and 2.
     pub taps_12: [[f32; TAPS]; 2],
+    /// [`FlrConfig::adaptive_without_ao`]: the guide channel (AO) window 0
+    /// is also fitted without (`u32::MAX`: off), and where that fit's models
+    /// and variances go in `models`.
+    pub without: u32,
+    pub without_model_off: u32,
+    pub without_var_off: u32,
+    pub pad_without: u32,
 }
 
 /// One window of the fit in the parameter block, laid out as the WGSL
@@ -115,7 +122,7 @@ pub struct GpuWindow {
 }
 
 // SAFETY: `repr(C)`, only u32/f32 fields and arrays of them, 4-byte aligned
-// throughout with no padding (1392 bytes: checked below); any bit pattern is valid.
+// throughout with no padding (1408 bytes: checked below); any bit pattern is valid.
 unsafe impl bytemuck::Zeroable for GpuParams {}
 // SAFETY: as above.
 unsafe impl bytemuck::Pod for GpuParams {}
@@ -125,7 +132,7 @@ unsafe impl bytemuck::Zeroable for GpuWindow {}
 unsafe impl bytemuck::Pod for GpuWindow {}
 const _: () = assert!(core::mem::size_of::<GpuWindow>() == 64);
 /// Bytes of the parameter block.
-pub const PARAMS_BYTES: usize = 1392;
+pub const PARAMS_BYTES: usize = 1408;
 const _: () = assert!(core::mem::size_of::<GpuParams>() == PARAMS_BYTES);
 
 impl GpuParams {
@@ -313,6 +320,9 @@ struct Regions {
     out: [(u32, usize); MAX_SCALES],
     model: [usize; MAX_SCALES],
     var: [Option<usize>; MAX_SCALES],
+    /// Window 0's fit without a guide ([`FlrConfig::adaptive_without_ao`]):
+    /// its models and variances.
+    without: Option<(usize, usize)>,
 }
 
 /// Elements a layout addresses for `channels` channels (one past the last), if it fits u32.
@@ -335,9 +345,6 @@ impl GpuPlan {
         let q = flr.guide_channels();
         if q > GPU_MAX_GUIDES {
             return Err(Error::TooManyGuides { got: q });
-        }
-        if cfg.adaptive_without_ao {
-            return Err(Error::Unsupported("adaptive_without_ao is not on the GPU path yet"));
         }
         let plan = GpuPlan { flr };
         if (0..plan.windows()).any(|s| plan.taps(s).radius >= TAPS) {
@@ -397,6 +404,7 @@ impl GpuPlan {
             out: [(0, 0); MAX_SCALES],
             model: [0; MAX_SCALES],
             var: [None; MAX_SCALES],
+            without: None,
         };
         if self.windows() == 1 {
             return r;
@@ -424,7 +432,18 @@ impl GpuPlan {
             r.var[s] = Some(r.models_len);
             r.models_len += self.grid(s).cells_x * self.grid(s).cells_y;
         }
+        if self.without_guide().is_some() {
+            r.without = Some((r.models_len, r.models_len + fine * ml));
+            r.models_len += fine * (ml + 1);
+        }
         r
+    }
+
+    /// The guide channel window 0 is also fitted without: AO, with
+    /// [`FlrConfig::adaptive_without_ao`].
+    fn without_guide(&self) -> Option<usize> {
+        let cfg = self.config();
+        cfg.guides.ao_channel().filter(|_| cfg.adaptive_without_ao && self.windows() > 1)
     }
 
     /// Output size.
@@ -556,6 +575,10 @@ impl GpuPlan {
             pooled_y: pooled.map_or(0, |g| g.cells_y as u32),
             win,
             taps_12: [if self.windows() > 1 { taps_of(1) } else { [0.0; TAPS] }, if self.windows() > 2 { taps_of(2) } else { [0.0; TAPS] }],
+            without: self.without_guide().map_or(u32::MAX, |d| d as u32),
+            without_model_off: r.without.map_or(u32::MAX, |(m, _)| m as u32),
+            without_var_off: r.without.map_or(u32::MAX, |(_, v)| v as u32),
+            pad_without: 0,
         })
     }
 

@@ -45,7 +45,7 @@ pub struct FlrArgs {
     /// Joint denoise + upsample: trace at 1/2 or 1/4 resolution (emulated by taking every 2nd/4th pixel of the noisy layer)
     #[arg(long)]
     pub upsample: Option<usize>,
-    /// Adaptive window with AO: also fit the smallest window without AO and let each cell's blend weigh that fit too (CPU only; off by default)
+    /// Adaptive window with AO: also fit the smallest window without AO and let each cell's blend weigh that fit too (off by default)
     #[arg(long)]
     pub without_ao: bool,
     /// WALR: à-trous iterations (1..=5; 4 = an 81x81 window)

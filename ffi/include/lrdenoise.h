@@ -298,7 +298,7 @@ typedef struct LrdFlrConfig {
   /**
    * LRD_BLUR_ADAPTIVE with LRD_GUIDE_AO: also fit the smallest window
    * without AO and blend it as a fourth candidate (off by default; see
-   * `FlrConfig::adaptive_without_ao`). Not on the GPU path yet.
+   * `FlrConfig::adaptive_without_ao`), on the CPU and the GPU path.
    */
   bool adaptive_without_ao;
 } LrdFlrConfig;
@@ -600,7 +600,7 @@ typedef struct LrdGpuDispatch {
   /**
    * Contents of the uniform parameter block (binding 0).
    */
-  uint8_t params[1392];
+  uint8_t params[1408];
 } LrdGpuDispatch;
 
 #ifdef __cplusplus

@@ -167,7 +167,7 @@ pub struct LrdFlrConfig {
     pub scalar_kernels: bool,
     /// LRD_BLUR_ADAPTIVE with LRD_GUIDE_AO: also fit the smallest window
     /// without AO and blend it as a fourth candidate (off by default; see
-    /// `FlrConfig::adaptive_without_ao`). Not on the GPU path yet.
+    /// `FlrConfig::adaptive_without_ao`), on the CPU and the GPU path.
     pub adaptive_without_ao: bool,
 }
 
@@ -1670,11 +1670,11 @@ pub struct LrdGpuDispatch {
     /// Minimum size of each buffer in bytes, in binding order.
     pub buffer_bytes: [u64; 8],
     /// Contents of the uniform parameter block (binding 0).
-    pub params: [u8; 1392],
+    pub params: [u8; 1408],
 }
 
 #[cfg(feature = "flr")]
-const _: () = assert!(lrdenoise_core::gpu::MAX_PASSES == 15 && lrdenoise_core::gpu::PARAMS_BYTES == 1392);
+const _: () = assert!(lrdenoise_core::gpu::MAX_PASSES == 15 && lrdenoise_core::gpu::PARAMS_BYTES == 1408);
 
 /// Fills `out` with the GPU dispatch description of `config` for
 /// `width`×`height` output frames (at most 8 guide channels), with
@@ -1712,7 +1712,7 @@ pub unsafe extern "C" fn lrd_gpu_dispatch(
             passes: [LrdGpuPass { entry: core::ptr::null(), workgroups: [0; 3] }; 15],
             pass_count: passes.len() as u32,
             buffer_bytes: [0; 8],
-            params: [0; 1392],
+            params: [0; 1408],
         };
         for (dst, p) in d.passes.iter_mut().zip(passes.iter()) {
             *dst = LrdGpuPass { entry: p.entry.as_ptr(), workgroups: p.workgroups };

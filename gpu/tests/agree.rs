@@ -137,6 +137,48 @@ fn adaptive_window() {
     check("adaptive nan/inf", adaptive([6.0, 12.0, 20.0], 8), &f, set);
 }
 
+/// The AO-free candidate (`adaptive_without_ao`): window 0 also fitted
+/// without AO and blended as a fourth candidate; AO last and AO followed by a
+/// user guide (the system reordered), both regularizations, sizes odd and
+/// tiny, NaN/Inf; and its output differs from the three-window blend.
+#[test]
+fn adaptive_without_ao() {
+    let base = GuideSet::NORMAL_DEPTH_AO;
+    for (set, user) in [(base, false), (GuideSet { user: 1, ..base }, true)] {
+        for (w, h, seed) in [(96, 64, 7), (75, 61, 2), (7, 3, 4), (1, 1, 5)] {
+            let mut f = Owned::synthetic(w, h, seed, 0.6);
+            if user {
+                f.user = vec![(0..w * h).map(|i| ((i * 7919) % 101) as f32 / 101.0).collect()];
+            }
+            for reg in [Regularization::Normalized { eps_mul: 1e-3, eps_add: 1e-2 }, Regularization::Tikhonov { eps: 1e-3 }] {
+                let three = FlrConfig { regularization: reg, ..adaptive(cfg(set, 8)) };
+                let four = FlrConfig { adaptive_without_ao: true, ..three };
+                let Some((mean, max, _, _)) = compare(three, &f, set) else { return };
+                if check(&format!("without AO {set:?} {reg:?}"), four, &f, set).is_none() {
+                    return;
+                }
+                assert!(mean < MEAN_TOL && max < MAX_TOL);
+                if w * h > 1000 {
+                    // the candidate changes the result by far more than the GPU's tolerance
+                    let mut g3 = gpu(three, w, h).unwrap();
+                    let mut g4 = gpu(four, w, h).unwrap();
+                    let frame = f.frame(set);
+                    let (mut o3, mut o4) = (vec![0f32; 3 * w * h], vec![0f32; 3 * w * h]);
+                    g3.denoise(&frame, &mut ImageViewMut::interleaved(&mut o3, w, h, 3).unwrap()).unwrap();
+                    g4.denoise(&frame, &mut ImageViewMut::interleaved(&mut o4, w, h, 3).unwrap()).unwrap();
+                    let (m, _) = rel_diff(&o4, &o3);
+                    assert!(m > 10.0 * MEAN_TOL, "{set:?} {reg:?}: the candidate moves the output by only {m:.2e}");
+                }
+            }
+        }
+    }
+    let mut f = Owned::synthetic(64, 48, 2, 0.6);
+    f.noisy[3 * 7] = f32::NAN;
+    f.depth[900] = f32::INFINITY;
+    f.ao[1500] = f32::NAN;
+    check("without AO nan/inf", FlrConfig { adaptive_without_ao: true, ..adaptive(cfg(base, 8)) }, &f, base);
+}
+
 #[test]
 fn degenerate_guides_and_nonfinite_inputs() {
     let base = Owned::synthetic(64, 48, 2, 0.6);

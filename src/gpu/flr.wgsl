@@ -13,7 +13,10 @@
 //   blur_cols_1 → solve_1 → blur_rows_2 → blur_cols_2 → solve_2 → blend → apply
 //
 // (`pool` when a window is fitted on the 2×2-pooled grid). Regions of `tmp`
-// and `models` are given by `Params::win`.
+// and `models` are given by `Params::win`. With `Params::without` (the AO
+// channel), window 0's solve also fits each cell without that guide, from the
+// same Cholesky factor (the guide ordered last: the system without it is the
+// leading block), and the blend weighs that fit as a fourth candidate.
 // Equation numbers are those of the FLR paper's appendix (eqs. 12–23).
 // Differences from the CPU path, all from f32 (WGSL has no f64): moments are
 // shifted to the frame reference and blurred in f32; the pivot floors are
@@ -74,6 +77,13 @@ struct Params {
     win: array<Window, 3>,
     // taps of windows 1 and 2, 17 vectors each
     taps_12: array<vec4<f32>, 34>,
+    // FlrConfig::adaptive_without_ao: the guide (AO) window 0 is also fitted
+    // without (NONE: off), and where that fit's models and variances go in
+    // `models` (on window 0's grid)
+    without: u32,
+    without_model_off: u32,
+    without_var_off: u32,
+    pad_without: u32,
 }
 
 // One window of the fit: its grid, where its blur reads and writes, where its
@@ -632,6 +642,12 @@ fn solve_at(gid: vec3<u32>) {
         if g.var_off != NONE {
             models[g.var_off + cy * g.cells_x + cx] = inf();
         }
+        if W == 0u && P.without != NONE {
+            for (var j = 0u; j < P.ml; j++) {
+                models[P.without_model_off + (cy * g.cells_x + cx) * P.ml + j] = 0.0;
+            }
+            models[P.without_var_off + cy * g.cells_x + cx] = inf();
+        }
         atomicAdd(&stats.empty_cells, 1u);
         return;
     }
@@ -643,6 +659,10 @@ fn solve_at(gid: vec3<u32>) {
     let muy = vec3<f32>(blurred(cell + t), blurred(cell + t + 1u), blurred(cell + t + 2u)) * inv_n;
     var c0 = muy;
     var coef: array<vec3<f32>, 9>;
+    // window 0's fit without guide `d` (NONE: none), `c0` and `coef` as the fit's
+    let d = select(NONE, P.without, W == 0u);
+    var sub_c0 = muy;
+    var sub_coef: array<vec3<f32>, 9>;
     var a: array<array<f32, 9>, 9>;
     var inv: array<f32, 9>;
     var dropped = 0u;
@@ -656,6 +676,7 @@ fn solve_at(gid: vec3<u32>) {
             mu[i] = blurred(cell + s + i) * inv_n;
             muz[i] = (mu[i] - stats.mean[i]) * inv_scale[i];
         }
+        // guide i at row and column moved(i, d) (d last; the identity without d)
         var idx = ss;
         for (var i = 0u; i < q; i++) {
             for (var j = i; j < q; j++) {
@@ -664,52 +685,70 @@ fn solve_at(gid: vec3<u32>) {
                 if i == j {
                     v += P.eps_mul * muz[i] * muz[i] + P.eps_add; // eq. 18
                 }
-                a[i][j] = v;
-                a[j][i] = v;
+                a[moved(i, d, q)][moved(j, d, q)] = v;
+                a[moved(j, d, q)][moved(i, d, q)] = v;
                 idx++;
             }
         }
         var isig: array<f32, 8>;
         for (var i = 0u; i < q; i++) {
-            isig[i] = 1.0 / sqrt(max(a[i][i], 1e-30)); // eq. 19
+            let ii = moved(i, d, q);
+            isig[i] = 1.0 / sqrt(max(a[ii][ii], 1e-30)); // eq. 19
         }
         var bh: array<vec3<f32>, 9>;
         for (var i = 0u; i < q; i++) {
+            let ii = moved(i, d, q);
             for (var j = 0u; j < q; j++) {
-                a[i][j] *= isig[i] * isig[j]; // eq. 20
+                let jj = moved(j, d, q);
+                a[ii][jj] *= isig[i] * isig[j]; // eq. 20
             }
-            a[i][i] += P.eps_add; // eq. 22
+            a[ii][ii] += P.eps_add; // eq. 22
             let pv = vec3<f32>(blurred(cell + p + 3u * i), blurred(cell + p + 3u * i + 1u), blurred(cell + p + 3u * i + 2u));
-            bh[i] = (pv * inv_n - mu[i] * muy) * (isig[i] * inv_scale[i]); // eq. 21
+            bh[ii] = (pv * inv_n - mu[i] * muy) * (isig[i] * inv_scale[i]); // eq. 21
         }
         dropped = cholesky(&a, &inv, q, FLOOR_NORMALIZED);
+        var lead = bh;
         substitute(&a, &inv, &bh, q);
+        if d != NONE {
+            // the leading block: every guide but d
+            substitute(&a, &inv, &lead, q - 1u);
+            lead[q - 1u] = vec3<f32>(0.0);
+        }
         for (var i = 0u; i < q; i++) {
-            let beta = bh[i] * (isig[i] * inv_scale[i]); // eq. 23
+            let ii = moved(i, d, q);
+            let beta = bh[ii] * (isig[i] * inv_scale[i]); // eq. 23
             coef[i] = beta;
             c0 -= beta * mu[i];
+            if d != NONE {
+                let sub_beta = lead[ii] * (isig[i] * inv_scale[i]);
+                sub_coef[i] = sub_beta;
+                sub_c0 -= sub_beta * mu[i];
+            }
         }
     } else {
         // Tikhonov (eq. 11) on the raw guides: variables [1, g_0 .. g_Q).
+        // unknowns: the intercept, then guide i at 1 + moved(i, d)
         let wn = g.weight_norm;
         var b: array<vec3<f32>, 9>;
         a[0][0] = n * wn + P.eps_tikhonov;
         var idx = ss;
         for (var i = 0u; i < q; i++) {
+            let ii = 1u + moved(i, d, q);
             let mi = stats.reference[i];
             let s_i = blurred(cell + s + i);
             let raw_s = (s_i + n * mi) * wn;
-            a[0][i + 1u] = raw_s;
-            a[i + 1u][0] = raw_s;
+            a[0][ii] = raw_s;
+            a[ii][0] = raw_s;
             for (var j = i; j < q; j++) {
+                let jj = 1u + moved(j, d, q);
                 let mj = stats.reference[j];
                 let raw = blurred(cell + idx) + mi * blurred(cell + s + j) + s_i * mj + n * mi * mj;
                 var v = raw * wn;
                 if i == j {
                     v += P.eps_tikhonov;
                 }
-                a[i + 1u][j + 1u] = v;
-                a[j + 1u][i + 1u] = v;
+                a[ii][jj] = v;
+                a[jj][ii] = v;
                 idx++;
             }
         }
@@ -717,20 +756,57 @@ fn solve_at(gid: vec3<u32>) {
         b[0] = tv * wn;
         for (var i = 0u; i < q; i++) {
             let pv = vec3<f32>(blurred(cell + p + 3u * i), blurred(cell + p + 3u * i + 1u), blurred(cell + p + 3u * i + 2u));
-            b[i + 1u] = (pv + stats.reference[i] * tv) * wn;
+            b[1u + moved(i, d, q)] = (pv + stats.reference[i] * tv) * wn;
         }
         dropped = cholesky(&a, &inv, q + 1u, FLOOR_TIKHONOV);
+        var lead = b;
         substitute(&a, &inv, &b, q + 1u);
+        if d != NONE {
+            substitute(&a, &inv, &lead, q);
+            lead[q] = vec3<f32>(0.0);
+        }
         c0 = b[0];
+        sub_c0 = lead[0];
         for (var i = 0u; i < q; i++) {
-            coef[i] = b[i + 1u];
-            c0 += b[i + 1u] * stats.reference[i];
+            let ii = 1u + moved(i, d, q);
+            coef[i] = b[ii];
+            c0 += b[ii] * stats.reference[i];
+            if d != NONE {
+                sub_coef[i] = lead[ii];
+                sub_c0 += lead[ii] * stats.reference[i];
+            }
         }
     }
     if dropped > 0u {
         atomicAdd(&stats.dropped_pivots, dropped);
     }
-    // write_model: the local mean where the fit is not finite
+    write_model(model, c0, coef, muy);
+    if g.var_off != NONE {
+        models[g.var_off + cy * g.cells_x + cx] = variance(cell, model, g, f32(q + 1u));
+    }
+    if d != NONE {
+        let sub_model = P.without_model_off + (cy * g.cells_x + cx) * P.ml;
+        write_model(sub_model, sub_c0, sub_coef, muy);
+        models[P.without_var_off + cy * g.cells_x + cx] = variance(cell, sub_model, g, f32(q));
+    }
+}
+
+// Guide `i`'s row and column in a system that orders guide `d` last (the
+// others keep their order); `i` itself when `d` is NONE.
+fn moved(i: u32, d: u32, q: u32) -> u32 {
+    if d == NONE || i < d {
+        return i;
+    }
+    if i == d {
+        return q - 1u;
+    }
+    return i - 1u;
+}
+
+// One cell's model at `model` (`write_model` of src/kernels/solve): the local
+// mean where the fit is not finite.
+fn write_model(model: u32, c0: vec3<f32>, coef: array<vec3<f32>, 9>, muy: vec3<f32>) {
+    let q = P.q;
     var ok = vec_finite(c0);
     for (var i = 0u; i < q; i++) {
         ok = ok && vec_finite(coef[i]);
@@ -758,9 +834,6 @@ fn solve_at(gid: vec3<u32>) {
     }
     for (var c = 0u; c < 3u; c++) {
         models[model + 3u + 3u * q + c] = m[c];
-    }
-    if g.var_off != NONE {
-        models[g.var_off + cy * g.cells_x + cx] = variance(cell, model, g);
     }
 }
 
@@ -798,8 +871,9 @@ fn luma3(v: vec3<f32>) -> f32 {
     return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
 }
 
-// v_s = r_s (Q + 1) / N_s of the model just written at `model` (`adaptive::variance`).
-fn variance(cell: u32, model: u32, g: Window) -> f32 {
+// v_s = r_s · coefficients / N_s of the model just written at `model`
+// (`adaptive::variance`; Q + 1 coefficients, Q for the fit without a guide).
+fn variance(cell: u32, model: u32, g: Window, coefficients: f32) -> f32 {
     let q = P.q;
     let n = blurred(cell);
     let inv = 1.0 / n;
@@ -815,7 +889,7 @@ fn variance(cell: u32, model: u32, g: Window) -> f32 {
     }
     let residual = max(blurred(cell + off_e()) * inv - mean * mean - explained, 0.0);
     let samples = max(g.area * min(n * g.weight_norm, 1.0), 1.0);
-    let v = residual * f32(q + 1u) / samples;
+    let v = residual * coefficients / samples;
     if finite(v) {
         return v;
     }
@@ -849,8 +923,17 @@ fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ml = P.ml;
     // each window's model and variance at this cell (a pooled window's
     // interpolated bilinearly; an empty neighbour makes the variance INF)
-    var ms: array<array<f32, 30>, 3>;
-    var vs: array<f32, 3>;
+    // (candidate 3: window 0's fit without `Params::without`, when there is one)
+    let nc = select(4u, 3u, P.without == NONE);
+    var ms: array<array<f32, 30>, 4>;
+    var vs: array<f32, 4>;
+    if nc == 4u {
+        let c = cy * P.cells_x + cx;
+        for (var j = 0u; j < ml; j++) {
+            ms[3][j] = models[P.without_model_off + c * ml + j];
+        }
+        vs[3] = models[P.without_var_off + c];
+    }
     for (var s = 0u; s < 3u; s++) {
         let g = P.win[s];
         if g.factor == 1u {
@@ -894,14 +977,14 @@ fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
     W = 0u;
     let cell = (cy * P.cells_x + cx) * P.k;
     let n = blurred(cell);
-    var gaps = vec3<f32>(0.0);
+    var gaps = vec4<f32>(0.0);
     if n > P.win[0].min_weight && finite(n) {
         let inv = 1.0 / n;
         var mu: array<f32, 8>;
         for (var a = 0u; a < q; a++) {
             mu[a] = blurred(cell + off_s() + a) * inv;
         }
-        for (var s = 1u; s < 3u; s++) {
+        for (var s = 1u; s < nc; s++) {
             var dc: array<f32, 8>;
             var at_mean = luma3(vec3<f32>(ms[s][0] - ms[0][0], ms[s][1] - ms[0][1], ms[s][2] - ms[0][2]));
             for (var a = 0u; a < q; a++) {
@@ -924,8 +1007,8 @@ fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     // weights 1 / (b_s² + v_s) (`adaptive::blend`); a larger window next to
     // an empty smallest one is taken at its variance alone
-    var w = vec3<f32>(0.0);
-    for (var s = 0u; s < 3u; s++) {
+    var w = vec4<f32>(0.0);
+    for (var s = 0u; s < nc; s++) {
         var mse = vs[s];
         if s > 0u && finite(vs[s]) && finite(vs[0]) {
             // the variance difference d_s² holds: max(v₀ − v_s, 0)
@@ -943,11 +1026,15 @@ fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
             w[s] = 1.0 / max(mse, 1e-30);
         }
     }
-    let total = w.x + w.y + w.z;
+    let total = w.x + w.y + w.z + w.w;
     let out = (cy * P.cells_x + cx) * ml;
     for (var j = 0u; j < ml; j++) {
         if total > 0.0 && finite(total) {
-            models[out + j] = (w.x * ms[0][j] + w.y * ms[1][j] + w.z * ms[2][j]) / total;
+            var m = w.x * ms[0][j] + w.y * ms[1][j] + w.z * ms[2][j];
+            if nc == 4u {
+                m += w.w * ms[3][j];
+            }
+            models[out + j] = m / total;
         } else {
             models[out + j] = ms[1][j];
         }
