@@ -1,5 +1,6 @@
-//! Times `Flr::denoise` with the defaults (adaptive window), with one
-//! σ = 12 px window and with the defaults plus the AO-free candidate
+//! Times `Flr::denoise` with the defaults (adaptive window, AO
+//! demodulation), the defaults without the AO demodulation (`ao_demodulation:
+//! None`), one σ = 12 px window and the defaults plus the AO-free candidate
 //! (`adaptive_without_ao`) on the synthetic 1920×1080 frame of `examples/stages`
 //! (planar normal + depth + AO, interleaved RGB in and out), one thread; the
 //! fastest of RUNS (default 15) each, alternating the configurations.
@@ -22,6 +23,7 @@ fn main() {
     let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3).unwrap(), guides);
     let configs = [
         ("defaults", FlrConfig::default()),
+        ("no ao demodulation", FlrConfig { ao_demodulation: None, ..FlrConfig::default() }),
         ("sigma 12", FlrConfig { blur: Blur::Gaussian { sigma: config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::default() }),
         ("without ao", FlrConfig { adaptive_without_ao: true, ..FlrConfig::default() }),
     ];

@@ -123,6 +123,8 @@ impl<'w> Flnr<'w> {
             block: 8,
             blur,
             regularization: Regularization::Normalized { eps_mul: eps_mul as f64, eps_add: eps_add as f64 },
+            // the network was trained through FLR without it (train/flnr.py)
+            ao_demodulation: None,
             ..FlrConfig::default()
         };
         let flr = Flr::new(cfg, width, height)?;

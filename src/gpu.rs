@@ -92,7 +92,11 @@ pub struct GpuParams {
     pub without: u32,
     pub without_model_off: u32,
     pub without_var_off: u32,
-    pub pad_without: u32,
+    /// [`FlrConfig::ao_demodulation`] where it applies: the AO channel
+    /// (`u32::MAX`: off) and the offset `c` of `s = √(ao + c)`.
+    pub demod_ao: u32,
+    pub demod_offset: f32,
+    pub pad_demod: [u32; 3],
 }
 
 /// One window of the fit in the parameter block, laid out as the WGSL
@@ -122,7 +126,7 @@ pub struct GpuWindow {
 }
 
 // SAFETY: `repr(C)`, only u32/f32 fields and arrays of them, 4-byte aligned
-// throughout with no padding (1408 bytes: checked below); any bit pattern is valid.
+// throughout with no padding (1424 bytes: checked below); any bit pattern is valid.
 unsafe impl bytemuck::Zeroable for GpuParams {}
 // SAFETY: as above.
 unsafe impl bytemuck::Pod for GpuParams {}
@@ -132,7 +136,7 @@ unsafe impl bytemuck::Zeroable for GpuWindow {}
 unsafe impl bytemuck::Pod for GpuWindow {}
 const _: () = assert!(core::mem::size_of::<GpuWindow>() == 64);
 /// Bytes of the parameter block.
-pub const PARAMS_BYTES: usize = 1408;
+pub const PARAMS_BYTES: usize = 1424;
 const _: () = assert!(core::mem::size_of::<GpuParams>() == PARAMS_BYTES);
 
 impl GpuParams {
@@ -578,7 +582,9 @@ impl GpuPlan {
             without: self.without_guide().map_or(u32::MAX, |d| d as u32),
             without_model_off: r.without.map_or(u32::MAX, |(m, _)| m as u32),
             without_var_off: r.without.map_or(u32::MAX, |(_, v)| v as u32),
-            pad_without: 0,
+            demod_ao: self.config().demodulation().map_or(u32::MAX, |(a, _)| a as u32),
+            demod_offset: self.config().demodulation().map_or(0.0, |(_, c)| c),
+            pad_demod: [0; 3],
         })
     }
 

@@ -114,6 +114,13 @@ fn window_fit(
 /// predictions' squared difference over the smallest window; weights 1 /
 /// (bias² + variance).
 fn adaptive_reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
+    if let Some(s) = demodulation(cfg, guides) {
+        // the estimator on y / s, its output times s (`FlrConfig::ao_demodulation`)
+        let plain = FlrConfig { ao_demodulation: None, ..*cfg };
+        let mut out = adaptive_reference(&plain, w, h, guides, &demodulate(y, &s));
+        out.iter_mut().enumerate().for_each(|(i, v)| *v *= s[i / 3]);
+        return out;
+    }
     let Blur::Adaptive { sigmas } = cfg.blur else { panic!("adaptive only") };
     assert_eq!(cfg.block, 1);
     let q = guides.len();
@@ -337,15 +344,19 @@ fn tiled_case(w: usize, h: usize, block: usize, sigmas: [f32; 3], without_ao: bo
     }
 }
 
-/// The energy moment `e = Σ ℓ²` of every cell, both moment paths, against f64.
+/// The energy moment `e = Σ ℓ²` of every cell, both moment paths, against
+/// f64; with the AO demodulation (the default) of the demodulated light `y / s`.
 #[test]
 fn energy_moment_is_sum_of_squared_luminance() {
     use lrdenoise::kernels::CellLayout;
-    for (block, w, h) in [(8, 40, 16), (4, 13, 9), (16, 35, 17)] {
+    for ((block, w, h), demod) in [(8, 40, 16), (4, 13, 9), (16, 35, 17)].into_iter().flat_map(|s| [(s, true), (s, false)]) {
         let f = Owned::synthetic(w, h, 6, 0.7);
         let set = GuideSet::NORMAL_DEPTH_AO;
+        let base = FlrConfig { ao_demodulation: if demod { cfg(set, block).ao_demodulation } else { None }, ..cfg(set, block) };
+        assert_eq!(base.ao_demodulation.is_some(), demod);
+        let s = demodulation(&base, &f.channels(set)).unwrap_or(vec![1.0; w * h]);
         for kernel in [Kernel::Simd, Kernel::Scalar] {
-            let c = FlrConfig { kernel, ..cfg(set, block) };
+            let c = FlrConfig { kernel, ..base };
             let flr = Flr::new(c, w, h).unwrap();
             let frame = f.frame(set);
             let cf = flr.check_frame(&frame).unwrap();
@@ -362,7 +373,7 @@ fn energy_moment_is_sum_of_squared_luminance() {
                 let mut want = 0f64;
                 for y in by * block..((by + 1) * block).min(h) {
                     for x in bx * block..((bx + 1) * block).min(w) {
-                        let l: f64 = (0..3).map(|ch| L[ch] * f.noisy[3 * (y * w + x) + ch] as f64).sum();
+                        let l: f64 = (0..3).map(|ch| L[ch] * f.noisy[3 * (y * w + x) + ch] as f64).sum::<f64>() / s[y * w + x];
                         want += l * l;
                     }
                 }

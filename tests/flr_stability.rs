@@ -117,10 +117,14 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 48, .. ProptestConfig::default() })]
 
     /// g → a·g + b on any guide leaves the normalized-mode output unchanged (up to rounding).
+    /// The AO demodulation (on by default) reads AO's values as occlusion in
+    /// [0, 1], so a transformed AO is checked without it; every other guide with it.
     #[test]
     fn affine_invariance(seed in 0u64..1000, which in 0usize..4, log_a in -3.0f32..3.0, neg in any::<bool>(), b in -1e4f32..1e4, block in prop::sample::select(vec![1usize, 4, 8, 16])) {
         let f = Owned::synthetic(40, 33, seed, 0.6);
         let set = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
+        let cfg = |set, block| FlrConfig { ao_demodulation: if which == 2 { None } else { cfg(set, block).ao_demodulation }, ..cfg(set, block) };
+        prop_assert!(which == 2 || cfg(set, block).ao_demodulation.is_some());
         let a = 10f32.powf(log_a) * if neg { -1.0 } else { 1.0 };
         let g = transformed(&f, a, b, which);
         // one window, and the default adaptive window (its bias and variance
@@ -181,5 +185,47 @@ proptest! {
             let (out, _) = run_frame(c, w, h, &frame);
             prop_assert!(all_finite(&out));
         }
+    }
+}
+
+/// The AO demodulation (`FlrConfig::ao_demodulation`, on by default): it
+/// applies only with AO among the guides and the normalized regularization
+/// (elsewhere the output is bit-identical to it off); AO that is NaN, ±Inf or
+/// outside [0, 1], a tiny offset and near-overflow light stay finite, and a
+/// non-finite AO is counted as a guide, not as noisy light; offsets that are
+/// not finite and > 0 are typed errors.
+#[test]
+fn ao_demodulation_applies_where_it_should_and_stays_finite() {
+    let f = Owned::synthetic(45, 37, 12, 0.5);
+    let on = cfg(GuideSet::NORMAL_DEPTH_AO, 8).ao_demodulation;
+    assert_eq!(on, Some(lrdenoise::config::DEFAULT_AO_OFFSET));
+    let same = |c: FlrConfig| {
+        let (a, _) = run(c, &f);
+        let (b, _) = run(FlrConfig { ao_demodulation: None, ..c }, &f);
+        a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits())
+    };
+    assert!(same(cfg(GuideSet::NORMAL_DEPTH, 8)), "no AO guide: nothing to demodulate");
+    assert!(same(FlrConfig { regularization: Regularization::Tikhonov { eps: 1e-4 }, ..cfg(GuideSet::NORMAL_DEPTH_AO, 8) }));
+    assert!(!same(cfg(GuideSet::NORMAL_DEPTH_AO, 8)), "with AO (normalized) it changes the fit");
+
+    let mut g = f.clone();
+    g.ao[10] = f32::NAN;
+    g.ao[20] = f32::INFINITY;
+    g.ao[30] = -3.0;
+    g.ao[40] = 1e30;
+    g.noisy[3 * 50] = 3e38; // y / s would overflow for a small offset
+    for kernel in [Kernel::Simd, Kernel::Scalar] {
+        for offset in [on, Some(1e-6), Some(1e6)] {
+            for blur in [cfg(GuideSet::NORMAL_DEPTH_AO, 8).blur, Blur::Adaptive { sigmas: lrdenoise::config::DEFAULT_SIGMAS }] {
+                let c = FlrConfig { kernel, blur, ao_demodulation: offset, ..cfg(GuideSet::NORMAL_DEPTH_AO, 8) };
+                let (out, rep) = run(c, &g);
+                assert!(all_finite(&out), "{kernel:?} {offset:?} {blur:?}");
+                assert_eq!((rep.nonfinite_noisy, rep.nonfinite_guides), (0, 2), "{kernel:?} {offset:?}");
+            }
+        }
+    }
+    for bad in [0.0, -0.1, f32::NAN, f32::INFINITY] {
+        let c = FlrConfig { ao_demodulation: Some(bad), ..cfg(GuideSet::NORMAL_DEPTH_AO, 8) };
+        assert!(matches!(Flr::new(c, 16, 16), Err(Error::InvalidConfig(_))), "{bad}");
     }
 }

@@ -9,6 +9,7 @@ rebuild. With no options it gives `lrd eval`'s FLR PSNR on frames that fill whol
         [--shrink K] [--basis chol|eig] [--shrink-variance] [--mse-blur CELLS]
         [--weight-power P] [--chroma WINDOW] [--subsets 0123;... --subset-windows 0,1]
         [--area-box C] [--eps-windows a,b,c] [--shared-residual] [--leverage]
+        [--ao-demod C|off]
 
 Experiments (session 29, docs/PERFORMANCE.md; none kept):
   --lattice N       frame guide mean/std from an N×N lattice of samples, not all pixels
@@ -32,6 +33,12 @@ Session 32 (none kept; 26 training frames, train + train3, mean 31.138 dB with n
   --leverage        each candidate's variance r (1 + E_cell[(x − μ)ᵀ M (x − μ)]) / N, the
                     cell's own leverage under the regularized inverse M (LEV_SCALE=s
                     scales it): box +0.27, clutter +0.13, colonnade −0.22, room −0.18
+Session 33 (kept: FlrConfig::ao_demodulation, the library's default since then):
+  --ao-demod C      the noisy light divided by s = sqrt(clamp(ao, 0, 1) + C) before the
+                    fit, the output multiplied by s (default 0.1, the library's; "off" for
+                    plain FLR). 6 train frames 33.011 -> 33.171 dB, 20 more training-family
+                    frames 32.164 -> 32.328; C = 0.05 / 0.2 / 0.3: 32.332 / 32.313 / 32.300
+                    there; s = ao + 1: 32.281
 Training frames only: never tune on the test split (tools/render.py --split test).
 """
 import math
@@ -333,6 +340,7 @@ def main():
     ap.add_argument("--area-box", type=float, default=0.0)
     ap.add_argument("--shared-residual", action="store_true")
     ap.add_argument("--leverage", action="store_true")
+    ap.add_argument("--ao-demod", default="0.1", help="offset C of the AO demodulation s = sqrt(ao + C), or off")
     a = ap.parse_args()
     global AREA_BOX, LEVERAGE
     AREA_BOX, LEVERAGE = a.area_box, a.leverage
@@ -345,7 +353,11 @@ def main():
     for f in sorted(sum((glob.glob(p) for p in a.frames), [])):
         fr = load(f)
         y, g = prep(fr)
-        scores.append(psnr(flr(y, g, **kw), fr))
+        s = np.ones_like(y[:1])
+        if a.ao_demod != "off":
+            ao = np.nan_to_num(fr["ao"][0].astype(np.float64), nan=1.0, posinf=1.0, neginf=1.0)
+            s = np.sqrt(np.clip(ao, 0, 1) + float(a.ao_demod))[None]
+        scores.append(psnr(flr(y / s, g, **kw) * s, fr))
         print(f"{f}: {scores[-1]:.2f} dB", flush=True)
     print(f"mean of {len(scores)}: {np.mean(scores):.3f} dB")
 

@@ -243,6 +243,7 @@ fn report_variants() -> Vec<Variant> {
         Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
         Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
         Variant::flr(FlrArgs { without_ao: true, ..Default::default() }),
+        Variant::flr(FlrArgs { ao_demodulation: Some("off".into()), ..Default::default() }),
         Variant::flr(FlrArgs::default()).on("noisy4"),
         Variant::method("bmfr", FlrArgs::default()),
         Variant::method("bmfr", FlrArgs { shrinkage: Some(0.0), ..Default::default() }),
@@ -341,13 +342,18 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
                 // the adaptive window with AO also without AO as a candidate (`--without-ao`)
                 let with_ao = sigma.contains(',') && g.contains(&"ao");
                 for without_ao in [false, true].into_iter().take(1 + with_ao as usize) {
-                    variants.push(Variant::flr(FlrArgs {
-                        guides: Some(gs.clone()),
-                        block: Some(block),
-                        sigma: Some(sigma.into()),
-                        without_ao,
-                        ..Default::default()
-                    }));
+                    // with AO at B = 8, also without the AO demodulation
+                    let plain = g.contains(&"ao") && block == 8 && !without_ao;
+                    for demod in [None, Some("off")].into_iter().take(1 + plain as usize) {
+                        variants.push(Variant::flr(FlrArgs {
+                            guides: Some(gs.clone()),
+                            block: Some(block),
+                            sigma: Some(sigma.into()),
+                            without_ao,
+                            ao_demodulation: demod.map(String::from),
+                            ..Default::default()
+                        }));
+                    }
                 }
             }
         }
@@ -411,6 +417,24 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
             f.psnr,
             f.ms,
             f.psnr - d.psnr
+        );
+    }
+    // The AO demodulation: the best B = 8 configuration with AO, with it (the default) and without
+    let demodulated = |on: bool| {
+        flr.iter()
+            .filter(|r| uses(r, "ao") && r.flags.contains("--block 8 ") && !r.flags.contains("--without-ao"))
+            .filter(|r| r.flags.contains("--ao-demodulation off") != on)
+            .max_by(|a, b| a.psnr.total_cmp(&b.psnr))
+    };
+    if let (Some(d), Some(p)) = (demodulated(true), demodulated(false)) {
+        let verdict = if p.psnr - d.psnr > 0.1 { "turn it off (--ao-demodulation off)" } else { "keep it" };
+        println!(
+            "  flr ao-demod     : best B = 8 with AO {:.2} dB in {:.3} ms, without the AO demodulation {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
+            d.psnr,
+            d.ms,
+            p.psnr,
+            p.ms,
+            p.psnr - d.psnr
         );
     }
     // BMFR and WALR, each against its own default

@@ -48,6 +48,9 @@ pub struct FlrArgs {
     /// Adaptive window with AO: also fit the smallest window without AO and let each cell's blend weigh that fit too (off by default)
     #[arg(long)]
     pub without_ao: bool,
+    /// With AO among the guides: divide the noisy light by sqrt(ao + C) before the fit and multiply the output back (AO demodulation; default C = 0.1), or "off" for plain FLR
+    #[arg(long, value_name = "C|off")]
+    pub ao_demodulation: Option<String>,
     /// WALR: à-trous iterations (1..=5; 4 = an 81x81 window)
     #[arg(long)]
     pub iterations: Option<u8>,
@@ -101,6 +104,7 @@ impl FlrArgs {
             || self.regularization.is_some()
             || self.upsample.is_some()
             || self.without_ao
+            || self.ao_demodulation.is_some()
     }
     fn has_walr_flags(&self) -> bool {
         self.iterations.is_some()
@@ -111,6 +115,17 @@ impl FlrArgs {
             || self.sdf_step.is_some()
             || self.epsilon.is_some()
             || self.previous_weight.is_some()
+    }
+}
+
+/// `--ao-demodulation`: "off" (plain FLR) or the offset C of sqrt(ao + C).
+pub fn parse_ao_demodulation(s: &str) -> Result<Option<f32>, String> {
+    match s {
+        "off" | "none" => Ok(None),
+        v => match v.parse::<f32>() {
+            Ok(c) if c.is_finite() && c > 0.0 => Ok(Some(c)),
+            _ => Err(format!("--ao-demodulation: '{v}' is not 'off' or a number > 0")),
+        },
     }
 }
 
@@ -213,6 +228,9 @@ impl FlrArgs {
             c.upsample = u;
         }
         c.adaptive_without_ao = self.without_ao; // validate() says when it cannot apply
+        if let Some(d) = &self.ao_demodulation {
+            c.ao_demodulation = parse_ao_demodulation(d)?;
+        }
         c.validate().map_err(|e| format!("flr flags: {e}"))?;
         Ok(c)
     }
@@ -226,9 +244,10 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
         || a.regularization.is_some()
         || a.upsample.is_some()
         || a.without_ao
+        || a.ao_demodulation.is_some()
     {
         return Err(
-            "--sigma, --radius, --box, --regularization, --upsample and --without-ao are FLR flags; bmfr takes --guides, --block and --shrinkage"
+            "--sigma, --radius, --box, --regularization, --upsample, --without-ao and --ao-demodulation are FLR flags; bmfr takes --guides, --block and --shrinkage"
                 .into(),
         );
     }
@@ -265,8 +284,9 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
         || a.block.is_some()
         || a.shrinkage.is_some()
         || a.without_ao
+        || a.ao_demodulation.is_some()
     {
-        return Err("--block, --sigma, --radius, --box, --regularization, --upsample, --without-ao and --shrinkage are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
+        return Err("--block, --sigma, --radius, --box, --regularization, --upsample, --without-ao, --ao-demodulation and --shrinkage are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
     }
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
@@ -387,6 +407,12 @@ pub fn flag_line(c: &FlrConfig) -> String {
     if c.adaptive_without_ao {
         s += " --without-ao";
     }
+    if c.guides.ao && c.ao_demodulation != FlrConfig::default().ao_demodulation {
+        match c.ao_demodulation {
+            Some(v) => s += &format!(" --ao-demodulation {v}"),
+            None => s += " --ao-demodulation off",
+        }
+    }
     s
 }
 
@@ -404,7 +430,13 @@ pub fn label(c: &FlrConfig) -> String {
     };
     let up = if c.upsample > 1 { format!(" up{}", c.upsample) } else { String::new() };
     let ao = if c.adaptive_without_ao { " -ao" } else { "" };
-    format!("flr {g} b{} {blur}{ao}{reg}{up}", c.block)
+    let demod = match c.ao_demodulation {
+        _ if !c.guides.ao => String::new(),
+        None => " -aod".into(),
+        v if v == FlrConfig::default().ao_demodulation => String::new(),
+        Some(v) => format!(" aod{v}"),
+    };
+    format!("flr {g} b{} {blur}{ao}{demod}{reg}{up}", c.block)
 }
 
 /// A runnable method on one frame size.

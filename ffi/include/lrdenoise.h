@@ -301,6 +301,13 @@ typedef struct LrdFlrConfig {
    * `FlrConfig::adaptive_without_ao`), on the CPU and the GPU path.
    */
   bool adaptive_without_ao;
+  /**
+   * With LRD_GUIDE_AO and the normalized regularization: the offset c of
+   * the AO demodulation (the noisy light divided by sqrt(ao + c) before the
+   * fit, the output multiplied back; see `FlrConfig::ao_demodulation`);
+   * 0 turns it off. Default 0.1 (`lrd_flr_config_default`).
+   */
+  float ao_demodulation;
 } LrdFlrConfig;
 
 /**
@@ -600,7 +607,7 @@ typedef struct LrdGpuDispatch {
   /**
    * Contents of the uniform parameter block (binding 0).
    */
-  uint8_t params[1408];
+  uint8_t params[1424];
 } LrdGpuDispatch;
 
 #ifdef __cplusplus

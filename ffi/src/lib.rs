@@ -169,6 +169,11 @@ pub struct LrdFlrConfig {
     /// without AO and blend it as a fourth candidate (off by default; see
     /// `FlrConfig::adaptive_without_ao`), on the CPU and the GPU path.
     pub adaptive_without_ao: bool,
+    /// With LRD_GUIDE_AO and the normalized regularization: the offset c of
+    /// the AO demodulation (the noisy light divided by sqrt(ao + c) before the
+    /// fit, the output multiplied back; see `FlrConfig::ao_demodulation`);
+    /// 0 turns it off. Default 0.1 (`lrd_flr_config_default`).
+    pub ao_demodulation: f32,
 }
 
 /// What happened during a run (added to by every call that takes one).
@@ -376,6 +381,7 @@ fn config(c: &LrdFlrConfig) -> Result<FlrConfig, LrdStatus> {
         clamp_negative: c.clamp_negative,
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
         adaptive_without_ao: c.adaptive_without_ao,
+        ao_demodulation: (c.ao_demodulation != 0.0).then_some(c.ao_demodulation),
     };
     cfg.validate().map_err(status_of)?;
     Ok(cfg)
@@ -470,6 +476,7 @@ pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
         clamp_negative: d.clamp_negative,
         scalar_kernels: false,
         adaptive_without_ao: d.adaptive_without_ao,
+        ao_demodulation: d.ao_demodulation.unwrap_or(0.0),
     }
 }
 
@@ -1670,11 +1677,11 @@ pub struct LrdGpuDispatch {
     /// Minimum size of each buffer in bytes, in binding order.
     pub buffer_bytes: [u64; 8],
     /// Contents of the uniform parameter block (binding 0).
-    pub params: [u8; 1408],
+    pub params: [u8; 1424],
 }
 
 #[cfg(feature = "flr")]
-const _: () = assert!(lrdenoise_core::gpu::MAX_PASSES == 15 && lrdenoise_core::gpu::PARAMS_BYTES == 1408);
+const _: () = assert!(lrdenoise_core::gpu::MAX_PASSES == 15 && lrdenoise_core::gpu::PARAMS_BYTES == 1424);
 
 /// Fills `out` with the GPU dispatch description of `config` for
 /// `width`×`height` output frames (at most 8 guide channels), with
@@ -1712,7 +1719,7 @@ pub unsafe extern "C" fn lrd_gpu_dispatch(
             passes: [LrdGpuPass { entry: core::ptr::null(), workgroups: [0; 3] }; 15],
             pass_count: passes.len() as u32,
             buffer_bytes: [0; 8],
-            params: [0; 1408],
+            params: [0; 1424],
         };
         for (dst, p) in d.passes.iter_mut().zip(passes.iter()) {
             *dst = LrdGpuPass { entry: p.entry.as_ptr(), workgroups: p.workgroups };

@@ -34,6 +34,12 @@ fuzz_target!(|d: &[u8]| {
         regularization: reg,
         kernel: if d[9] & 2 == 0 { Kernel::Simd } else { Kernel::Scalar },
         adaptive_without_ao: adaptive && guides.ao && d[9] & 8 != 0,
+        // the AO demodulation (on by default): off, or a tiny offset (s down to 1e-3)
+        ao_demodulation: match d[9] >> 4 & 3 {
+            1 => None,
+            2 => Some(1e-6),
+            _ => FlrConfig::default().ao_demodulation,
+        },
         ..FlrConfig::default()
     };
     let body = &d[12..];

@@ -179,6 +179,50 @@ fn adaptive_without_ao() {
     check("without AO nan/inf", FlrConfig { adaptive_without_ao: true, ..adaptive(cfg(base, 8)) }, &f, base);
 }
 
+/// The AO demodulation (`ao_demodulation`, on by default, so every other
+/// test here runs it with AO): off and on, one window and the adaptive one,
+/// a tiny offset (s down to 1e-3), AO outside [0, 1] and NaN; and it moves
+/// the output by far more than the GPU's tolerance.
+#[test]
+fn ao_demodulation() {
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    for (w, h, seed) in [(96, 64, 3), (37, 29, 8), (1, 1, 2)] {
+        let mut f = Owned::synthetic(w, h, seed, 0.6);
+        for (i, a) in f.ao.iter_mut().enumerate() {
+            match i % 97 {
+                5 => *a = -0.5,
+                9 => *a = 3.0,
+                _ => {}
+            }
+        }
+        for blur in [cfg(set, 8).blur, Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] }] {
+            let on = FlrConfig { blur, ..cfg(set, 8) };
+            assert!(on.ao_demodulation.is_some());
+            for demod in [None, on.ao_demodulation, Some(1e-6)] {
+                let c = FlrConfig { ao_demodulation: demod, ..on };
+                if check(&format!("ao demodulation {demod:?} {blur:?}"), c, &f, set).is_none() {
+                    return;
+                }
+            }
+            if w * h > 1000 {
+                let off = FlrConfig { ao_demodulation: None, ..on };
+                let (mut g0, mut g1) = (gpu(off, w, h).unwrap(), gpu(on, w, h).unwrap());
+                let frame = f.frame(set);
+                let (mut o0, mut o1) = (vec![0f32; 3 * w * h], vec![0f32; 3 * w * h]);
+                g0.denoise(&frame, &mut ImageViewMut::interleaved(&mut o0, w, h, 3).unwrap()).unwrap();
+                g1.denoise(&frame, &mut ImageViewMut::interleaved(&mut o1, w, h, 3).unwrap()).unwrap();
+                let (m, _) = rel_diff(&o1, &o0);
+                assert!(m > 10.0 * MEAN_TOL, "{blur:?}: the demodulation moves the output by only {m:.2e}");
+            }
+        }
+    }
+    let mut f = Owned::synthetic(64, 48, 2, 0.6);
+    f.noisy[3 * 7] = f32::NAN;
+    f.ao[1500] = f32::NAN;
+    f.ao[1700] = f32::INFINITY;
+    check("ao demodulation nan/inf", cfg(set, 8), &f, set);
+}
+
 #[test]
 fn degenerate_guides_and_nonfinite_inputs() {
     let base = Owned::synthetic(64, 48, 2, 0.6);

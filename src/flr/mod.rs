@@ -28,6 +28,7 @@
 //! blend weighs that fit as a fourth candidate. See [`adaptive`].
 
 pub mod adaptive;
+pub mod demodulation;
 
 use crate::config::{Blur, FlrConfig, Kernel};
 use crate::error::{Arg, Error};
@@ -414,6 +415,12 @@ impl Flr {
         1 + usize::from(s == 0 && self.without_guide().is_some())
     }
     /// The guide window 0 is also fitted without ([`FlrConfig::adaptive_without_ao`]: AO).
+    /// The AO channel and offset of [`FlrConfig::ao_demodulation`], when it
+    /// applies ([`FlrConfig::demodulation`]).
+    pub fn demodulation(&self) -> Option<(usize, f32)> {
+        self.cfg.demodulation()
+    }
+
     fn without_guide(&self) -> Option<usize> {
         self.cfg.guides.ao_channel().filter(|_| self.cfg.adaptive_without_ao && self.scale_count() > 1)
     }
@@ -635,6 +642,18 @@ impl Flr {
                 g += 1;
             }
         }
+        if let Some((ao, c)) = self.demodulation() {
+            for (r, rgb) in colour.chunks_exact_mut(3 * w).enumerate() {
+                let a = if borrowed[ao] {
+                    frame.fit[ao].and_then(|v| v.row_f32(y0 + r, 0, 0, w)).ok_or(bad)?
+                } else {
+                    &gathered[(ao * bin + r) * w..(ao * bin + r + 1) * w]
+                };
+                let (p0, p12) = rgb.split_at_mut(w);
+                let (p1, p2) = p12.split_at_mut(w);
+                demodulation::divide_rows([p0, p1, p2], a, c);
+            }
+        }
         let mut band = BandRows { planes: [[&[][..]; 3 + MAX_GUIDES]; MAX_ROWS], rows: bin, width: w, reference: stats.reference };
         for (r, planes) in band.planes.iter_mut().enumerate().take(bin) {
             for c in 0..3 {
@@ -719,10 +738,17 @@ impl Flr {
             let wrow = &mut wplane[o..o + vw];
             wrow.fill(1.0);
             {
-                let (p0, p12) = rest.split_at_mut(plane);
+                let (colour, guides) = rest.split_at_mut(3 * plane);
+                let (p0, p12) = colour.split_at_mut(plane);
                 let (p1, p2) = p12.split_at_mut(plane);
                 let rgb = [&mut p0[o..o + vw], &mut p1[o..o + vw], &mut p2[o..o + vw]];
                 frame.noisy.read_row_n(y, x0, rgb).ok_or(bad)?;
+                if let Some((ao, c)) = self.demodulation() {
+                    // AO's plane gets its raw row first (centred in the loop below)
+                    let a = &mut guides[ao * plane + o..ao * plane + o + vw];
+                    frame.fit[ao].ok_or(Error::GuideMismatch)?.read_row(y, 0, x0, a).ok_or(bad)?;
+                    demodulation::divide_rows([&mut p0[o..o + vw], &mut p1[o..o + vw], &mut p2[o..o + vw]], a, c);
+                }
                 for p in [&p0[o..o + vw], &p1[o..o + vw], &p2[o..o + vw]] {
                     mask_finite(p, wrow);
                 }
@@ -1117,6 +1143,11 @@ impl Flr {
             let fallback =
                 dispatch_q!(self.q, apply_row(row_models, row_slopes, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
             rep.fallback_pixels += fallback as u64;
+            if let Some((ao, c)) = self.demodulation() {
+                let (r, gb) = outbuf.split_at_mut(w);
+                let (g, b) = gb.split_at_mut(w);
+                demodulation::multiply_rows([r, g, &mut b[..w]], rows[ao], c);
+            }
             let (r, gb) = outbuf.split_at(w);
             let (g, b) = gb.split_at(w);
             out_band.write_row_n(y - y0, 0, [r, g, &b[..w]]).ok_or(bad)?;

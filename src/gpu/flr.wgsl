@@ -83,7 +83,14 @@ struct Params {
     without: u32,
     without_model_off: u32,
     without_var_off: u32,
-    pad_without: u32,
+    // FlrConfig::ao_demodulation: the AO channel (NONE: off) and the offset c
+    // of s = sqrt(ao + c); the noisy light is divided by s before the moments,
+    // the output multiplied by it
+    demod_ao: u32,
+    demod_offset: f32,
+    pad_demod0: u32,
+    pad_demod1: u32,
+    pad_demod2: u32,
 }
 
 // One window of the fit: its grid, where its blur reads and writes, where its
@@ -163,6 +170,27 @@ fn noisy_at(c: u32, x: u32, y: u32) -> f32 {
     let l = P.noisy;
     let i = l.x + y * l.z + x * l.y + c * l.w;
     return sample(noisy[word(i)], i);
+}
+
+// The AO demodulation's s = sqrt(clamp(ao, 0, 1) + c) (a non-finite AO counts
+// as 1, open) and `v / s` or `v * s`, keeping `v` where that would overflow
+// (src/flr/demodulation.rs).
+fn demod_scale(ao: f32) -> f32 {
+    var a = 1.0;
+    if finite(ao) {
+        a = clamp(ao, 0.0, 1.0);
+    }
+    return sqrt(a + P.demod_offset);
+}
+
+fn demod_divide(v: f32, s: f32) -> f32 {
+    let d = v / s;
+    return select(v, d, finite(d) || !finite(v));
+}
+
+fn demod_multiply(v: f32, s: f32) -> f32 {
+    let m = v * s;
+    return select(v, m, finite(m));
 }
 
 // The window the running entry point works on (set first thing by each).
@@ -353,8 +381,12 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
                 for (var a = 0u; a < q; a++) {
                     pix[o + 1u + a] = (fit_at(a, x, y) - stats.reference[a]) - r[a];
                 }
+                var s = 1.0;
+                if P.demod_ao != NONE {
+                    s = demod_scale(fit_at(P.demod_ao, x, y));
+                }
                 for (var c = 0u; c < 3u; c++) {
-                    pix[o + 1u + q + c] = noisy_at(c, x, y);
+                    pix[o + 1u + q + c] = demod_divide(noisy_at(c, x, y), s);
                 }
                 let l = 0.2126 * pix[o + 1u + q] + 0.7152 * pix[o + 2u + q] + 0.0722 * pix[o + 3u + q];
                 pix[o + 4u + q] = l;
@@ -1106,6 +1138,10 @@ fn apply(@builtin(global_invocation_id) gid: vec3<u32>) {
         atomicAdd(&stats.fallback_pixels, 1u);
     }
     let l = P.output;
+    var s = 1.0;
+    if P.demod_ao != NONE {
+        s = demod_scale(guide_at(P.demod_ao, x, y));
+    }
     for (var c = 0u; c < 3u; c++) {
         var yv = lm[c];
         for (var g = 0u; g < q; g++) {
@@ -1116,6 +1152,9 @@ fn apply(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         if P.clamp_negative != 0u {
             yv = max(yv, 0.0);
+        }
+        if P.demod_ao != NONE {
+            yv = demod_multiply(yv, s);
         }
         output[l.x + y * l.z + x * l.y + c * l.w] = yv;
     }

@@ -288,6 +288,22 @@ pub fn window_taps(kern: &[f64], r: isize, (w, h): (usize, usize), valid: &[bool
     idx
 }
 
+/// The AO demodulation's per-pixel scale `s = √(clamp(ao, 0, 1) + c)`, in
+/// f64 from its definition (a non-finite AO counts as 1), when
+/// `cfg.ao_demodulation` applies (AO among the guides, normalized mode).
+#[allow(dead_code)]
+pub fn demodulation(cfg: &FlrConfig, guides: &[Vec<f64>]) -> Option<Vec<f64>> {
+    let ao = cfg.guides.ao_channel()?;
+    let c = cfg.ao_demodulation.filter(|_| matches!(cfg.regularization, Regularization::Normalized { .. }))? as f64;
+    Some(guides[ao].iter().map(|&a| (if a.is_finite() { a.clamp(0.0, 1.0) } else { 1.0 } + c).sqrt()).collect())
+}
+
+/// Interleaved RGB `y` divided by the per-pixel `s`.
+#[allow(dead_code)]
+pub fn demodulate(y: &[f32], s: &[f64]) -> Vec<f32> {
+    y.iter().enumerate().map(|(i, &v)| (v as f64 / s[i / 3]) as f32).collect()
+}
+
 /// Pixels whose noisy value and guides are all finite.
 pub fn valid_pixels(w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<bool> {
     (0..w * h).map(|i| (0..3).all(|c| y[3 * i + c].is_finite()) && guides.iter().all(|g| g[i].is_finite())).collect()
@@ -298,6 +314,13 @@ pub fn valid_pixels(w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<b
 /// equations written out plainly. `guides[q][pixel]`, `y` interleaved RGB.
 /// Pixels with a non-finite value are excluded. Output interleaved RGB, no clamping.
 pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
+    if let Some(s) = demodulation(cfg, guides) {
+        // y / s fitted without it, the prediction times s (`FlrConfig::ao_demodulation`)
+        let plain = FlrConfig { ao_demodulation: None, ..*cfg };
+        let mut out = reference(&plain, w, h, guides, &demodulate(y, &s));
+        out.iter_mut().enumerate().for_each(|(i, v)| *v *= s[i / 3]);
+        return out;
+    }
     let q = guides.len();
     let models = reference_models(cfg, w, h, guides, y);
     let mut out = vec![0.0; 3 * w * h];

@@ -1,0 +1,117 @@
+//! AO demodulation ([`crate::FlrConfig::ao_demodulation`]): the noisy light
+//! is divided by `s(ao) = √(clamp(ao, 0, 1) + c)` before its moments are
+//! taken and the applied model multiplied by `s` again, so FLR fits
+//! `y ≈ s · (c₀ + β·g)` by least squares weighted `1 / s²`.
+//!
+//! Why: the quality protocol (`shared/DATA.md`) scores tone-mapped light, in
+//! which an error in a dark, occluded region weighs more than the same error
+//! in an open one, while plain least squares let the bright pixels of a window
+//! dominate its fit. Occlusion also scales the light rather than adding to it,
+//! which the model `s · (c₀ + β·g)` expresses with the same coefficients.
+//! The square root and the offset `c` were chosen on the training scenes
+//! (README, "Towards FLR = OIDN"); `s ∈ [√c, √(1 + c)]`, never 0 or NaN: a
+//! non-finite AO value counts as 1 (open), out-of-range values are clamped.
+//!
+//! Both passes run eight pixels at a time (`wide`), the row's tail one by one;
+//! square root and division are correctly rounded, so the lanes and the tail
+//! give the same values.
+
+use wide::f32x8;
+
+/// `s(ao)` for the offset `c` (`c > 0`, checked by `FlrConfig::validate`).
+#[inline]
+pub fn scale(ao: f32, c: f32) -> f32 {
+    // `a.abs() <= MAX` is false for NaN and ±Inf
+    let a = if ao.abs() <= f32::MAX { ao } else { 1.0 };
+    libm::sqrtf(a.clamp(0.0, 1.0) + c)
+}
+
+/// [`scale`] on eight lanes (the same value: the square root is correctly
+/// rounded in both).
+#[inline(always)]
+fn scale8(ao: f32x8, c: f32x8) -> f32x8 {
+    let finite = ao.abs().simd_le(f32x8::splat(f32::MAX));
+    let a = finite.select(ao, f32x8::ONE);
+    (a.fast_max(f32x8::ZERO).fast_min(f32x8::ONE) + c).sqrt()
+}
+
+/// `v op s(a)` on three rows, kept only where it is finite or `v` was not
+/// (see the callers); `s` once per pixel for all three.
+#[inline(always)]
+fn scale_rows(rgb: [&mut [f32]; 3], ao: &[f32], c: f32, divide: bool) {
+    let (c8, max) = (f32x8::splat(c), f32x8::splat(f32::MAX));
+    let [r, g, b] = rgb;
+    let n = ao.len().min(r.len()).min(g.len()).min(b.len());
+    let whole = n - n % 8;
+    let lanes = |v: &[f32]| f32x8::from(<[f32; 8]>::try_from(v).unwrap_or_default());
+    let one = |v: &mut [f32], s: f32x8| {
+        let x = lanes(v);
+        let y = if divide { x / s } else { x * s };
+        // NaN and ±Inf stay as they are; a finite value that would overflow too
+        let keep = y.abs().simd_le(max) | !x.abs().simd_le(max);
+        v.copy_from_slice(&keep.select(y, x).to_array());
+    };
+    let chunks = r[..whole].chunks_exact_mut(8).zip(g[..whole].chunks_exact_mut(8)).zip(b[..whole].chunks_exact_mut(8));
+    for (((r, g), b), a) in chunks.zip(ao[..whole].chunks_exact(8)) {
+        let s = scale8(lanes(a), c8);
+        one(r, s);
+        one(g, s);
+        one(b, s);
+    }
+    for i in whole..n {
+        let s = scale(ao[i], c);
+        for v in [&mut r[i], &mut g[i], &mut b[i]] {
+            let y = if divide { *v / s } else { *v * s };
+            *v = if y.is_finite() || !v.is_finite() { y } else { *v };
+        }
+    }
+}
+
+/// Divides three colour rows by `s(ao)` per pixel (before the moments).
+/// A finite value that the division would make infinite (beyond ~0.3 ×
+/// `f32::MAX` for a small `c`) is left as it was: still finite, so the
+/// moments' finiteness check sees what the caller gave. NaN and ±Inf stay.
+#[inline]
+pub fn divide_rows(rgb: [&mut [f32]; 3], ao: &[f32], c: f32) {
+    scale_rows(rgb, ao, c, true);
+}
+
+/// Multiplies three output rows by `s(ao)` per pixel (after the model is
+/// applied); a product that would overflow keeps the model's value, so the
+/// output stays finite.
+#[inline]
+pub fn multiply_rows(rgb: [&mut [f32]; 3], ao: &[f32], c: f32) {
+    scale_rows(rgb, ao, c, false);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scale_is_bounded_and_finite() {
+        let c = 0.1;
+        for a in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -5.0, 0.0, 0.3, 1.0, 7.0, f32::MAX] {
+            let s = scale(a, c);
+            assert!(s.is_finite() && s >= c.sqrt() && s <= (1.0 + c).sqrt(), "{a}: {s}");
+        }
+        assert_eq!(scale(f32::NAN, c), scale(1.0, c));
+        assert_eq!(scale(0.25, 0.75), 1.0);
+    }
+
+    #[test]
+    fn divide_then_multiply_round_trips_and_stays_finite() {
+        let ao = [0.0, 0.5, 1.0, f32::NAN, 0.2];
+        let mut r = [1.0, 2.0, 3.0, 4.0, f32::MAX];
+        let (mut g, mut b) = ([0.5; 5], [f32::NAN, 1.0, f32::INFINITY, 0.0, -2.0]);
+        divide_rows([&mut r, &mut g, &mut b], &ao, 0.1);
+        assert_eq!(r[0], 1.0 / 0.1f32.sqrt());
+        assert_eq!(r[4], f32::MAX, "an overflowing quotient keeps the value");
+        assert!(b[0].is_nan() && b[2] == f32::INFINITY, "non-finite input stays non-finite (the moments count it)");
+        multiply_rows([&mut r, &mut g, &mut b], &ao, 0.1);
+        for (x, want) in r[..4].iter().zip([1.0, 2.0, 3.0, 4.0]) {
+            assert!((x - want).abs() <= 1e-6 * want, "{x} vs {want}");
+        }
+        assert!(r[4].is_finite());
+    }
+}
