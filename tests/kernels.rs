@@ -234,7 +234,7 @@ fn rows_match_planes<const Q: usize>(seed: u64, block: usize, offset: f32, bad: 
         *r = raw[(3 + q) * rows * width + 1];
     }
     let row = |p: usize, r: usize| &raw[(p * rows + r) * width..(p * rows + r + 1) * width];
-    let mut band = BandRows { planes: [[&[][..]; 15]; MAX_ROWS], rows, width, reference };
+    let mut band = BandRows { planes: [[&[][..]; 15]; MAX_ROWS], rows, width, reference, demod: None };
     for r in 0..rows {
         for p in 0..planes_n {
             band.planes[r][p] = row(p, r);
@@ -292,7 +292,7 @@ fn moments_in_place_whole_block_invalid() {
     // every value NaN: all blocks empty, every pixel counted
     use lrdenoise::kernels::moments::*;
     let nan = vec![f32::NAN; 16];
-    let mut band = BandRows { planes: [[&[][..]; 15]; MAX_ROWS], rows: 8, width: 16, reference: [0.0; 12] };
+    let mut band = BandRows { planes: [[&[][..]; 15]; MAX_ROWS], rows: 8, width: 16, reference: [0.0; 12], demod: None };
     for r in 0..8 {
         for p in 0..4 {
             band.planes[r][p] = &nan;

@@ -28,7 +28,6 @@
 //! blend weighs that fit as a fourth candidate. See [`adaptive`].
 
 pub mod adaptive;
-pub mod demodulation;
 
 use crate::config::{Blur, FlrConfig, Kernel};
 use crate::error::{Arg, Error};
@@ -36,6 +35,7 @@ use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
 use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, Taps};
+use crate::kernels::demodulation;
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cell_without, solve_cells4, solve_cells4_without, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
@@ -642,19 +642,9 @@ impl Flr {
                 g += 1;
             }
         }
-        if let Some((ao, c)) = self.demodulation() {
-            for (r, rgb) in colour.chunks_exact_mut(3 * w).enumerate() {
-                let a = if borrowed[ao] {
-                    frame.fit[ao].and_then(|v| v.row_f32(y0 + r, 0, 0, w)).ok_or(bad)?
-                } else {
-                    &gathered[(ao * bin + r) * w..(ao * bin + r + 1) * w]
-                };
-                let (p0, p12) = rgb.split_at_mut(w);
-                let (p1, p2) = p12.split_at_mut(w);
-                demodulation::divide_rows([p0, p1, p2], a, c);
-            }
-        }
-        let mut band = BandRows { planes: [[&[][..]; 3 + MAX_GUIDES]; MAX_ROWS], rows: bin, width: w, reference: stats.reference };
+        // (the AO demodulation is applied as the moments build their colour vectors)
+        let planes = [[&[][..]; 3 + MAX_GUIDES]; MAX_ROWS];
+        let mut band = BandRows { planes, rows: bin, width: w, reference: stats.reference, demod: self.demodulation() };
         for (r, planes) in band.planes.iter_mut().enumerate().take(bin) {
             for c in 0..3 {
                 planes[c] = &colour[(3 * r + c) * w..(3 * r + c + 1) * w];

@@ -14,6 +14,7 @@
 pub mod apply;
 pub mod blur;
 pub mod cholesky;
+pub mod demodulation;
 pub mod moments;
 pub mod qr;
 pub mod solve;

@@ -12,7 +12,7 @@
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-use super::CellLayout;
+use super::{demodulation, CellLayout};
 use crate::guides::MAX_GUIDES;
 use crate::image::{prefetch, prefetch_l2};
 use crate::isa::Isa;
@@ -125,13 +125,16 @@ pub const MAX_ROWS: usize = 16;
 /// One band of `rows` input rows read in place: `planes[r][0..3]` are the
 /// noisy colour rows of band row `r`, `planes[r][3 + q]` the raw guide rows
 /// (not centred), each at least `width` long; `reference` is the frame
-/// reference `m` subtracted from each guide.
+/// reference `m` subtracted from each guide; `demod`, the AO demodulation's
+/// guide index and offset ([`crate::FlrConfig::ao_demodulation`]): the colour
+/// is divided by `s(ao)` as its vectors are built (`None`: taken as it is).
 #[derive(Clone, Copy, Debug)]
 pub struct BandRows<'a> {
     pub planes: [[&'a [f32]; 3 + MAX_GUIDES]; MAX_ROWS],
     pub rows: usize,
     pub width: usize,
     pub reference: [f32; MAX_GUIDES],
+    pub demod: Option<(usize, f32)>,
 }
 
 /// What [`moments_rows`] found.
@@ -247,6 +250,7 @@ fn groups_plain<const Q: usize>(
         mv[q] = f32x8::splat(band.reference[q]);
         rv[q] = f32x8::splat(r[q]);
     }
+    let demod = band.demod.filter(|&(a, _)| a < Q).map(|(a, c)| (a, f32x8::splat(c)));
     let mut ng = 0;
     for row in &band.planes[..band.rows] {
         for q in 0..Q {
@@ -258,8 +262,15 @@ fn groups_plain<const Q: usize>(
             for q in 0..Q {
                 vg[q] = (load_at(row[3 + q], x) - mv[q]) - rv[q];
             }
-            for c in 0..3 {
-                vg[Q + c] = load_at(row[c], x);
+            if let Some((a, c)) = demod {
+                let f = demodulation::inverse8(load_at(row[3 + a], x), c);
+                for c in 0..3 {
+                    vg[Q + c] = demodulation::demodulate8(load_at(row[c], x), f);
+                }
+            } else {
+                for c in 0..3 {
+                    vg[Q + c] = load_at(row[c], x);
+                }
             }
             ng += 1;
         }
@@ -302,6 +313,7 @@ fn groups_masked<const Q: usize>(
 ) -> (usize, f32x8) {
     let max = f32x8::splat(f32::MAX);
     let one = f32x8::splat(1.0);
+    let demod = band.demod.filter(|&(a, _)| a < Q).map(|(a, c)| (a, f32x8::splat(c)));
     let mut ng = 0;
     let mut wsum = f32x8::ZERO;
     for row in &band.planes[..band.rows] {
@@ -317,8 +329,9 @@ fn groups_masked<const Q: usize>(
                 let d = ok.select(load_at(row[3 + q], x) - f32x8::splat(band.reference[q]), f32x8::ZERO);
                 vg[q] = (d - f32x8::splat(r[q])) * w;
             }
+            let f = demod.map_or(one, |(a, c)| demodulation::inverse8(load_at(row[3 + a], x), c));
             for c in 0..3 {
-                vg[Q + c] = ok.select(load_at(row[c], x), f32x8::ZERO);
+                vg[Q + c] = ok.select(demodulation::demodulate8(load_at(row[c], x), f), f32x8::ZERO);
             }
             ng += 1;
         }
