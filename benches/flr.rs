@@ -87,8 +87,11 @@ fn bench_frames(c: &mut Criterion) {
                 let nbytes = bytes(w, h, q, if f16in { 2 } else { 4 });
                 g.throughput(Throughput::Bytes(nbytes));
                 let fr = frame(&d, q, f16in);
-                // the defaults (the adaptive window), and one σ = 12 px window (the fast path)
-                for (name, cfg) in [("flr", FlrConfig::with_guides(set(q))), ("flr_sigma12", single(q))] {
+                // the defaults (the adaptive window, the AO demodulation), one σ = 12 px
+                // window (the fast path), and the defaults without the AO demodulation
+                let plain = FlrConfig { ao_demodulation: None, ..FlrConfig::with_guides(set(q)) };
+                let configs = [("flr", FlrConfig::with_guides(set(q))), ("flr_sigma12", single(q)), ("flr_no_ao_demod", plain)];
+                for (name, cfg) in configs.into_iter().filter(|(n, c)| *n != "flr_no_ao_demod" || c.guides.ao) {
                     let flr = Flr::new(cfg, w, h).unwrap();
                     let mut scratch = vec![0f64; flr.scratch_len()];
                     let mut out = vec![0f32; 3 * w * h];

@@ -81,8 +81,9 @@ pub struct FlrConfig {
     /// larger window's (`flr::adaptive`). AO helps some scenes and costs
     /// others up to half a dB; this lets each cell choose. Off by default:
     /// on the training scenes +0.1–0.2 dB, on the held-out scenes +0.05 dB
-    /// (scene-dependent: −0.12 to +0.23) for ~7 % more time (README,
-    /// "Towards FLR = OIDN"). CPU and GPU paths.
+    /// (scene-dependent: −0.12 to +0.23; +0.07 dB on top of the AO
+    /// demodulation) for ~7 % more time (README, "Towards FLR = OIDN"). CPU and
+    /// GPU paths.
     pub adaptive_without_ao: bool,
     /// AO demodulation, with AO among the guides: the noisy light is divided
     /// per pixel by `s = √(clamp(ao, 0, 1) + c)` (`c` this offset) before the
@@ -93,8 +94,9 @@ pub struct FlrConfig {
     /// Ignored when AO is not a guide, so the default suits every guide set,
     /// and in the Tikhonov mode (the paper's textbook fit, everything as given;
     /// [`FlrConfig::demodulation`] says when it applies). Default `Some(DEFAULT_AO_OFFSET)`; `None` is plain FLR (the paper's).
-    /// Chosen on the training scenes (+0.16 dB on 6, +0.28 dB on 20 more; README,
-    /// "Towards FLR = OIDN"). The output is then not invariant to an affine
+    /// Chosen on the training scenes (+0.16 dB on 6 frames and on 20 more; the
+    /// held-out scenes, measured once afterwards: +0.14 dB, level with OIDN; ~6 %
+    /// more time; README, "Towards FLR = OIDN"). The output is then not invariant to an affine
     /// change of the AO channel (DATA.md fixes AO to [0, 1]); every other guide
     /// stays invariant. CPU and GPU paths.
     pub ao_demodulation: Option<f32>,
