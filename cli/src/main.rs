@@ -308,6 +308,18 @@ fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, 
     Ok(())
 }
 
+/// One `lrd advise` line weighing an option: the best configuration without
+/// it (`a`) against the best with it (`b`), each with its description;
+/// `verdicts[0]` when `b` gains more than 0.1 dB, else `verdicts[1]`.
+fn print_option(name: &str, (what_a, a): (&str, &Record), (what_b, b): (&str, &Record), verdicts: [&str; 2]) {
+    let gain = b.psnr - a.psnr;
+    let verdict = if gain > 0.1 { verdicts[0] } else { verdicts[1] };
+    println!(
+        "  {name:<17}: {what_a} {:.2} dB in {:.3} ms, {what_b} {:.2} dB in {:.3} ms ({gain:+.2} dB) -> {verdict}",
+        a.psnr, a.ms, b.psnr, b.ms
+    );
+}
+
 fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize, threads: usize, methods: &str) -> Result<(), String> {
     let exr = ExrFrame::read(frame)?;
     let inputs = Inputs::from_exr(&exr, frame, "noisy")?;
@@ -409,15 +421,8 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
             .max_by(|a, b| a.psnr.total_cmp(&b.psnr))
     };
     if let (Some(d), Some(f)) = (adaptive_ao(false), adaptive_ao(true)) {
-        let verdict = if f.psnr - d.psnr > 0.1 { "use it (--without-ao)" } else { "skip it" };
-        println!(
-            "  flr without-ao   : best adaptive with AO {:.2} dB in {:.3} ms, with the AO-free candidate {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
-            d.psnr,
-            d.ms,
-            f.psnr,
-            f.ms,
-            f.psnr - d.psnr
-        );
+        let (a, b) = (("best adaptive with AO", *d), ("with the AO-free candidate", *f));
+        print_option("flr without-ao", a, b, ["use it (--without-ao)", "skip it"]);
     }
     // The AO demodulation: the best B = 8 configuration with AO, with it (the default) and without
     let demodulated = |on: bool| {
@@ -427,15 +432,8 @@ fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize,
             .max_by(|a, b| a.psnr.total_cmp(&b.psnr))
     };
     if let (Some(d), Some(p)) = (demodulated(true), demodulated(false)) {
-        let verdict = if p.psnr - d.psnr > 0.1 { "turn it off (--ao-demodulation off)" } else { "keep it" };
-        println!(
-            "  flr ao-demod     : best B = 8 with AO {:.2} dB in {:.3} ms, without the AO demodulation {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
-            d.psnr,
-            d.ms,
-            p.psnr,
-            p.ms,
-            p.psnr - d.psnr
-        );
+        let (a, b) = (("best B = 8 with AO", *d), ("without the AO demodulation", *p));
+        print_option("flr ao-demod", a, b, ["turn it off (--ao-demodulation off)", "keep it"]);
     }
     // BMFR and WALR, each against its own default
     let find = |method: &str, flag: &str| records.iter().find(|r| r.method == method && r.flags.contains(flag));
