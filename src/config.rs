@@ -92,13 +92,14 @@ pub struct FlrConfig {
     /// weigh each pixel by `1 / s²` (occluded pixels, which the tone-mapped
     /// error weighs most, count more). A non-finite AO value counts as 1 (open).
     /// Ignored when AO is not a guide, so the default suits every guide set,
-    /// and in the Tikhonov mode (the paper's textbook fit, everything as given;
-    /// [`FlrConfig::demodulation`] says when it applies). Default `Some(DEFAULT_AO_OFFSET)`; `None` is plain FLR (the paper's).
-    /// Chosen on the training scenes (+0.16 dB on 6 frames and on 20 more; the
-    /// held-out scenes, measured once afterwards: +0.14 dB, level with OIDN; ~6 %
-    /// more time; README, "Towards FLR = OIDN"). The output is then not invariant to an affine
-    /// change of the AO channel (DATA.md fixes AO to [0, 1]); every other guide
-    /// stays invariant. CPU and GPU paths.
+    /// and in the Tikhonov mode (the paper's textbook fit, everything as
+    /// given); [`FlrConfig::demodulation`] says when it applies.
+    /// Default `Some(DEFAULT_AO_OFFSET)`; `None` is plain FLR (the paper's).
+    /// Chosen on the training scenes (+0.16 dB on 6 frames and on 20 more;
+    /// on the held-out scenes, measured once afterwards, +0.14 dB, level with
+    /// OIDN; ~6 % more time; README, "Towards FLR = OIDN"). The output is then
+    /// not invariant to an affine change of the AO channel (DATA.md fixes AO
+    /// to [0, 1]); every other guide stays invariant. CPU and GPU paths.
     pub ao_demodulation: Option<f32>,
 }
 

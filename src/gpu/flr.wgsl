@@ -173,8 +173,12 @@ fn noisy_at(c: u32, x: u32, y: u32) -> f32 {
 }
 
 // The AO demodulation's s = sqrt(clamp(ao, 0, 1) + c) (a non-finite AO counts
-// as 1, open) and `v / s` or `v * s`, keeping `v` where that would overflow
-// (src/flr/demodulation.rs).
+// as 1, open), and `v · (1 / s)` or `v · s` clamped to ±f32::MAX so that a
+// finite value stays finite: the arithmetic of src/kernels/demodulation.rs.
+// (`v` is finite at both call sites: moments stage only valid pixels, apply
+// has replaced a non-finite prediction by the fallback already.)
+const F32_MAX: f32 = 3.40282347e+38;
+
 fn demod_scale(ao: f32) -> f32 {
     var a = 1.0;
     if finite(ao) {
@@ -184,13 +188,11 @@ fn demod_scale(ao: f32) -> f32 {
 }
 
 fn demod_divide(v: f32, s: f32) -> f32 {
-    let d = v / s;
-    return select(v, d, finite(d) || !finite(v));
+    return clamp(v * (1.0 / s), -F32_MAX, F32_MAX);
 }
 
 fn demod_multiply(v: f32, s: f32) -> f32 {
-    let m = v * s;
-    return select(v, m, finite(m));
+    return clamp(v * s, -F32_MAX, F32_MAX);
 }
 
 // The window the running entry point works on (set first thing by each).
