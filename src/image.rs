@@ -135,13 +135,40 @@ const DEINTERLEAVE_AHEAD: usize = 256;
 /// may well be read again from cache, so they are stored as usual.
 pub const STREAM_MIN_BYTES: usize = 8 << 20;
 
+/// Four pixels' planar `a`, `b`, `c` lanes as interleaved `[a0 b0 c0 a1]`,
+/// `[b1 c1 a2 b2]`, `[c2 a3 b3 c3]` (SSE shuffles; RGB output rows).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn interleave4(
+    a: core::arch::x86_64::__m128,
+    b: core::arch::x86_64::__m128,
+    c: core::arch::x86_64::__m128,
+) -> [core::arch::x86_64::__m128; 3] {
+    use core::arch::x86_64::{_mm_shuffle_ps, _mm_unpackhi_ps, _mm_unpacklo_ps};
+    // SAFETY: SSE is part of x86-64; the shuffles only move register lanes.
+    unsafe {
+        let ab_lo = _mm_unpacklo_ps(a, b); // a0 b0 a1 b1
+        let ab_hi = _mm_unpackhi_ps(a, b); // a2 b2 a3 b3
+
+        // _mm_shuffle_ps::<imm>(x, y) = [x[i0], x[i1], y[i2], y[i3]], imm = i3 i2 i1 i0 (2 bits each)
+        let c0a1 = _mm_shuffle_ps::<0b10_10_00_00>(c, ab_lo); // c0 c0 a1 a1
+        let o0 = _mm_shuffle_ps::<0b10_00_01_00>(ab_lo, c0a1); // a0 b0 c0 a1
+        let b1c1 = _mm_shuffle_ps::<0b01_01_11_11>(ab_lo, c); // b1 b1 c1 c1
+        let o1 = _mm_shuffle_ps::<0b01_00_10_00>(b1c1, ab_hi); // b1 c1 a2 b2
+        let c2a3 = _mm_shuffle_ps::<0b10_10_10_10>(c, ab_hi); // c2 c2 a3 a3
+        let b3c3 = _mm_shuffle_ps::<0b11_11_11_11>(ab_hi, c); // b3 b3 c3 c3
+        let o2 = _mm_shuffle_ps::<0b10_00_10_00>(c2a3, b3c3); // c2 a3 b3 c3
+        [o0, o1, o2]
+    }
+}
+
 /// `dst = [p0[0], p1[0], p2[0], p0[1], …]` (RGB interleave, `dst.len() ==
 /// 3 * p0.len()`) with SSE non-temporal stores on the 16-byte aligned part;
 /// ends with a store fence, so later stores (e.g. a flag telling another
 /// thread the row is done) are ordered after these.
 #[cfg(target_arch = "x86_64")]
 fn interleave3_streaming(dst: &mut [f32], p0: &[f32], p1: &[f32], p2: &[f32]) {
-    use core::arch::x86_64::{_mm_loadu_ps, _mm_sfence, _mm_shuffle_ps, _mm_stream_ps, _mm_unpackhi_ps, _mm_unpacklo_ps};
+    use core::arch::x86_64::{_mm_loadu_ps, _mm_sfence, _mm_stream_ps};
     let len = p0.len().min(p1.len()).min(p2.len()).min(dst.len() / 3);
     let scalar = |dst: &mut [f32], i: usize| dst[3 * i..3 * i + 3].copy_from_slice(&[p0[i], p1[i], p2[i]]);
     // Pixels up to the first whose start is 16-byte aligned (f32s are 4-byte
@@ -158,17 +185,7 @@ fn interleave3_streaming(dst: &mut [f32], p0: &[f32], p1: &[f32], p2: &[f32]) {
         // store address is 16-byte aligned (dst + 12·head is, and 48 · n keeps it).
         unsafe {
             let (a, b, c) = (_mm_loadu_ps(p0.as_ptr().add(i)), _mm_loadu_ps(p1.as_ptr().add(i)), _mm_loadu_ps(p2.as_ptr().add(i)));
-            let ab_lo = _mm_unpacklo_ps(a, b); // a0 b0 a1 b1
-            let ab_hi = _mm_unpackhi_ps(a, b); // a2 b2 a3 b3
-
-            // _mm_shuffle_ps::<imm>(x, y) = [x[i0], x[i1], y[i2], y[i3]], imm = i3 i2 i1 i0 (2 bits each)
-            let c0a1 = _mm_shuffle_ps::<0b10_10_00_00>(c, ab_lo); // c0 c0 a1 a1
-            let o0 = _mm_shuffle_ps::<0b10_00_01_00>(ab_lo, c0a1); // a0 b0 c0 a1
-            let b1c1 = _mm_shuffle_ps::<0b01_01_11_11>(ab_lo, c); // b1 b1 c1 c1
-            let o1 = _mm_shuffle_ps::<0b01_00_10_00>(b1c1, ab_hi); // b1 c1 a2 b2
-            let c2a3 = _mm_shuffle_ps::<0b10_10_10_10>(c, ab_hi); // c2 c2 a3 a3
-            let b3c3 = _mm_shuffle_ps::<0b11_11_11_11>(ab_hi, c); // b3 b3 c3 c3
-            let o2 = _mm_shuffle_ps::<0b10_00_10_00>(c2a3, b3c3); // c2 a3 b3 c3
+            let [o0, o1, o2] = interleave4(a, b, c);
             let d = dst.as_mut_ptr().add(3 * i);
             _mm_stream_ps(d, o0);
             _mm_stream_ps(d.add(4), o1);
@@ -739,6 +756,22 @@ impl<'a> ImageViewMut<'a> {
             SamplesMut::F16(s) => SamplesMut::F16(s),
         };
         Ok(ImageViewMut { samples, width: self.width, height: n, channels: self.channels, layout })
+    }
+
+    /// Row `y` as `3 · width` values when the image is interleaved RGB f32
+    /// (pixel stride 3, channel stride 1), for a kernel that interleaves as it
+    /// computes; and whether rows of this image are best written with
+    /// non-temporal stores (x86-64, at least [`STREAM_MIN_BYTES`], as
+    /// [`Self::write_row_n`] does). `None` for any other layout.
+    pub fn rgb_row_f32(&mut self, y: usize) -> Option<(&mut [f32], bool)> {
+        let l = self.layout;
+        let SamplesMut::F32(s) = &mut self.samples else { return None };
+        if y >= self.height || l.pixel_stride != 3 || l.channel_stride != 1 || self.channels < 3 {
+            return None;
+        }
+        let streaming = cfg!(target_arch = "x86_64") && core::mem::size_of_val(*s) >= STREAM_MIN_BYTES;
+        let start = l.offset + y * l.row_stride;
+        Some((s.get_mut(start..start + 3 * self.width)?, streaming))
     }
 
     /// Whether each row's elements lie in `[offset + y*row_stride, offset + (y+1)*row_stride)`,

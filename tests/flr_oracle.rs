@@ -417,3 +417,55 @@ fn interleaved_planar_and_f16_agree() {
     let max = a.iter().zip(&c16).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
     assert!(max < 2e-2, "f16 {max}");
 }
+
+/// Every output layout holds the same bits: interleaved RGB f32, which the
+/// apply writes as it computes (with non-temporal stores at and above
+/// `image::STREAM_MIN_BYTES`, where the row starts 16-byte aligned), the same
+/// one float off that alignment (then through three planes and
+/// `write_row_n`), planar, and RGBA; with the defaults (adaptive window, AO
+/// demodulation), without the demodulation, and with one window at B = 16.
+#[test]
+fn output_layouts_agree_streamed_or_not() {
+    let set = GuideSet { normal: true, depth: true, position: false, ao: true, user: 0 };
+    let big_w = lrdenoise::image::STREAM_MIN_BYTES / (12 * 96) + 1; // 96 rows of interleaved RGB ≥ the threshold
+    let configs = [
+        FlrConfig { guides: set, ..FlrConfig::default() },
+        FlrConfig { guides: set, ao_demodulation: None, ..FlrConfig::default() },
+        FlrConfig { guides: set, block: 16, blur: Blur::Gaussian { sigma: 12.0, radius: None }, ..FlrConfig::default() },
+    ];
+    for (w, h) in [(75, 41), (big_w, 96)] {
+        let f = Owned::synthetic(w, h, 5, 0.5);
+        let n = w * h;
+        let streamed = 12 * n >= lrdenoise::image::STREAM_MIN_BYTES;
+        assert_eq!(streamed, w == big_w);
+        for c in configs {
+            let flr = Flr::new(c, w, h).unwrap();
+            let mut scratch = vec![0f64; flr.scratch_len()];
+            let mut run = |out: &mut ImageViewMut<'_>| flr.denoise(&f.frame(set), &mut scratch, out).unwrap();
+            // interleaved RGB at a 16-byte aligned start, and one float after it
+            let mut buf = vec![f32::NAN; 3 * n + 8];
+            let at = (0..4).find(|k| (buf.as_ptr() as usize + 4 * k).is_multiple_of(16)).unwrap();
+            let mut rgb = |off: usize, buf: &mut Vec<f32>| {
+                let l = Layout { offset: off, ..Layout::interleaved(w, 3) };
+                let rep = run(&mut ImageViewMut::new(SamplesMut::F32(buf), w, h, 3, l).unwrap());
+                (buf[off..off + 3 * n].to_vec(), rep)
+            };
+            let (aligned, ra) = rgb(at, &mut buf);
+            let (shifted, rs) = rgb(at + 1, &mut buf);
+            let mut planar = vec![f32::NAN; 3 * n];
+            let rp = run(&mut ImageViewMut::new(SamplesMut::F32(&mut planar), w, h, 3, Layout::planar(w, h)).unwrap());
+            let mut rgba = vec![-3f32; 4 * n];
+            let rr = run(&mut ImageViewMut::new(SamplesMut::F32(&mut rgba), w, h, 3, Layout::interleaved(w, 4)).unwrap());
+            assert!(ra == rs && ra == rp && ra == rr);
+            for i in 0..n {
+                for ch in 0..3 {
+                    let want = aligned[3 * i + ch];
+                    assert!(want.is_finite());
+                    let got = [shifted[3 * i + ch], planar[ch * n + i], rgba[4 * i + ch]];
+                    assert!(got.iter().all(|g| g.to_bits() == want.to_bits()), "{w}x{h} pixel {i} channel {ch}: {want} vs {got:?}");
+                }
+                assert_eq!(rgba[4 * i + 3], -3.0, "the fourth channel is left as it was");
+            }
+        }
+    }
+}

@@ -33,7 +33,7 @@ use crate::config::{Blur, FlrConfig, Kernel};
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
-use crate::kernels::apply::{apply_row, lerp_rows, RowGuides};
+use crate::kernels::apply::{apply_row, lerp_rows, RowGuides, RowOut};
 use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, Taps};
 use crate::kernels::demodulation;
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
@@ -1129,18 +1129,28 @@ impl Flr {
             }
             lerp_rows(models, self.cells_x, self.cells_y, self.ml, self.cfg.block, y, row_models, row_slopes);
             let guides = RowGuides { rows, reference: stats.reference, width: w };
-            let clamp = self.cfg.clamp_negative;
-            let fallback =
-                dispatch_q!(self.q, apply_row(row_models, row_slopes, self.cells_x, self.cfg.block, guides, clamp, simd, outbuf));
+            let (clamp, demod) = (self.cfg.clamp_negative, self.demodulation());
+            // Interleaved RGB f32 output (the usual case) is written as it is
+            // computed; any other layout through three planes and `write_row_n`.
+            // Streaming stores need a 16-byte aligned row (then every group of
+            // eight pixels is: they start at multiples of four pixels, 48 bytes).
+            let band_row = y - y0;
+            let direct = match out_band.rgb_row_f32(band_row) {
+                Some((dst, false)) => Some(RowOut::Rgb(dst)),
+                Some((dst, true)) if (dst.as_ptr() as usize).is_multiple_of(16) => Some(RowOut::RgbStreaming(dst)),
+                _ => None,
+            };
+            let fallback = if let Some(o) = direct {
+                dispatch_q!(self.q, apply_row(row_models, row_slopes, self.cells_x, self.cfg.block, guides, clamp, demod, simd, o))
+            } else {
+                let o = RowOut::Planes(&mut outbuf[..]);
+                let f = dispatch_q!(self.q, apply_row(row_models, row_slopes, self.cells_x, self.cfg.block, guides, clamp, demod, simd, o));
+                let (r, gb) = outbuf.split_at(w);
+                let (g, b) = gb.split_at(w);
+                out_band.write_row_n(band_row, 0, [r, g, &b[..w]]).ok_or(bad)?;
+                f
+            };
             rep.fallback_pixels += fallback as u64;
-            if let Some((ao, c)) = self.demodulation() {
-                let (r, gb) = outbuf.split_at_mut(w);
-                let (g, b) = gb.split_at_mut(w);
-                demodulation::multiply_rows([r, g, &mut b[..w]], rows[ao], c);
-            }
-            let (r, gb) = outbuf.split_at(w);
-            let (g, b) = gb.split_at(w);
-            out_band.write_row_n(y - y0, 0, [r, g, &b[..w]]).ok_or(bad)?;
         }
         Ok(rep)
     }

@@ -13,8 +13,10 @@
 //! non-finite AO value counts as 1 (open), out-of-range values are clamped.
 //!
 //! The moments' in-place path demodulates its colour vectors as it builds
-//! them ([`inverse8`], [`demodulate8`]: no pass of its own); the gathering
-//! path and the apply run over rows ([`divide_rows`], [`multiply_rows`]).
+//! them ([`inverse8`], [`demodulate8`]: no pass of its own), and the apply
+//! re-modulates each group of eight pixels before it stores them
+//! ([`scale8`], [`remodulate8`]); only the gathering moments path runs over
+//! rows ([`divide_rows`]).
 //! Both run eight pixels at a time (`wide`), the row's tail one by one;
 //! square root and division are correctly rounded, so the lanes and the tail
 //! give the same values. Cost at 1080p (x86-64-v3, Zen 4, one thread):
@@ -38,8 +40,9 @@ pub fn inverse8(ao: f32x8, c: f32x8) -> f32x8 {
     f32x8::ONE / scale8(ao, c)
 }
 
+/// [`scale`] on eight lanes (correctly rounded: each lane is `scale(ao, c)`).
 #[inline(always)]
-fn scale8(ao: f32x8, c: f32x8) -> f32x8 {
+pub fn scale8(ao: f32x8, c: f32x8) -> f32x8 {
     let finite = ao.abs().simd_le(f32x8::splat(f32::MAX));
     let a = finite.select(ao, f32x8::ONE);
     (a.fast_max(f32x8::ZERO).fast_min(f32x8::ONE) + c).sqrt()
@@ -64,49 +67,46 @@ fn demodulate1(x: f32, f: f32) -> f32 {
     (x * f).clamp(-f32::MAX, f32::MAX) + (x - x)
 }
 
-/// Three rows times `1 / s(a)` ([`demodulate8`]) or `s(a)` (clamped to
-/// ±`f32::MAX`), `s` once per pixel for all three.
+/// `y · s` clamped to ±`f32::MAX` (the applied model re-modulated; the
+/// output stays finite).
 #[inline(always)]
-fn scale_rows(rgb: [&mut [f32]; 3], ao: &[f32], c: f32, divide: bool) {
-    let (c8, max) = (f32x8::splat(c), f32x8::splat(f32::MAX));
+pub fn remodulate8(y: f32x8, s: f32x8) -> f32x8 {
+    let max = f32x8::splat(f32::MAX);
+    (y * s).fast_min(max).fast_max(-max)
+}
+
+/// [`remodulate8`] on one value (the same rounding: one product, then the clamp).
+#[inline(always)]
+pub fn remodulate1(y: f32, s: f32) -> f32 {
+    (y * s).clamp(-f32::MAX, f32::MAX)
+}
+
+/// Divides three colour rows by `s(ao)` per pixel (before the moments), `s`
+/// once per pixel for all three ([`demodulate8`]). A finite value that the
+/// division would make infinite (beyond ~0.3 × `f32::MAX` for a small `c`) is
+/// clamped to ±`f32::MAX`: still finite, so the moments' finiteness check sees
+/// what the caller gave; NaN and ±Inf become NaN.
+#[inline]
+pub fn divide_rows(rgb: [&mut [f32]; 3], ao: &[f32], c: f32) {
+    let c8 = f32x8::splat(c);
     let [r, g, b] = rgb;
     let n = ao.len().min(r.len()).min(g.len()).min(b.len());
     let whole = n - n % 8;
     let lanes = |v: &[f32]| f32x8::from(<[f32; 8]>::try_from(v).unwrap_or_default());
-    let one = |v: &mut [f32], f: f32x8| {
-        let x = lanes(v);
-        let y = if divide { demodulate8(x, f) } else { (x * f).fast_min(max).fast_max(-max) };
-        v.copy_from_slice(&y.to_array());
-    };
+    let one = |v: &mut [f32], f: f32x8| v.copy_from_slice(&demodulate8(lanes(v), f).to_array());
     let chunks = r[..whole].chunks_exact_mut(8).zip(g[..whole].chunks_exact_mut(8)).zip(b[..whole].chunks_exact_mut(8));
     for (((r, g), b), a) in chunks.zip(ao[..whole].chunks_exact(8)) {
-        let f = if divide { inverse8(lanes(a), c8) } else { scale8(lanes(a), c8) };
+        let f = inverse8(lanes(a), c8);
         one(r, f);
         one(g, f);
         one(b, f);
     }
     for i in whole..n {
-        let s = scale(ao[i], c);
+        let f = 1.0 / scale(ao[i], c);
         for v in [&mut r[i], &mut g[i], &mut b[i]] {
-            *v = if divide { demodulate1(*v, 1.0 / s) } else { (*v * s).clamp(-f32::MAX, f32::MAX) };
+            *v = demodulate1(*v, f);
         }
     }
-}
-
-/// Divides three colour rows by `s(ao)` per pixel (before the moments).
-/// A finite value that the division would make infinite (beyond ~0.3 ×
-/// `f32::MAX` for a small `c`) is clamped to ±`f32::MAX`: still finite, so the
-/// moments' finiteness check sees what the caller gave; NaN and ±Inf become NaN.
-#[inline]
-pub fn divide_rows(rgb: [&mut [f32]; 3], ao: &[f32], c: f32) {
-    scale_rows(rgb, ao, c, true);
-}
-
-/// Multiplies three output rows by `s(ao)` per pixel (after the model is
-/// applied), clamped to ±`f32::MAX` so the output stays finite.
-#[inline]
-pub fn multiply_rows(rgb: [&mut [f32]; 3], ao: &[f32], c: f32) {
-    scale_rows(rgb, ao, c, false);
 }
 
 #[cfg(test)]
@@ -134,10 +134,14 @@ mod tests {
         assert_eq!(r[4], f32::MAX, "an overflowing quotient is clamped");
         assert!(b[0].is_nan() && b[2].is_nan(), "non-finite input stays non-finite (the moments count it)");
         assert_eq!(b[4], -2.0 * (1.0 / 0.3f32.sqrt()));
-        multiply_rows([&mut r, &mut g, &mut b], &ao, 0.1);
-        for (x, want) in r[..4].iter().zip([1.0, 2.0, 3.0, 4.0]) {
-            assert!((x - want).abs() <= 1e-6 * want, "{x} vs {want}");
+        for (i, (x, want)) in r.iter().zip([1.0, 2.0, 3.0, 4.0]).enumerate() {
+            let y = remodulate1(*x, scale(ao[i], 0.1));
+            assert!((y - want).abs() <= 1e-6 * want, "{y} vs {want}");
         }
-        assert!(r[4].is_finite());
+        assert_eq!(remodulate1(f32::MAX, 2.0), f32::MAX, "the product is clamped");
+        let lanes = remodulate8(f32x8::from([1.0, -f32::MAX, 3.0, 0.5, 0.0, -1.0, 7.0, f32::MAX]), f32x8::splat(1.5)).to_array();
+        for (x, y) in [1.0, -f32::MAX, 3.0, 0.5, 0.0, -1.0, 7.0, f32::MAX].iter().zip(lanes) {
+            assert_eq!(remodulate1(*x, 1.5).to_bits(), y.to_bits(), "lanes and one value agree");
+        }
     }
 }

@@ -6,13 +6,14 @@
 //! `x86-64-v3` build (bit-identical there); against an SSE2 build the
 //! products round separately. `apply::tests` compares the two.
 
-use super::{RowGuides, Span};
+use super::{RowGuides, Sink, Span};
 use crate::guides::MAX_GUIDES;
 use core::arch::x86_64::{
     __m256, _mm256_add_ps, _mm256_and_ps, _mm256_andnot_ps, _mm256_blendv_ps, _mm256_castsi256_ps, _mm256_cmp_ps, _mm256_fmadd_ps,
-    _mm256_loadu_ps, _mm256_max_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_ps,
-    _mm256_setzero_ps, _mm256_storeu_ps, _mm256_sub_ps, _CMP_LE_OQ,
+    _mm256_loadu_ps, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_ps,
+    _mm256_setzero_ps, _mm256_sqrt_ps, _mm256_sub_ps, _CMP_LE_OQ,
 };
+use wide::f32x8;
 
 /// [`super::simd_spans`] with AVX2 + FMA: every whole 8-pixel group between
 /// the first and last cell centres; returns the fallback count and the first
@@ -21,12 +22,13 @@ use core::arch::x86_64::{
 /// # Safety
 /// The CPU must support AVX2 and FMA ([`crate::isa::Isa::Avx2Fma`] available).
 #[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn simd_spans<const Q: usize, const CLAMP: bool>(
+pub(super) unsafe fn simd_spans<const Q: usize, const CLAMP: bool, S: Sink>(
     row_models: &[f32],
     row_slopes: &[f32],
     sp: &Span,
     guides: &RowGuides<'_>,
-    outs: &mut [&mut [f32]; 3],
+    demod: Option<(usize, f32)>,
+    out: &mut S,
 ) -> (usize, usize) {
     let (ml, w) = (sp.ml, guides.width);
     let inv_b = _mm256_set1_ps(1.0 / sp.block as f32);
@@ -45,7 +47,7 @@ pub(super) unsafe fn simd_spans<const Q: usize, const CLAMP: bool>(
             }
             let (base, slope) = (&row_models[i * ml..(i + 1) * ml], &row_slopes[i * ml..(i + 1) * ml]);
             // SAFETY: AVX2 and FMA are enabled in this function; x0 + 8 ≤ w.
-            fallback += unsafe { group::<Q, CLAMP>(base, slope, fx0, &reference, guides, x0, outs) };
+            fallback += unsafe { group::<Q, CLAMP, S>(base, slope, fx0, &reference, guides, demod, x0, out) };
             x = x0 + 8;
         }
         return (fallback, x);
@@ -61,7 +63,7 @@ pub(super) unsafe fn simd_spans<const Q: usize, const CLAMP: bool>(
             }
             let fx = if g == 0 { fx0 } else { _mm256_add_ps(fx0, _mm256_mul_ps(_mm256_set1_ps((8 * g) as f32), inv_b)) };
             // SAFETY: AVX2 and FMA are enabled in this function; x0 + 8 ≤ w.
-            fallback += unsafe { group::<Q, CLAMP>(base, slope, fx, &reference, guides, x0, outs) };
+            fallback += unsafe { group::<Q, CLAMP, S>(base, slope, fx, &reference, guides, demod, x0, out) };
             x = x0 + 8;
         }
     }
@@ -73,15 +75,17 @@ pub(super) unsafe fn simd_spans<const Q: usize, const CLAMP: bool>(
 /// # Safety
 /// The CPU must support AVX2 and FMA; `x0 + 8 ≤ guides.width`, and every
 /// guide row and output plane holds `width` values (`apply_row` checked).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-unsafe fn group<const Q: usize, const CLAMP: bool>(
+unsafe fn group<const Q: usize, const CLAMP: bool, S: Sink>(
     base: &[f32],
     slope: &[f32],
     fx: __m256,
     reference: &[__m256; MAX_GUIDES],
     g: &RowGuides<'_>,
+    demod: Option<(usize, f32)>,
     x0: usize,
-    outs: &mut [&mut [f32]; 3],
+    out: &mut S,
 ) -> usize {
     // SAFETY: AVX2 and FMA are guaranteed by the caller; every load and store
     // is of a bounds-checked 8-value slice.
@@ -96,7 +100,8 @@ unsafe fn group<const Q: usize, const CLAMP: bool>(
             d[q] = _mm256_sub_ps(load(g.rows[q]), reference[q]);
         }
         let mut all_ok = true;
-        for (c, out) in outs.iter_mut().enumerate() {
+        let mut rgb = [_mm256_setzero_ps(); 3];
+        for (c, o) in rgb.iter_mut().enumerate() {
             let mut y = lerp(c);
             for q in 0..Q {
                 y = _mm256_fmadd_ps(lerp(3 + 3 * q + c), d[q], y);
@@ -111,8 +116,20 @@ unsafe fn group<const Q: usize, const CLAMP: bool>(
             if CLAMP {
                 r = _mm256_max_ps(r, _mm256_setzero_ps());
             }
-            _mm256_storeu_ps(out[x0..x0 + 8].as_mut_ptr(), r);
+            *o = r;
         }
+        if let Some((a, c)) = demod {
+            // `demodulation::scale8` and `remodulate8`, in the same order
+            let ao = load(g.rows[a]);
+            let finite = finite(ao);
+            let one = _mm256_set1_ps(1.0);
+            let clamped = _mm256_min_ps(_mm256_max_ps(_mm256_blendv_ps(one, ao, finite), _mm256_setzero_ps()), one);
+            let s = _mm256_sqrt_ps(_mm256_add_ps(clamped, _mm256_set1_ps(c)));
+            for v in rgb.iter_mut() {
+                *v = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(*v, s), max), _mm256_sub_ps(_mm256_setzero_ps(), max));
+            }
+        }
+        out.put8(x0, rgb.map(bytemuck::cast::<__m256, f32x8>));
         if all_ok {
             return 0;
         }
