@@ -1,4 +1,5 @@
-//! AVX2 + FMA version of the block accumulation ([`super::accumulate`]), for
+//! AVX2 + FMA version of the block accumulation ([`super::accumulate`]) and
+//! of building an in-place block's group vectors ([`super::groups_plain`]), for
 //! builds whose `wide` is SSE2: the same loop with `core::arch` intrinsics,
 //! chosen at run time by [`crate::isa::Isa`] (one file per instruction set, as
 //! in `kernels::qr` and `nn::conv`: `wide`'s methods are not promised to
@@ -9,11 +10,14 @@
 //! `moments::tests` compares the two; the FLR tests check whichever the CPU
 //! runs against f64.
 
-use super::{MAX_K, VW};
+use super::{BandRows, MAX_GROUPS, MAX_K, PREFETCH_AHEAD, PREFETCH_L2_AHEAD, VW};
+use crate::guides::MAX_GUIDES;
+use crate::image::{prefetch, prefetch_l2};
 use crate::kernels::{CellLayout, LUMA};
 use core::arch::x86_64::{
-    __m256, _mm256_add_ps, _mm256_andnot_ps, _mm256_cmp_ps, _mm256_fmadd_ps, _mm256_hadd_ps, _mm256_movemask_ps, _mm256_mul_ps,
-    _mm256_permute2f128_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps, _CMP_LE_OQ,
+    __m256, _mm256_add_ps, _mm256_andnot_ps, _mm256_blendv_ps, _mm256_cmp_ps, _mm256_div_ps, _mm256_fmadd_ps, _mm256_hadd_ps,
+    _mm256_loadu_ps, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_permute2f128_ps, _mm256_set1_ps,
+    _mm256_setzero_ps, _mm256_sqrt_ps, _mm256_storeu_ps, _mm256_sub_ps, _CMP_LE_OQ,
 };
 use wide::f32x8;
 
@@ -129,4 +133,69 @@ pub(super) unsafe fn accumulate<const Q: usize>(
         dst.copy_from_slice(&total[..dst.len()]);
     }
     true
+}
+
+/// [`super::groups_plain`] with AVX2: the group vectors of a block read in
+/// place, every pixel taken as valid (`e = (g − m) − r`, and the colour,
+/// divided by `s(ao)` when the band demodulates). Only subtractions, one
+/// division, one square root and min/max, each exactly rounded and in the
+/// portable version's order, so the two are bit-identical in every build.
+/// Measured in a default (SSE2) build: `wide`'s two-half lanes made building
+/// the groups twice the work of the AVX2 accumulation that follows.
+///
+/// # Safety
+/// The CPU must support AVX2. Every row slice of `band` holds `band.width`
+/// values, `x0 + block ≤ band.width`, `block % 8 == 0` and `band.rows · block
+/// / 8 ≤ MAX_GROUPS` (what `moments_rows` checks before calling).
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn groups_plain<const Q: usize>(
+    band: &BandRows<'_>,
+    x0: usize,
+    block: usize,
+    r: &[f32; MAX_GUIDES],
+    v: &mut [[f32x8; VW]; MAX_GROUPS],
+) -> usize {
+    // SAFETY (every load below): `x + 8 ≤ band.width ≤ row.len()` by the caller's
+    // contract, for x in x0..x0 + block.
+    let load = |s: &[f32], x: usize| unsafe { _mm256_loadu_ps(s.as_ptr().add(x)) };
+    let (mut mv, mut rv) = ([_mm256_setzero_ps(); MAX_GUIDES], [_mm256_setzero_ps(); MAX_GUIDES]);
+    for q in 0..Q {
+        mv[q] = _mm256_set1_ps(band.reference[q]);
+        rv[q] = _mm256_set1_ps(r[q]);
+    }
+    let demod = band.demod.filter(|&(a, _)| a < Q).map(|(a, c)| (a, _mm256_set1_ps(c)));
+    let (zero, one, max) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0), _mm256_set1_ps(f32::MAX));
+    let neg_max = _mm256_sub_ps(zero, max);
+    let mut ng = 0;
+    for row in &band.planes[..band.rows] {
+        for q in 0..Q {
+            prefetch(row[3 + q], x0 + PREFETCH_AHEAD);
+            prefetch_l2(row[3 + q], x0 + PREFETCH_L2_AHEAD);
+        }
+        for x in (x0..x0 + block).step_by(8) {
+            let vg: &mut [__m256] = bytemuck::cast_slice_mut(&mut v[ng][..]);
+            for q in 0..Q {
+                vg[q] = _mm256_sub_ps(_mm256_sub_ps(load(row[3 + q], x), mv[q]), rv[q]);
+            }
+            if let Some((a, c)) = demod {
+                // demodulation::inverse8: 1 / √(clamp(finite ? ao : 1, 0, 1) + c)
+                let ao = load(row[3 + a], x);
+                let finite = _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_andnot_ps(_mm256_set1_ps(-0.0), ao), max);
+                let clamped = _mm256_min_ps(_mm256_max_ps(_mm256_blendv_ps(one, ao, finite), zero), one);
+                let f = _mm256_div_ps(one, _mm256_sqrt_ps(_mm256_add_ps(clamped, c)));
+                for ch in 0..3 {
+                    // demodulation::demodulate8: (y · f) clamped to ±MAX, + (y − y)
+                    let y = load(row[ch], x);
+                    let d = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(y, f), max), neg_max);
+                    vg[Q + ch] = _mm256_add_ps(d, _mm256_sub_ps(y, y));
+                }
+            } else {
+                for ch in 0..3 {
+                    vg[Q + ch] = load(row[ch], x);
+                }
+            }
+            ng += 1;
+        }
+    }
+    ng
 }

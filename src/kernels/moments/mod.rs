@@ -196,7 +196,7 @@ pub fn moments_rows<const Q: usize>(
             r[q] = band.planes[0][3 + q][x0] - band.reference[q];
         }
         before_block(cx, nb);
-        let ng = groups_plain::<Q>(band, x0, block, &r, &mut scratch.groups);
+        let ng = groups_plain_on::<Q>(isa, band, x0, block, &r, &mut scratch.groups);
         // every lane of every group has weight 1
         let wsum = f32x8::splat(ng as f32);
         if !accumulate_on::<Q>(isa, &scratch.groups[..ng], &mut scratch.sums, wsum, &lay, &mut acc, true) {
@@ -233,6 +233,29 @@ fn load_at(s: &[f32], i: usize) -> f32x8 {
 /// ahead made no difference).
 const PREFETCH_AHEAD: usize = 48;
 const PREFETCH_L2_AHEAD: usize = 128;
+
+/// [`groups_plain`] in AVX2 intrinsics where `isa` says so (a build whose
+/// `wide` lacks them on a CPU that has them), else the portable lanes;
+/// bit-identical either way. Same preconditions as `groups_plain` (checked
+/// by `moments_rows`).
+#[inline(always)]
+fn groups_plain_on<const Q: usize>(
+    isa: Isa,
+    band: &BandRows<'_>,
+    x0: usize,
+    block: usize,
+    r: &[f32; MAX_GUIDES],
+    v: &mut [[f32x8; VW]; MAX_GROUPS],
+) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 (`Isa::intrinsics`); `moments_rows` checked the
+        // band's shape (`rows_supported`, rows of `width` values, blocks inside it).
+        return unsafe { avx2::groups_plain::<Q>(band, x0, block, r, v) };
+    }
+    let _ = isa;
+    groups_plain::<Q>(band, x0, block, r, v)
+}
 
 /// Group vectors of a block assuming every pixel valid: `e = (g − m) − r`
 /// (the value the gathered plane holds, minus the reference, times weight 1).
@@ -648,6 +671,65 @@ mod tests {
             lanes[3] = f32::NAN;
             bad[ng - 1][5 + 1] = f32x8::from(lanes);
             compare::<5>(&bad[..ng]);
+        }
+    }
+
+    /// The AVX2 group builder (where this CPU has it) gives the portable
+    /// lanes' vectors bit for bit, in any build: with and without the AO
+    /// demodulation, NaN, ±Inf, huge and out-of-range values included, B = 8
+    /// and 16, from 1 to 16 rows.
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn avx2_groups_match_portable() {
+        if !Isa::Avx2Fma.available() {
+            return;
+        }
+        const W: usize = 48;
+        let mut seed = 99u32;
+        let mut rnd = || crate::hash::uniform(&mut seed) as f32;
+        let special = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, -3.0, 1.5, 0.0];
+        let data: [[[f32; W]; 3 + MAX_GUIDES]; MAX_ROWS] = core::array::from_fn(|row| {
+            core::array::from_fn(|p| {
+                core::array::from_fn(|x| if (x + 3 * p + 5 * row) % 23 == 0 { special[(x + p) % special.len()] } else { 4.0 * rnd() - 1.0 })
+            })
+        });
+        fn compare<const Q: usize>(data: &[[[f32; W]; 3 + MAX_GUIDES]; MAX_ROWS], rows: usize, block: usize, demod: Option<(usize, f32)>) {
+            let mut band = BandRows { planes: [[&[][..]; 3 + MAX_GUIDES]; MAX_ROWS], rows, width: W, reference: [0.5; MAX_GUIDES], demod };
+            for (r, planes) in band.planes.iter_mut().enumerate() {
+                for (p, plane) in planes.iter_mut().enumerate() {
+                    *plane = &data[r][p][..];
+                }
+            }
+            let r: [f32; MAX_GUIDES] = core::array::from_fn(|q| 0.25 * q as f32);
+            for x0 in (0..=W - block).step_by(8) {
+                let (mut p, mut a) = ([[f32x8::ZERO; VW]; MAX_GROUPS], [[f32x8::ZERO; VW]; MAX_GROUPS]);
+                let np = groups_plain::<Q>(&band, x0, block, &r, &mut p);
+                // SAFETY: the test returned early unless the CPU has AVX2; the band's
+                // rows hold W values, x0 + block ≤ W and rows · block / 8 ≤ MAX_GROUPS.
+                let na = unsafe { avx2::groups_plain::<Q>(&band, x0, block, &r, &mut a) };
+                assert_eq!(np, na);
+                for g in 0..np {
+                    for j in 0..Q + 3 {
+                        let (pv, av) = (p[g][j].to_array(), a[g][j].to_array());
+                        for l in 0..8 {
+                            assert_eq!(
+                                pv[l].to_bits(),
+                                av[l].to_bits(),
+                                "Q {Q} rows {rows} B {block} x0 {x0} group {g} vector {j}: {pv:?} vs {av:?}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        for rows in [1usize, 2, 8, 16] {
+            for demod in [None, Some((0, 0.1)), Some((4, 1e-6)), Some((7, 0.3))] {
+                compare::<1>(&data, rows, 8, demod);
+                compare::<5>(&data, rows, 8, demod);
+                compare::<8>(&data, rows, 8, demod);
+                compare::<5>(&data, rows, 16, demod);
+                compare::<MAX_GUIDES>(&data, rows.min(MAX_GROUPS * 8 / 16), 16, demod);
+            }
         }
     }
 }
