@@ -305,20 +305,40 @@ fn normalized<T: F64Lanes, const Q: usize, const SUB: bool>(
         cholesky::solve_lead_n(&wh, &inv_diag, &mut sub, Q - 1);
         sub[Q - 1] = [s(0.0); 3];
     }
-    // Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ).
-    let raw = |x: &[[T; 3]; Q]| {
-        let mut fit = Fit { c0: muy, coef: [[s(0.0); 3]; Q], muy };
+    let back = Standardised { isig, inv_scale, mu, muy, drop };
+    let full = back.raw::<SUB>(&bh);
+    (full, dropped, if SUB { back.raw::<SUB>(&sub) } else { full })
+}
+
+/// What [`normalized`] needs to take a solution on standardised guides back to
+/// raw ones.
+struct Standardised<T, const Q: usize> {
+    isig: [T; Q],
+    inv_scale: [f64; Q],
+    mu: [T; Q],
+    muy: [T; 3],
+    drop: usize,
+}
+
+impl<T: F64Lanes, const Q: usize> Standardised<T, Q> {
+    /// Back to raw guides (eq. 23): y = μ_y + Σ β (d − μ). A function rather
+    /// than a closure: a closure called twice was not inlined into the AVX2
+    /// solve's `#[target_feature]` function, so it compiled without AVX and
+    /// called each `_mm256_mul_pd` as a function (~6 % of a default build's
+    /// frame with the AO-free candidate, measured).
+    #[inline(always)]
+    fn raw<const SUB: bool>(&self, x: &[[T; 3]; Q]) -> Fit<T, Q> {
+        let s = T::splat;
+        let mut fit = Fit { c0: self.muy, coef: [[s(0.0); 3]; Q], muy: self.muy };
         for a in 0..Q {
             for c in 0..3 {
-                let beta = x[at(a)][c] * isig[a] * s(inv_scale[a]);
+                let beta = x[moved::<Q, SUB>(a, self.drop)][c] * self.isig[a] * s(self.inv_scale[a]);
                 fit.coef[a][c] = beta;
-                fit.c0[c] = fit.c0[c] - beta * mu[a];
+                fit.c0[c] = fit.c0[c] - beta * self.mu[a];
             }
         }
         fit
-    };
-    let full = raw(&bh);
-    (full, dropped, if SUB { raw(&sub) } else { full })
+    }
 }
 
 /// Textbook Tikhonov (eq. 11) on the guides exactly as given: the fit, its
