@@ -10,7 +10,7 @@
 //! `moments::tests` compares the two; the FLR tests check whichever the CPU
 //! runs against f64.
 
-use super::{BandRows, MAX_GROUPS, MAX_K, PREFETCH_AHEAD, PREFETCH_L2_AHEAD, VW};
+use super::{eight_at, store_eight, BandRows, MAX_GROUPS, MAX_K, PREFETCH_AHEAD, PREFETCH_L2_AHEAD, VW};
 use crate::guides::MAX_GUIDES;
 use crate::image::{prefetch, prefetch_l2};
 use crate::kernels::{CellLayout, LUMA};
@@ -124,13 +124,13 @@ pub(super) unsafe fn accumulate<const Q: usize>(
             b0 += nb;
         }
     }
-    for (dst, src) in acc[..lay.k].chunks_mut(8).zip(sums[..lay.k].chunks(8)) {
-        let mut eight = [zero; 8];
-        eight[..src.len()].copy_from_slice(src);
+    // (as the portable version: whole runs of eight, no run-time length copies)
+    for i in (0..lay.k).step_by(8) {
+        let eight = eight_at(sums, i, zero);
         let mut total = [0f32; 8];
         // SAFETY: AVX is enabled in this function; `total` holds 8 f32.
         unsafe { _mm256_storeu_ps(total.as_mut_ptr(), lane_sums(&eight)) };
-        dst.copy_from_slice(&total[..dst.len()]);
+        store_eight(acc, i, lay.k, &total);
     }
     true
 }

@@ -563,14 +563,43 @@ fn accumulate<const Q: usize>(
             b0 += nb;
         }
     }
-    for (dst, src) in acc[..lay.k].chunks_mut(8).zip(sums[..lay.k].chunks(8)) {
-        let mut eight = [f32x8::ZERO; 8];
-        eight[..src.len()].copy_from_slice(src);
-        let t = f32x8::transpose(eight);
+    for i in (0..lay.k).step_by(8) {
+        let t = f32x8::transpose(eight_at(&sums[..], i, f32x8::ZERO));
         let total: [f32; 8] = ((t[0] + t[1]) + (t[2] + t[3]) + ((t[4] + t[5]) + (t[6] + t[7]))).into();
-        dst.copy_from_slice(&total[..dst.len()]);
+        store_eight(acc, i, lay.k, &total);
     }
     true
+}
+
+/// `sums[i..i + 8]`, padded with `zero` past the end (`MAX_K`). Lanes past the cell's
+/// `k` moments may hold anything (an earlier block's sums): the reduction
+/// keeps every moment in a lane of its own, and [`store_eight`] leaves them
+/// where no one reads them. (A copy of the exact `k − i` vectors had a
+/// run-time length and compiled to a `memcpy` call per eight moments: ~2 %
+/// of a default build's frame.)
+#[inline(always)]
+fn eight_at<T: Copy>(sums: &[T], i: usize, zero: T) -> [T; 8] {
+    if let Some(s) = sums.get(i..i + 8) {
+        let mut e = [zero; 8];
+        e.copy_from_slice(s);
+        e
+    } else {
+        core::array::from_fn(|j| sums.get(i + j).copied().unwrap_or(zero))
+    }
+}
+
+/// The eight lane sums of moments `i..i + 8` into `acc` (whole, where they fit
+/// in `MAX_K`: entries `k..` of `acc` are scratch that [`store_shifted`] never
+/// reads; else only those below `k`).
+#[inline(always)]
+fn store_eight(acc: &mut [f32; MAX_K], i: usize, k: usize, total: &[f32; 8]) {
+    if let Some(d) = acc.get_mut(i..i + 8) {
+        d.copy_from_slice(total);
+    } else {
+        for (j, t) in total.iter().enumerate().take(k.saturating_sub(i)) {
+            acc[i + j] = *t;
+        }
+    }
 }
 
 /// Moments about the block reference `r` → moments about the frame reference (f64).
