@@ -231,7 +231,10 @@ struct Rgb<'a, const STREAM: bool>(&'a mut [f32]);
 impl<const STREAM: bool> Sink for Rgb<'_, STREAM> {
     #[inline(always)]
     fn put8(&mut self, x0: usize, rgb: [f32x8; 3]) {
-        let d: &mut [f32; 24] = (&mut self.0[3 * x0..3 * x0 + 24]).try_into().expect("24 values");
+        // (`x0 + 8 ≤ width` and the row holds `3 · width` values: always there)
+        let Some(d) = self.0.get_mut(3 * x0..3 * x0 + 24).and_then(|d| <&mut [f32; 24]>::try_from(d).ok()) else {
+            return;
+        };
         #[cfg(target_arch = "x86_64")]
         {
             use core::arch::x86_64::{__m128, _mm_storeu_ps, _mm_stream_ps};
