@@ -38,7 +38,7 @@ fn bench(c: &mut Criterion) {
             black_box(fl.denoise(&frame, &mut scratch, &mut fs, &mut ov).unwrap())
         })
     });
-    // the network in 2×2 tiles of 256 px with halos (the default until session 19)
+    // the network in 2×2 tiles of 256 px with halos (more halo recomputed than the default 512 px tile)
     let tiled = Flnr::new(&blob, w, h).unwrap().with_tile(256).unwrap();
     let mut ws = vec![0f32; tiled.scratch_len()];
     g.bench_function("flnr_tiles_256", |b| {

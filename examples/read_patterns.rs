@@ -7,9 +7,10 @@
 //!   prefetch 128 values ahead (`kernels::moments`),
 //!
 //! next to a `memcpy` of the same 41 MB. Minimum of 7 runs each.
-//! `cargo run --release --example read_patterns` (session 29, two runs: row
-//! by row 1.4 / 2.1 ms; blocks 3.7 / 5.1 ms without prefetch, 3.3 / 3.3 with the
-//! L1 prefetch, 1.3 / 1.8 ms with both).
+//! `cargo run --release --example read_patterns` (x86-64-v3, one thread, two
+//! runs on the machine of `docs/PERFORMANCE.md`: row by row 1.4 / 2.1 ms;
+//! blocks 3.7 / 5.1 ms without prefetch, 3.3 / 3.3 with the L1 prefetch,
+//! 1.3 / 1.8 ms with both).
 use std::hint::black_box;
 use std::time::Instant;
 

@@ -1,6 +1,7 @@
-//! FLNR — Fast Local Neural Regression (Salmi, Csefalvay & Imber, §3.3;
-//! `../shared/ALGORITHMS.md` §2): a small U-Net ([`crate::nn::UNet`]) writes
-//! `Q'` model guides `X'_model` (the moments are built from them) and `Q'` map
+//! FLNR — Fast Local Neural Regression (Salmi, Cséfalvay & Imber, "Fast Local
+//! Neural Regression for Low-Cost, Path Traced Lambertian Global
+//! Illumination", §3.3): a small U-Net ([`crate::nn::UNet`]) writes `Q'`
+//! model guides `X'_model` (the moments are built from them) and `Q'` map
 //! guides `X'_map` (the per-block models are applied to them); then FLR runs
 //! as usual, with the σ, ε, ϵ trained with the network.
 //!
@@ -9,7 +10,7 @@
 //! instead of replacing them. FLNR then starts out as FLR (near-constant
 //! learned guides are regularised away) and even a short CPU training can only
 //! improve on it; the paper's replacement needs far longer training to catch up
-//! with the plain guides (measured: −1.1 dB after the same training).
+//! with the plain guides.
 //!
 //! Network input (8 planes, as `train/flnr.py` builds it): the normal (3),
 //! depth divided by the frame's mean depth (1), AO (1), and
@@ -18,21 +19,20 @@
 //! samples). The frame needs normal, depth and AO.
 //!
 //! **Tiles with halos.** The network runs tile by tile (default
-//! [`DEFAULT_TILE`] = 512 px edge), each on its input grown by a halo of the
-//! network's receptive radius (17 px for two levels, rounded up to 20 so the
-//! stride-2 grids of tile and frame coincide) and clipped to the frame, so
-//! its working memory is bounded by the tile, not the frame. At 1920×1080
-//! with the bundled 12/24/48 network, [`Flnr::scratch_len`] is 39.3 M f32
-//! (157 MB) instead of 226 M (0.9 GB) for the whole frame at once: 22.7 M
-//! for one tile's tensors, 16.6 M for the 2·Q' = 8 learned guide planes FLR
-//! reads, which stay frame-sized like any other guides of the frame. The
-//! tiles' results are bit-identical to the whole frame's (the zero padding at
-//! the frame's border is the same; a tile's own border effects stay inside
-//! its halo; tested). The halo is recomputed: ~1.16× the network's arithmetic
-//! at 512 px tiles, ~1.34× at 256 (`examples/flnr_tiles`, 1080p, AVX2 + FMA,
-//! one thread, session 19: 2.9 s at 512, 3.5 s at 256, 4.6 s at 128, 2.8 s
-//! for the whole frame). The tiles are independent: [`Flnr::network_tile`]
-//! runs one, on any thread.
+//! [`DEFAULT_TILE`] = 512 px edge, at least [`MIN_TILE`]), each on its input
+//! grown by a halo of the network's receptive radius (17 px for two levels,
+//! rounded up to 20 so the stride-2 grids of tile and frame coincide) and
+//! clipped to the frame, so its working memory is bounded by the tile, not the
+//! frame. At 1920×1080 with the bundled 12/24/48 network,
+//! [`Flnr::scratch_len`] is 39.3 M f32 (157 MB) instead of 226 M (0.9 GB) for
+//! the whole frame at once: 22.7 M for one tile's tensors, 16.6 M for the
+//! 2·Q' = 8 learned guide planes FLR reads, which stay frame-sized like any
+//! other guides of the frame. The tiles' results are bit-identical to the
+//! whole frame's (the zero padding at the frame's border is the same; a
+//! tile's own border effects stay inside its halo; tested). The halo is
+//! recomputed: ~1.16× the network's arithmetic at 512 px tiles, ~1.34× at 256
+//! (`cargo run --release --example flnr_tiles` times the tile sizes). The
+//! tiles are independent: [`Flnr::network_tile`] runs one, on any thread.
 
 use crate::config::{Blur, FlrConfig, Regularization};
 use crate::error::{Arg, Error};
@@ -45,11 +45,10 @@ use crate::nn::UNet;
 pub const INPUT_GUIDES: GuideSet = GuideSet::NORMAL_DEPTH_AO;
 const IN_CHANNELS: usize = 8;
 /// Default edge (pixels) of the network's output tiles. 512: the halo's
-/// recomputation is ~1.16× at this size (~1.34× at 256, which was the default
-/// until the 3×3 layers stopped depending on a tile's tensors staying in
-/// cache, session 18), a tile's tensors (22.7 M f32, 91 MB, for the bundled
-/// network) are a tenth of the whole frame's, and a 1080p frame still has 12
-/// tiles to spread over threads.
+/// recomputation is ~1.16× at this size (~1.34× at 256; the 3×3 layers do not
+/// depend on a tile's tensors staying in cache), a tile's tensors (22.7 M
+/// f32, 91 MB, for the bundled network) are a tenth of the whole frame's, and
+/// a 1080p frame still has 12 tiles to spread over threads.
 pub const DEFAULT_TILE: usize = 512;
 /// Smallest tile edge [`Flnr::with_tile`] accepts: for networks of up to 3
 /// levels (tested; the bundled one has 2) every level of a tile's input stays

@@ -225,7 +225,7 @@ fn halves_strided<const N: usize>(src: &[f16], ps: usize, dst: [&mut [f32]; N]) 
 /// at a time are converted in bulk into a small buffer (F16C where the CPU has
 /// it; [`crate::convert`]), then picked with a constant stride, which the
 /// compiler vectorises. (A conversion per value cannot be vectorised across a
-/// stride: it took 20 % of FLR's time on RGBA16F inputs, session 29.)
+/// stride: it measured 20 % of FLR's time on RGBA16F inputs.)
 #[inline]
 fn halves_strided_ps<const N: usize, const PS: usize>(src: &[f16], mut dst: [&mut [f32]; N]) {
     const PX: usize = 64;

@@ -10,14 +10,13 @@ use core::sync::atomic::{AtomicU8, Ordering};
 /// `f64` lanes) and model application (`kernels::apply`).
 ///
 /// `wide` picks SSE2/AVX/NEON at compile time, so a plain x86-64 build runs
-/// them in SSE2 without fused multiply-adds (the network 2.4× slower than in
-/// an `x86-64-v3` build). [`Isa::detect`] therefore chooses AVX2 + FMA whenever
+/// them in SSE2 without fused multiply-adds. [`Isa::detect`] therefore chooses AVX2 + FMA whenever
 /// the build enables them or the CPU reports them at run time. The check is
 /// the one `std::is_x86_feature_detected!` makes, written with `core::arch`
 /// so that `no_std` builds get it too: CPUID says the CPU has AVX2 and FMA,
-/// and XGETBV says the OS saves the YMM registers (until session 20 only
-/// `std` builds detected them, so a Rust user on the default features, which
-/// lack `std`, ran the SSE2 lanes: 162 against 93 ms for a 256×256 frame).
+/// and XGETBV says the OS saves the YMM registers. A Rust user on the
+/// default features (which lack `std`) therefore gets the AVX2 + FMA kernels
+/// too.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Isa {
     /// `wide`'s `f32x8` (the build's instruction set).
@@ -50,8 +49,8 @@ impl Isa {
     /// one rule of every kernel's dispatch (`qr`, `moments`, `solve`,
     /// `apply`, `blur`; `conv` runs its file in every build). An `x86-64-v3`
     /// build keeps `wide`'s lanes, which compile to the same instructions and
-    /// measured 4–7 % faster for FLR there than the intrinsics files (whose
-    /// functions do not inline into their callers). The call stays behind
+    /// are faster there than the intrinsics files (whose functions do not
+    /// inline into their callers). The call stays behind
     /// `#[cfg(target_arch = "x86_64")]`: the intrinsics files exist only there.
     #[inline]
     pub fn intrinsics(self) -> bool {

@@ -335,8 +335,8 @@ fn merged3_joins_only_interleaved_siblings() {
     let p = ImageView::f32(&data[..3 * w * h], w, h, 3, Layout::planar(w, h)).unwrap();
     let pc = |c| p.channels(c, 1).unwrap();
     assert!(ImageView::merged3([&pc(0), &pc(1), &pc(2)]).is_none());
-    // f16 siblings merge too (one bulk-converting pass; until session 28 each
-    // channel was a strided read converting per value), but never with f32 ones
+    // f16 siblings merge too (one bulk-converting pass rather than a strided
+    // read converting per value), but never with f32 ones
     for ps in [3usize, 4] {
         let d16: Vec<half::f16> = data.iter().map(|x| half::f16::from_f32(*x)).collect();
         let v16 = ImageView::f16(&d16[..ps * w * h], w, h, 3, Layout::interleaved(w, ps)).unwrap();

@@ -11,7 +11,17 @@ rebuild. With no options it gives `lrd eval`'s FLR PSNR on frames that fill whol
         [--area-box C] [--eps-windows a,b,c] [--shared-residual] [--leverage]
         [--ao-demod C|off]
 
-Experiments (session 29, docs/PERFORMANCE.md; none kept):
+Options the library has (same arithmetic, same PSNR as `lrd eval`):
+  --subsets 0123 --subset-windows 0
+                    also fit window 0 without AO (guides 0..3 of normal xyz, depth, ao),
+                    a candidate blended like a window: variance r (Q' + 1) / N with its
+                    own Q', bias² from its gap to window 0's full fit
+                    (FlrConfig::adaptive_without_ao, `lrd --without-ao`, off by default)
+  --ao-demod C|off  the noisy light divided by s = sqrt(clamp(ao, 0, 1) + C) before the
+                    fit, the output multiplied by s (FlrConfig::ao_demodulation; the
+                    library's default is C = 0.1; "off" is plain FLR)
+Estimator variants the library does not have (each scored no better on the training
+frames; docs/METHODS.md, FLR):
   --lattice N       frame guide mean/std from an N×N lattice of samples, not all pixels
   --shrink K        Wiener shrinkage of the guide coefficients, q²/(q² + K r/N) per
                     component of the whitened basis (--basis), every window
@@ -19,26 +29,12 @@ Experiments (session 29, docs/PERFORMANCE.md; none kept):
   --mse-blur C      blur the blend's per-cell MSE estimates over C cells (Gaussian σ)
   --weight-power P  blend weights 1 / MSE^P
   --chroma S        one chromaticity per cell, from window S; only luminance per pixel
-Session 31 (README, "Towards FLR = OIDN"; in the library as FlrConfig::adaptive_without_ao, off by default):
-  --subsets 0123 --subset-windows 0
-                    also fit window 0 without AO (guides 0..3 of normal xyz, depth, ao),
-                    a candidate blended like a window: variance r (Q' + 1) / N with its
-                    own Q', bias² from its gap to window 0's full fit
-Session 32 (none kept; 26 training frames, train + train3, mean 31.138 dB with no options):
-  --area-box C      variance area 4π(σ² + C b²/12), b the grid's cell side (C = 1: the
-                    cell box's own spread): 31.177 (C = 1), 31.242 (C = 4); a knob that
-                    moves weight to the small window, not a better estimate
-  --eps-windows a,b,c  ϵ per window: 0.003,0.01,0.03 31.176 / 0.03,0.01,0.01 31.096
-  --shared-residual every window's variance from window 0's residual: 31.125
+  --area-box C      variance area 4π(σ² + C b²/12), b the grid's cell side
+  --eps-windows a,b,c  ϵ per window
+  --shared-residual every window's variance from window 0's residual
   --leverage        each candidate's variance r (1 + E_cell[(x − μ)ᵀ M (x − μ)]) / N, the
                     cell's own leverage under the regularized inverse M (LEV_SCALE=s
-                    scales it): box +0.27, clutter +0.13, colonnade −0.22, room −0.18
-Session 33 (kept: FlrConfig::ao_demodulation, the library's default since then):
-  --ao-demod C      the noisy light divided by s = sqrt(clamp(ao, 0, 1) + C) before the
-                    fit, the output multiplied by s (default 0.1, the library's; "off" for
-                    plain FLR). 6 train frames 33.011 -> 33.171 dB, 20 more training-family
-                    frames 32.164 -> 32.328; C = 0.05 / 0.2 / 0.3: 32.332 / 32.313 / 32.300
-                    there; s = ao + 1: 32.281
+                    scales it)
 Training frames only: never tune on the test split (tools/render.py --split test).
 """
 import math

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference implementation of the shared/DATA.md quality protocol with
+"""Reference implementation of the docs/DATA.md quality protocol with
 scikit-image and NVIDIA's flip-evaluator, to cross-check `lrd`'s Rust metrics.
 
     python3 tools/metrics_reference.py FRAME.exr [DENOISED.exr]

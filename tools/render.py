@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Render frames and sequences in the layout of shared/DATA.md with Mitsuba 3.
+"""Render frames and sequences in the layout of docs/DATA.md with Mitsuba 3.
 
 Scenes are built procedurally from Mitsuba's shapes; each scene family has a
 seed, so the same command always gives the same frames. The train/test split is

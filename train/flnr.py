@@ -20,9 +20,8 @@ per-cell models. By default it is the library's default, the adaptive window (σ
 px, the larger two on the 2×2-pooled grid, blended per cell by 1 / (bias² + variance):
 src/flr/adaptive.rs); `--sigmas 12` trains on one window. `--check` prints plain FLR's
 PSNR per frame, to compare with `lrd eval` (on the train scenes: equal to the last digit
-for both). Loss: SMAPE against the reference (adding the DATA.md metric's tone-mapped
-error was tried in session 17, commit 8db77fb, and scored no better on the validation
-frames: train/README.md). `--val FRAMES` scores frames that are never trained on at the
+for both). Loss: SMAPE against the reference (adding the quality protocol's tone-mapped
+error, docs/DATA.md, scored no better on the validation frames: train/README.md). `--val FRAMES` scores frames that are never trained on at the
 end (plain FLR and FLNR PSNR), to choose between runs without touching the test split.
 """
 import argparse
@@ -293,8 +292,7 @@ def main():
             print(f"{fr['name']}: plain FLR {psnr(full_frame(model, fr, plain=True), fr):.2f} dB")
         return
     if args.init:
-        # the network and the ε, ϵ it was trained with (before session 18 only
-        # the network was loaded, and ε, ϵ restarted from 1e-3, 1e-2)
+        # the network and the ε, ϵ it was trained with
         _, (eps_mul, eps_add) = load_blob(model.net, args.init)
         with torch.no_grad():
             model.log_eps_mul.fill_(math.log(eps_mul))

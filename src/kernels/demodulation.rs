@@ -3,13 +3,13 @@
 //! taken and the applied model multiplied by `s` again, so FLR fits
 //! `y ≈ s · (c₀ + β·g)` by least squares weighted `1 / s²`.
 //!
-//! Why: the quality protocol (`shared/DATA.md`) scores tone-mapped light, in
+//! Why: the quality protocol (`docs/DATA.md`) scores tone-mapped light, in
 //! which an error in a dark, occluded region weighs more than the same error
 //! in an open one, while plain least squares let the bright pixels of a window
 //! dominate its fit. Occlusion also scales the light rather than adding to it,
 //! which the model `s · (c₀ + β·g)` expresses with the same coefficients.
 //! The square root and the offset `c` were chosen on the training scenes
-//! (README, "Towards FLR = OIDN"); `s ∈ [√c, √(1 + c)]`, never 0 or NaN: a
+//! (`docs/METHODS.md`, FLR); `s ∈ [√c, √(1 + c)]`, never 0 or NaN: a
 //! non-finite AO value counts as 1 (open), out-of-range values are clamped.
 //!
 //! The moments' in-place path demodulates its colour vectors as it builds

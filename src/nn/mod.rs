@@ -1,5 +1,6 @@
-//! Allocation-free inference of FLNR's guide network (`../shared/ALGORITHMS.md`
-//! §2): a small U-Net read from a weight blob ([`blob`]), run layer by layer on
+//! Allocation-free inference of FLNR's guide network (Salmi, Cséfalvay & Imber,
+//! "Fast Local Neural Regression for Low-Cost, Path Traced Lambertian Global
+//! Illumination"): a small U-Net read from a weight blob ([`blob`]), run layer by layer on
 //! planar f32 tensors in a caller-provided scratch ([`UNet::forward`]).
 //!
 //! Architecture (the blob's header gives `in`, `out`, and the widths
@@ -32,9 +33,9 @@ use conv::{concat_upsampled, conv, Act};
 /// channel for one output row; with planes a multiple of 4 KiB apart (any
 /// `w·h` divisible by 1024, e.g. 256×256 or 512×512) all those rows fall in
 /// the same L1 and L2 cache sets and evict each other. An odd number of lines
-/// puts the planes' rows in different sets. Measured (session 20, one thread,
-/// real 256×256 frames): FLNR 5 % faster in the default build (3×3 layers in
-/// AVX2 chosen at run time, the rest SSE2), unchanged in an x86-64-v3 build.
+/// puts the planes' rows in different sets (measured on 256×256 frames, one
+/// thread: FLNR 5 % faster in the default build, no change in an x86-64-v3
+/// build).
 /// The caller's input and output tensors keep `w·h`.
 pub const fn plane_stride(w: usize, h: usize) -> usize {
     let lines = (w * h).div_ceil(16);

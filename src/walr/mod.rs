@@ -1,5 +1,6 @@
-//! WALR — Weighted À-trous Linear Regression (Meunier & Harada,
-//! `papers/walr-meunier-harada.txt`).
+//! WALR — Weighted À-trous Linear Regression (Meunier & Harada, "Weighted
+//! À-Trous Linear Regression (WALR) for Real-Time Diffuse Indirect Lighting
+//! Denoising"; section numbers below are the paper's).
 //!
 //! A per-pixel weighted linear regression of the noisy light on the features
 //! `X = (1, octahedral normal (2 values in [0, 1]), extra guides)`, solved from
@@ -66,12 +67,10 @@ pub use temporal::{History, TemporalConfig};
 /// Largest number of regression features (1 + 2 normal + AO + 4 user).
 pub const MAX_FEATURES: usize = 8;
 /// Default [`WalrConfig::previous_weight`]: 0.6 of the 27×27 window's fit and
-/// 0.4 of the 81×81 one's. Chosen on the 34 training-family frames (session
-/// 22, `lrd eval`, mean PSNR / SSIM / FLIP): 0 (the paper's single window)
-/// 28.90 dB / 0.706 / 0.136; 0.5: 29.72 / 0.707 / 0.123; 0.6: 29.78 / 0.704 /
-/// 0.122; 0.7: 29.80 / 0.702 / 0.122 (T = 3 alone: 29.56 / 0.689 / 0.129).
-/// Neither window suits every region, and the mixture of a narrow and a wide
-/// box is a heavier-tailed kernel than either.
+/// 0.4 of the 81×81 one's, used when [`WalrConfig::adaptive_blend`] is off;
+/// chosen on training scenes (`docs/METHODS.md`, WALR). Neither window suits
+/// every region, and the mixture of a narrow and a wide box is a
+/// heavier-tailed kernel than either.
 pub const DEFAULT_PREVIOUS_WEIGHT: f32 = 0.6;
 
 /// Largest number of à-trous iterations (5: 243×243 pixels).

@@ -213,7 +213,7 @@ fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0
     // output rows two at a time, which read the same input rows (2r + 2 loads
     // for two outputs instead of 2(2r + 1)), each output chunk accumulated in
     // registers and stored once. (One row at a time with a multiply-add per
-    // tap, as before session 30, was bound by its loads and multiply-adds.)
+    // tap measured slower: bound by its loads and multiply-adds.)
     let r = taps.radius;
     let mut s0 = 0;
     while s0 < row_len {
