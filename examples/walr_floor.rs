@@ -1,6 +1,6 @@
 //! A floor under WALR's single-frame time at 1920×1080 on one core: the
 //! à-trous sums alone, as a perfect implementation would do them (a timing
-//! aid, not a benchmark; see the README, "WALR's 40 ms target").
+//! aid, not a benchmark; see `docs/PERFORMANCE.md`, WALR).
 //!
 //! Every WALR iteration sums, per pixel and stored plane, the centre and 8
 //! taps weighted by their edge-stopping values: 9 loads and 8 multiply-adds

@@ -18,11 +18,9 @@
 //!   ([`crate::kernels::qr::Shrinkage`], κ = [`BmfrConfig::shrinkage`], 4 by
 //!   default, 0 for the paper's plain least squares): each component of `Qᵀz`
 //!   is damped by `q² / (q² + κσ̂²)`, σ̂² the block's residual variance. Ten
-//!   features fitted to 1024 one-sample pixels overfit the noise; on the 34
-//!   training-family frames (1 spp) this took single-frame BMFR from 26.93
-//!   to 29.27 dB (κ = 2, 3, 4, 5, 6: 28.95, 29.17, 29.27, 29.31, 29.31 dB;
-//!   4 was the best on the first 6 of them), and the temporal pipeline,
-//!   whose accumulated input is less noisy and so is shrunk less, gains too.
+//!   features fitted to 1024 one-sample pixels overfit the noise, which the
+//!   shrinkage damps; the temporal pipeline, whose accumulated input is less
+//!   noisy and so is shrunk less, gains too (`docs/METHODS.md`, BMFR).
 //!
 //! The block grid shifts every frame by one of 16 offsets ([`BLOCK_OFFSETS`],
 //! the original's table, in 1/32 of a block), so temporal accumulation hides

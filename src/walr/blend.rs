@@ -22,7 +22,7 @@
 //!
 //! Per pixel the estimates are too noisy to choose by (a per-pixel weight
 //! scored no better than the fixed blend on the training frames); averaged
-//! over the small window they gain ~0.2 dB (see the README, WALR).
+//! over the small window they choose well (`docs/METHODS.md`, WALR).
 //! Both passes work on bands of rows; pass 2 reads pass 1's results of the
 //! rows around its band, so all of pass 1 must be done first.
 
@@ -38,8 +38,8 @@ use wide::f32x8;
 const P_STATS: usize = 6;
 
 /// Discount `K` of the variance difference in the large window's bias
-/// estimate (module doc). Chosen on the training frames in a numpy prototype
-/// fed with the per-pixel statistics: 0.5 and 2 scored 0.02–0.03 dB lower.
+/// estimate (module doc). Chosen on the training frames, where 0.5 and 2
+/// scored lower.
 pub const BLEND_BIAS_DISCOUNT: f32 = 1.0;
 /// Cap of the stored statistics (f16 holds them; see [`window_stats`]).
 const STAT_MAX: f32 = 60000.0;
