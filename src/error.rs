@@ -49,6 +49,11 @@ pub enum Error {
     InvalidTile { index: usize, count: usize },
     /// This operation is not possible with these arguments (the string says why).
     Unsupported(&'static str),
+    /// A tile of stage `stage` ([`crate::flr::Stage`] index) was run out of
+    /// order: before the stage ahead of it completed or before the frame's
+    /// prepare, a second time in one frame, with a worker that is busy, or with
+    /// other arguments than the frame's prepare.
+    StageOrder { stage: u8, tile: usize },
 }
 
 impl fmt::Display for Error {
@@ -79,6 +84,9 @@ impl fmt::Display for Error {
                 write!(f, "tile {index} out of range or mis-sized (tile count {count})")
             }
             Error::Unsupported(why) => write!(f, "unsupported: {why}"),
+            Error::StageOrder { stage, tile } => {
+                write!(f, "stage {stage} tile {tile} run out of order (or twice, or on a busy worker, or with other arguments than its frame's prepare)")
+            }
         }
     }
 }

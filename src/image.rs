@@ -32,6 +32,26 @@ impl Layout {
     pub const fn planar(width: usize, height: usize) -> Self {
         Layout { offset: 0, pixel_stride: 1, row_stride: width, channel_stride: width * height }
     }
+    /// Whether every (pixel, channel) of a `width`×`height`×`channels` image
+    /// has an element of its own: sorted by stride, each dimension's stride
+    /// clears everything the smaller ones span. (Sufficient; exotic
+    /// interleavings that are injective in other ways are refused too.)
+    pub fn elements_distinct(&self, width: usize, height: usize, channels: usize) -> bool {
+        let mut dims = [(self.pixel_stride, width), (self.row_stride, height), (self.channel_stride, channels)];
+        dims.sort_unstable();
+        let mut span = 0usize; // largest index offset reached by the smaller dimensions
+        for (stride, n) in dims {
+            if n <= 1 {
+                continue;
+            }
+            if stride <= span || stride == 0 {
+                return false;
+            }
+            let Some(s) = stride.checked_mul(n - 1).and_then(|e| e.checked_add(span)) else { return false };
+            span = s;
+        }
+        true
+    }
     /// One past the largest element index used, or `None` on overflow.
     fn end(&self, width: usize, height: usize, channels: usize) -> Option<usize> {
         let last = self
@@ -613,6 +633,11 @@ impl<'a> ImageViewMut<'a> {
         if layout.pixel_stride == 0 || (height > 1 && layout.row_stride == 0) || (channels > 1 && layout.channel_stride == 0) {
             return Err(Error::InvalidStride { arg: Arg::Output });
         }
+        // Two pixels or channels on one element would make the output depend
+        // on the write order: refused.
+        if !layout.elements_distinct(width, height, channels) {
+            return Err(Error::InvalidStride { arg: Arg::Output });
+        }
         Ok(ImageViewMut { samples, width, height, channels, layout })
     }
     /// Shorthand for a tightly packed, interleaved f32 image.
@@ -811,6 +836,68 @@ impl<'a> ImageViewMut<'a> {
         let top = ImageViewMut::new(top, w, rows, c, top_layout)?;
         let bottom = ImageViewMut::new(bottom, w, h - rows, c, bottom_layout)?;
         Ok((top, Some(bottom)))
+    }
+}
+
+/// Row bands of one output image for concurrent writers: each band is a view
+/// of its own rows only. Made from an image whose rows do not overlap.
+#[derive(Debug)]
+pub(crate) struct RowBands<'a, 'o> {
+    f32s: Option<*mut f32>,
+    f16s: Option<*mut f16>,
+    width: usize,
+    height: usize,
+    channels: usize,
+    layout: Layout,
+    _out: core::marker::PhantomData<&'a mut ImageViewMut<'o>>,
+}
+
+impl<'a, 'o> RowBands<'a, 'o> {
+    /// Bands of `out`; `None` unless its rows are separable.
+    pub(crate) fn new(out: &'a mut ImageViewMut<'o>) -> Option<Self> {
+        if !out.rows_are_separable() {
+            return None;
+        }
+        let (f32s, f16s) = match &mut out.samples {
+            SamplesMut::F32(s) => (Some(s.as_mut_ptr()), None),
+            SamplesMut::F16(s) => (None, Some(s.as_mut_ptr())),
+        };
+        Some(RowBands {
+            f32s,
+            f16s,
+            width: out.width,
+            height: out.height,
+            channels: out.channels,
+            layout: out.layout,
+            _out: core::marker::PhantomData,
+        })
+    }
+
+    /// Rows `y0..y0 + n` as a view of their own.
+    ///
+    /// # Safety
+    /// No other live view made by this `RowBands` covers any of these rows.
+    pub(crate) unsafe fn band(&self, y0: usize, n: usize) -> Result<ImageViewMut<'a>, Error> {
+        if n == 0 || y0.checked_add(n).is_none_or(|e| e > self.height) {
+            return Err(Error::InvalidTile { index: y0, count: self.height });
+        }
+        let l = self.layout;
+        let start = l.offset + y0 * l.row_stride;
+        // elements of the band's last row, and of the rows before it
+        let extent = (self.width - 1) * l.pixel_stride + (self.channels - 1) * l.channel_stride + 1;
+        let len = (n - 1) * l.row_stride + extent;
+        let layout = Layout { offset: 0, ..l };
+        // SAFETY: rows are separable (checked in `new`), so rows y0..y0+n lie
+        // in [start, start + len) inside the image's slice, which no other band
+        // covers (the caller's contract); the slice lives for 'a.
+        let samples = unsafe {
+            match (self.f32s, self.f16s) {
+                (Some(p), _) => SamplesMut::F32(core::slice::from_raw_parts_mut(p.add(start), len)),
+                (_, Some(p)) => SamplesMut::F16(core::slice::from_raw_parts_mut(p.add(start), len)),
+                _ => return Err(Error::InvalidStride { arg: Arg::Output }),
+            }
+        };
+        ImageViewMut::new(samples, self.width, n, self.channels, layout)
     }
 }
 

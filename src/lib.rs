@@ -65,7 +65,7 @@ pub use bmfr::{Bmfr, BmfrConfig};
 pub use config::{Blur, FlrConfig, Kernel, Regularization};
 pub use error::{Arg, Error};
 #[cfg(feature = "flr")]
-pub use flr::{CheckedFrame, Flr, Parts, Report, ScratchLayout, Stats, StatsSums};
+pub use flr::{CheckedFrame, Flr, Parts, Report, ScratchLayout, Stage, Stats, StatsSums, Tiled};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 pub use history::History;
@@ -88,6 +88,18 @@ pub const SIMD_LEVEL: &str = if cfg!(all(target_arch = "x86_64", target_feature 
 } else {
     "scalar"
 };
+
+/// The instruction set FLR's, BMFR's and FLNR's 8-lane kernels run on this
+/// CPU: `"avx2+fma"` when [`isa::Isa::detect`] picks the AVX2 + FMA kernels
+/// (also in a plain x86-64 build, whose `wide` lanes are SSE2), else
+/// [`SIMD_LEVEL`].
+pub fn simd_level() -> &'static str {
+    if isa::Isa::detect() == isa::Isa::Avx2Fma {
+        "avx2+fma"
+    } else {
+        SIMD_LEVEL
+    }
+}
 
 /// Crate version.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -243,6 +243,29 @@ int main(int argc, char **argv) {
     printf("FLR %dx%d: whole frame %.3f ms (best of 5, 1 thread), tiled %u tiles on 2 pthreads %.3f ms; identical\n",
            W, H, best, tiles, tiled_ms);
 
+    /* Misuse is refused with a status, never answered with wrong output: the
+       scratch records the frame's progress, and outputs may not overlap. */
+    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_APPLY, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
+        return 3; /* the frame is done: APPLY again needs a new PREPARE */
+    CHECK(lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_PREPARE, 0, 0, NULL));
+    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_APPLY, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
+        return 3; /* APPLY before its models exist */
+    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_STATS, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
+        return 3; /* STATS before MOMENTS */
+    LrdImageMut onto_noisy = out;
+    onto_noisy.data = noisy;
+    if (lrd_flr_denoise(&cfg, &frame, &onto_noisy, scratch, bytes, NULL) != LRD_STATUS_INVALID_ARGUMENT) return 3;
+    LrdImageMut onto_scratch = out;
+    onto_scratch.data = tscratch;
+    if (lrd_flr_run_tile(&cfg, &frame, &onto_scratch, tscratch, tbytes, 2, LRD_STAGE_PREPARE, 0, 0, NULL) !=
+        LRD_STATUS_INVALID_ARGUMENT)
+        return 3;
+    LrdImageMut shared_pixels = out;
+    shared_pixels.pixel_stride = sizeof(float); /* pixel x's green is pixel x+1's red */
+    shared_pixels.channel_stride = sizeof(float);
+    if (lrd_flr_denoise(&cfg, &frame, &shared_pixels, scratch, bytes, NULL) != LRD_STATUS_INVALID_ARGUMENT) return 3;
+    printf("FLR misuse: out-of-order stages and overlapping outputs refused\n");
+
     /* Half-float buffers in and out (LRD_FORMAT_F16; the library converts them
      * with F16C where the CPU has it). Reading a half is exact, so the f16 run
      * must equal the f32 run on the same values, rounded to half on output. */

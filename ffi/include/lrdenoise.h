@@ -92,6 +92,13 @@ enum LrdStatus
    * Any other internal error.
    */
   LRD_STATUS_INTERNAL = 10,
+  /**
+   * A tiled stage was run out of order: before every tile of the stage
+   * ahead of it finished (or before this frame's PREPARE), a second time
+   * for one tile, on a worker that is busy, or with other arguments than
+   * the frame's PREPARE. Nothing was written.
+   */
+  LRD_STATUS_STAGE_ORDER = 11,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L
@@ -102,7 +109,8 @@ typedef uint32_t LrdStatus;
 #endif // __cplusplus
 
 /**
- * Stages of a tiled FLR run, in order.
+ * Stages of a tiled FLR run, numbered in the order they run (the core's
+ * `flr::Stage`).
  */
 enum LrdStage
 #if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
@@ -110,7 +118,7 @@ enum LrdStage
 #endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
  {
   /**
-   * One tile (tile 0): picks per-frame references.
+   * One tile (tile 0): starts a frame, picks per-frame references.
    */
   LRD_STAGE_PREPARE = 0,
   /**
@@ -130,14 +138,15 @@ enum LrdStage
    */
   LRD_STAGE_BLUR_COLS_SOLVE = 4,
   /**
+   * `tile_count` tiles: blends the adaptive window's models
+   * (LRD_BLUR_ADAPTIVE); with one window each tile returns at once, but
+   * the stage still runs: APPLY needs it completed.
+   */
+  LRD_STAGE_BLEND = 5,
+  /**
    * `tile_count` tiles: apply the models to the output rows (uses a worker buffer).
    */
-  LRD_STAGE_APPLY = 5,
-  /**
-   * `tile_count` tiles, after BLUR_COLS_SOLVE and before APPLY: blends the
-   * adaptive window's models (LRD_BLUR_ADAPTIVE); with one window it does nothing.
-   */
-  LRD_STAGE_BLEND = 6,
+  LRD_STAGE_APPLY = 6,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L
@@ -661,24 +670,29 @@ LrdStatus lrd_flr_denoise(const struct LrdFlrConfig *config,
 /**
  * Runs one tile of one stage of a tiled FLR run.
  *
- * Rules (they make concurrent calls safe):
+ * Rules (they make concurrent calls safe; breaking one returns a status):
  * - every call of a frame passes the same config, frame, out, scratch (8-byte
  *   aligned, at least `lrd_flr_tiled_scratch_size(.., workers, ..)` bytes) and `workers`;
- * - stages run in order PREPARE, MOMENTS, STATS, BLUR_ROWS, BLUR_COLS_SOLVE,
- *   BLEND, APPLY; every tile of a stage finishes before the next stage starts
- *   (a barrier). BLEND matters only with the adaptive window
- *   (LRD_BLUR_ADAPTIVE: each BLUR_ROWS / BLUR_COLS_SOLVE tile then does all
- *   three windows of its rows); with one window it returns at once, and
- *   skipping it is allowed;
- * - PREPARE and STATS have one tile (0); the others have `lrd_flr_tile_count` tiles;
+ * - a frame starts with PREPARE, which must not run while another call on
+ *   the same scratch is in flight; then the stages run in their numeric
+ *   order, every tile of each once: PREPARE, MOMENTS, STATS, BLUR_ROWS,
+ *   BLUR_COLS_SOLVE, BLEND, APPLY (`lrd_flr_stage_tile_count` tiles each);
+ *   a stage's tiles may start only when every tile of the stage before has
+ *   returned OK (a barrier);
  * - tiles of one stage may run concurrently if each concurrent call passes a
  *   different `worker` in [0, workers);
  * - APPLY needs an output whose rows do not overlap in memory (e.g. interleaved
- *   RGB/RGBA); planar outputs return LRD_STATUS_UNSUPPORTED (use lrd_flr_denoise).
+ *   RGB/RGBA); planar outputs return LRD_STATUS_UNSUPPORTED (use lrd_flr_denoise);
+ * - `out` must not overlap the noisy image, a guide or the scratch, and its
+ *   pixels must not share memory (LRD_STATUS_INVALID_ARGUMENT otherwise).
  *
- * The result is bit-identical to lrd_flr_denoise. An unknown stage, a tile or
- * worker index out of range and `workers` = 0 return LRD_STATUS_INVALID_TILE.
- * `report` may be NULL; give concurrent calls distinct reports and sum them.
+ * The scratch records the frame's progress: a tile run before PREPARE, before
+ * the stage ahead of it completed, a second time, on a busy worker, or with
+ * other arguments than the frame's PREPARE returns LRD_STATUS_STAGE_ORDER and
+ * writes nothing. The result is bit-identical to lrd_flr_denoise. An unknown
+ * stage, a tile or worker index out of range and `workers` = 0 return
+ * LRD_STATUS_INVALID_TILE. `report` may be NULL; give concurrent calls
+ * distinct reports and sum them.
  */
 LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
                            const struct LrdFrame *frame,
@@ -690,6 +704,16 @@ LrdStatus lrd_flr_run_tile(const struct LrdFlrConfig *config,
                            uint32_t tile,
                            uint32_t worker,
                            struct LrdReport *report);
+
+/**
+ * Tiles of `stage` (an LrdStage) in a tiled run: 1 for PREPARE and STATS,
+ * `lrd_flr_tile_count` for the others.
+ */
+LrdStatus lrd_flr_stage_tile_count(const struct LrdFlrConfig *config,
+                                   uint32_t width,
+                                   uint32_t height,
+                                   uint32_t stage,
+                                   uint32_t *count);
 
 /**
  * The default BMFR configuration: the paper's normal + position guides
@@ -864,8 +888,10 @@ LrdStatus lrd_flnr_tiled_scratch_size(const uint8_t *weights,
  *   different `worker` in [0, workers).
  *
  * The result is bit-identical to `lrd_flnr_denoise`. An unknown stage, a tile
- * or worker index out of range, `workers` = 0, and NETWORK before PREPARE on
- * this scratch return LRD_STATUS_INVALID_TILE. `report` may be NULL (FLR
+ * or worker index out of range (checked in every stage) and `workers` = 0
+ * return LRD_STATUS_INVALID_TILE; NETWORK before PREPARE on this scratch, and
+ * FLR before as many NETWORK tiles as `lrd_flnr_tile_count` have returned OK
+ * since PREPARE, return LRD_STATUS_STAGE_ORDER. `report` may be NULL (FLR
  * stage only adds to it).
  */
 LrdStatus lrd_flnr_run_tile(const uint8_t *weights,
@@ -908,7 +934,9 @@ const char *lrd_version(void);
 uint32_t lrd_features(void);
 
 /**
- * The SIMD instruction set compiled in ("sse2", "avx2+fma", "neon", ...).
+ * The SIMD instruction set the kernels run on this CPU ("avx2+fma" when
+ * the AVX2 + FMA kernels are chosen at run time, else the build's: "sse2",
+ * "neon", ...).
  */
 const char *lrd_simd_level(void);
 

@@ -13,6 +13,8 @@ use lrdenoise_core::{
     Blur, Error, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Kernel, Layout, Regularization, Report,
 };
 use std::panic::{catch_unwind, AssertUnwindSafe};
+#[cfg(feature = "flnr")]
+use std::sync::atomic::{AtomicU64, Ordering};
 
 #[cfg(feature = "flnr")]
 use lrdenoise_core::flnr::Flnr;
@@ -43,6 +45,11 @@ pub enum LrdStatus {
     LRD_STATUS_PANIC = 9,
     /// Any other internal error.
     LRD_STATUS_INTERNAL = 10,
+    /// A tiled stage was run out of order: before every tile of the stage
+    /// ahead of it finished (or before this frame's PREPARE), a second time
+    /// for one tile, on a worker that is busy, or with other arguments than
+    /// the frame's PREPARE. Nothing was written.
+    LRD_STATUS_STAGE_ORDER = 11,
 }
 
 use LrdStatus::*;
@@ -192,11 +199,12 @@ pub struct LrdReport {
     pub history_rejected: u64,
 }
 
-/// Stages of a tiled FLR run, in order.
+/// Stages of a tiled FLR run, numbered in the order they run (the core's
+/// `flr::Stage`).
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LrdStage {
-    /// One tile (tile 0): picks per-frame references.
+    /// One tile (tile 0): starts a frame, picks per-frame references.
     LRD_STAGE_PREPARE = 0,
     /// `tile_count` tiles: block moments (uses a worker buffer).
     LRD_STAGE_MOMENTS = 1,
@@ -206,12 +214,25 @@ pub enum LrdStage {
     LRD_STAGE_BLUR_ROWS = 3,
     /// `tile_count` tiles: vertical blur and per-cell solve.
     LRD_STAGE_BLUR_COLS_SOLVE = 4,
+    /// `tile_count` tiles: blends the adaptive window's models
+    /// (LRD_BLUR_ADAPTIVE); with one window each tile returns at once, but
+    /// the stage still runs: APPLY needs it completed.
+    LRD_STAGE_BLEND = 5,
     /// `tile_count` tiles: apply the models to the output rows (uses a worker buffer).
-    LRD_STAGE_APPLY = 5,
-    /// `tile_count` tiles, after BLUR_COLS_SOLVE and before APPLY: blends the
-    /// adaptive window's models (LRD_BLUR_ADAPTIVE); with one window it does nothing.
-    LRD_STAGE_BLEND = 6,
+    LRD_STAGE_APPLY = 6,
 }
+
+const _: () = {
+    use lrdenoise_core::Stage;
+    assert!(LrdStage::LRD_STAGE_PREPARE as usize == Stage::Prepare.index());
+    assert!(LrdStage::LRD_STAGE_MOMENTS as usize == Stage::Moments.index());
+    assert!(LrdStage::LRD_STAGE_STATS as usize == Stage::Stats.index());
+    assert!(LrdStage::LRD_STAGE_BLUR_ROWS as usize == Stage::BlurRows.index());
+    assert!(LrdStage::LRD_STAGE_BLUR_COLS_SOLVE as usize == Stage::BlurColsSolve.index());
+    assert!(LrdStage::LRD_STAGE_BLEND as usize == Stage::Blend.index());
+    assert!(LrdStage::LRD_STAGE_APPLY as usize == Stage::Apply.index());
+    assert!(Stage::ALL.len() == 7);
+};
 
 /// Feature bits returned by `lrd_features()`.
 pub const LRD_FEATURE_FLR: u32 = 1;
@@ -228,6 +249,7 @@ fn status_of(e: Error) -> LrdStatus {
         Error::TooManyGuides { .. } | Error::InvalidConfig(_) => LRD_STATUS_INVALID_CONFIG,
         Error::InvalidTile { .. } => LRD_STATUS_INVALID_TILE,
         Error::Unsupported(_) => LRD_STATUS_UNSUPPORTED,
+        Error::StageOrder { .. } => LRD_STATUS_STAGE_ORDER,
     }
 }
 
@@ -401,19 +423,9 @@ fn scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
     flr.scratch_len_for(workers).checked_mul(8).and_then(|b| b.checked_add(HEADER)).ok_or(LRD_STATUS_INVALID_ARGUMENT)
 }
 
-/// f64 values a tiled run needs beyond `Flr::scratch_len_for`: with the
-/// adaptive window, each window after the first gets its own horizontal-blur
-/// grid, and each after the second its own blurred grid (window 1 uses the
-/// layout's `blurred`). `lrd_flr_denoise` reuses one of each, window after
-/// window; tiled stages run every window of a tile in one call.
-fn tiled_extra(flr: &Flr) -> usize {
-    let n = flr.scale_count();
-    (1..n).chain(2..n).map(|s| flr.window_grid_len(s)).sum()
-}
-
+/// Bytes of a tiled run's scratch: the core's [`Flr::tiled_scratch_len`].
 fn tiled_scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
-    let extra = tiled_extra(flr).checked_mul(8).ok_or(LRD_STATUS_INVALID_ARGUMENT)?;
-    scratch_bytes(flr, workers)?.checked_add(extra).ok_or(LRD_STATUS_INVALID_ARGUMENT)
+    flr.tiled_scratch_len(workers).and_then(|n| n.checked_mul(8)).ok_or(LRD_STATUS_INVALID_ARGUMENT)
 }
 
 fn write_report(report: *mut LrdReport, r: Report) {
@@ -524,57 +536,6 @@ pub unsafe extern "C" fn lrd_flr_tile_count(config: *const LrdFlrConfig, width: 
     })
 }
 
-/// The scratch buffer split for one call. Regions are built only for what the
-/// stage touches, so concurrent calls never hold overlapping mutable slices.
-/// The regions are `Flr::scratch_layout`'s (after the stats header), then,
-/// with the adaptive window, the later windows' horizontal-blur grids and
-/// blurred grids ([`tiled_extra`]).
-struct Raw {
-    stats: *mut lrdenoise_core::Stats,
-    base: *mut f64,
-    layout: lrdenoise_core::ScratchLayout,
-    /// Window `s`'s horizontal-blur grid (f64 offset from `base`; the
-    /// layout's `tmp` for window 0).
-    tmp: [usize; lrdenoise_core::flr::MAX_SCALES],
-    /// Window `s`'s blurred grid (`first` for window 0, `blurred` for window 1).
-    blurred: [usize; lrdenoise_core::flr::MAX_SCALES],
-}
-
-impl Raw {
-    /// `len` f64 at `offset` of the scratch, shared.
-    ///
-    /// # Safety
-    /// `offset + len` is inside the scratch and nothing writes it meanwhile.
-    unsafe fn f64s(&self, offset: usize, len: usize) -> &[f64] {
-        // SAFETY: the caller's contract.
-        unsafe { core::slice::from_raw_parts(self.base.add(offset), len) }
-    }
-    /// `len` f64 at `offset`, exclusively this call's.
-    ///
-    /// # Safety
-    /// `offset + len` is inside the scratch and no other call touches it meanwhile.
-    #[allow(clippy::mut_from_ref)]
-    unsafe fn f64s_mut(&self, offset: usize, len: usize) -> &mut [f64] {
-        // SAFETY: the caller's contract.
-        unsafe { core::slice::from_raw_parts_mut(self.base.add(offset), len) }
-    }
-    /// `len` f32 starting `index` f32 into the f64 region that starts at `region`.
-    ///
-    /// # Safety
-    /// As for [`Raw::f64s`].
-    unsafe fn f32s(&self, region: usize, index: usize, len: usize) -> &[f32] {
-        // SAFETY: the caller's contract.
-        unsafe { core::slice::from_raw_parts((self.base.add(region) as *const f32).add(index), len) }
-    }
-    /// # Safety
-    /// As for [`Raw::f64s_mut`].
-    #[allow(clippy::mut_from_ref)]
-    unsafe fn f32s_mut(&self, region: usize, index: usize, len: usize) -> &mut [f32] {
-        // SAFETY: the caller's contract.
-        unsafe { core::slice::from_raw_parts_mut((self.base.add(region) as *mut f32).add(index), len) }
-    }
-}
-
 /// The frame and output image behind the caller's pointers;
 /// LRD_STATUS_NULL_POINTER if either is NULL.
 ///
@@ -594,32 +555,6 @@ fn check_scratch(scratch: *mut c_void) -> Result<(), LrdStatus> {
     } else {
         Ok(())
     }
-}
-
-fn split_raw(flr: &Flr, scratch: *mut c_void, bytes: usize, workers: usize) -> Result<Raw, LrdStatus> {
-    check_scratch(scratch)?;
-    if bytes < tiled_scratch_bytes(flr, workers)? {
-        return Err(LRD_STATUS_BUFFER_TOO_SMALL);
-    }
-    let layout = flr.scratch_layout(workers);
-    let mut at = flr.scratch_len_for(workers);
-    let mut next = |s: usize| {
-        let o = at;
-        at += flr.window_grid_len(s);
-        o
-    };
-    const { assert!(lrdenoise_core::flr::MAX_SCALES == 3) };
-    let (mut tmp, mut blurred) = ([layout.tmp.start; 3], [layout.first.start, layout.blurred.start, 0]);
-    let n = flr.scale_count();
-    for (s, t) in tmp.iter_mut().enumerate().take(n).skip(1) {
-        *t = next(s);
-    }
-    for (s, b) in blurred.iter_mut().enumerate().take(n).skip(2) {
-        *b = next(s);
-    }
-    let base = scratch as *mut u8;
-    // SAFETY: HEADER < bytes (checked above), so both pointers are inside the buffer.
-    Ok(unsafe { Raw { stats: base as *mut lrdenoise_core::Stats, base: base.add(HEADER) as *mut f64, layout, tmp, blurred } })
 }
 
 /// Denoises one frame on the calling thread. `out` (3 channels) sets the
@@ -644,6 +579,7 @@ pub unsafe extern "C" fn lrd_flr_denoise(
         if scratch_bytes < needed {
             return Err(LRD_STATUS_BUFFER_TOO_SMALL);
         }
+        check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
         // SAFETY: the caller's frame images satisfy the LrdImage contract; the
         // scratch is aligned and at least `needed` bytes; `out` is exclusively ours.
         let r = unsafe {
@@ -659,24 +595,29 @@ pub unsafe extern "C" fn lrd_flr_denoise(
 
 /// Runs one tile of one stage of a tiled FLR run.
 ///
-/// Rules (they make concurrent calls safe):
+/// Rules (they make concurrent calls safe; breaking one returns a status):
 /// - every call of a frame passes the same config, frame, out, scratch (8-byte
 ///   aligned, at least `lrd_flr_tiled_scratch_size(.., workers, ..)` bytes) and `workers`;
-/// - stages run in order PREPARE, MOMENTS, STATS, BLUR_ROWS, BLUR_COLS_SOLVE,
-///   BLEND, APPLY; every tile of a stage finishes before the next stage starts
-///   (a barrier). BLEND matters only with the adaptive window
-///   (LRD_BLUR_ADAPTIVE: each BLUR_ROWS / BLUR_COLS_SOLVE tile then does all
-///   three windows of its rows); with one window it returns at once, and
-///   skipping it is allowed;
-/// - PREPARE and STATS have one tile (0); the others have `lrd_flr_tile_count` tiles;
+/// - a frame starts with PREPARE, which must not run while another call on
+///   the same scratch is in flight; then the stages run in their numeric
+///   order, every tile of each once: PREPARE, MOMENTS, STATS, BLUR_ROWS,
+///   BLUR_COLS_SOLVE, BLEND, APPLY (`lrd_flr_stage_tile_count` tiles each);
+///   a stage's tiles may start only when every tile of the stage before has
+///   returned OK (a barrier);
 /// - tiles of one stage may run concurrently if each concurrent call passes a
 ///   different `worker` in [0, workers);
 /// - APPLY needs an output whose rows do not overlap in memory (e.g. interleaved
-///   RGB/RGBA); planar outputs return LRD_STATUS_UNSUPPORTED (use lrd_flr_denoise).
+///   RGB/RGBA); planar outputs return LRD_STATUS_UNSUPPORTED (use lrd_flr_denoise);
+/// - `out` must not overlap the noisy image, a guide or the scratch, and its
+///   pixels must not share memory (LRD_STATUS_INVALID_ARGUMENT otherwise).
 ///
-/// The result is bit-identical to lrd_flr_denoise. An unknown stage, a tile or
-/// worker index out of range and `workers` = 0 return LRD_STATUS_INVALID_TILE.
-/// `report` may be NULL; give concurrent calls distinct reports and sum them.
+/// The scratch records the frame's progress: a tile run before PREPARE, before
+/// the stage ahead of it completed, a second time, on a busy worker, or with
+/// other arguments than the frame's PREPARE returns LRD_STATUS_STAGE_ORDER and
+/// writes nothing. The result is bit-identical to lrd_flr_denoise. An unknown
+/// stage, a tile or worker index out of range and `workers` = 0 return
+/// LRD_STATUS_INVALID_TILE. `report` may be NULL; give concurrent calls
+/// distinct reports and sum them.
 #[no_mangle]
 pub unsafe extern "C" fn lrd_flr_run_tile(
     config: *const LrdFlrConfig,
@@ -695,115 +636,123 @@ pub unsafe extern "C" fn lrd_flr_run_tile(
         let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let flr = plan(config, out.width, out.height)?;
         let (workers, tile, worker) = (workers as usize, tile as usize, worker as usize);
-        if workers == 0 || worker >= workers {
+        let stage = lrdenoise_core::Stage::from_index(stage as usize).ok_or(LRD_STATUS_INVALID_TILE)?;
+        if workers == 0 || worker >= workers || tile >= flr.stage_tiles(stage) {
             return Err(LRD_STATUS_INVALID_TILE);
         }
-        let raw = split_raw(&flr, scratch, scratch_bytes, workers)?;
-        let nt = flr.tile_count();
-        let single = matches!(stage, 0 | 2);
-        if stage > 6 || (single && tile != 0) || (!single && tile >= nt) {
-            return Err(LRD_STATUS_INVALID_TILE);
+        check_scratch(scratch)?;
+        if scratch_bytes < tiled_scratch_bytes(&flr, workers)? {
+            return Err(LRD_STATUS_BUFFER_TOO_SMALL);
         }
-        let (cx, cy) = flr.cells();
-        let ml = lrdenoise_core::kernels::model_len(flr.guide_channels());
-        let windows = flr.scale_count();
-        let l = &raw.layout;
-        let st = status_of;
-        // SAFETY: the images satisfy the LrdImage contract (caller). Every region
-        // is inside the buffer (split_raw checked its size against this layout).
-        // Under the documented rules, the mutable slices built here (this tile's
-        // bands of cells/pooled/tmp/first/blurred/models/scale models/variances,
-        // this worker's buffer, the stats header in single-tile stages, this
-        // tile's output rows) are not accessed by any concurrent call, and the
-        // shared slices are only read during this stage.
+        check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
+        let key = call_key(frame, out, scratch);
+        // SAFETY: the scratch is 8-byte aligned and `scratch_bytes` long
+        // (checked); under the documented rules every call on it goes through
+        // a `Tiled` of this plan, and `Tiled::run` refuses the calls that would
+        // race. The images satisfy the LrdImage contract (caller); the output
+        // band is this tile's rows, which no other APPLY tile writes.
         let rep = unsafe {
+            let tiled = flr.tiled_raw(scratch as *mut f64, scratch_bytes / 8, workers, key).map_err(status_of)?;
             let f = frame_views(frame, true)?;
-            let cf = flr.check_frame(&f).map_err(st)?;
-            let wl = flr.worker_len();
-            let worker_buf = || raw.f32s_mut(l.workers.start, worker * wl, wl);
-            let band = |region: usize, r: core::ops::Range<usize>| raw.f64s_mut(region + r.start, r.len());
-            // window s's moment grid source (cells or pooled); its horizontal-blur
-            // and blurred grids are at raw.tmp[s] and raw.blurred[s]
-            let src = |s: usize| if flr.window_pooled(s) { l.pooled.start } else { l.cells.start };
-            match stage {
-                0 => {
-                    raw.stats.write(flr.prepare(&cf));
-                    Report::default()
+            let cf = flr.check_frame(&f).map_err(status_of)?;
+            if stage == lrdenoise_core::Stage::Apply {
+                let (y0, y1) = flr.tile_pixel_rows(tile).map_err(status_of)?;
+                if !view_mut(out, 0, out.height as usize)?.rows_are_separable() {
+                    return Err(LRD_STATUS_UNSUPPORTED);
                 }
-                1 => {
-                    let stats = raw.stats.read();
-                    let c = flr.cells_tile_range(tile).map_err(st)?;
-                    let cells = band(l.cells.start, c.clone());
-                    let rep = flr.moments_tile(&cf, &stats, tile, cells, worker_buf()).map_err(st)?;
-                    if let Some(s) = flr.pooled_window() {
-                        let p = flr.window_cells_tile_range(s, tile).map_err(st)?;
-                        flr.pool_tile(tile, cells, band(l.pooled.start, p)).map_err(st)?;
-                    }
-                    rep
-                }
-                2 => {
-                    let mut stats = raw.stats.read();
-                    flr.finish_stats(raw.f64s(l.cells.start, l.cells.len()), &mut stats).map_err(st)?;
-                    raw.stats.write(stats);
-                    Report::default()
-                }
-                3 => {
-                    for s in 0..windows {
-                        let grid = raw.f64s(src(s), flr.window_grid_len(s));
-                        let out = band(raw.tmp[s], flr.window_cells_tile_range(s, tile).map_err(st)?);
-                        flr.blur_rows_tile_at(s, tile, grid, out).map_err(st)?;
-                    }
-                    Report::default()
-                }
-                4 if windows == 1 => {
-                    let stats = raw.stats.read();
-                    let c = flr.cells_tile_range(tile).map_err(st)?;
-                    let cells = band(l.cells.start, c);
-                    let m = flr.models_tile_range(tile).map_err(st)?;
-                    let models = raw.f32s_mut(l.models.start, m.start, m.len());
-                    flr.blur_cols_tile(tile, raw.f64s(l.tmp.start, l.tmp.len()), cells).map_err(st)?;
-                    flr.solve_tile(&stats, tile, cells, models).map_err(st)?
-                }
-                4 => {
-                    let stats = raw.stats.read();
-                    let mut rep = Report::default();
-                    for s in 0..windows {
-                        let out = band(raw.blurred[s], flr.window_cells_tile_range(s, tile).map_err(st)?);
-                        flr.blur_cols_tiles_at(s, tile..tile + 1, raw.f64s(raw.tmp[s], flr.window_grid_len(s)), out).map_err(st)?;
-                        let m = flr.scale_models_tile_range(s, tile).map_err(st)?;
-                        let v = flr.scale_variances_tile_range(s, tile).map_err(st)?;
-                        let (models, variances) = (raw.f32s_mut(l.scale_models.start, m.start, m.len()), band(l.variances.start, v));
-                        rep += flr.solve_tile_at(s, &stats, tile, out, models, variances).map_err(st)?;
-                    }
-                    rep
-                }
-                6 if windows == 1 => Report::default(),
-                6 => {
-                    let first =
-                        raw.f64s(l.first.start + flr.cells_tile_range(tile).map_err(st)?.start, flr.cells_tile_len(tile).map_err(st)?);
-                    let nm = flr.scale_models_tile_range(windows - 1, nt - 1).map_err(st)?.end;
-                    let nv = flr.scale_variances_tile_range(windows - 1, nt - 1).map_err(st)?.end;
-                    let m = flr.models_tile_range(tile).map_err(st)?;
-                    let models = raw.f32s_mut(l.models.start, m.start, m.len());
-                    flr.blend_tile(tile, first, raw.f32s(l.scale_models.start, 0, nm), raw.f64s(l.variances.start, nv), models)
-                        .map_err(st)?;
-                    Report::default()
-                }
-                _ => {
-                    let stats = raw.stats.read();
-                    let models = raw.f32s(l.models.start, 0, cx * cy * ml);
-                    let (y0, y1) = flr.tile_pixel_rows(tile).map_err(st)?;
-                    let mut band = view_mut(out, y0, y1 - y0)?;
-                    if !band.rows_are_separable() {
-                        return Err(LRD_STATUS_UNSUPPORTED);
-                    }
-                    flr.apply_tile(&cf, &stats, tile, models, worker_buf(), &mut band).map_err(st)?
-                }
+                let mut band = view_mut(out, y0, y1 - y0)?;
+                tiled.run(&cf, stage, tile, worker, Some(&mut band)).map_err(status_of)?
+            } else {
+                tiled.run(&cf, stage, tile, worker, None).map_err(status_of)?
             }
         };
         write_report(report, rep);
         Ok(())
     })
+}
+
+/// Tiles of `stage` (an LrdStage) in a tiled run: 1 for PREPARE and STATS,
+/// `lrd_flr_tile_count` for the others.
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flr_stage_tile_count(
+    config: *const LrdFlrConfig,
+    width: u32,
+    height: u32,
+    stage: u32,
+    count: *mut u32,
+) -> LrdStatus {
+    guard(|| {
+        let flr = plan(config, width, height)?;
+        let stage = lrdenoise_core::Stage::from_index(stage as usize).ok_or(LRD_STATUS_INVALID_TILE)?;
+        let n = u32::try_from(flr.stage_tiles(stage)).map_err(|_| LRD_STATUS_INVALID_ARGUMENT)?;
+        // SAFETY: checked for NULL; caller passes a valid pointer.
+        *unsafe { count.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = n;
+        Ok(())
+    })
+}
+
+/// FNV-1a over the frame's and the output's descriptions and the scratch
+/// address: a tiled call whose arguments differ from its frame's PREPARE gets
+/// another key and is refused. (Fields one by one: the structs' padding
+/// bytes are not the caller's to define.)
+fn call_key(frame: &LrdFrame, out: &LrdImageMut, scratch: *mut c_void) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut add = |v: u64| {
+        for b in v.to_le_bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    let mut image = |d: usize, f: u32, w: u32, hh: u32, s: [usize; 3]| {
+        for v in [d as u64, u64::from(f) | u64::from(w) << 32, u64::from(hh), s[0] as u64, s[1] as u64, s[2] as u64] {
+            add(v);
+        }
+    };
+    for (i, _) in images(frame) {
+        image(i.data as usize, i.format, i.width, i.height, [i.pixel_stride, i.row_stride, i.channel_stride]);
+    }
+    image(out.data as usize, out.format, out.width, out.height, [out.pixel_stride, out.row_stride, out.channel_stride]);
+    image(scratch as usize, 0, 0, 0, [0; 3]);
+    h
+}
+
+/// Every image of a frame with its channel count: noisy, guides, low-resolution guides.
+fn images(frame: &LrdFrame) -> impl Iterator<Item = (&LrdImage, usize)> + '_ {
+    fn guides(g: &LrdGuides) -> impl Iterator<Item = (&LrdImage, usize)> + '_ {
+        [(&g.normal, 3), (&g.depth, 1), (&g.position, 3), (&g.ao, 1)].into_iter().chain(g.user.iter().map(|u| (u, 1)))
+    }
+    core::iter::once((&frame.noisy, 3)).chain(guides(&frame.guides)).chain(guides(&frame.guides_low))
+}
+
+/// Bytes `[start, end)` an image spans (None for an absent or invalid image:
+/// its own checks report it).
+fn byte_range(data: *const c_void, format: u32, w: u32, h: u32, ch: usize, strides: (usize, usize, usize)) -> Option<(usize, usize)> {
+    if data.is_null() {
+        return None;
+    }
+    let (elem, _, span) = layout_of(data, format, w, h, ch, strides).ok()?;
+    Some((data as usize, (data as usize).checked_add(span * elem)?))
+}
+
+/// LRD_STATUS_INVALID_ARGUMENT if the output's bytes overlap any image of
+/// `frame` or any of the `others` (address, bytes) ranges (scratch, history),
+/// or if two of its pixels or channels share memory.
+fn check_output_disjoint(out: &LrdImageMut, frame: &LrdFrame, others: &[(usize, usize)]) -> Result<(), LrdStatus> {
+    let strides = (out.pixel_stride, out.row_stride, out.channel_stride);
+    let (elem, layout, _) = layout_of(out.data, out.format, out.width, out.height, 3, strides)?;
+    let _ = elem;
+    if !layout.elements_distinct(out.width as usize, out.height as usize, 3) {
+        return Err(LRD_STATUS_INVALID_ARGUMENT);
+    }
+    let (o0, o1) = byte_range(out.data, out.format, out.width, out.height, 3, strides).ok_or(LRD_STATUS_INVALID_ARGUMENT)?;
+    let overlaps = |(a, b): (usize, usize)| a < o1 && o0 < b;
+    let inputs = images(frame)
+        .filter_map(|(i, ch)| byte_range(i.data, i.format, i.width, i.height, ch, (i.pixel_stride, i.row_stride, i.channel_stride)));
+    let others = others.iter().filter(|(_, n)| *n > 0).map(|&(a, n)| (a, a.saturating_add(n)));
+    if inputs.chain(others).any(overlaps) {
+        return Err(LRD_STATUS_INVALID_ARGUMENT);
+    }
+    Ok(())
 }
 
 // ---------------------------------------------------------------- BMFR
@@ -1047,6 +996,7 @@ unsafe fn denoise_single<M: Temporal>(
     unsafe {
         let (frame, out) = frame_and_out(frame, out)?;
         let m = plan(out.width, out.height)?;
+        check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
         let f = frame_views(frame, false)?;
         let s = f32_buffer(scratch, scratch_bytes, f32_bytes(m.scratch_len())?)?;
         let mut o = view_mut(out, 0, out.height as usize)?;
@@ -1079,6 +1029,23 @@ unsafe fn denoise_temporal<M: Temporal>(
         let out = out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?;
         let hist = history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?;
         let m = plan(out.width, out.height)?;
+        let ranges = [(scratch as usize, scratch_bytes), (hist.data as usize, hist.bytes)];
+        check_output_disjoint(out, frame, &ranges)?;
+        if !motion.is_null() {
+            let mi = &*motion;
+            let mr = byte_range(mi.data, mi.format, mi.width, mi.height, 2, (mi.pixel_stride, mi.row_stride, mi.channel_stride));
+            let o = byte_range(out.data, out.format, out.width, out.height, 3, (out.pixel_stride, out.row_stride, out.channel_stride));
+            if let (Some((a, b)), Some((c, d))) = (mr, o) {
+                if a < d && c < b {
+                    return Err(LRD_STATUS_INVALID_ARGUMENT);
+                }
+            }
+        }
+        // the history is written too: it must not overlap the scratch either
+        let (s0, h0) = (scratch as usize, hist.data as usize);
+        if !hist.data.is_null() && s0 < h0.saturating_add(hist.bytes) && h0 < s0.saturating_add(scratch_bytes) {
+            return Err(LRD_STATUS_INVALID_ARGUMENT);
+        }
         let f = frame_views(frame, false)?;
         let mv = match motion.as_ref() {
             Some(mi) => view(mi, 2)?,
@@ -1487,6 +1454,7 @@ pub unsafe extern "C" fn lrd_flnr_denoise(
         if need.is_none_or(|n| scratch_bytes < n) {
             return Err(LRD_STATUS_BUFFER_TOO_SMALL);
         }
+        check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
         // SAFETY: the caller's images satisfy the LrdImage contract; the scratch
         // is 8-byte aligned and holds `flr_len` f64 followed by `net_len` f32
         // (checked above); `out` is exclusively ours for the call.
@@ -1560,8 +1528,10 @@ pub unsafe extern "C" fn lrd_flnr_tiled_scratch_size(
 ///   different `worker` in [0, workers).
 ///
 /// The result is bit-identical to `lrd_flnr_denoise`. An unknown stage, a tile
-/// or worker index out of range, `workers` = 0, and NETWORK before PREPARE on
-/// this scratch return LRD_STATUS_INVALID_TILE. `report` may be NULL (FLR
+/// or worker index out of range (checked in every stage) and `workers` = 0
+/// return LRD_STATUS_INVALID_TILE; NETWORK before PREPARE on this scratch, and
+/// FLR before as many NETWORK tiles as `lrd_flnr_tile_count` have returned OK
+/// since PREPARE, return LRD_STATUS_STAGE_ORDER. `report` may be NULL (FLR
 /// stage only adds to it).
 #[cfg(feature = "flnr")]
 #[no_mangle]
@@ -1585,14 +1555,15 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
         let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let fl = flnr_plan(weights, weights_bytes, tile_size, out.width, out.height)?;
         check_scratch(scratch)?;
-        // As in lrd_flr_run_tile: no worker index is in [0, 0).
-        if workers == 0 {
+        // As in lrd_flr_run_tile: no worker index is in [0, 0); every stage checks it.
+        if workers == 0 || worker >= workers {
             return Err(LRD_STATUS_INVALID_TILE);
         }
         let lay = flnr_layout(&fl, workers as usize)?;
         if scratch_bytes < lay.total {
             return Err(LRD_STATUS_BUFFER_TOO_SMALL);
         }
+        check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
         let (nx, ny) = fl.tile_grid();
         let one = |t: u32| if t == 0 { Ok(()) } else { Err(LRD_STATUS_INVALID_TILE) };
         let base = scratch as *mut u8;
@@ -1606,18 +1577,24 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
             let f = frame_views(frame, false)?;
             let header = base as *mut u64;
             let scale_at = base.add(8) as *mut lrdenoise_core::flnr::InputScale;
-            const { assert!(8 + core::mem::size_of::<lrdenoise_core::flnr::InputScale>() <= HEADER) };
+            const { assert!(8 + core::mem::size_of::<lrdenoise_core::flnr::InputScale>() <= HEADER - 8) };
+            // NETWORK tiles completed since PREPARE (the header's last 8 bytes)
+            let networks_done = AtomicU64::from_ptr(base.add(HEADER - 8) as *mut u64);
             let planes = base.add(lay.planes) as *mut f32;
             match stage {
                 s if s == LrdFlnrStage::LRD_FLNR_STAGE_PREPARE as u32 => {
                     one(tile)?;
                     let sc = fl.input_scale(&f).map_err(status_of)?;
                     scale_at.write_unaligned(sc);
+                    (*networks_done).store(0, Ordering::Relaxed);
                     header.write(FLNR_PREPARED);
                 }
                 s if s == LrdFlnrStage::LRD_FLNR_STAGE_NETWORK as u32 => {
-                    if tile as usize >= nx * ny || worker >= workers || header.read() != FLNR_PREPARED {
+                    if tile as usize >= nx * ny {
                         return Err(LRD_STATUS_INVALID_TILE);
+                    }
+                    if header.read() != FLNR_PREPARED {
+                        return Err(LRD_STATUS_STAGE_ORDER);
                     }
                     let sc = scale_at.read_unaligned();
                     let ws =
@@ -1630,9 +1607,13 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
                             core::ptr::copy_nonoverlapping(src.as_ptr(), planes.add(k * np + y * w + r.x0), src.len());
                         }
                     }
+                    (*networks_done).fetch_add(1, Ordering::AcqRel);
                 }
                 s if s == LrdFlnrStage::LRD_FLNR_STAGE_FLR as u32 => {
                     one(tile)?;
+                    if header.read() != FLNR_PREPARED || (*networks_done).load(Ordering::Acquire) != (nx * ny) as u64 {
+                        return Err(LRD_STATUS_STAGE_ORDER);
+                    }
                     let g = core::slice::from_raw_parts(planes, fl.guide_planes_len());
                     let fs = core::slice::from_raw_parts_mut(base.add(lay.flr) as *mut f64, fl.flr_scratch_len());
                     let lf = fl.flr_frame(&f, g).map_err(status_of)?;
@@ -1765,10 +1746,12 @@ pub extern "C" fn lrd_features() -> u32 {
     f
 }
 
-/// The SIMD instruction set compiled in ("sse2", "avx2+fma", "neon", ...).
+/// The SIMD instruction set the kernels run on this CPU ("avx2+fma" when
+/// the AVX2 + FMA kernels are chosen at run time, else the build's: "sse2",
+/// "neon", ...).
 #[no_mangle]
 pub extern "C" fn lrd_simd_level() -> *const c_char {
-    match lrdenoise_core::SIMD_LEVEL {
+    match lrdenoise_core::simd_level() {
         "avx2+fma" => c"avx2+fma".as_ptr(),
         "avx" => c"avx".as_ptr(),
         "sse4.1" => c"sse4.1".as_ptr(),
@@ -1793,6 +1776,7 @@ pub extern "C" fn lrd_status_string(status: u32) -> *const c_char {
         8 => c"stage, tile or worker index out of range",
         9 => c"internal panic (a bug in lrdenoise)",
         10 => c"internal error",
+        11 => c"tiled stage run out of order, twice, on a busy worker, or with other arguments than its frame's PREPARE",
         _ => c"unknown status",
     };
     s.as_ptr()

@@ -135,15 +135,15 @@ fn entry_points_validate_everything() {
         let mut nt = 0u32;
         assert_eq!(lrd_flr_tile_count(&cfg, w, h, &mut nt), LrdStatus::LRD_STATUS_OK);
         assert!(nt >= 1);
-        for stage in 0..5 {
+        for stage in 0..6 {
             let tiles = if stage == 0 || stage == 2 { 1 } else { nt };
             for t in 0..tiles {
                 assert_eq!(lrd_flr_run_tile(&cfg, &fr, &op, sp, tb, 1, stage, t, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
             }
         }
-        assert_eq!(lrd_flr_run_tile(&cfg, &fr, &op, sp, tb, 1, 5, 0, 0, null_mut()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+        assert_eq!(lrd_flr_run_tile(&cfg, &fr, &op, sp, tb, 1, 6, 0, 0, null_mut()), LrdStatus::LRD_STATUS_UNSUPPORTED);
     }
-    for s in 0..12 {
+    for s in 0..13 {
         let m = unsafe { CStr::from_ptr(lrd_status_string(s)) };
         assert!(!m.to_bytes().is_empty());
     }
@@ -453,7 +453,7 @@ fn adaptive_case(w: u32, h: u32, sigmas: [f32; 3], ao: bool, without_ao: bool) {
         assert_eq!(lrd_flr_run_tile(&cfg, &frame, &ot, tp, tb - 8, 2, 0, 0, 0, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
         let (mut r_whole, mut r_tiled) = (LrdReport::default(), LrdReport::default());
         assert_eq!(lrd_flr_denoise(&cfg, &frame, &o, sp, bytes, &mut r_whole), LrdStatus::LRD_STATUS_OK);
-        for stage in [0u32, 1, 2, 3, 4, 6, 5] {
+        for stage in 0u32..7 {
             let tiles = if stage == 0 || stage == 2 { 1 } else { nt };
             for t in (0..tiles).rev() {
                 let st = lrd_flr_run_tile(&cfg, &frame, &ot, tp, tb, 2, stage, t, t % 2, &mut r_tiled);
@@ -557,7 +557,7 @@ fn flnr_matches_the_rust_api() {
         const NETWORK: u32 = LrdFlnrStage::LRD_FLNR_STAGE_NETWORK as u32;
         const FLR: u32 = LrdFlnrStage::LRD_FLNR_STAGE_FLR as u32;
         // a network tile before PREPARE (fresh scratch), and bad stage / tile / worker
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
         assert_eq!(
             lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb - 1, 2, PREPARE, 0, 0, null_mut()),
             LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
@@ -567,6 +567,14 @@ fn flnr_matches_the_rust_api() {
         assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 1, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         out.fill(0.0);
         let o = packed_out(&mut out, w, h);
+        // the worker index is checked in every stage
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 0, 2, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 7, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
+        // FLR before every network tile has run
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
         assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
         assert_eq!(
             lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, count, 0, null_mut()),

@@ -28,6 +28,9 @@
 //! blend weighs that fit as a fourth candidate. See [`adaptive`].
 
 pub mod adaptive;
+pub mod schedule;
+
+pub use schedule::{Stage, Tiled};
 
 use crate::config::{Blur, FlrConfig, Kernel};
 use crate::error::{Arg, Error};
