@@ -147,7 +147,8 @@ impl FlrRunner {
     pub fn new(cfg: FlrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
         let flr = Flr::new(cfg, w, h).map_err(|e| format!("flr: {e}"))?;
         let threads = threads.max(1);
-        let scratch = vec![0f64; flr.scratch_len_for(threads)];
+        let len = if threads > 1 { flr.tiled_scratch_len(threads).ok_or("flr: scratch size overflows")? } else { flr.scratch_len() };
+        let scratch = vec![0f64; len];
         let pool =
             if threads > 1 { Some(rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| e.to_string())?) } else { None };
         Ok(FlrRunner { flr, scratch, threads, pool })
@@ -166,21 +167,12 @@ impl FlrRunner {
         let mut ov = ImageViewMut::interleaved(out, full.w, full.h, 3).map_err(|e| e.to_string())?;
         let r = match &self.pool {
             None => self.flr.denoise(&frame, &mut self.scratch, &mut ov),
-            Some(pool) => denoise_parallel(&self.flr, &frame, &mut self.scratch, self.threads, pool, ov),
+            Some(pool) => {
+                self.flr.denoise_parallel(&frame, &mut self.scratch, &mut ov, self.threads, for_each_in_groups(pool, self.threads))
+            }
         };
         r.map_err(|e| format!("flr: {e}"))
     }
-}
-
-/// Splits `v` into consecutive pieces of the given lengths.
-fn split_lens<'a, T>(mut v: &'a mut [T], lens: &[usize]) -> Vec<&'a mut [T]> {
-    let mut out = Vec::with_capacity(lens.len());
-    for &n in lens {
-        let (a, b) = v.split_at_mut(n);
-        out.push(a);
-        v = b;
-    }
-    out
 }
 
 /// Runs `f` on every item, items split into `workers.len()` contiguous groups,
@@ -222,94 +214,18 @@ fn par_groups<T: Send, W: Send>(
     Ok(total)
 }
 
-/// The same stages as `Flr::denoise`, tiles in parallel: bit-identical output.
-pub fn denoise_parallel(
-    flr: &Flr,
-    frame: &Frame<'_>,
-    scratch: &mut [f64],
-    threads: usize,
-    pool: &rayon::ThreadPool,
-    out: ImageViewMut<'_>,
-) -> Result<Report, Error> {
-    let f = flr.check_frame(frame)?;
-    let p = flr.split_scratch(scratch, threads)?;
-    let mut stats = flr.prepare(&f);
-    let nt = flr.tile_count();
-    let cl: Vec<usize> = (0..nt).map(|t| flr.cells_tile_len(t)).collect::<Result<_, _>>()?;
-    let ml: Vec<usize> = (0..nt).map(|t| flr.models_tile_len(t)).collect::<Result<_, _>>()?;
-    let mut workers: Vec<&mut [f32]> = p.workers.chunks_exact_mut(flr.worker_len()).collect();
-    let mut units: Vec<()> = vec![(); threads];
-    let mut rep = Report::default();
-
-    let st = stats;
-    let items: Vec<_> = split_lens(p.cells, &cl).into_iter().enumerate().collect();
-    rep += par_groups(pool, items, &mut workers, &|(t, c), w| flr.moments_tile(&f, &st, t, c, w))?;
-    flr.finish_stats(p.cells, &mut stats)?;
-    let st = stats;
-    if flr.scale_count() > 1 {
-        // The adaptive window: pool, blur and solve each window on its grid, then blend.
-        let lens = |range: &dyn Fn(usize) -> Result<std::ops::Range<usize>, Error>| -> Result<Vec<usize>, Error> {
-            (0..nt).map(|t| range(t).map(|r| r.len())).collect()
-        };
-        if let Some(s) = flr.pooled_window() {
-            let pl = lens(&|t| flr.window_cells_tile_range(s, t))?;
-            let cells: &[f64] = p.cells;
-            let items: Vec<_> = split_lens(&mut *p.pooled, &pl).into_iter().enumerate().collect();
-            par_groups(pool, items, &mut units, &|(t, d), _| {
-                flr.pool_tile(t, &cells[flr.cells_tile_range(t)?], d).map(|_| Report::default())
-            })?;
-        }
-        for s in 0..flr.scale_count() {
-            let wl = lens(&|t| flr.window_cells_tile_range(s, t))?;
-            let n: usize = wl.iter().sum();
-            let src: &[f64] = if flr.window_pooled(s) { p.pooled } else { p.cells };
-            let items: Vec<_> = split_lens(&mut p.tmp[..n], &wl).into_iter().enumerate().collect();
-            par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile_at(s, t, src, d).map(|_| Report::default()))?;
-            let tmp: &[f64] = &p.tmp[..n];
-            let dst = if s == 0 { &mut *p.first } else { &mut p.blurred[..n] };
-            let grids = split_lens(dst, &wl);
-            let (m0, v0) = (flr.scale_models_tile_range(s, 0)?.start, flr.scale_variances_tile_range(s, 0)?.start);
-            let (mls, vls) = (lens(&|t| flr.scale_models_tile_range(s, t))?, lens(&|t| flr.scale_variances_tile_range(s, t))?);
-            let models = split_lens(&mut p.scale_models[m0..m0 + mls.iter().sum::<usize>()], &mls);
-            let vars = split_lens(&mut p.variances[v0..v0 + vls.iter().sum::<usize>()], &vls);
-            let items: Vec<_> = grids.into_iter().zip(models).zip(vars).enumerate().collect();
-            rep += par_groups(pool, items, &mut units, &|(t, ((c, m), v)), _| {
-                flr.blur_cols_tiles_at(s, t..t + 1, tmp, c)?;
-                flr.solve_tile_at(s, &st, t, c, m, v)
-            })?;
-        }
-        let (first, sm, vars): (&[f64], &[f32], &[f64]) = (p.first, p.scale_models, p.variances);
-        let items: Vec<_> = split_lens(&mut *p.models, &ml).into_iter().enumerate().collect();
-        par_groups(pool, items, &mut units, &|(t, m), _| {
-            flr.blend_tile(t, &first[flr.cells_tile_range(t)?], sm, vars, m).map(|_| Report::default())
-        })?;
-    } else {
-        {
-            let cells: &[f64] = p.cells;
-            let items: Vec<_> = split_lens(&mut *p.tmp, &cl).into_iter().enumerate().collect();
-            par_groups(pool, items, &mut units, &|(t, d), _| flr.blur_rows_tile(t, cells, d).map(|_| Report::default()))?;
-        }
-        let tmp: &[f64] = p.tmp;
-        let cells = split_lens(p.cells, &cl);
-        let models = split_lens(p.models, &ml);
-        let items: Vec<_> = cells.into_iter().zip(models).enumerate().collect();
-        rep += par_groups(pool, items, &mut units, &|(t, (c, m)), _| {
-            flr.blur_cols_tile(t, tmp, c)?;
-            flr.solve_tile(&st, t, c, m)
-        })?;
+/// The rayon executor of [`Flr::denoise_parallel`]: a stage's tiles in
+/// `threads` contiguous groups (neighbouring bands share rows of the frame),
+/// one task per group, the group's index as its worker.
+fn for_each_in_groups(pool: &rayon::ThreadPool, threads: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) + '_ {
+    move |count, f| {
+        let per = count.div_ceil(threads).max(1);
+        pool.scope(|s| {
+            for w in 0..threads {
+                s.spawn(move |_| (w * per..((w + 1) * per).min(count)).for_each(|i| f(i, w)));
+            }
+        });
     }
-    let models: &[f32] = p.models;
-    let mut bands = Vec::with_capacity(nt);
-    let mut rest = Some(out);
-    for t in 0..nt {
-        let (y0, y1) = flr.tile_pixel_rows(t)?;
-        let r = rest.take().ok_or(Error::InvalidTile { index: t, count: nt })?;
-        let (band, r) = r.split_rows(y1 - y0)?;
-        bands.push((t, band));
-        rest = r;
-    }
-    rep += par_groups(pool, bands, &mut workers, &|(t, mut band), w| flr.apply_tile(&f, &st, t, models, w, &mut band))?;
-    Ok(rep)
 }
 
 /// Single-frame BMFR for one size: plan, one worker buffer per thread; the
@@ -418,7 +334,10 @@ impl FlnrRunner {
         // more threads than tiles would only hold scratch
         let threads = threads.clamp(1, tx * ty);
         let (scratch, flr_scratch) = if threads > 1 {
-            (vec![0f32; flnr.guide_planes_len() + threads * flnr.tile_scratch_len()], vec![0f64; flnr.flr().scratch_len_for(threads)])
+            (
+                vec![0f32; flnr.guide_planes_len() + threads * flnr.tile_scratch_len()],
+                vec![0f64; flnr.flr().tiled_scratch_len(threads).ok_or("flnr: scratch size overflows")?],
+            )
         } else {
             (vec![0f32; flnr.scratch_len()], vec![0f64; flnr.flr_scratch_len()])
         };
@@ -449,7 +368,7 @@ fn flnr_parallel(
     frame: &Frame<'_>,
     scratch: &mut [f32],
     flr_scratch: &mut [f64],
-    out: ImageViewMut<'_>,
+    mut out: ImageViewMut<'_>,
 ) -> Result<Report, Error> {
     let scale = fl.input_scale(frame)?;
     let (planes, rest) = scratch.split_at_mut(fl.guide_planes_len());
@@ -464,7 +383,7 @@ fn flnr_parallel(
     })?;
     let planes: &[f32] = shared.into_inner().map_err(|_| POISONED)?;
     let f = fl.flr_frame(frame, planes)?;
-    denoise_parallel(fl.flr(), &f, flr_scratch, threads, pool, out)
+    fl.flr().denoise_parallel(&f, flr_scratch, &mut out, threads, for_each_in_groups(pool, threads))
 }
 
 /// Single-frame WALR for one size: plan, scratch, and each stage's rows
