@@ -1,7 +1,7 @@
 //! FLR configuration: guides, block size, window, regulariser, upsampling.
 //!
 //! All distances are in full-resolution pixels. Defaults are the tuned ones
-//! (see README, "Defaults").
+//! (see docs/METHODS.md, FLR).
 
 use crate::error::Error;
 use crate::guides::GuideSet;
@@ -82,7 +82,7 @@ pub struct FlrConfig {
     /// others up to half a dB; this lets each cell choose. Off by default:
     /// on the training scenes +0.1–0.2 dB, on the held-out scenes +0.05 dB
     /// (scene-dependent: −0.12 to +0.23; +0.07 dB on top of the AO
-    /// demodulation) for ~7 % more time (README, "Towards FLR = OIDN"). CPU and
+    /// demodulation) for ~7 % more time (docs/RESULTS.md). CPU and
     /// GPU paths.
     pub adaptive_without_ao: bool,
     /// AO demodulation, with AO among the guides: the noisy light is divided
@@ -97,7 +97,7 @@ pub struct FlrConfig {
     /// Default `Some(DEFAULT_AO_OFFSET)`; `None` is plain FLR (the paper's).
     /// Chosen on the training scenes (+0.16 dB on 6 frames and on 20 more;
     /// on the held-out scenes, measured once afterwards, +0.14 dB, level with
-    /// OIDN; ~6 % more time; README, "Towards FLR = OIDN"). The output is then
+    /// OIDN; ~6 % more time; docs/RESULTS.md). The output is then
     /// not invariant to an affine change of the AO channel (DATA.md fixes AO
     /// to [0, 1]); every other guide stays invariant. CPU and GPU paths.
     pub ao_demodulation: Option<f32>,

@@ -13,8 +13,7 @@
 //! v_s), 0)` with `K` = [`BIAS_DISCOUNT`]. Weights are `1 / (b_s² + v_s)`.
 //!
 //! Measured on the training scenes (256², 1 spp, σ = 6/12/20 px): +0.29 dB
-//! over σ = 12 alone; the prototype (`tools/flr_scales_proto.py`) found the
-//! same per pixel. Estimating `r_s` needs the energy moment, so this mode
+//! over σ = 12 alone. Estimating `r_s` needs the energy moment, so this mode
 //! costs three blurs and three solves instead of one.
 
 use crate::kernels::cholesky::F64Lanes;
@@ -316,9 +315,9 @@ impl ModelLanes {
 
 /// Transposes values `0..3(Q + 1)` (the constant and guide coefficients) of
 /// four cells' models, 4 × 4 at a time, into `lanes[value][cell]`. (Read one
-/// lane at a time from model-major storage, as before session 30, each of the
-/// ~50 model reads of the gaps, or ~20 of a variance, was 4 scalar loads,
-/// conversions and inserts.)
+/// lane at a time from model-major storage, each of the ~50 model reads of
+/// the gaps, or ~20 of a variance, would be 4 scalar loads, conversions and
+/// inserts.)
 #[inline(always)]
 fn transpose_values<const Q: usize>(models: [&[f32]; 4], lanes: &mut [[f32; 4]; GAP_VALUES]) {
     // a model holds 3(Q + 1) + 3 values, so the 4-wide reads at j < 3(Q + 1) stay inside

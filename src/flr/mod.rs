@@ -1,7 +1,8 @@
-//! The FLR frame driver: plan, scratch layout, and the six stages, each split
-//! into independent tiles (bands of cell rows) so a caller can run them on
-//! threads or an engine's job system. [`Flr::denoise`] runs every tile of
-//! every stage in order; running the tiles yourself gives bit-identical output.
+//! The FLR frame driver: plan, scratch layout, and the stage kernels, each
+//! split into independent tiles (bands of cell rows). The stage order and the
+//! entry that runs one tile are written once, in [`schedule`];
+//! [`Flr::denoise`] runs the same tiles on one thread in a cache-friendly
+//! order, bit-identical to running them stage by stage.
 //!
 //! Stages and what each tile reads → writes:
 //!
@@ -666,9 +667,8 @@ impl Flr {
         // While this band's blocks are summed, the next band's noisy rows are
         // asked into L2, a slice before each block, so that their
         // de-interleaving at the start of the next band waits less on memory
-        // (session 29, 1080p Q5 v3, `examples/stages`, alternating with the
-        // build without: moments 6.9–7.1 → 6.7–6.8 ms; asking for the next
-        // band's guide rows as well was slower: 7.6 → 10.9 ms).
+        // (1080p Q5 v3, `examples/stages`: moments ~3 % faster with it;
+        // asking for the next band's guide rows as well is slower).
         let (next_y0, next_rows) = (y0 + bin, bin.min(self.in_h.saturating_sub(y0 + bin)));
         let noisy = frame.noisy;
         let next_band = |i: usize, n: usize| {
@@ -1185,7 +1185,7 @@ impl Flr {
         // pooled the raw moments are needed only while their own tile is
         // processed: one tile of `cells`. Both then stay in L2 instead of
         // leaving two frame-sized grids (10 MB each at 1080p) for memory to
-        // write back (session 30). The Gaussian only: the box blur's sliding
+        // write back. The Gaussian only: the box blur's sliding
         // window restarts per tile from the whole grid.
         let row_len = self.cells_x * self.lay.k;
         let ring = (2 * lag + 1).next_power_of_two() * TILE_CELL_ROWS;
@@ -1363,8 +1363,8 @@ struct WindowModels<'a> {
 /// once and kept for the next block column, which shares it, then two such
 /// columns horizontally. Neighbours of weight 0 are skipped, so an empty
 /// neighbour's infinite variance makes the interpolated one infinite only
-/// where it counts. (Four corners per cell, as before session 30, took ~0.75
-/// ms of a 1080p frame in a profile; this takes about a quarter of that.)
+/// where it counts. (Four corners per cell would take about four times as
+/// long: ~0.75 ms of a 1080p frame.)
 struct WindowReader<'a> {
     win: WindowModels<'a>,
     /// The block row whose vertical taps `ys` hold (`usize::MAX`: none yet).
