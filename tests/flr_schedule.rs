@@ -126,7 +126,6 @@ fn stages_out_of_order_are_refused() {
     }
     assert!(tiled.completed(Stage::Apply));
     assert!(order(run(Stage::Apply, 0, 0)), "the frame is done");
-    drop(run);
     assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "stages one by one != denoise");
     // a Tiled of another worker count over the same memory is another plan
     let tiled1 = flr.tiled(&mut scratch, 1).unwrap();
