@@ -33,6 +33,37 @@ impl Variant {
         self.input_layer = layer.into();
         self
     }
+    /// For the progress bar: the method and the flags it was given.
+    pub fn describe(&self) -> String {
+        let mut s = self.method.clone();
+        let a = &self.args;
+        let mut add = |flag: &str, v: Option<String>| {
+            if let Some(v) = v {
+                s += &format!(" --{flag} {v}");
+            }
+        };
+        add("guides", a.guides.clone());
+        add("block", a.block.map(|v| v.to_string()));
+        add("sigma", a.sigma.clone());
+        add("box", a.box_radius.map(|v| v.to_string()));
+        add("regularization", a.regularization.clone());
+        add("upsample", a.upsample.map(|v| v.to_string()));
+        add("shrinkage", a.shrinkage.map(|v| v.to_string()));
+        add("iterations", a.iterations.map(|v| v.to_string()));
+        add("previous-weight", a.previous_weight.clone());
+        add("storage", a.storage.clone());
+        add("ao-demodulation", a.ao_demodulation.clone());
+        if a.without_ao {
+            s += " --without-ao";
+        }
+        if a.no_tracing {
+            s += " --no-tracing";
+        }
+        if self.input_layer != "noisy" || self.method == "noisy" {
+            s += &format!(" [{}]", self.input_layer);
+        }
+        s
+    }
 }
 
 /// One (variant, frame) result; the JSON schema `lrd eval --json` writes and
@@ -63,13 +94,25 @@ pub struct Record {
     pub flicker: Option<f64>,
 }
 
-/// Outputs kept for image strips: (config label, tone-mapped RGB, FLIP map).
+/// One configuration's images of one frame, kept for the image strips.
+pub struct Panel {
+    pub method: String,
+    pub config: String,
+    pub psnr: f64,
+    pub flip: f64,
+    /// Tone-mapped RGB.
+    pub tm: Vec<f32>,
+    /// FLIP error map.
+    pub fmap: Vec<f32>,
+}
+
+/// Outputs kept for image strips.
 pub struct FrameImages {
     pub frame: String,
     pub w: usize,
     pub h: usize,
     pub reference_tm: Vec<f32>,
-    pub rows: Vec<(String, Vec<f32>, Vec<f32>)>,
+    pub rows: Vec<Panel>,
 }
 
 /// Expands directories to the `.exr` files directly inside them, sorted.
@@ -109,14 +152,17 @@ pub fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// A progress bar on stderr: `what`, the bar, steps done, elapsed time and
+/// ETA, then the message (the frame and configuration at work). indicatif
+/// draws nothing when stderr is not a terminal (a pipe, a file, CI logs).
 pub fn progress(len: u64, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(len);
     pb.set_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} ({elapsed})")
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {elapsed_precise} ETA {eta}  {wide_msg}")
             .unwrap_or(ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    pb.set_message(what.to_string());
+    pb.set_prefix(what.to_string());
     pb
 }
 
@@ -193,7 +239,10 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
             fi.reference_tm = ref_tm.clone();
         }
         for (vi, v) in variants.iter().enumerate() {
-            pb.inc(1);
+            pb.set_message(format!("{name}: {}", v.describe()));
+            if vi > 0 {
+                pb.inc(1);
+            }
             if !exr.has(&v.input_layer) {
                 pb.suspend(|| eprintln!("{}: no '{}' layer, variant skipped", path.display(), v.input_layer));
                 continue;
@@ -243,7 +292,8 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 _ => None,
             };
             if opt.keep_images {
-                fi.rows.push((built.label.clone(), out_tm.clone(), fmap));
+                let (method, config) = (v.method.clone(), built.label.clone());
+                fi.rows.push(Panel { method, config, psnr: s.psnr, flip: s.flip, tm: out_tm.clone(), fmap });
             }
             records.push(Record {
                 method: v.method.clone(),
@@ -265,6 +315,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 carry[vi] = Some(Carry { seq: sq.clone(), built: temporal.then_some(built), prev: (out_tm, ref_tm.clone()) });
             }
         }
+        pb.inc(1);
         if opt.keep_images {
             images.push(fi);
         }

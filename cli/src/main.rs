@@ -11,7 +11,7 @@ use lrdenoise_cli::{exrio, metrics};
 use clap::{Parser, Subcommand};
 use evaluate::{evaluate, list_frames, means, time_method, EvalOptions, Record, Variant};
 use exrio::{ExrFrame, Layer};
-use methods::{check_method, Built, FlrArgs, Method};
+use methods::{check_method, Built, FlrArgs, Method, MethodName};
 use runner::Inputs;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -28,8 +28,10 @@ struct Cli {
 enum Cmd {
     /// Denoise one frame: writes OUT.exr with a `denoised` layer (plus the input layers)
     Denoise {
+        /// The input frame: an OpenEXR file with a `noisy` RGB layer and the guide layers (normal, depth, position, ao, albedo)
         frame: PathBuf,
-        #[arg(short, long)]
+        /// The EXR file to write (the `denoised` layer, plus the input's layers unless --only-output)
+        #[arg(short, long, value_name = "OUT.exr")]
         output: PathBuf,
         #[command(flatten)]
         run: RunArgs,
@@ -42,18 +44,22 @@ enum Cmd {
     },
     /// Denoise a sequence directory (frame_NNNN.exr) into OUTDIR, same file names
     DenoiseSeq {
+        /// Directory of the sequence's frames, frame_0000.exr, frame_0001.exr, ... (denoised in name order)
         dir: PathBuf,
-        #[arg(short, long)]
+        /// Directory to write the denoised frames to (created if missing)
+        #[arg(short, long, value_name = "OUTDIR")]
         output: PathBuf,
         #[command(flatten)]
         run: RunArgs,
     },
     /// Score methods on frames with a reference: PSNR, SSIM, FLIP, rMSE and median time
     Eval {
+        /// Frames with a `reference` layer, or directories of them (a directory of frame_NNNN.exr is a sequence)
         #[arg(required = true)]
         frames: Vec<PathBuf>,
-        #[arg(long, default_value = "flr")]
-        methods: String,
+        /// Methods to score, comma separated (each with the flags below)
+        #[arg(long, value_enum, value_delimiter = ',', default_value = "flr")]
+        methods: Vec<MethodName>,
         #[command(flatten)]
         flr: FlrArgs,
         /// Write one JSON record per (method, frame)
@@ -62,25 +68,34 @@ enum Cmd {
         /// Timed runs per measurement (after one warm-up; at least 5)
         #[arg(long, default_value_t = 7)]
         runs: usize,
+        /// Threads (default: all cores)
         #[arg(long)]
         threads: Option<usize>,
     },
     /// Evaluate every method and configuration; write DIR/report.md, plot.svg/png and image strips
     Report {
+        /// Frames with a `reference` layer, or directories of them (a directory of frame_NNNN.exr is a sequence)
         #[arg(required = true)]
         frames: Vec<PathBuf>,
-        #[arg(short, long)]
+        /// Directory to write report.md, plot.png, plot.svg, records.json and strip_FRAME.png to (created if missing)
+        #[arg(short, long, value_name = "DIR")]
         output: PathBuf,
         /// JSON files of records produced elsewhere (same schema as `eval --json`), merged into tables and plot
         #[arg(long)]
         peers: Vec<PathBuf>,
+        /// Timed runs per measurement (after one warm-up; at least 5)
         #[arg(long, default_value_t = 7)]
         runs: usize,
+        /// Threads (default: all cores)
         #[arg(long)]
         threads: Option<usize>,
+        /// Strips with every configuration (default: the noisy input, the best configuration of each method, the reference)
+        #[arg(long)]
+        full_strips: bool,
     },
     /// Measure which guides and settings earn their cost on this scene; print the flags to use
     Advise {
+        /// A frame with a `reference` layer and the guide layers
         frame: PathBuf,
         /// Cheapest configuration within D dB of the best (default 0.25)
         #[arg(long, conflicts_with = "budget_ms")]
@@ -88,8 +103,10 @@ enum Cmd {
         /// Best configuration within T ms
         #[arg(long)]
         budget_ms: Option<f64>,
+        /// Timed runs per measurement (after one warm-up; at least 5)
         #[arg(long, default_value_t = 7)]
         runs: usize,
+        /// Threads (default: all cores)
         #[arg(long)]
         threads: Option<usize>,
         /// Methods to weigh, comma separated from flr,bmfr,walr: besides FLR's guides × block × window
@@ -100,21 +117,27 @@ enum Cmd {
     },
     /// Time the denoiser alone on a synthetic frame (or FRAME resampled to WxH)
     Bench {
-        #[arg(long, default_value = "flr")]
-        method: String,
+        /// The method to time
+        #[arg(long, value_enum, default_value_t = MethodName::Flr)]
+        method: MethodName,
+        /// Frame size, WIDTHxHEIGHT
         #[arg(long, default_value = "1920x1080")]
         size: String,
+        /// Threads
         #[arg(long, default_value_t = 1)]
         threads: usize,
+        /// Timed runs (after one warm-up; at least 5); the median is reported
         #[arg(long, default_value_t = 30)]
         runs: usize,
         #[command(flatten)]
         flr: FlrArgs,
+        /// An EXR frame to resample to --size and time on (default: a synthetic frame with every guide)
         frame: Option<PathBuf>,
     },
     /// Write FLR's GPU compute shaders (WGSL, SPIR-V, MSL, HLSL) and their dispatch description to DIR
     Shaders {
-        #[arg(short, long)]
+        /// Directory to write flr.wgsl, flr.spv, flr.metal, flr.hlsl, dispatch.md and params.bin to (created if missing)
+        #[arg(short, long, value_name = "DIR")]
         out: PathBuf,
         /// Frame size the dispatch description is written for
         #[arg(long, default_value = "1920x1080")]
@@ -127,18 +150,24 @@ enum Cmd {
     },
     /// Denoise the bundled sample frames with every method and write the report to ./lrd-demo/
     Demo {
-        #[arg(short, long, default_value = "lrd-demo")]
+        /// Directory to write the report to (report.md, plot.png, plot.svg, records.json, strip_FRAME.png)
+        #[arg(short, long, value_name = "DIR", default_value = "lrd-demo")]
         output: PathBuf,
+        /// Threads (default: all cores)
         #[arg(long)]
         threads: Option<usize>,
+        /// Strips with every configuration (default: the noisy input, the best configuration of each method, the reference)
+        #[arg(long)]
+        full_strips: bool,
     },
 }
 
 /// Flags shared by `denoise` and `denoise-seq`.
 #[derive(clap::Args)]
 struct RunArgs {
-    #[arg(long, default_value = "flr")]
-    method: String,
+    /// The denoiser (on a sequence, bmfr and walr run their temporal pipelines)
+    #[arg(long, value_enum, default_value_t = MethodName::Flr)]
+    method: MethodName,
     #[command(flatten)]
     flr: FlrArgs,
     /// The noisy layer to denoise (e.g. noisy4)
@@ -260,7 +289,15 @@ fn report_variants() -> Vec<Variant> {
     ]
 }
 
-fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, threads: usize) -> Result<(), String> {
+/// Writes the report into `out`; returns the mean records (over frames, one per configuration).
+fn write_report(
+    frames: &[PathBuf],
+    out: &Path,
+    peers: &[PathBuf],
+    runs: usize,
+    threads: usize,
+    full_strips: bool,
+) -> Result<Vec<Record>, String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let opt = EvalOptions { runs: runs.max(5), threads, keep_images: true };
     let (mut records, images) = evaluate(frames, &report_variants(), &opt)?;
@@ -275,7 +312,9 @@ fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, 
     let mean = means(&records);
     let refs: Vec<&Record> = mean.iter().collect();
     report::plot(out, &refs)?;
-    let strips = report::strips(out, &images)?;
+    // the strips: by default the noisy input and each method's best configuration
+    let keep: Vec<String> = report::best_per_method(&mean).iter().map(|r| r.config.clone()).collect();
+    let strips = report::strips(out, &images, (!full_strips).then_some(keep.as_slice()))?;
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
@@ -293,19 +332,29 @@ fn write_report(frames: &[PathBuf], out: &Path, peers: &[PathBuf], runs: usize, 
     );
     md += "## Mean over frames\n\n";
     md += &report::table(&mean, false);
+    md += "\n### Configuration names\n\n";
+    md += report::LEGEND;
     md += "\n![error versus run time](plot.png)\n\n";
     md += "## Per frame\n\n";
     md += &report::table(&records, true);
-    md += "\n## Image strips\n\nTop: noisy | each configuration | reference; bottom: FLIP error maps.\n\n";
+    md += if full_strips {
+        "\n## Image strips\n\nTop: noisy | each configuration | reference; bottom: FLIP error maps.\n\n"
+    } else {
+        "\n## Image strips\n\nTop: noisy | the best configuration of each method (mean PSNR) | reference; bottom: FLIP error maps. \
+         Every configuration: `--full-strips`.\n\n"
+    };
     for s in &strips {
         md += &format!("![{s}]({s})\n\n");
     }
     std::fs::write(out.join("report.md"), md).map_err(|e| format!("{}: {e}", out.display()))?;
     let json = serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?;
     std::fs::write(out.join("records.json"), json).map_err(|e| e.to_string())?;
-    println!("{}", report::table(&mean, false));
-    println!("wrote {}/report.md, plot.svg, plot.png, records.json and {} strip(s)", out.display(), strips.len());
-    Ok(())
+    Ok(mean)
+}
+
+/// The line naming what `lrd report` / `lrd demo` wrote.
+fn report_written(out: &Path) -> String {
+    format!("report: {} (with plot.png, plot.svg, records.json and strip_FRAME.png in {})", out.join("report.md").display(), out.display())
 }
 
 /// One `lrd advise` line weighing an option: the best configuration without
@@ -689,22 +738,33 @@ fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::Denoise { frame, output, run: RunArgs { method, flr, input_layer, threads }, png, only_output } => {
             let t = threads_or_all(threads);
-            let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
+            let method = method.as_str();
+            let job = DenoiseJob { method, flr: &flr, input_layer: &input_layer, threads: t };
             let (cfg, ms, w, h) = denoise_file(&job, &mut None, &frame, &output, png.as_deref(), only_output)?;
-            println!("{method} [{cfg}] {w}x{h} threads {t}: {ms:.2} ms -> {}", output.display());
+            let written = match &png {
+                Some(p) => format!("{} and {}", output.display(), p.display()),
+                None => output.display().to_string(),
+            };
+            println!("{method} [{cfg}] {w}x{h} threads {t}: {ms:.2} ms; wrote {written}");
         }
         Cmd::DenoiseSeq { dir, output, run: RunArgs { method, flr, input_layer, threads } } => {
             let t = threads_or_all(threads);
             let frames = list_frames(std::slice::from_ref(&dir))?;
             std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
             // On a sequence, bmfr and walr mean their temporal pipelines.
-            let method = if method == "bmfr" || method == "walr" { format!("{method}-temporal") } else { method };
-            let job = DenoiseJob { method: &method, flr: &flr, input_layer: &input_layer, threads: t };
-            let pb = evaluate::progress(frames.len() as u64, "denoising");
+            let method = match method {
+                MethodName::Bmfr => MethodName::BmfrTemporal,
+                MethodName::Walr => MethodName::WalrTemporal,
+                m => m,
+            }
+            .as_str();
+            let job = DenoiseJob { method, flr: &flr, input_layer: &input_layer, threads: t };
+            let pb = evaluate::progress(frames.len() as u64, method);
             let mut total = 0.0;
             let mut built = None;
             for f in &frames {
                 let name = f.file_name().ok_or("bad frame name")?;
+                pb.set_message(name.to_string_lossy().to_string());
                 let (_, ms, _, _) = denoise_file(&job, &mut built, f, &output.join(name), None, false)?;
                 total += ms;
                 pb.inc(1);
@@ -719,9 +779,8 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Cmd::Eval { frames, methods, flr, json, runs, threads } => {
             let mut variants = vec![Variant::noisy("noisy")];
-            for m in methods.split(',').map(str::trim) {
-                check_method(m)?;
-                variants.push(Variant::method(m, flr.clone()));
+            for m in methods {
+                variants.push(Variant::method(m.as_str(), flr.clone()));
             }
             let t = threads_or_all(threads);
             let (records, _) =
@@ -735,15 +794,17 @@ fn run(cli: Cli) -> Result<(), String> {
                     .map_err(|e| format!("{}: {e}", j.display()))?;
             }
         }
-        Cmd::Report { frames, output, peers, runs, threads } => {
-            write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads))?
+        Cmd::Report { frames, output, peers, runs, threads, full_strips } => {
+            let mean = write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads), full_strips)?;
+            println!("{}", report::table(&mean, false));
+            println!("{}", report_written(&output));
         }
         Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads, methods } => {
             advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads), &methods)?
         }
-        Cmd::Bench { method, size, threads, runs, flr, frame } => bench(&method, &size, threads, runs, &flr, frame.as_deref())?,
+        Cmd::Bench { method, size, threads, runs, flr, frame } => bench(method.as_str(), &size, threads, runs, &flr, frame.as_deref())?,
         Cmd::Shaders { out, size, f16_inputs, flr } => shaders(&out, &size, f16_inputs, &flr)?,
-        Cmd::Demo { output, threads } => {
+        Cmd::Demo { output, threads, full_strips } => {
             let d = data_dir()?;
             let mut frames = list_frames(std::slice::from_ref(&d))?;
             // plus every frame of each bundled sequence, in order (temporal
@@ -757,13 +818,35 @@ fn run(cli: Cli) -> Result<(), String> {
                     }
                 }
             }
-            write_report(&frames, &output, &[], 7, threads_or_all(threads))?;
+            let t = threads_or_all(threads);
+            let mean = write_report(&frames, &output, &[], 7, t, full_strips)?;
+            let configs = mean.iter().filter(|r| r.method != "noisy").count();
+            println!("lrd demo: {configs} configurations on {} frames (the bundled stills and sequence), {t} thread(s)", frames.len());
+            print!("{}", report::summary(&mean));
+            println!("{}", report_written(&output));
         }
     }
     Ok(())
 }
 
+/// A closed stdout (`lrd bench | head -1`) ends lrd as it ends other Unix
+/// tools: by SIGPIPE, silently (status 141 in a shell). Rust starts programs
+/// with SIGPIPE ignored, which turns such a write into an error that
+/// `println!` panics on ("failed printing to stdout: Broken pipe"). Restoring
+/// the default once covers every write to stdout and stderr, including the
+/// progress bar's, where handling `BrokenPipe` would need every print changed
+/// to a fallible write. Files lrd writes are complete before it prints about them.
+#[cfg(unix)]
+fn default_sigpipe() {
+    // SAFETY: called first thing in main, before any other thread exists; SIG_DFL is a valid handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    #[cfg(unix)]
+    default_sigpipe();
     std::panic::set_hook(Box::new(|info| {
         let msg = info
             .payload()
@@ -780,5 +863,30 @@ fn main() -> ExitCode {
             eprintln!("lrd: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// `lrd --help` and every `lrd SUBCOMMAND --help` describe each argument.
+    #[test]
+    fn every_argument_has_help() {
+        let cli = Cli::command();
+        let mut missing = vec![];
+        for sub in cli.get_subcommands() {
+            if sub.get_about().is_none() {
+                missing.push(sub.get_name().to_string());
+            }
+            for a in sub.get_arguments() {
+                let builtin = matches!(a.get_id().as_str(), "help" | "version");
+                if !builtin && a.get_help().is_none() && a.get_long_help().is_none() {
+                    missing.push(format!("{} {}", sub.get_name(), a.get_id()));
+                }
+            }
+        }
+        assert!(missing.is_empty(), "without help text: {missing:?}");
     }
 }

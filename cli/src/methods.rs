@@ -604,6 +604,37 @@ impl Method {
 /// Known method names for `--methods` / `--method`.
 pub const METHODS: &[&str] = &["flr", "flnr", "bmfr", "bmfr-temporal", "walr", "walr-temporal"];
 
+/// `--method` / `--methods`: the values clap accepts and lists in `--help`
+/// and in the error for an unknown one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MethodName {
+    /// Fast Local Regression: per-block affine fits to the guides (CPU, or --device gpu)
+    Flr,
+    /// FLR on guides rewritten by a small U-Net (--weights)
+    Flnr,
+    /// Blockwise Multi-Order Feature Regression, one frame
+    Bmfr,
+    /// BMFR's temporal pipeline (accumulation and reprojection over a sequence)
+    BmfrTemporal,
+    /// Weighted à-trous Linear Regression, one frame
+    Walr,
+    /// WALR's temporal pipeline over a sequence
+    WalrTemporal,
+}
+
+impl MethodName {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MethodName::Flr => "flr",
+            MethodName::Flnr => "flnr",
+            MethodName::Bmfr => "bmfr",
+            MethodName::BmfrTemporal => "bmfr-temporal",
+            MethodName::Walr => "walr",
+            MethodName::WalrTemporal => "walr-temporal",
+        }
+    }
+}
+
 /// The network trained by `train/flnr.py` (see train/README.md).
 pub const BUNDLED_WEIGHTS: &[u8] = include_bytes!("../../train/flnr.bin");
 

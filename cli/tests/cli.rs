@@ -47,6 +47,10 @@ fn bad_inputs_give_clear_errors() {
     fails_with(&["denoise", &room, "-o", out, "--guides", "normal,colour"], &["--guides", "colour"]);
     fails_with(&["denoise", &room, "-o", out, "--block", "3"], &["block"]);
     fails_with(&["denoise", &room, "-o", out, "--method", "magic"], &["--method", "magic"]);
+    // clap lists the methods
+    let (_, _, e) = lrd(&["denoise", &room, "-o", out, "--method", "magic"]);
+    assert!(e.contains("possible values: flr, flnr, bmfr, bmfr-temporal, walr, walr-temporal"), "{e}");
+    fails_with(&["eval", &room, "--methods", "flr,oidn"], &["--methods", "oidn"]);
     fails_with(&["bench", "--size", "12by7"], &["--size"]);
     // a frame without the depth layer, asked to use depth
     let nodepth = tmp("nodepth.exr");
@@ -64,6 +68,8 @@ fn denoise_writes_layers_and_preview() {
     let (ok, so, e) = lrd(&["denoise", &room, "-o", out.to_str().unwrap(), "--png", png.to_str().unwrap(), "--threads", "2"]);
     assert!(ok, "{e}");
     assert!(so.contains("256x256") && so.contains("ms") && so.contains("threads 2"), "{so}");
+    // the summary names every file written
+    assert!(so.contains(out.to_str().unwrap()) && so.contains(png.to_str().unwrap()), "{so}");
     assert!(std::fs::metadata(&png).unwrap().len() > 1000);
     // output keeps the inputs and can be denoised again; eval reads it
     let (ok, so, e) = lrd(&["eval", out.to_str().unwrap(), "--runs", "5"]);
@@ -93,6 +99,8 @@ fn eval_json_and_quality() {
     let json = tmp("eval.json");
     let (ok, _, e) = lrd(&["eval", &data("room_7.exr"), &data("poles_7.exr"), "--json", json.to_str().unwrap(), "--runs", "5"]);
     assert!(ok, "{e}");
+    // the progress bar draws only on a terminal
+    assert!(e.is_empty(), "{e}");
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let recs = v.as_array().unwrap();
     assert_eq!(recs.len(), 4); // (noisy, flr) x 2 frames
@@ -446,4 +454,44 @@ fn walr_without_depth_is_unit_free() {
     };
     let (with, without) = (psnr("normal,depth,position"), psnr("normal,position"));
     assert!((with - without).abs() < 0.3, "with depth {with}, without {without}");
+}
+
+/// Output into a closed pipe (`lrd bench | head -1`) ends lrd quietly: by
+/// SIGPIPE (status 141 in a shell) or with status 0, never with a panic.
+#[cfg(unix)]
+#[test]
+fn closed_stdout_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    for args in [&["bench", "--size", "320x200", "--runs", "5"][..], &["--help"][..]] {
+        let mut child =
+            Command::new(env!("CARGO_BIN_EXE_lrd")).args(args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("run lrd");
+        drop(child.stdout.take()); // the reader goes away before lrd writes
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success() || o.status.signal() == Some(13) || o.status.code() == Some(141), "{args:?}: {:?} {err}", o.status);
+        assert!(!err.contains("internal error") && !err.contains("panicked") && !err.contains("Broken pipe"), "{args:?}: {err}");
+    }
+}
+
+/// `lrd report` on one frame: the tables with the legend of configuration
+/// names, the plot, and a strip of the main configurations (noisy, the best of
+/// each method, reference: at most 8 panels); `--full-strips` shows them all.
+#[test]
+fn report_writes_legend_plot_and_capped_strips() {
+    let dir = tmp("report");
+    let (ok, so, e) = lrd(&["report", &data("room_7.exr"), "-o", dir.to_str().unwrap(), "--runs", "5"]);
+    assert!(ok, "{e}");
+    assert!(so.contains("report.md"), "{so}");
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    assert!(md.contains("Configuration names") && md.contains("`-aod`") && md.contains("`kK`"), "{md}");
+    for f in ["plot.png", "plot.svg", "records.json", "strip_room_7.png"] {
+        assert!(std::fs::metadata(dir.join(f)).unwrap().len() > 1000, "{f}");
+    }
+    let strip = image::image_dimensions(dir.join("strip_room_7.png")).unwrap();
+    assert!(strip.0 <= 8 * 256 && strip.0 >= 4 * 256, "{strip:?}");
+    let full = tmp("report_full");
+    let (ok, _, e) = lrd(&["report", &data("room_7.exr"), "-o", full.to_str().unwrap(), "--runs", "5", "--full-strips"]);
+    assert!(ok, "{e}");
+    assert!(image::image_dimensions(full.join("strip_room_7.png")).unwrap().0 > 16 * 256);
 }
