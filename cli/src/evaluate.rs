@@ -92,6 +92,10 @@ pub struct Record {
     /// (`metrics::flicker`); `None` elsewhere.
     #[serde(default)]
     pub flicker: Option<f64>,
+    /// The index in `evaluate`'s `variants` of the variant that made this
+    /// row (`lrd advise` reads the configuration from it); not in the JSON.
+    #[serde(skip)]
+    pub variant: Option<usize>,
 }
 
 /// One configuration's images of one frame, kept for the image strips.
@@ -309,6 +313,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 height: h,
                 flags: built.flags.clone(),
                 flicker,
+                variant: Some(vi),
             });
             if let Some(sq) = &seq {
                 let temporal = matches!(built.method, Method::Temporal(_));
@@ -355,6 +360,7 @@ pub fn means(records: &[Record]) -> Vec<Record> {
                     let f: Vec<f64> = rs.iter().filter_map(|r| r.flicker).collect();
                     (!f.is_empty()).then(|| f.iter().sum::<f64>() / f.len() as f64)
                 },
+                variant: rs[0].variant,
             }
         })
         .collect()

@@ -1,15 +1,18 @@
 //! `lrd`: denoise frames, evaluate and compare methods, report error against
 //! run time, advise what a scene can drop, benchmark. See the README.
 
+mod advise;
+mod bench;
 mod evaluate;
 mod methods;
 mod report;
 mod runner;
+mod shaders;
 
 use lrdenoise_cli::{exrio, metrics};
 
 use clap::{Parser, Subcommand};
-use evaluate::{evaluate, list_frames, means, time_method, EvalOptions, Record, Variant};
+use evaluate::{evaluate, list_frames, means, EvalOptions, Record, Variant};
 use exrio::{ExrFrame, Layer};
 use methods::{check_method, Built, FlrArgs, Method, MethodName};
 use runner::Inputs;
@@ -252,477 +255,6 @@ fn print_table(records: &[Record]) {
     println!("{}", report::table(&m, false));
 }
 
-/// The configurations `lrd report` compares: the default, then one setting changed at a time.
-fn report_variants() -> Vec<Variant> {
-    let g = |s: &str| FlrArgs { guides: Some(s.into()), ..Default::default() };
-    vec![
-        Variant::noisy("noisy"),
-        Variant::noisy("noisy4"),
-        Variant::flr(FlrArgs::default()),
-        Variant::flr(g("none")),
-        Variant::flr(g("normal")),
-        Variant::flr(g("normal,depth")),
-        Variant::flr(g("normal,depth,position,ao")),
-        Variant::flr(FlrArgs { block: Some(4), ..Default::default() }),
-        Variant::flr(FlrArgs { block: Some(16), ..Default::default() }),
-        Variant::flr(FlrArgs { sigma: Some("6".into()), ..Default::default() }),
-        Variant::flr(FlrArgs { sigma: Some("24".into()), ..Default::default() }),
-        Variant::flr(FlrArgs { sigma: Some("12".into()), ..Default::default() }),
-        Variant::flr(FlrArgs { box_radius: Some(16.0), ..Default::default() }),
-        Variant::flr(FlrArgs { regularization: Some("tikhonov:1e-4".into()), ..Default::default() }),
-        Variant::flr(FlrArgs { upsample: Some(2), ..Default::default() }),
-        Variant::flr(FlrArgs { without_ao: true, ..Default::default() }),
-        Variant::flr(FlrArgs { ao_demodulation: Some("off".into()), ..Default::default() }),
-        Variant::flr(FlrArgs::default()).on("noisy4"),
-        Variant::method("bmfr", FlrArgs::default()),
-        Variant::method("bmfr", FlrArgs { shrinkage: Some(0.0), ..Default::default() }),
-        Variant::method("bmfr-temporal", FlrArgs::default()),
-        Variant::method("bmfr-temporal", FlrArgs { shrinkage: Some(0.0), ..Default::default() }),
-        Variant::method("walr", FlrArgs::default()),
-        Variant::method("walr", FlrArgs { no_tracing: true, ..Default::default() }),
-        Variant::method("walr", FlrArgs { storage: Some("f16".into()), ..Default::default() }),
-        Variant::method("walr", FlrArgs { previous_weight: Some("0.6".into()), ..Default::default() }),
-        Variant::method("walr", FlrArgs { previous_weight: Some("0".into()), ..Default::default() }),
-        Variant::method("walr", FlrArgs { iterations: Some(3), previous_weight: Some("0".into()), ..Default::default() }),
-        Variant::method("walr-temporal", FlrArgs::default()),
-        Variant::method("flnr", FlrArgs::default()),
-    ]
-}
-
-/// Writes the report into `out`; returns the mean records (over frames, one per configuration).
-fn write_report(
-    frames: &[PathBuf],
-    out: &Path,
-    peers: &[PathBuf],
-    runs: usize,
-    threads: usize,
-    full_strips: bool,
-) -> Result<Vec<Record>, String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: true };
-    let (mut records, images) = evaluate(frames, &report_variants(), &opt)?;
-    if records.is_empty() {
-        return Err("no frame with a 'reference' layer: nothing to report".into());
-    }
-    for p in peers {
-        let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
-        let peer: Vec<Record> = serde_json::from_str(&text).map_err(|e| format!("{}: not a JSON list of records ({e})", p.display()))?;
-        records.extend(peer);
-    }
-    let mean = means(&records);
-    let refs: Vec<&Record> = mean.iter().collect();
-    report::plot(out, &refs)?;
-    // the strips: by default the noisy input and each method's best configuration
-    let keep: Vec<String> = report::best_per_method(&mean).iter().map(|r| r.config.clone()).collect();
-    let strips = report::strips(out, &images, (!full_strips).then_some(keep.as_slice()))?;
-    let cpu = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
-        .unwrap_or_else(|| "unknown CPU".into());
-    let (w, h) = (records[0].width, records[0].height);
-    let mut md = String::new();
-    md += "# lrdenoise report\n\n";
-    md += &format!(
-        "{} frame(s), {w}x{h} (first frame); {threads} thread(s); {cpu}; SIMD level `{}` (compiled; run-time choice for FLR's moments, solve and apply, BMFR's QR and FLNR's 3×3 layers: `{:?}`); time = median of {} runs after a warm-up, denoiser only (no I/O). \
-         Metrics follow shared/DATA.md (albedo-modulated, tone-mapped PSNR/SSIM/LDR-FLIP, linear rMSE). Peer rows (if any) were measured by their own tools.\n\n",
-        images.len(),
-        lrdenoise::SIMD_LEVEL,
-        lrdenoise::isa::Isa::detect(),
-        opt.runs
-    );
-    md += "## Mean over frames\n\n";
-    md += &report::table(&mean, false);
-    md += "\n### Configuration names\n\n";
-    md += report::LEGEND;
-    md += "\n![error versus run time](plot.png)\n\n";
-    md += "## Per frame\n\n";
-    md += &report::table(&records, true);
-    md += if full_strips {
-        "\n## Image strips\n\nTop: noisy | each configuration | reference; bottom: FLIP error maps.\n\n"
-    } else {
-        "\n## Image strips\n\nTop: noisy | the best configuration of each method (mean PSNR) | reference; bottom: FLIP error maps. \
-         Every configuration: `--full-strips`.\n\n"
-    };
-    for s in &strips {
-        md += &format!("![{s}]({s})\n\n");
-    }
-    std::fs::write(out.join("report.md"), md).map_err(|e| format!("{}: {e}", out.display()))?;
-    let json = serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?;
-    std::fs::write(out.join("records.json"), json).map_err(|e| e.to_string())?;
-    Ok(mean)
-}
-
-/// The line naming what `lrd report` / `lrd demo` wrote.
-fn report_written(out: &Path) -> String {
-    format!("report: {} (with plot.png, plot.svg, records.json and strip_FRAME.png in {})", out.join("report.md").display(), out.display())
-}
-
-/// One `lrd advise` line weighing an option: the best configuration without
-/// it (`a`) against the best with it (`b`), each with its description;
-/// `verdicts[0]` when `b` gains more than 0.1 dB, else `verdicts[1]`.
-fn print_option(name: &str, (what_a, a): (&str, &Record), (what_b, b): (&str, &Record), verdicts: [&str; 2]) {
-    let gain = b.psnr - a.psnr;
-    let verdict = if gain > 0.1 { verdicts[0] } else { verdicts[1] };
-    println!(
-        "  {name:<17}: {what_a} {:.2} dB in {:.3} ms, {what_b} {:.2} dB in {:.3} ms ({gain:+.2} dB) -> {verdict}",
-        a.psnr, a.ms, b.psnr, b.ms
-    );
-}
-
-fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: usize, threads: usize, methods: &str) -> Result<(), String> {
-    let exr = ExrFrame::read(frame)?;
-    let inputs = Inputs::from_exr(&exr, frame, "noisy")?;
-    if inputs.reference.is_none() {
-        return Err(format!("{}: advise measures quality and needs a 'reference' layer", frame.display()));
-    }
-    let methods: Vec<&str> = methods.split(',').map(str::trim).filter(|m| !m.is_empty()).collect();
-    if let Some(m) = methods.iter().find(|m| !["flr", "bmfr", "walr"].contains(m)) {
-        return Err(format!("--methods: '{m}' is not flr, bmfr or walr"));
-    }
-    if !methods.contains(&"flr") {
-        return Err("--methods: flr is always weighed (the guide verdicts are FLR's); add bmfr and/or walr to it".into());
-    }
-    // Every subset of the available guides x block sizes x window sizes.
-    let avail: Vec<&str> = [
-        ("normal", inputs.normal.is_some()),
-        ("depth", inputs.depth.is_some()),
-        ("position", inputs.position.is_some()),
-        ("ao", inputs.ao.is_some()),
-        ("albedo", inputs.albedo.is_some()),
-    ]
-    .iter()
-    .filter(|(_, a)| *a)
-    .map(|(n, _)| *n)
-    .collect();
-    let mut variants = vec![Variant::noisy("noisy")];
-    for mask in 0..(1usize << avail.len()) {
-        let g: Vec<&str> = avail.iter().enumerate().filter(|(i, _)| mask >> i & 1 == 1).map(|(_, n)| *n).collect();
-        let gs = if g.is_empty() { "none".to_string() } else { g.join(",") };
-        for block in [4, 8, 16] {
-            for sigma in ["6", "12", "24", "6,12,20"] {
-                // the adaptive window with AO also without AO as a candidate (`--without-ao`)
-                let with_ao = sigma.contains(',') && g.contains(&"ao");
-                for without_ao in [false, true].into_iter().take(1 + with_ao as usize) {
-                    // with AO at B = 8, also without the AO demodulation
-                    let plain = g.contains(&"ao") && block == 8 && !without_ao;
-                    for demod in [None, Some("off")].into_iter().take(1 + plain as usize) {
-                        variants.push(Variant::flr(FlrArgs {
-                            guides: Some(gs.clone()),
-                            block: Some(block),
-                            sigma: Some(sigma.into()),
-                            without_ao,
-                            ao_demodulation: demod.map(String::from),
-                            ..Default::default()
-                        }));
-                    }
-                }
-            }
-        }
-    }
-    // Other methods with what the frame has (BMFR wants normals; WALR normals and positions),
-    // and WALR's optional stages one at a time.
-    let has = |g: &str| avail.contains(&g);
-    if methods.contains(&"bmfr") && has("normal") {
-        for block in [32, 64] {
-            variants.push(Variant::method("bmfr", FlrArgs { block: Some(block), ..Default::default() }));
-        }
-        variants.push(Variant::method("bmfr", FlrArgs { shrinkage: Some(0.0), ..Default::default() }));
-    }
-    if methods.contains(&"walr") && has("normal") && has("position") {
-        let pw = |w: &str| Some(w.to_string());
-        variants.push(Variant::method("walr", FlrArgs::default()));
-        variants.push(Variant::method("walr", FlrArgs { no_tracing: true, ..Default::default() }));
-        variants.push(Variant::method("walr", FlrArgs { previous_weight: pw("0.6"), ..Default::default() }));
-        variants.push(Variant::method("walr", FlrArgs { previous_weight: pw("0"), ..Default::default() }));
-    }
-    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: false };
-    let (records, _) = evaluate(&[frame.to_path_buf()], &variants, &opt)?;
-    let noisy = records.iter().find(|r| r.method == "noisy").map(|r| r.psnr).unwrap_or(f64::NAN);
-    let flr: Vec<&Record> = records.iter().filter(|r| r.method == "flr").collect();
-    // the choice is made over every method weighed
-    let all: Vec<&Record> = records.iter().filter(|r| r.method != "noisy").collect();
-    let best = all.iter().max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or("no configuration could run")?;
-    let pick = match budget {
-        Some(t) => all.iter().filter(|r| r.ms <= t).max_by(|a, b| a.psnr.total_cmp(&b.psnr)).ok_or_else(|| {
-            format!("no configuration runs within {t} ms (fastest: {:.3} ms)", all.iter().map(|r| r.ms).fold(f64::MAX, f64::min))
-        })?,
-        None => {
-            let d = max_loss.unwrap_or(0.25);
-            all.iter().filter(|r| r.psnr >= best.psnr - d).min_by(|a, b| a.ms.total_cmp(&b.ms)).unwrap_or(best)
-        }
-    };
-    // What each guide is worth: best PSNR with it minus best without it.
-    println!("{}: {} configurations measured, {threads} thread(s), noisy input {noisy:.2} dB", frame.display(), flr.len());
-    // (By the --guides value: "normal" also occurs in "--regularization normalized:...".)
-    let uses = |r: &Record, g: &str| {
-        r.flags.split("--guides ").nth(1).and_then(|v| v.split_whitespace().next()).is_some_and(|v| v.split(',').any(|x| x == g))
-    };
-    for gname in &avail {
-        let with = flr.iter().filter(|r| uses(r, gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
-        let without = flr.iter().filter(|r| !uses(r, gname)).map(|r| r.psnr).fold(f64::MIN, f64::max);
-        let verdict = if with - without > 0.1 { "keep" } else { "can drop" };
-        println!("  guide {gname:<8}: best with {with:.2} dB, without {without:.2} dB ({:+.2} dB) -> {verdict}", with - without);
-    }
-    // The AO-free candidate: the best adaptive configuration with AO, with and without it
-    let adaptive_ao = |free: bool| {
-        flr.iter()
-            .filter(|r| uses(r, "ao") && r.flags.contains("--sigma 6,12,20") && r.flags.contains("--without-ao") == free)
-            .max_by(|a, b| a.psnr.total_cmp(&b.psnr))
-    };
-    if let (Some(d), Some(f)) = (adaptive_ao(false), adaptive_ao(true)) {
-        let (a, b) = (("best adaptive with AO", *d), ("with the AO-free candidate", *f));
-        print_option("flr without-ao", a, b, ["use it (--without-ao)", "skip it"]);
-    }
-    // The AO demodulation: the best B = 8 configuration with AO, with it (the default) and without
-    let demodulated = |on: bool| {
-        flr.iter()
-            .filter(|r| uses(r, "ao") && r.flags.contains("--block 8 ") && !r.flags.contains("--without-ao"))
-            .filter(|r| r.flags.contains("--ao-demodulation off") != on)
-            .max_by(|a, b| a.psnr.total_cmp(&b.psnr))
-    };
-    if let (Some(d), Some(p)) = (demodulated(true), demodulated(false)) {
-        let (a, b) = (("best B = 8 with AO", *d), ("without the AO demodulation", *p));
-        print_option("flr ao-demod", a, b, ["turn it off (--ao-demodulation off)", "keep it"]);
-    }
-    // BMFR and WALR, each against its own default
-    let find = |method: &str, flag: &str| records.iter().find(|r| r.method == method && r.flags.contains(flag));
-    let walr = |flag: &str| find("walr", flag);
-    let walr_default = records.iter().find(|r| r.method == "walr" && r.flags.contains("adaptive") && !r.flags.contains("--no-tracing"));
-    if let (Some(d), Some(nt)) = (walr_default, walr("--no-tracing")) {
-        let verdict = if d.psnr - nt.psnr > 0.1 { "keep" } else { "can drop (it also stops light leaking past thin objects: check those)" };
-        println!(
-            "  walr tracing     : with {:.2} dB in {:.3} ms, without {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
-            d.psnr,
-            d.ms,
-            nt.psnr,
-            nt.ms,
-            d.psnr - nt.psnr
-        );
-    }
-    if let (Some(d), Some(f), Some(one)) = (walr_default, walr("--previous-weight 0.6 "), walr("--previous-weight 0 ")) {
-        let verdict = if d.psnr - f.psnr > 0.1 { "keep" } else { "can drop (--previous-weight 0.6)" };
-        println!(
-            "  walr blend       : adaptive {:.2} dB in {:.3} ms, fixed 0.6 {:.2} dB in {:.3} ms, one window {:.2} dB ({:+.2} dB adaptive - fixed) -> {verdict}",
-            d.psnr,
-            d.ms,
-            f.psnr,
-            f.ms,
-            one.psnr,
-            d.psnr - f.psnr
-        );
-    }
-    let bmfr_default = records.iter().find(|r| r.method == "bmfr" && r.flags.contains("--block 32") && !r.flags.contains("--shrinkage"));
-    if let (Some(b32), Some(b64)) = (bmfr_default, find("bmfr", "--block 64")) {
-        println!("  bmfr blocks      : 32x32 {:.2} dB in {:.3} ms, 64x64 {:.2} dB in {:.3} ms", b32.psnr, b32.ms, b64.psnr, b64.ms);
-    }
-    if let (Some(d), Some(plain)) = (bmfr_default, find("bmfr", "--shrinkage 0")) {
-        let verdict = if d.psnr - plain.psnr > 0.1 { "keep" } else { "can drop (--shrinkage 0)" };
-        println!(
-            "  bmfr shrinkage   : with {:.2} dB in {:.3} ms, without {:.2} dB in {:.3} ms ({:+.2} dB) -> {verdict}",
-            d.psnr,
-            d.ms,
-            plain.psnr,
-            plain.ms,
-            d.psnr - plain.psnr
-        );
-    }
-    println!("  best     : {:.2} dB in {:.3} ms  ({})", best.psnr, best.ms, best.config);
-    println!("  chosen   : {:.2} dB in {:.3} ms  ({})", pick.psnr, pick.ms, pick.config);
-    println!("{}", pick.flags);
-    Ok(())
-}
-
-fn parse_size(size: &str) -> Result<(usize, usize), String> {
-    size.split_once('x')
-        .and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?)))
-        .filter(|(a, b)| *a > 0 && *b > 0)
-        .ok_or_else(|| format!("--size: '{size}' is not WIDTHxHEIGHT"))
-}
-
-/// `lrd shaders`: the shader module in four languages plus `dispatch.md`, the
-/// buffers, bindings, passes and parameter block for one frame size.
-fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Result<(), String> {
-    use lrdenoise::gpu::{GpuLayouts, GpuPlan, InputFormat};
-    let (w, h) = parse_size(size)?;
-    // a frame with every guide, so the guide set is --guides (default normal,depth,ao)
-    let probe = Inputs {
-        w: 1,
-        h: 1,
-        noisy: vec![0.0; 3],
-        normal: Some(vec![0.0; 3]),
-        depth: Some(vec![0.0]),
-        position: Some(vec![0.0; 3]),
-        ao: Some(vec![0.0]),
-        albedo: None,
-        reference: None,
-        motion: None,
-    };
-    let cfg = flr.config(&probe)?;
-    let plan = GpuPlan::new(cfg, w, h).map_err(|e| format!("shaders: {e}"))?;
-    let s = lrdenoise_gpu::shaders().map_err(|e| e.to_string())?;
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let write = |name: &str, bytes: &[u8]| std::fs::write(out.join(name), bytes).map_err(|e| format!("{}: {e}", out.join(name).display()));
-    write("flr.wgsl", s.wgsl.as_bytes())?;
-    write("flr.spv", &le_bytes(&s.spirv))?;
-    write("flr.metal", s.msl.as_bytes())?;
-    write("flr.hlsl", s.hlsl.as_bytes())?;
-    let input = if f16_inputs { InputFormat::F16 } else { InputFormat::F32 };
-    let layouts = GpuLayouts::planar(w, h, input);
-    let params = plan.params(&layouts).map_err(|e| e.to_string())?;
-    let mut md = format!(
-        "# FLR dispatch for {w}x{h}, {} ({} guide channels)\n\n\
-         One bind group for every pass; binding i = the i-th buffer below. Inputs planar f32 \
-         ({input:?} inputs, GpuLayouts::planar); other layouts: set the offsets and strides of the parameter block \
-         (lrdenoise::gpu::GpuPlan::params).\n\n| binding | buffer | access | bytes |\n|---:|---|---|---:|\n",
-        methods::flag_line(&cfg),
-        plan.guide_channels()
-    );
-    for b in plan.buffers(&layouts).map_err(|e| e.to_string())? {
-        md += &format!("| {} | {:?} | {:?} | {} |\n", b.binding, b.buffer, b.access, b.bytes);
-    }
-    md += "\nPasses, in order (a storage barrier between consecutive passes):\n\n| entry point | workgroups |\n|---|---|\n";
-    for p in plan.passes().iter() {
-        md += &format!("| `{}` | {} x {} x {} |\n", p.name(), p.workgroups[0], p.workgroups[1], p.workgroups[2]);
-    }
-    md += &format!("\nThe parameter block (binding 0, {} bytes) for these layouts is `params.bin`.\n", lrdenoise::gpu::PARAMS_BYTES);
-    write("dispatch.md", md.as_bytes())?;
-    write("params.bin", params.as_bytes())?;
-    println!("wrote flr.wgsl, flr.spv, flr.metal, flr.hlsl, dispatch.md and params.bin to {}", out.display());
-    Ok(())
-}
-
-/// 32-bit words as little-endian bytes (SPIR-V files are little-endian words).
-fn le_bytes(words: &[u32]) -> Vec<u8> {
-    words.iter().flat_map(|w| w.to_le_bytes()).collect()
-}
-
-fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, frame: Option<&Path>) -> Result<(), String> {
-    check_method(method)?;
-    let (w, h) = parse_size(size)?;
-    let inputs = match frame {
-        Some(p) => {
-            let exr = ExrFrame::read(p)?;
-            Inputs::from_exr(&exr, p, "noisy")?.resample(w, h)
-        }
-        None => synthetic(w, h),
-    };
-    let mut b = Method::build(method, flr, &inputs, threads)?;
-    if let Method::FlrGpu { gpu, .. } = &b.method {
-        // lavapipe (a CPU rasteriser) is for correctness; its times mean nothing
-        println!("GPU adapter: {}; times include upload and readback", gpu.adapter_name());
-    }
-    let mut out = vec![0f32; w * h * 3];
-    let (med, all) = time_method(&mut b.method, &inputs, &mut out, runs.max(5))?;
-    if let Method::FlrGpu { .. } = &b.method {
-        gpu_pass_times(&mut b.method, &inputs, &mut out, runs.max(5))?;
-    }
-    let min = all.iter().copied().fold(f64::MAX, f64::min);
-    let max = all.iter().copied().fold(0.0, f64::max);
-    println!(
-        "{method} {w}x{h} [{}] threads {threads} simd {} (run-time kernels {:?}): median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
-        b.label,
-        lrdenoise::SIMD_LEVEL,
-        lrdenoise::isa::Isa::detect(),
-        all.len(),
-        (w * h) as f64 / med / 1e3
-    );
-    if let Some(bytes) = b.min_bytes {
-        let copy = memcpy_median(bytes, all.len());
-        println!(
-            "baseline, same run: memcpy of the {:.1} MB one call must at least move (each input layer read once, the RGB output written once; one thread): median {copy:.3} ms; {method} takes {:.1}x that",
-            bytes as f64 / 1e6,
-            med / copy
-        );
-    }
-    Ok(())
-}
-
-/// Median time (ms) of copying `bytes / 2` bytes (reading half and writing
-/// half of `bytes`), `runs` times after a warm-up: `lrd bench`'s baseline.
-fn memcpy_median(bytes: usize, runs: usize) -> f64 {
-    let src = vec![1u8; bytes / 2];
-    let mut dst = vec![0u8; bytes / 2];
-    dst.copy_from_slice(&src);
-    let mut t: Vec<f64> = (0..runs.max(1))
-        .map(|_| {
-            let s = std::time::Instant::now();
-            dst.copy_from_slice(std::hint::black_box(&src));
-            std::hint::black_box(&mut dst);
-            s.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    evaluate::median(&mut t)
-}
-
-/// Prints the shader time alone (timestamp queries: median per pass over `runs` frames).
-fn gpu_pass_times(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize) -> Result<(), String> {
-    let names: Vec<&str> = match &*m {
-        Method::FlrGpu { gpu, .. } => gpu.plan().passes().iter().map(|p| p.name()).collect(),
-        _ => return Ok(()),
-    };
-    let mut per_pass: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
-    for _ in 0..runs {
-        m.run(inputs, out)?;
-        let Method::FlrGpu { gpu, .. } = &*m else { return Ok(()) };
-        let Some(t) = gpu.pass_times_ms() else {
-            println!("GPU time: the adapter has no timestamp queries");
-            return Ok(());
-        };
-        for (v, t) in per_pass.iter_mut().zip(t) {
-            v.push(*t);
-        }
-    }
-    let med: Vec<f64> = per_pass.iter_mut().map(|v| evaluate::median(v)).collect();
-    let parts: Vec<String> = names.iter().zip(&med).map(|(n, t)| format!("{n} {t:.3}")).collect();
-    println!("GPU time (timestamps, median of {runs}): {:.3} ms = {} ms", med.iter().sum::<f64>(), parts.join(" + "));
-    Ok(())
-}
-
-/// A synthetic frame with every guide (for benchmarks: content does not change the work).
-fn synthetic(w: usize, h: usize) -> Inputs {
-    let mut s = 0x9E3779B97F4A7C15u64;
-    let mut rnd = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 40) as f32 / (1u64 << 24) as f32
-    };
-    let n = w * h;
-    let mut normal = vec![0f32; 3 * n];
-    let mut depth = vec![0f32; n];
-    let mut position = vec![0f32; 3 * n];
-    let mut ao = vec![0f32; n];
-    let mut noisy = vec![0f32; 3 * n];
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            let r = ((x / 97) + (y / 61)) % 3;
-            let nr = [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]][r];
-            normal[3 * i..3 * i + 3].copy_from_slice(&nr);
-            depth[i] = 2.0 + y as f32 * 0.01 + r as f32;
-            position[3 * i..3 * i + 3].copy_from_slice(&[x as f32 * 0.01, depth[i], y as f32 * 0.01]);
-            ao[i] = 0.5 + 0.5 * ((x as f32) * 0.05).sin().abs();
-            for c in 0..3 {
-                noisy[3 * i + c] = (0.2 + 0.1 * c as f32) * ao[i] * 2.0 * rnd();
-            }
-        }
-    }
-    // a quarter-pixel pan, so temporal methods reproject every pixel
-    let motion = Some(vec![0.25f32; 2 * n]);
-    Inputs {
-        w,
-        h,
-        noisy,
-        normal: Some(normal),
-        depth: Some(depth),
-        position: Some(position),
-        ao: Some(ao),
-        albedo: None,
-        reference: None,
-        motion,
-    }
-}
-
 /// The bundled sample frames: `data/` next to the workspace, or ./data.
 fn data_dir() -> Result<PathBuf, String> {
     let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("data");
@@ -795,15 +327,17 @@ fn run(cli: Cli) -> Result<(), String> {
             }
         }
         Cmd::Report { frames, output, peers, runs, threads, full_strips } => {
-            let mean = write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads), full_strips)?;
+            let mean = report::write_report(&list_frames(&frames)?, &output, &peers, runs, threads_or_all(threads), full_strips)?;
             println!("{}", report::table(&mean, false));
-            println!("{}", report_written(&output));
+            println!("{}", report::report_written(&output));
         }
         Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads, methods } => {
-            advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads), &methods)?
+            advise::advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads), &methods)?
         }
-        Cmd::Bench { method, size, threads, runs, flr, frame } => bench(method.as_str(), &size, threads, runs, &flr, frame.as_deref())?,
-        Cmd::Shaders { out, size, f16_inputs, flr } => shaders(&out, &size, f16_inputs, &flr)?,
+        Cmd::Bench { method, size, threads, runs, flr, frame } => {
+            bench::bench(method.as_str(), &size, threads, runs, &flr, frame.as_deref())?
+        }
+        Cmd::Shaders { out, size, f16_inputs, flr } => shaders::shaders(&out, &size, f16_inputs, &flr)?,
         Cmd::Demo { output, threads, full_strips } => {
             let d = data_dir()?;
             let mut frames = list_frames(std::slice::from_ref(&d))?;
@@ -819,11 +353,11 @@ fn run(cli: Cli) -> Result<(), String> {
                 }
             }
             let t = threads_or_all(threads);
-            let mean = write_report(&frames, &output, &[], 7, t, full_strips)?;
+            let mean = report::write_report(&frames, &output, &[], 7, t, full_strips)?;
             let configs = mean.iter().filter(|r| r.method != "noisy").count();
             println!("lrd demo: {configs} configurations on {} frames (the bundled stills and sequence), {t} thread(s)", frames.len());
             print!("{}", report::summary(&mean));
-            println!("{}", report_written(&output));
+            println!("{}", report::report_written(&output));
         }
     }
     Ok(())
