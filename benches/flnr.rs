@@ -26,7 +26,7 @@ fn bench(c: &mut Criterion) {
         ..Default::default()
     };
     let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3).unwrap(), guides);
-    let fl = Flnr::new(&blob, w, h).unwrap();
+    let fl = Flnr::new(FlnrConfig::new(&blob), w, h).unwrap();
     let mut scratch = vec![0f32; fl.scratch_len()];
     let mut fs = vec![0f64; fl.flr_scratch_len()];
     let mut out = vec![0f32; 3 * n];
@@ -39,7 +39,7 @@ fn bench(c: &mut Criterion) {
         })
     });
     // the network in 2×2 tiles of 256 px with halos (more halo recomputed than the default 512 px tile)
-    let tiled = Flnr::new(&blob, w, h).unwrap().with_tile(256).unwrap();
+    let tiled = Flnr::new(FlnrConfig { tile: 256, ..FlnrConfig::new(&blob) }, w, h).unwrap();
     let mut ws = vec![0f32; tiled.scratch_len()];
     g.bench_function("flnr_tiles_256", |b| {
         b.iter(|| {

@@ -85,6 +85,23 @@ fn tile_start(i: usize, n: usize, len: usize, align: usize) -> usize {
     }
 }
 
+/// FLNR's configuration: the network's weights and the tile size it runs in.
+#[derive(Clone, Copy, Debug)]
+pub struct FlnrConfig<'w> {
+    /// A weight blob from `train/flnr.py` (e.g. the bundled `train/flnr.bin`),
+    /// borrowed for the plan's lifetime.
+    pub weights: &'w [u8],
+    /// Network tile edge in pixels (at least [`MIN_TILE`]; default [`DEFAULT_TILE`]).
+    pub tile: usize,
+}
+
+impl<'w> FlnrConfig<'w> {
+    /// The weights with the default tile.
+    pub fn new(weights: &'w [u8]) -> Self {
+        FlnrConfig { weights, tile: DEFAULT_TILE }
+    }
+}
+
 /// FLNR for one frame size and one set of weights.
 #[derive(Clone, Copy, Debug)]
 pub struct Flnr<'w> {
@@ -102,11 +119,11 @@ pub struct Flnr<'w> {
 }
 
 impl<'w> Flnr<'w> {
-    /// Parses `weights` (a blob from `train/flnr.py`) and plans FLR with the
+    /// Parses the weights (a blob from `train/flnr.py`) and plans FLR with the
     /// window(s) and ε, ϵ it was trained with (block 8; three windows: the
-    /// adaptive window), and the network in [`DEFAULT_TILE`] tiles.
-    pub fn new(weights: &'w [u8], width: usize, height: usize) -> Result<Self, Error> {
-        let net = UNet::parse(weights)?;
+    /// adaptive window), and the network in tiles of `cfg.tile` px.
+    pub fn new(config: FlnrConfig<'w>, width: usize, height: usize) -> Result<Self, Error> {
+        let net = UNet::parse(config.weights)?;
         let q = net.out_channels() / 2;
         if net.in_channels() != IN_CHANNELS || net.out_channels() % 2 != 0 || !(1..=MAX_USER_GUIDES).contains(&q) {
             return Err(Error::InvalidConfig("weights: FLNR needs 8 input channels and 2·Q' outputs, Q' ≤ 4"));
@@ -130,14 +147,14 @@ impl<'w> Flnr<'w> {
         let align = 1 << net.levels();
         let halo = net.receptive_radius().div_ceil(align) * align;
         let fl = Flnr { net, flr, width, height, q, tile: DEFAULT_TILE, halo, region_max: (0, 0) };
-        fl.with_tile(DEFAULT_TILE)
+        fl.with_tile(config.tile)
     }
 
     /// The same plan with the network run in tiles of about `tile` × `tile`
     /// output pixels (at least [`MIN_TILE`]; `usize::MAX`: the whole frame at
     /// once). Larger tiles recompute less halo and need more scratch; every
     /// tile size gives the same output, bit for bit.
-    pub fn with_tile(mut self, tile: usize) -> Result<Self, Error> {
+    fn with_tile(mut self, tile: usize) -> Result<Self, Error> {
         if tile < MIN_TILE {
             return Err(Error::InvalidConfig("tile (at least 64 pixels)"));
         }

@@ -630,6 +630,7 @@ impl GpuPlan {
             empty_blocks: counter(3),
             empty_cells: counter(4),
             dropped_pivots: counter(5),
+            history_rejected: 0,
         }
     }
 }

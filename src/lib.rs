@@ -38,6 +38,7 @@
 pub mod bmfr;
 pub mod config;
 mod convert;
+mod denoiser;
 pub mod error;
 #[cfg(feature = "flnr")]
 pub mod flnr;
@@ -55,6 +56,7 @@ pub mod isa;
 pub mod kernels;
 #[cfg(feature = "flnr")]
 pub mod nn;
+pub mod report;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod reproject;
 #[cfg(feature = "walr")]
@@ -63,13 +65,17 @@ pub mod walr;
 #[cfg(feature = "bmfr")]
 pub use bmfr::{Bmfr, BmfrConfig};
 pub use config::{Blur, FlrConfig, Kernel, Regularization};
+pub use denoiser::{Denoiser, TemporalDenoiser};
 pub use error::{Arg, Error};
+#[cfg(feature = "flnr")]
+pub use flnr::{Flnr, FlnrConfig};
 #[cfg(feature = "flr")]
-pub use flr::{CheckedFrame, Flr, Parts, Report, ScratchLayout, Stage, Stats, StatsSums, Tiled};
+pub use flr::{CheckedFrame, Flr, Parts, ScratchLayout, Stage, Stats, StatsSums, Tiled};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 pub use history::History;
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
+pub use report::Report;
 #[cfg(feature = "walr")]
 pub use walr::{Walr, WalrConfig};
 

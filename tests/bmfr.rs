@@ -107,7 +107,7 @@ fn matches_f64_oracle_without_noise() {
         let b = Bmfr::new(cfg, w, h).unwrap();
         assert_eq!(b.feature_count(), 5);
         let (out, rep) = run(cfg, &f, index);
-        assert_eq!(rep.dropped_features, 0);
+        assert_eq!(rep.dropped_pivots, 0);
         let want = oracle(&b, &f, index);
         let (max, mean) = diff(&out, &want);
         // measured ≤ 3.4e-7 / 7.3e-8 (f32 rounding)
@@ -161,7 +161,7 @@ fn rank_deficient_blocks_are_finite_and_sensible() {
             let (out, rep) = run(cfg, &f, 0);
             assert!(out.iter().all(|v| v.is_finite() && *v >= 0.0));
             if noise == 0.0 {
-                assert!(rep.dropped_features > 0, "the constant normal must be dropped");
+                assert!(rep.dropped_pivots > 0, "the constant normal must be dropped");
             }
             for y in 0..f.h {
                 for x in 0..f.w {

@@ -56,7 +56,7 @@ fn random_blob(q: usize, widths: &[usize]) -> Vec<u8> {
 }
 
 fn run_flnr(blob: &[u8], f: &Owned) -> Result<(Vec<f32>, Report), Error> {
-    let fl = Flnr::new(blob, f.w, f.h)?;
+    let fl = Flnr::new(FlnrConfig::new(blob), f.w, f.h)?;
     let mut scratch = vec![0f32; fl.scratch_len()];
     let mut fs = vec![0f64; fl.flr_scratch_len()];
     let mut out = vec![f32::NAN; 3 * f.w * f.h];
@@ -83,10 +83,10 @@ fn random_weights_run_finite_and_errors_are_typed() {
     let mut odd = random_blob(2, &[4]);
     odd[12] = 3;
     assert!(matches!(run_flnr(&odd, &f), Err(Error::InvalidConfig(_))));
-    assert!(matches!(Flnr::new(&random_blob(5, &[4]), 16, 16), Err(Error::InvalidConfig(_))));
+    assert!(matches!(Flnr::new(FlnrConfig::new(&random_blob(5, &[4])), 16, 16), Err(Error::InvalidConfig(_))));
     // missing AO
     let blob = random_blob(2, &[4]);
-    let fl = Flnr::new(&blob, 16, 16).unwrap();
+    let fl = Flnr::new(FlnrConfig::new(&blob), 16, 16).unwrap();
     let mut scratch = vec![0f32; fl.scratch_len()];
     let mut fs = vec![0f64; fl.flr_scratch_len()];
     let mut out = vec![0f32; 3 * 256];
@@ -99,7 +99,7 @@ fn random_weights_run_finite_and_errors_are_typed() {
 
 /// FLNR with the network in tiles of `tile` pixels (`usize::MAX`: whole frame).
 fn run_tiled(blob: &[u8], f: &Owned, tile: usize) -> (Vec<f32>, usize) {
-    let fl = Flnr::new(blob, f.w, f.h).unwrap().with_tile(tile).unwrap();
+    let fl = Flnr::new(FlnrConfig { tile, ..FlnrConfig::new(blob) }, f.w, f.h).unwrap();
     let mut scratch = vec![f32::NAN; fl.scratch_len()];
     let mut fs = vec![0f64; fl.flr_scratch_len()];
     let mut out = vec![f32::NAN; 3 * f.w * f.h];
@@ -137,7 +137,7 @@ fn tiles_with_halos_equal_the_whole_frame_bit_for_bit() {
     // the halo matters: a tile cut without it would differ (checked by the
     // receptive-radius test below), and tiles below the minimum are refused
     let blob = random_blob(2, &[4, 6, 8]);
-    assert!(matches!(Flnr::new(&blob, 300, 200).unwrap().with_tile(63), Err(Error::InvalidConfig(_))));
+    assert!(matches!(Flnr::new(FlnrConfig { tile: 63, ..FlnrConfig::new(&blob) }, 300, 200), Err(Error::InvalidConfig(_))));
 }
 
 #[test]
@@ -149,7 +149,7 @@ fn split_steps_in_any_tile_order_equal_denoise_bit_for_bit() {
     for &(w, h, tile) in &[(300usize, 200usize, 64usize), (257, 131, 100), (64, 64, 64)] {
         let mut f = Owned::synthetic(w, h, 11, 0.5);
         f.noisy[5] = f32::NAN;
-        let fl = Flnr::new(&blob, w, h).unwrap().with_tile(tile).unwrap();
+        let fl = Flnr::new(FlnrConfig { tile, ..FlnrConfig::new(&blob) }, w, h).unwrap();
         let (whole, _) = run_tiled(&blob, &f, tile);
         let frame = f.frame(INPUT_GUIDES);
         let scale = fl.input_scale(&frame).unwrap();
@@ -185,7 +185,7 @@ fn receptive_radius_is_what_one_input_pixel_reaches() {
     // halo is built from this radius, so it must not be an underestimate
     for (widths, expect) in [(&[4usize][..], 2usize), (&[4, 6][..], 7), (&[4, 6, 8][..], 17)] {
         let blob = random_blob(2, widths);
-        let fl = Flnr::new(&blob, 96, 96).unwrap();
+        let fl = Flnr::new(FlnrConfig::new(&blob), 96, 96).unwrap();
         let net = fl.network();
         assert_eq!(net.receptive_radius(), expect);
         let (w, h) = (96, 96);

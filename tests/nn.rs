@@ -268,10 +268,10 @@ fn version_2_blobs_carry_the_adaptive_window() {
     let net = UNet::parse(&v2).unwrap();
     assert_eq!((net.flr_sigmas(), net.flr_eps()), (&[6f32, 12.0, 20.0][..], [2e-3, 3e-2]));
     // FLNR plans the FLR it was trained with
-    let fl = lrdenoise::flnr::Flnr::new(&v2, 40, 30).unwrap();
+    let fl = lrdenoise::flnr::Flnr::new(lrdenoise::FlnrConfig::new(&v2), 40, 30).unwrap();
     assert_eq!(fl.flr().config().blur, Blur::Adaptive { sigmas: [6.0, 12.0, 20.0] });
     let one = as_v2(&v1, 1, &[10.0], [1e-3, 1e-2]);
-    let fl = lrdenoise::flnr::Flnr::new(&one, 40, 30).unwrap();
+    let fl = lrdenoise::flnr::Flnr::new(lrdenoise::FlnrConfig::new(&one), 40, 30).unwrap();
     assert_eq!(fl.flr().config().blur, Blur::Gaussian { sigma: 10.0, radius: None });
     for (sigmas, eps) in
         [(&[6.0, 12.0][..], [1e-3, 1e-2]), (&[6.0, 6.0, 20.0][..], [1e-3, 1e-2]), (&[12.0][..], [0.0, 1e-2]), (&[][..], [1e-3, 1e-2])]

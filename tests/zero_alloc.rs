@@ -114,7 +114,7 @@ fn flnr_allocates_nothing() {
     let f = Owned::synthetic(150, 91, 2, 0.5);
     // one tile (the default for this size) and 3×2 tiles with halos
     for tile in [lrdenoise::flnr::DEFAULT_TILE, 64] {
-        let fl = Flnr::new(&blob, f.w, f.h).unwrap().with_tile(tile).unwrap();
+        let fl = Flnr::new(FlnrConfig { tile, ..FlnrConfig::new(&blob) }, f.w, f.h).unwrap();
         let mut scratch = vec![0f32; fl.scratch_len()];
         let mut fs = vec![0f64; fl.flr_scratch_len()];
         let mut out = vec![0f32; f.w * f.h * 3];

@@ -329,7 +329,7 @@ impl FlnrRunner {
     pub fn new(weights: Vec<u8>, w: usize, h: usize, threads: usize) -> Result<Self, String> {
         // leaked on purpose: a runner lives as long as the command
         let blob: &'static [u8] = Box::leak(weights.into_boxed_slice());
-        let flnr = lrdenoise::flnr::Flnr::new(blob, w, h).map_err(|e| e.to_string())?;
+        let flnr = lrdenoise::flnr::Flnr::new(lrdenoise::FlnrConfig::new(blob), w, h).map_err(|e| e.to_string())?;
         let (tx, ty) = flnr.tile_grid();
         // more threads than tiles would only hold scratch
         let threads = threads.clamp(1, tx * ty);
@@ -599,7 +599,7 @@ mod tests {
         };
         let (one, t1) = run(1);
         assert_eq!(t1, 1);
-        let fl = lrdenoise::flnr::Flnr::new(crate::methods::BUNDLED_WEIGHTS, w, h).unwrap();
+        let fl = lrdenoise::flnr::Flnr::new(lrdenoise::FlnrConfig::new(crate::methods::BUNDLED_WEIGHTS), w, h).unwrap();
         let tiles = fl.tile_grid().0 * fl.tile_grid().1;
         assert!(tiles >= 2, "{tiles} tile(s): nothing to spread");
         assert!(one.iter().all(|v| v.is_finite()));

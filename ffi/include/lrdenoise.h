@@ -744,7 +744,7 @@ LrdStatus lrd_bmfr_temporal_sizes(const struct LrdBmfrConfig *config,
  * Single-frame BMFR on the calling thread. `index` picks the block-grid
  * offset and the regularisation noise (use the frame number). `out` (3
  * channels) has the frame's size; `frame.guides_low` must be absent.
- * `scratch`: 4-byte aligned, at least `lrd_bmfr_scratch_size` bytes.
+ * `scratch`: 8-byte aligned, at least `lrd_bmfr_scratch_size` bytes.
  * `report` may be NULL; otherwise the run's counts are added to it.
  */
 LrdStatus lrd_bmfr_denoise(const struct LrdBmfrConfig *config,
@@ -760,7 +760,7 @@ LrdStatus lrd_bmfr_denoise(const struct LrdBmfrConfig *config,
  * accumulation, the fit, filtered accumulation, TAA) on the calling thread.
  * `motion` (2 channels: previous minus current pixel position) may be NULL,
  * or have `data == NULL`, for a static camera. `history` is read and
- * advanced; `scratch` (4-byte aligned) and `history->data` must be at least
+ * advanced; `scratch` (8-byte aligned) and `history->data` must be at least
  * the sizes from `lrd_bmfr_temporal_sizes`. `report` may be NULL.
  */
 LrdStatus lrd_bmfr_denoise_temporal(const struct LrdBmfrConfig *config,
@@ -799,7 +799,7 @@ LrdStatus lrd_walr_temporal_sizes(const struct LrdWalrConfig *config,
 /**
  * Single-frame WALR on the calling thread. `index` seeds the replacement
  * averages (use the frame number). `out` (3 channels) has the frame's size;
- * `frame.guides_low` must be absent. `scratch`: 4-byte aligned, at least
+ * `frame.guides_low` must be absent. `scratch`: 8-byte aligned, at least
  * `lrd_walr_scratch_size` bytes. `report` may be NULL.
  */
 LrdStatus lrd_walr_denoise(const struct LrdWalrConfig *config,

@@ -9,15 +9,17 @@
 #![allow(non_camel_case_types)]
 
 use core::ffi::{c_char, c_void};
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+use lrdenoise_core::TemporalDenoiser;
 use lrdenoise_core::{
-    Blur, Error, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Kernel, Layout, Regularization, Report,
+    Blur, Denoiser, Error, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Kernel, Layout, Regularization, Report,
 };
 use std::panic::{catch_unwind, AssertUnwindSafe};
 #[cfg(feature = "flnr")]
 use std::sync::atomic::{AtomicU64, Ordering};
 
 #[cfg(feature = "flnr")]
-use lrdenoise_core::flnr::Flnr;
+use lrdenoise_core::flnr::{Flnr, FlnrConfig};
 
 /// Result of every call. Values are stable across versions.
 #[repr(u32)]
@@ -437,6 +439,7 @@ fn write_report(report: *mut LrdReport, r: Report) {
         out.empty_blocks += r.empty_blocks;
         out.empty_cells += r.empty_cells;
         out.dropped_pivots += r.dropped_pivots;
+        out.history_rejected += r.history_rejected;
     }
 }
 
@@ -857,6 +860,25 @@ fn f32_bytes(len: usize) -> Result<usize, LrdStatus> {
     len.checked_mul(4).ok_or(LRD_STATUS_INVALID_ARGUMENT)
 }
 
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+fn f64_bytes(len: usize) -> Result<usize, LrdStatus> {
+    len.checked_mul(8).ok_or(LRD_STATUS_INVALID_ARGUMENT)
+}
+
+/// `bytes` bytes at `ptr` as f64 scratch (8-byte aligned, at least `needed` bytes).
+///
+/// # Safety
+/// `ptr` must point to `bytes` writable bytes, exclusively ours for `'a`.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+unsafe fn f64_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Result<&'a mut [f64], LrdStatus> {
+    check_scratch(ptr)?;
+    if bytes < needed {
+        return Err(LRD_STATUS_BUFFER_TOO_SMALL);
+    }
+    // SAFETY: non-null, 8-byte aligned, at least `needed` bytes (caller's contract).
+    Ok(unsafe { core::slice::from_raw_parts_mut(ptr as *mut f64, needed / 8) })
+}
+
 /// `bytes` bytes at `ptr` as f32 (4-byte aligned, at least `needed` bytes).
 ///
 /// # Safety
@@ -876,97 +898,44 @@ unsafe fn f32_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Resul
     Ok(unsafe { core::slice::from_raw_parts_mut(ptr as *mut f32, needed / 4) })
 }
 
-/// What the C entry points of the methods with a temporal pipeline (BMFR,
-/// WALR) call; one implementation of the entry points serves both.
+/// BMFR's and WALR's single frame at a frame index (their per-frame grid
+/// offsets), over the f64 scratch of [`Denoiser`]; everything else the C
+/// entry points of both call goes through the core's [`TemporalDenoiser`].
 #[cfg(any(feature = "bmfr", feature = "walr"))]
-trait Temporal {
-    type Report;
-    fn scratch_len(&self) -> usize;
-    fn temporal_scratch_len(&self) -> usize;
-    fn history_len(&self) -> usize;
-    fn denoise(&self, f: &Frame<'_>, index: u32, scratch: &mut [f32], out: &mut ImageViewMut<'_>) -> Result<Self::Report, Error>;
-    fn denoise_temporal(
-        &self,
-        f: &Frame<'_>,
-        motion: Option<&ImageView<'_>>,
-        history: &mut lrdenoise_core::History<'_>,
-        scratch: &mut [f32],
-        out: &mut ImageViewMut<'_>,
-    ) -> Result<Self::Report, Error>;
-    /// Adds a run's counts to the C report.
-    fn add(r: &Self::Report, out: &mut LrdReport);
+trait AtIndex: TemporalDenoiser {
+    fn denoise_at(&self, f: &Frame<'_>, index: u32, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error>;
 }
 
-/// Forwards the trait to the method's own functions of the same names.
 #[cfg(any(feature = "bmfr", feature = "walr"))]
-macro_rules! temporal_method {
-    ($ty:ty, $report:ty, |$r:ident, $o:ident| $add:block) => {
-        impl Temporal for $ty {
-            type Report = $report;
-            fn scratch_len(&self) -> usize {
-                <$ty>::scratch_len(self)
+macro_rules! at_index {
+    ($ty:ty) => {
+        impl AtIndex for $ty {
+            fn denoise_at(&self, f: &Frame<'_>, index: u32, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+                let len = <$ty>::scratch_len(self);
+                let got = 2 * scratch.len();
+                let s = bytemuck::cast_slice_mut::<f64, f32>(scratch).get_mut(..len).ok_or(Error::ScratchTooSmall { needed: len, got })?;
+                <$ty>::denoise(self, f, index, s, out)
             }
-            fn temporal_scratch_len(&self) -> usize {
-                <$ty>::temporal_scratch_len(self)
-            }
-            fn history_len(&self) -> usize {
-                <$ty>::history_len(self)
-            }
-            fn denoise(&self, f: &Frame<'_>, index: u32, s: &mut [f32], o: &mut ImageViewMut<'_>) -> Result<$report, Error> {
-                <$ty>::denoise(self, f, index, s, o)
-            }
-            fn denoise_temporal(
-                &self,
-                f: &Frame<'_>,
-                m: Option<&ImageView<'_>>,
-                h: &mut lrdenoise_core::History<'_>,
-                s: &mut [f32],
-                o: &mut ImageViewMut<'_>,
-            ) -> Result<$report, Error> {
-                <$ty>::denoise_temporal(self, f, m, h, s, o)
-            }
-            fn add($r: &$report, $o: &mut LrdReport) $add
         }
     };
 }
 
 #[cfg(feature = "bmfr")]
-temporal_method!(lrdenoise_core::Bmfr, lrdenoise_core::bmfr::Report, |r, out| {
-    out.nonfinite_noisy += r.nonfinite_noisy;
-    out.nonfinite_guides += r.nonfinite_guides;
-    out.fallback_pixels += r.fallback_pixels;
-    out.empty_blocks += r.empty_blocks;
-    out.dropped_pivots += r.dropped_features;
-    out.history_rejected += r.history_rejected;
-});
-
+at_index!(lrdenoise_core::Bmfr);
 #[cfg(feature = "walr")]
-temporal_method!(lrdenoise_core::Walr, lrdenoise_core::walr::Report, |r, out| {
-    out.nonfinite_noisy += r.nonfinite_noisy;
-    out.nonfinite_guides += r.nonfinite_guides;
-    out.fallback_pixels += r.fallback_pixels;
-    out.history_rejected += r.history_rejected;
-});
+at_index!(lrdenoise_core::Walr);
 
 #[cfg(any(feature = "bmfr", feature = "walr"))]
-fn add_report<M: Temporal>(report: *mut LrdReport, r: &M::Report) {
-    // SAFETY: NULL is allowed; otherwise the caller passes a valid, exclusive pointer.
-    if let Some(out) = unsafe { report.as_mut() } {
-        M::add(r, out);
-    }
-}
-
-#[cfg(any(feature = "bmfr", feature = "walr"))]
-fn scratch_size<M: Temporal>(plan: M, bytes: *mut usize) -> Result<(), LrdStatus> {
-    let b = f32_bytes(plan.scratch_len())?;
+fn scratch_size<M: Denoiser>(plan: M, bytes: *mut usize) -> Result<(), LrdStatus> {
+    let b = f64_bytes(plan.scratch_len())?;
     // SAFETY: checked for NULL; caller passes a valid pointer.
     *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
     Ok(())
 }
 
 #[cfg(any(feature = "bmfr", feature = "walr"))]
-fn temporal_sizes<M: Temporal>(plan: M, scratch_bytes: *mut usize, history_bytes: *mut usize) -> Result<(), LrdStatus> {
-    let (s, h) = (f32_bytes(plan.temporal_scratch_len())?, f32_bytes(plan.history_len())?);
+fn temporal_sizes<M: TemporalDenoiser>(plan: M, scratch_bytes: *mut usize, history_bytes: *mut usize) -> Result<(), LrdStatus> {
+    let (s, h) = (f64_bytes(plan.temporal_scratch_len())?, f32_bytes(plan.history_len())?);
     // SAFETY: checked for NULL; caller passes valid pointers.
     unsafe {
         *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
@@ -981,7 +950,7 @@ fn temporal_sizes<M: Temporal>(plan: M, scratch_bytes: *mut usize, history_bytes
 /// The pointers satisfy the contracts of the `lrd_*_denoise` entry points.
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 #[allow(clippy::too_many_arguments)]
-unsafe fn denoise_single<M: Temporal>(
+unsafe fn denoise_single<M: AtIndex>(
     plan: impl FnOnce(u32, u32) -> Result<M, LrdStatus>,
     frame: *const LrdFrame,
     index: u32,
@@ -998,10 +967,10 @@ unsafe fn denoise_single<M: Temporal>(
         let m = plan(out.width, out.height)?;
         check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
         let f = frame_views(frame, false)?;
-        let s = f32_buffer(scratch, scratch_bytes, f32_bytes(m.scratch_len())?)?;
+        let s = f64_buffer(scratch, scratch_bytes, f64_bytes(m.scratch_len())?)?;
         let mut o = view_mut(out, 0, out.height as usize)?;
-        let r = m.denoise(&f, index, s, &mut o).map_err(status_of)?;
-        add_report::<M>(report, &r);
+        let r = m.denoise_at(&f, index, s, &mut o).map_err(status_of)?;
+        write_report(report, r);
     }
     Ok(())
 }
@@ -1013,7 +982,7 @@ unsafe fn denoise_single<M: Temporal>(
 /// points; the history buffer must not overlap the scratch or the images.
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 #[allow(clippy::too_many_arguments)]
-unsafe fn denoise_temporal<M: Temporal>(
+unsafe fn denoise_temporal<M: TemporalDenoiser>(
     plan: impl FnOnce(u32, u32) -> Result<M, LrdStatus>,
     frame: *const LrdFrame,
     motion: *const LrdImage,
@@ -1051,13 +1020,13 @@ unsafe fn denoise_temporal<M: Temporal>(
             Some(mi) => view(mi, 2)?,
             None => None,
         };
-        let s = f32_buffer(scratch, scratch_bytes, f32_bytes(m.temporal_scratch_len())?)?;
+        let s = f64_buffer(scratch, scratch_bytes, f64_bytes(m.temporal_scratch_len())?)?;
         let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(m.history_len())?)?;
         let mut h = lrdenoise_core::History::resume(hd, hist.frames);
         let mut o = view_mut(out, 0, out.height as usize)?;
         let r = m.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
         hist.frames = h.frames();
-        add_report::<M>(report, &r);
+        write_report(report, r);
     }
     Ok(())
 }
@@ -1114,7 +1083,7 @@ pub unsafe extern "C" fn lrd_bmfr_temporal_sizes(
 /// Single-frame BMFR on the calling thread. `index` picks the block-grid
 /// offset and the regularisation noise (use the frame number). `out` (3
 /// channels) has the frame's size; `frame.guides_low` must be absent.
-/// `scratch`: 4-byte aligned, at least `lrd_bmfr_scratch_size` bytes.
+/// `scratch`: 8-byte aligned, at least `lrd_bmfr_scratch_size` bytes.
 /// `report` may be NULL; otherwise the run's counts are added to it.
 #[cfg(feature = "bmfr")]
 #[no_mangle]
@@ -1135,7 +1104,7 @@ pub unsafe extern "C" fn lrd_bmfr_denoise(
 /// accumulation, the fit, filtered accumulation, TAA) on the calling thread.
 /// `motion` (2 channels: previous minus current pixel position) may be NULL,
 /// or have `data == NULL`, for a static camera. `history` is read and
-/// advanced; `scratch` (4-byte aligned) and `history->data` must be at least
+/// advanced; `scratch` (8-byte aligned) and `history->data` must be at least
 /// the sizes from `lrd_bmfr_temporal_sizes`. `report` may be NULL.
 #[cfg(feature = "bmfr")]
 #[no_mangle]
@@ -1304,7 +1273,7 @@ pub unsafe extern "C" fn lrd_walr_temporal_sizes(
 
 /// Single-frame WALR on the calling thread. `index` seeds the replacement
 /// averages (use the frame number). `out` (3 channels) has the frame's size;
-/// `frame.guides_low` must be absent. `scratch`: 4-byte aligned, at least
+/// `frame.guides_low` must be absent. `scratch`: 8-byte aligned, at least
 /// `lrd_walr_scratch_size` bytes. `report` may be NULL.
 #[cfg(feature = "walr")]
 #[no_mangle]
@@ -1366,12 +1335,8 @@ fn flnr_plan<'w>(weights: *const u8, weights_bytes: usize, tile: u32, width: u32
     // SAFETY: the caller passes `weights_bytes` readable bytes at `weights`,
     // unchanged for the duration of the call (the header's contract).
     let blob = unsafe { core::slice::from_raw_parts(weights, weights_bytes) };
-    let fl = Flnr::new(blob, width as usize, height as usize).map_err(status_of)?;
-    if tile == 0 {
-        Ok(fl)
-    } else {
-        fl.with_tile(tile as usize).map_err(status_of)
-    }
+    let tile = if tile == 0 { lrdenoise_core::flnr::DEFAULT_TILE } else { tile as usize };
+    Flnr::new(FlnrConfig { weights: blob, tile }, width as usize, height as usize).map_err(status_of)
 }
 
 /// Byte offsets of a threaded FLNR scratch: the header (input scales), FLR's

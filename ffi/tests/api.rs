@@ -248,7 +248,7 @@ fn bmfr_matches_the_rust_api() {
     unsafe {
         let mut bytes = 0usize;
         assert_eq!(lrd_bmfr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
-        let mut cs = vec![0f32; bytes / 4];
+        let mut cs = vec![0f64; bytes / 8];
         let sp = cs.as_mut_ptr() as *mut _;
         let mut rep = LrdReport::default();
         assert_eq!(lrd_bmfr_denoise(&cfg, &frame, 3, &o, sp, bytes, &mut rep), LrdStatus::LRD_STATUS_OK);
@@ -276,8 +276,8 @@ fn bmfr_matches_the_rust_api() {
         // temporal: three frames through both APIs
         let (mut sb, mut hb) = (0usize, 0usize);
         assert_eq!(lrd_bmfr_temporal_sizes(&cfg, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_OK);
-        assert_eq!((sb, hb), (4 * b.temporal_scratch_len(), 4 * b.history_len()));
-        let mut ts = vec![0f32; sb / 4];
+        assert_eq!((sb, hb), (8 * b.temporal_scratch_len().div_ceil(2), 4 * b.history_len()));
+        let mut ts = vec![0f64; sb / 8];
         let mut hd = vec![0f32; hb / 4];
         let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
         let mut rhd = vec![0f32; b.history_len()];
@@ -305,7 +305,7 @@ fn bmfr_matches_the_rust_api() {
         }
         assert_eq!(
             (rep.history_rejected, rep.dropped_pivots, rep.fallback_pixels),
-            (rrep.history_rejected, rrep.dropped_features, rrep.fallback_pixels)
+            (rrep.history_rejected, rrep.dropped_pivots, rrep.fallback_pixels)
         );
         let mut short = hist;
         short.bytes -= 4;
@@ -360,7 +360,7 @@ fn walr_matches_the_rust_api() {
     unsafe {
         let mut bytes = 0usize;
         assert_eq!(lrd_walr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
-        let mut cs = vec![0f32; bytes / 4];
+        let mut cs = vec![0f64; bytes / 8];
         let sp = cs.as_mut_ptr() as *mut _;
         assert_eq!(lrd_walr_denoise(&cfg, &frame, 2, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_OK);
         assert_eq!(out, want);
@@ -377,8 +377,8 @@ fn walr_matches_the_rust_api() {
 
         let (mut sb, mut hb) = (0usize, 0usize);
         assert_eq!(lrd_walr_temporal_sizes(&cfg, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_OK);
-        assert_eq!((sb, hb), (4 * wl.temporal_scratch_len(), 4 * wl.history_len()));
-        let mut ts = vec![0f32; sb / 4];
+        assert_eq!((sb, hb), (8 * wl.temporal_scratch_len().div_ceil(2), 4 * wl.history_len()));
+        let mut ts = vec![0f64; sb / 8];
         let mut hd = vec![0f32; hb / 4];
         let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
         let mut rhd = vec![0f32; wl.history_len()];
@@ -497,7 +497,9 @@ fn flnr_matches_the_rust_api() {
     frame.guides.ao = img(ao.as_ptr(), w, h, 1);
 
     // the Rust API
-    let fl = Flnr::new(&blob, w as usize, h as usize).unwrap().with_tile(tile as usize).unwrap();
+    let fl =
+        Flnr::new(lrdenoise_core::FlnrConfig { tile: tile as usize, ..lrdenoise_core::FlnrConfig::new(&blob) }, w as usize, h as usize)
+            .unwrap();
     let guides = lrdenoise_core::Guides {
         normal: Some(lrdenoise_core::ImageView::interleaved(&normal, w as usize, h as usize, 3).unwrap()),
         depth: Some(lrdenoise_core::ImageView::interleaved(&depth, w as usize, h as usize, 1).unwrap()),

@@ -226,7 +226,7 @@ fn temporal_outputs_that_overlap_are_refused() {
     let (mut sb, mut hb) = (0, 0);
     unsafe {
         assert_eq!(lrd_bmfr_temporal_sizes(&cfg, w, h, &mut sb, &mut hb), OK);
-        let mut scratch = vec![0f32; sb / 4];
+        let mut scratch = vec![0f64; sb / 8];
         let mut history = vec![0f32; hb / 4];
         let sp = scratch.as_mut_ptr() as *mut _;
         let mut out = vec![0f32; 3 * n];

@@ -109,7 +109,7 @@ fuzz_target!(|d: &[u8]| {
         let st = unsafe { lrd_bmfr_temporal_sizes(&b, w, h, &mut sb, &mut hb) };
         assert_ne!(st, LrdStatus::LRD_STATUS_PANIC);
         if st == LrdStatus::LRD_STATUS_OK {
-            let (mut s, mut hd) = (vec![0f32; sb / 4], vec![0f32; hb / 4]);
+            let (mut s, mut hd) = (vec![0f64; sb / 8], vec![0f32; hb / 4]);
             let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
             for k in 0..2 {
                 let m = if d[22] % 2 == 0 { null() } else { &mv as *const LrdImage };
@@ -141,7 +141,7 @@ fuzz_target!(|d: &[u8]| {
         let st = unsafe { lrd_walr_temporal_sizes(&c, w, h, &mut sb, &mut hb) };
         assert_ne!(st, LrdStatus::LRD_STATUS_PANIC);
         if st == LrdStatus::LRD_STATUS_OK {
-            let (mut s, mut hd) = (vec![0f32; sb / 4], vec![0f32; hb / 4]);
+            let (mut s, mut hd) = (vec![0f64; sb / 8], vec![0f32; hb / 4]);
             let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
             let r = unsafe { lrd_walr_denoise_temporal(&c, &wf, null(), &mut hist, &o, s.as_mut_ptr() as *mut _, sb, null_mut()) };
             assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);

@@ -140,33 +140,7 @@ impl BmfrConfig {
     }
 }
 
-/// What happened during a run.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Report {
-    /// Input pixels with a NaN/Inf noisy value (excluded from the fit).
-    pub nonfinite_noisy: u64,
-    /// Input pixels with a NaN/Inf guide value (excluded from the fit).
-    pub nonfinite_guides: u64,
-    /// Output pixels whose own guides were not finite: given the block mean.
-    pub fallback_pixels: u64,
-    /// Blocks without any valid sample (output 0 there).
-    pub empty_blocks: u64,
-    /// Features dropped by the QR pivot test, summed over blocks.
-    pub dropped_features: u64,
-    /// Temporal only: pixels without usable history (disocclusion, first frame).
-    pub history_rejected: u64,
-}
-
-impl core::ops::AddAssign for Report {
-    fn add_assign(&mut self, o: Report) {
-        self.nonfinite_noisy += o.nonfinite_noisy;
-        self.nonfinite_guides += o.nonfinite_guides;
-        self.fallback_pixels += o.fallback_pixels;
-        self.empty_blocks += o.empty_blocks;
-        self.dropped_features += o.dropped_features;
-        self.history_rejected += o.history_rejected;
-    }
-}
+pub use crate::report::Report;
 
 /// A frame checked against the plan: the noisy view and one view per guide channel.
 #[derive(Clone, Copy, Debug)]
@@ -378,7 +352,7 @@ impl Bmfr {
             let shrink = Shrinkage { kappa: self.cfg.shrinkage, samples: g.valid };
             let fit = lstsq_shrunk_ld(wb.a, wb.ld, b * b, m, 3, self.cfg.pivot_tol, simd, shrink, Some(&dots[..m + 3]), &mut coef[..m * 3])
                 .ok_or(Error::Unsupported("QR sizes"))?;
-            rep.dropped_features += fit.dropped.count_ones() as u64;
+            rep.dropped_pivots += fit.dropped.count_ones() as u64;
         } else {
             prefetch(2);
             rep.empty_blocks += 1;

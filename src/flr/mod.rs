@@ -76,33 +76,7 @@ impl Grid {
     }
 }
 
-/// What happened during a run (summed over tiles).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Report {
-    /// Input pixels with a NaN/Inf noisy value (excluded from the fit).
-    pub nonfinite_noisy: u64,
-    /// Input pixels with a NaN/Inf guide value (excluded from the fit).
-    pub nonfinite_guides: u64,
-    /// Output pixels whose own guides were not finite: given the local mean.
-    pub fallback_pixels: u64,
-    /// Blocks without any valid pixel.
-    pub empty_blocks: u64,
-    /// Cells whose window held no valid pixel (output 0 there).
-    pub empty_cells: u64,
-    /// Guide coefficients dropped by the Cholesky pivot floor (rank deficiency).
-    pub dropped_pivots: u64,
-}
-
-impl core::ops::AddAssign for Report {
-    fn add_assign(&mut self, o: Report) {
-        self.nonfinite_noisy += o.nonfinite_noisy;
-        self.nonfinite_guides += o.nonfinite_guides;
-        self.fallback_pixels += o.fallback_pixels;
-        self.empty_blocks += o.empty_blocks;
-        self.empty_cells += o.empty_cells;
-        self.dropped_pivots += o.dropped_pivots;
-    }
-}
+pub use crate::report::Report;
 
 /// `mask[i] = 0` where `v[i]` is NaN or ±Inf. Written as a multiply by 0/1 so
 /// it vectorises to compare + and + multiply with plain stores (a conditional

@@ -207,29 +207,7 @@ impl WalrConfig {
     }
 }
 
-/// What happened during a run.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Report {
-    /// Input pixels with a NaN/Inf noisy value (excluded from every average).
-    pub nonfinite_noisy: u64,
-    /// Input pixels with a NaN/Inf guide value (treated as "no geometry").
-    pub nonfinite_guides: u64,
-    /// Output pixels without a single usable sample in their window (output
-    /// 0), or with NaN/Inf guides (output: the weighted mean light of the
-    /// surrounding geometry).
-    pub fallback_pixels: u64,
-    /// Temporal only: pixels without usable history (disocclusion, first frame).
-    pub history_rejected: u64,
-}
-
-impl core::ops::AddAssign for Report {
-    fn add_assign(&mut self, o: Self) {
-        self.nonfinite_noisy += o.nonfinite_noisy;
-        self.nonfinite_guides += o.nonfinite_guides;
-        self.fallback_pixels += o.fallback_pixels;
-        self.history_rejected += o.history_rejected;
-    }
-}
+pub use crate::report::Report;
 
 /// A frame checked against the plan: the noisy view and one view per guide channel.
 #[derive(Clone, Copy, Debug)]

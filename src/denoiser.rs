@@ -1,0 +1,131 @@
+//! One shape for every method: a config plus a frame size give a plan
+//! (`Flr::new`, `Bmfr::new`, `Walr::new`, `Flnr::new`); the plan says how
+//! much scratch it needs, in f64; `denoise(frame, scratch, out)` returns the
+//! shared [`Report`]. Temporal methods add a caller-owned [`History`].
+//!
+//! The methods' own entry points stay (BMFR and WALR take a frame index for
+//! their per-frame grid offsets; FLNR's takes its two scratch types apart);
+//! the traits are what generic callers (the C API, benches, a renderer that
+//! switches methods) program against.
+
+use crate::error::Error;
+use crate::guides::Frame;
+use crate::image::{ImageView, ImageViewMut};
+use crate::report::Report;
+
+/// A single-frame denoiser planned for one output size.
+pub trait Denoiser {
+    /// Output size (width, height).
+    fn size(&self) -> (usize, usize);
+    /// f64 values of scratch [`Denoiser::denoise`] needs.
+    fn scratch_len(&self) -> usize;
+    /// Denoises `frame` into `out` (the output size, at least 3 channels).
+    /// Allocates nothing.
+    fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error>;
+}
+
+/// A denoiser with a temporal pipeline over a caller-owned history.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+pub trait TemporalDenoiser: Denoiser {
+    /// f32 values of the [`History`] buffer.
+    fn history_len(&self) -> usize;
+    /// f64 values of scratch [`TemporalDenoiser::denoise_temporal`] needs.
+    fn temporal_scratch_len(&self) -> usize;
+    /// One frame of the pipeline; advances `history`. `motion` (2 channels:
+    /// previous − current pixel position) may be `None` for a static camera.
+    fn denoise_temporal(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error>;
+}
+
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+use crate::history::History;
+
+/// The first `len` f32 of an f64 scratch (`len.div_ceil(2)` f64).
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+fn as_f32(scratch: &mut [f64], len: usize) -> Result<&mut [f32], Error> {
+    let (needed, got) = (len.div_ceil(2), scratch.len());
+    let s = scratch.get_mut(..needed).ok_or(Error::ScratchTooSmall { needed, got })?;
+    Ok(&mut bytemuck::cast_slice_mut::<f64, f32>(s)[..len])
+}
+
+#[cfg(feature = "flr")]
+impl Denoiser for crate::flr::Flr {
+    fn size(&self) -> (usize, usize) {
+        crate::flr::Flr::size(self)
+    }
+    fn scratch_len(&self) -> usize {
+        crate::flr::Flr::scratch_len(self)
+    }
+    fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        crate::flr::Flr::denoise(self, frame, scratch, out)
+    }
+}
+
+/// BMFR and WALR: the single frame is frame index 0 of their grid offsets.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+macro_rules! temporal_method {
+    ($ty:ty) => {
+        impl Denoiser for $ty {
+            fn size(&self) -> (usize, usize) {
+                <$ty>::size(self)
+            }
+            fn scratch_len(&self) -> usize {
+                <$ty>::scratch_len(self).div_ceil(2)
+            }
+            fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+                <$ty>::denoise(self, frame, 0, as_f32(scratch, <$ty>::scratch_len(self))?, out)
+            }
+        }
+        impl TemporalDenoiser for $ty {
+            fn history_len(&self) -> usize {
+                <$ty>::history_len(self)
+            }
+            fn temporal_scratch_len(&self) -> usize {
+                <$ty>::temporal_scratch_len(self).div_ceil(2)
+            }
+            fn denoise_temporal(
+                &self,
+                frame: &Frame<'_>,
+                motion: Option<&ImageView<'_>>,
+                history: &mut History<'_>,
+                scratch: &mut [f64],
+                out: &mut ImageViewMut<'_>,
+            ) -> Result<Report, Error> {
+                let s = as_f32(scratch, <$ty>::temporal_scratch_len(self))?;
+                <$ty>::denoise_temporal(self, frame, motion, history, s, out)
+            }
+        }
+    };
+}
+
+#[cfg(feature = "bmfr")]
+temporal_method!(crate::bmfr::Bmfr);
+#[cfg(feature = "walr")]
+temporal_method!(crate::walr::Walr);
+
+#[cfg(feature = "flnr")]
+impl Denoiser for crate::flnr::Flnr<'_> {
+    fn size(&self) -> (usize, usize) {
+        self.flr().size()
+    }
+    /// FLR's f64 scratch, then the network's f32 scratch packed two per f64.
+    fn scratch_len(&self) -> usize {
+        self.flr_scratch_len() + crate::flnr::Flnr::scratch_len(self).div_ceil(2)
+    }
+    fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        let needed = Denoiser::scratch_len(self);
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let (flr, net) = scratch.split_at_mut(self.flr_scratch_len());
+        let net_len = crate::flnr::Flnr::scratch_len(self);
+        let net = &mut bytemuck::cast_slice_mut::<f64, f32>(net)[..net_len];
+        crate::flnr::Flnr::denoise(self, frame, net, flr, out)
+    }
+}
