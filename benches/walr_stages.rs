@@ -1,6 +1,6 @@
 //! Times WALR's stages separately at 1920×1080 on one thread (a profiling
 //! aid, not a benchmark: `cargo bench --bench walr` is the benchmark).
-//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo run --release --example walr_stages [W H] [trace|notrace] [f16] [fixed]`
+//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo bench --bench walr_stages [-- [W H] [trace|notrace] [f16] [fixed]]`
 //! (fixed: the fixed blend of the last two windows, not the adaptive one;
 //! with `WALR_BLEND_TIMES=1` set, the adaptive blend's two passes are timed
 //! apart on every run).

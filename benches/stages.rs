@@ -1,6 +1,6 @@
 //! Times each FLR stage on a synthetic 1920×1080 frame (one thread; the
 //! fastest of 15 runs (default) per stage, as this is a shared virtual machine).
-//! `cargo run --release --example stages [WIDTH HEIGHT [RUNS]]` (more runs for `perf`)
+//! `cargo bench --bench stages [-- WIDTH HEIGHT [RUNS]]` (more runs for `perf`)
 use lrdenoise::*;
 use std::time::Instant;
 

@@ -1,6 +1,6 @@
 //! FLNR's network in tiles: scratch and time per tile size at a frame size.
 //!
-//! `cargo run --release --example flnr_tiles [WIDTH HEIGHT [RUNS]]` (default
+//! `cargo bench --bench flnr_tiles [-- WIDTH HEIGHT [RUNS]]` (default
 //! 1920 1080 3): for tiles of 128, 256, 384, 512, 768 px and the whole frame, the
 //! scratch [`Flnr::scratch_len`] asks for and the median time of `RUNS`
 //! denoises on one thread.
@@ -29,7 +29,7 @@ fn main() {
     let mut out = vec![0f32; 3 * n];
     let mut first: Option<Vec<f32>> = None;
     for tile in [128, 256, 384, 512, 768, usize::MAX] {
-        let fl = Flnr::new(&blob, w, h).unwrap().with_tile(tile).unwrap();
+        let fl = Flnr::new(FlnrConfig { tile, ..FlnrConfig::new(&blob) }, w, h).unwrap();
         let mut scratch = vec![0f32; fl.scratch_len()];
         let mut fs = vec![0f64; fl.flr_scratch_len()];
         let mut times = Vec::new();

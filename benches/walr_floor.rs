@@ -15,7 +15,7 @@
 //! A second run adds the one thing no implementation can skip either: each
 //! tap's edge-stopping weight from the geometry (untraced: the tap itself).
 //!
-//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo run --release --example walr_floor [PLANES]`
+//! `RUSTFLAGS="-C target-cpu=x86-64-v3" cargo bench --bench walr_floor [-- PLANES]`
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -125,7 +125,8 @@ fn run<const P: usize, const WEIGHTS: bool>() {
 }
 
 fn main() {
-    let planes = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(15usize);
+    // (`cargo bench` adds `--bench` to the arguments)
+    let planes = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(15usize);
     match planes {
         14 => (run::<14, false>(), run::<14, true>()),
         16 => (run::<16, false>(), run::<16, true>()),

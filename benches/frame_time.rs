@@ -1,10 +1,10 @@
 //! Times `Flr::denoise` with the defaults (adaptive window, AO
 //! demodulation), the defaults without the AO demodulation (`ao_demodulation:
 //! None`), one σ = 12 px window and the defaults plus the AO-free candidate
-//! (`adaptive_without_ao`) on the synthetic 1920×1080 frame of `examples/stages`
+//! (`adaptive_without_ao`) on the synthetic 1920×1080 frame of `benches/stages.rs`
 //! (planar normal + depth + AO, interleaved RGB in and out), one thread; the
 //! fastest of RUNS (default 15) each, alternating the configurations.
-//! `cargo run --release --example frame_time [WIDTH HEIGHT [RUNS]]`
+//! `cargo bench --bench frame_time [-- WIDTH HEIGHT [RUNS]]`
 use lrdenoise::*;
 use std::time::Instant;
 
