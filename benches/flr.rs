@@ -74,7 +74,7 @@ fn bytes(w: usize, h: usize, q: usize, elem: usize) -> u64 {
 
 /// One Gaussian window of σ = 12 px (not the default adaptive window).
 fn single(q: usize) -> FlrConfig {
-    FlrConfig { blur: Blur::Gaussian { sigma: lrdenoise::config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::with_guides(set(q)) }
+    FlrConfig { blur: Blur::Gaussian { sigma: lrdenoise::flr::config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::with_guides(set(q)) }
 }
 
 fn bench_frames(c: &mut Criterion) {

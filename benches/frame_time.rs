@@ -24,7 +24,7 @@ fn main() {
     let configs = [
         ("defaults", FlrConfig::default()),
         ("no ao demodulation", FlrConfig { ao_demodulation: None, ..FlrConfig::default() }),
-        ("sigma 12", FlrConfig { blur: Blur::Gaussian { sigma: config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::default() }),
+        ("sigma 12", FlrConfig { blur: Blur::Gaussian { sigma: flr::config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::default() }),
         ("without ao", FlrConfig { adaptive_without_ao: true, ..FlrConfig::default() }),
     ];
     let flrs: Vec<Flr> = configs.iter().map(|(_, c)| Flr::new(*c, w, h).unwrap()).collect();

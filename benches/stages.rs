@@ -13,7 +13,7 @@ fn main() {
     // Planar guides (as in `benches/flr.rs`): normal x, y, z, depth, AO.
     let g: Vec<f32> = (0..5 * n).map(|i| ((i / 97) % 7) as f32 * 0.3 + (i % w) as f32 * 1e-3).collect();
     // one σ = 12 px window: the stage sequence below is the single-window one
-    let cfg = FlrConfig { blur: Blur::Gaussian { sigma: config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::default() };
+    let cfg = FlrConfig { blur: Blur::Gaussian { sigma: flr::config::DEFAULT_SIGMA, radius: None }, ..FlrConfig::default() };
     let flr = Flr::new(cfg, w, h).unwrap();
     let view = |ch: usize, first: usize| {
         let l = Layout { offset: first * n, ..Layout::planar(w, h) };

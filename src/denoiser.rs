@@ -10,7 +10,9 @@
 
 use crate::error::Error;
 use crate::guides::Frame;
-use crate::image::{ImageView, ImageViewMut};
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+use crate::image::ImageView;
+use crate::image::ImageViewMut;
 use crate::report::Report;
 
 /// A single-frame denoiser planned for one output size.

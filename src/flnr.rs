@@ -34,11 +34,12 @@
 //! (`cargo run --release --example flnr_tiles` times the tile sizes). The
 //! tiles are independent: [`Flnr::network_tile`] runs one, on any thread.
 
-use crate::config::{Blur, FlrConfig, Regularization};
 use crate::error::{Arg, Error};
+use crate::flr::config::{Blur, FlrConfig};
 use crate::flr::{Flr, Report};
 use crate::guides::{Frame, GuideSet, MAX_USER_GUIDES};
 use crate::image::{ImageView, ImageViewMut, Layout};
+use crate::kernels::solve::Regularization;
 use crate::nn::UNet;
 
 /// Guides the network reads.

@@ -841,6 +841,7 @@ impl<'a> ImageViewMut<'a> {
 
 /// Row bands of one output image for concurrent writers: each band is a view
 /// of its own rows only. Made from an image whose rows do not overlap.
+#[cfg(feature = "flr")]
 #[derive(Debug)]
 pub(crate) struct RowBands<'a, 'o> {
     f32s: Option<*mut f32>,
@@ -852,6 +853,7 @@ pub(crate) struct RowBands<'a, 'o> {
     _out: core::marker::PhantomData<&'a mut ImageViewMut<'o>>,
 }
 
+#[cfg(feature = "flr")]
 impl<'a, 'o> RowBands<'a, 'o> {
     /// Bands of `out`; `None` unless its rows are separable.
     pub(crate) fn new(out: &'a mut ImageViewMut<'o>) -> Option<Self> {

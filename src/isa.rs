@@ -143,3 +143,13 @@ mod tests {
         assert_eq!(super::f16c_available(), std::is_x86_feature_detected!("f16c"));
     }
 }
+
+/// Which kernel implementation runs (for testing SIMD against scalar).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Kernel {
+    /// SIMD where the block size allows it, scalar elsewhere.
+    #[default]
+    Simd,
+    /// Portable scalar code everywhere (the oracle for the SIMD paths).
+    Scalar,
+}

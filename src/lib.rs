@@ -36,7 +36,6 @@
 
 #[cfg(feature = "bmfr")]
 pub mod bmfr;
-pub mod config;
 mod convert;
 mod denoiser;
 pub mod error;
@@ -44,8 +43,6 @@ pub mod error;
 pub mod flnr;
 #[cfg(feature = "flr")]
 pub mod flr;
-#[cfg(feature = "flr")]
-pub mod gpu;
 pub mod guides;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod hash;
@@ -64,17 +61,22 @@ pub mod walr;
 
 #[cfg(feature = "bmfr")]
 pub use bmfr::{Bmfr, BmfrConfig};
-pub use config::{Blur, FlrConfig, Kernel, Regularization};
-pub use denoiser::{Denoiser, TemporalDenoiser};
+pub use denoiser::Denoiser;
+#[cfg(any(feature = "bmfr", feature = "walr"))]
+pub use denoiser::TemporalDenoiser;
 pub use error::{Arg, Error};
 #[cfg(feature = "flnr")]
 pub use flnr::{Flnr, FlnrConfig};
+#[cfg(feature = "flr")]
+pub use flr::config::{Blur, FlrConfig};
 #[cfg(feature = "flr")]
 pub use flr::{CheckedFrame, Flr, Parts, ScratchLayout, Stage, Stats, StatsSums, Tiled};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 pub use history::History;
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
+pub use isa::Kernel;
+pub use kernels::solve::Regularization;
 pub use report::Report;
 #[cfg(feature = "walr")]
 pub use walr::{Walr, WalrConfig};

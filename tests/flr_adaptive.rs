@@ -266,7 +266,7 @@ fn shadow_and_flat_regions_choose_their_window() {
 fn tiled_equals_whole_frame() {
     // (61, 45, 8) with σ 3/6/11 fits every window on the block grid; the others pool.
     // The awkward sizes run the default sigmas (the default window).
-    let d = lrdenoise::config::DEFAULT_SIGMAS;
+    let d = lrdenoise::flr::config::DEFAULT_SIGMAS;
     for (w, h, block, sigmas) in [
         (61, 45, 8, [3.0, 6.0, 11.0]),
         (75, 53, 8, [6.0, 12.0, 20.0]),

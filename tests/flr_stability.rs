@@ -129,7 +129,7 @@ proptest! {
         let g = transformed(&f, a, b, which);
         // one window, and the default adaptive window (its bias and variance
         // estimates are differences of predictions: invariant as well)
-        let adaptive = FlrConfig { blur: Blur::Adaptive { sigmas: lrdenoise::config::DEFAULT_SIGMAS }, ..cfg(set, block) };
+        let adaptive = FlrConfig { blur: Blur::Adaptive { sigmas: lrdenoise::flr::config::DEFAULT_SIGMAS }, ..cfg(set, block) };
         for c in [cfg(set, block), adaptive] {
             let (o1, _) = run(c, &f);
             let (o2, _) = run(c, &g);
@@ -198,7 +198,7 @@ proptest! {
 fn ao_demodulation_applies_where_it_should_and_stays_finite() {
     let f = Owned::synthetic(45, 37, 12, 0.5);
     let on = cfg(GuideSet::NORMAL_DEPTH_AO, 8).ao_demodulation;
-    assert_eq!(on, Some(lrdenoise::config::DEFAULT_AO_OFFSET));
+    assert_eq!(on, Some(lrdenoise::flr::config::DEFAULT_AO_OFFSET));
     let same = |c: FlrConfig| {
         let (a, _) = run(c, &f);
         let (b, _) = run(FlrConfig { ao_demodulation: None, ..c }, &f);
@@ -216,7 +216,7 @@ fn ao_demodulation_applies_where_it_should_and_stays_finite() {
     g.noisy[3 * 50] = 3e38; // y / s would overflow for a small offset
     for kernel in [Kernel::Simd, Kernel::Scalar] {
         for offset in [on, Some(1e-6), Some(1e6)] {
-            for blur in [cfg(GuideSet::NORMAL_DEPTH_AO, 8).blur, Blur::Adaptive { sigmas: lrdenoise::config::DEFAULT_SIGMAS }] {
+            for blur in [cfg(GuideSet::NORMAL_DEPTH_AO, 8).blur, Blur::Adaptive { sigmas: lrdenoise::flr::config::DEFAULT_SIGMAS }] {
                 let c = FlrConfig { kernel, blur, ao_demodulation: offset, ..cfg(GuideSet::NORMAL_DEPTH_AO, 8) };
                 let (out, rep) = run(c, &g);
                 assert!(all_finite(&out), "{kernel:?} {offset:?} {blur:?}");

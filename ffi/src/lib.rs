@@ -1627,7 +1627,7 @@ pub struct LrdGpuDispatch {
 }
 
 #[cfg(feature = "flr")]
-const _: () = assert!(lrdenoise_core::gpu::MAX_PASSES == 15 && lrdenoise_core::gpu::PARAMS_BYTES == 1424);
+const _: () = assert!(lrdenoise_core::flr::gpu::MAX_PASSES == 15 && lrdenoise_core::flr::gpu::PARAMS_BYTES == 1424);
 
 /// Fills `out` with the GPU dispatch description of `config` for
 /// `width`×`height` output frames (at most 8 guide channels), with
@@ -1641,7 +1641,7 @@ pub unsafe extern "C" fn lrd_gpu_dispatch(
     input_format: u32,
     out: *mut LrdGpuDispatch,
 ) -> LrdStatus {
-    use lrdenoise_core::gpu::{GpuLayouts, GpuPlan, InputFormat};
+    use lrdenoise_core::flr::gpu::{GpuLayouts, GpuPlan, InputFormat};
     guard(|| {
         let input = match input_format {
             0 => InputFormat::F32,
@@ -1683,7 +1683,7 @@ pub unsafe extern "C" fn lrd_gpu_dispatch(
 /// FLR's WGSL shader module (static, NUL-terminated).
 #[no_mangle]
 pub extern "C" fn lrd_gpu_wgsl() -> *const c_char {
-    concat!(include_str!("../../src/gpu/flr.wgsl"), "\0").as_ptr() as *const c_char
+    concat!(include_str!("../../src/flr/flr.wgsl"), "\0").as_ptr() as *const c_char
 }
 
 /// The library version, e.g. "0.1.0" (static, NUL-terminated).

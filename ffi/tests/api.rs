@@ -153,13 +153,13 @@ fn entry_points_validate_everything() {
 
 #[test]
 fn gpu_dispatch_description() {
-    use lrdenoise_core::gpu::{GpuLayouts, GpuPlan};
+    use lrdenoise_core::flr::gpu::{GpuLayouts, GpuPlan};
     let cfg = lrd_flr_config_default();
     let mut d = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
     assert_eq!(unsafe { lrd_gpu_dispatch(&cfg, 100, 70, 0, d.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
     let d = unsafe { d.assume_init() };
     let plan = GpuPlan::new(lrdenoise_core::FlrConfig::default(), 100, 70).unwrap();
-    let layouts = GpuLayouts::planar(100, 70, lrdenoise_core::gpu::InputFormat::F32);
+    let layouts = GpuLayouts::planar(100, 70, lrdenoise_core::flr::gpu::InputFormat::F32);
     assert_eq!(d.pass_count as usize, plan.passes().len());
     for (c, r) in d.passes.iter().zip(plan.passes().iter()) {
         assert_eq!(unsafe { CStr::from_ptr(c.entry) }, r.entry);
@@ -170,7 +170,7 @@ fn gpu_dispatch_description() {
     }
     assert_eq!(&d.params[..], plan.params(&layouts).unwrap().as_bytes());
     let wgsl = unsafe { CStr::from_ptr(lrd_gpu_wgsl()) }.to_str().unwrap();
-    assert_eq!(wgsl, lrdenoise_core::gpu::FLR_WGSL);
+    assert_eq!(wgsl, lrdenoise_core::flr::gpu::FLR_WGSL);
     // errors
     let mut out = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
     assert_eq!(unsafe { lrd_gpu_dispatch(null(), 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_NULL_POINTER);

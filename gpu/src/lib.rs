@@ -1,6 +1,6 @@
 //! # lrdenoise-gpu
 //!
-//! Runs FLR's WGSL compute shaders ([`lrdenoise::gpu`]) on a `wgpu` device:
+//! Runs FLR's WGSL compute shaders ([`lrdenoise::flr::gpu`]) on a `wgpu` device:
 //! the dispatch description of [`GpuPlan`] executed as written, so this crate
 //! is also the reference for engines that run the shaders with their own API.
 //! [`shaders`] converts the module to SPIR-V, MSL and HLSL with naga.
@@ -24,11 +24,11 @@
 //! # Ok::<(), lrdenoise_gpu::GpuError>(())
 //! ```
 
-use lrdenoise::gpu::{Access, GpuLayouts, GpuPlan, InputFormat, FLR_WGSL};
+use lrdenoise::flr::gpu::{Access, GpuLayouts, GpuPlan, InputFormat, FLR_WGSL};
 use lrdenoise::{Arg, Error, FlrConfig, Frame, ImageViewMut, Report};
 use std::fmt;
 
-pub use lrdenoise::gpu;
+pub use lrdenoise::flr::gpu;
 
 /// What can go wrong on the GPU path.
 #[derive(Debug)]
@@ -78,7 +78,7 @@ pub struct GpuFlr {
     /// Sample format of the uploaded inputs.
     input: InputFormat,
     /// Parameter blocks: [fit guides = output guides (upsample 1 only), separate fit guides].
-    params: [Option<lrdenoise::gpu::GpuParams>; 2],
+    params: [Option<lrdenoise::flr::gpu::GpuParams>; 2],
     /// Which of `params` the uniform buffer holds.
     current: Option<usize>,
     /// Timestamp queries (two per pass) and their resolve buffer, when the device has them.
@@ -92,7 +92,7 @@ pub struct GpuFlr {
 }
 
 /// Most timestamps written per frame: the beginning and end of each pass.
-const TIMESTAMPS: u32 = 2 * lrdenoise::gpu::MAX_PASSES as u32;
+const TIMESTAMPS: u32 = 2 * lrdenoise::flr::gpu::MAX_PASSES as u32;
 
 /// Requests the default adapter and a device with default limits.
 pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError> {
@@ -222,7 +222,7 @@ impl GpuFlr {
         });
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("lrdenoise readback"),
-            size: out_bytes + lrdenoise::gpu::STATS_BYTES + TIMESTAMPS as u64 * 8,
+            size: out_bytes + lrdenoise::flr::gpu::STATS_BYTES + TIMESTAMPS as u64 * 8,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -379,8 +379,8 @@ impl GpuFlr {
         self.encode(&mut enc);
         let out_bytes = self.buffers[7].size();
         enc.copy_buffer_to_buffer(&self.buffers[7], 0, &self.readback, 0, out_bytes);
-        enc.copy_buffer_to_buffer(&self.buffers[3], 0, &self.readback, out_bytes, lrdenoise::gpu::STATS_BYTES);
-        let ts_at = out_bytes + lrdenoise::gpu::STATS_BYTES;
+        enc.copy_buffer_to_buffer(&self.buffers[3], 0, &self.readback, out_bytes, lrdenoise::flr::gpu::STATS_BYTES);
+        let ts_at = out_bytes + lrdenoise::flr::gpu::STATS_BYTES;
         if let Some((set, resolve)) = &self.timer {
             enc.resolve_query_set(set, 0..TIMESTAMPS, resolve, 0);
             enc.copy_buffer_to_buffer(resolve, 0, &self.readback, ts_at, TIMESTAMPS as u64 * 8);

@@ -10,6 +10,7 @@
 #[path = "../../tests/common/mod.rs"]
 mod common;
 use common::*;
+use lrdenoise::flr::gpu;
 use lrdenoise::*;
 use lrdenoise_gpu::{GpuError, GpuFlr};
 
@@ -297,7 +298,7 @@ fn f16_inputs() {
 
 /// The adaptive window (the library's default) on top of `c`.
 fn adaptive(c: FlrConfig) -> FlrConfig {
-    FlrConfig { blur: Blur::Adaptive { sigmas: lrdenoise::config::DEFAULT_SIGMAS }, ..c }
+    FlrConfig { blur: Blur::Adaptive { sigmas: lrdenoise::flr::config::DEFAULT_SIGMAS }, ..c }
 }
 
 fn f16_case(f: &Owned, c: FlrConfig) {

@@ -31,10 +31,10 @@
 pub mod features;
 pub mod temporal;
 
-use crate::config::Kernel;
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
+use crate::isa::Kernel;
 use crate::kernels::qr::{lstsq_shrunk_ld, Shrinkage, MAX_FEATURES};
 use features::{apply_block, gather_block, Band, FeatureSet, Sources};
 

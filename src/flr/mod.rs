@@ -29,21 +29,24 @@
 //! blend weighs that fit as a fourth candidate. See [`adaptive`].
 
 pub mod adaptive;
+pub mod config;
+pub mod gpu;
 pub mod schedule;
 
 pub use schedule::{Stage, Tiled};
 
-use crate::config::{Blur, FlrConfig, Kernel};
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
+use crate::isa::Kernel;
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides, RowOut};
-use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, Taps};
+use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, radius_to_cells, Taps, GAUSSIAN_TRUNCATION};
 use crate::kernels::demodulation;
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cell_without, solve_cells4, solve_cells4_without, CellOutcome, SolveParams};
 use crate::kernels::{dispatch_q, model_len, CellLayout};
 use adaptive::MAX_CANDIDATES;
+use config::{Blur, FlrConfig};
 
 /// Most window sizes one run fits ([`Blur::Adaptive`]).
 pub const MAX_SCALES: usize = 3;
@@ -234,7 +237,7 @@ impl Flr {
                         grids[s] = Grid { cells_x: fine.cells_x.div_ceil(2), cells_y: fine.cells_y.div_ceil(2), factor: 2 };
                     }
                     let cell = b * grids[s].factor;
-                    taps[s] = Taps::gaussian(sigma as f64 / cell as f64, crate::config::radius_to_cells(3.0 * sigma, cell));
+                    taps[s] = Taps::gaussian(sigma as f64 / cell as f64, radius_to_cells(GAUSSIAN_TRUNCATION * sigma, cell));
                 }
                 taps
             }

@@ -3,7 +3,7 @@
 //! tile of one stage ([`Tiled::run`]) on a scratch that records the frame's
 //! progress. The C tiled API, [`Flr::denoise_parallel`] (generic over the
 //! caller's executor) and the CLI's threads all run these tiles; the GPU pass
-//! list names the stage each pass belongs to ([`crate::flr::gpu`]).
+//! list names the stage each pass belongs to ([`super::gpu`]).
 //!
 //! | stage | tiles | reads | writes |
 //! |---|---|---|---|
@@ -222,13 +222,13 @@ fn plan_key(flr: &Flr, workers: usize, len: usize) -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
     let c = flr.config();
     let (sigmas, radius) = match c.blur {
-        crate::config::Blur::Gaussian { sigma, radius } => ([sigma, 0.0, 0.0], radius.unwrap_or(-1.0)),
-        crate::config::Blur::Box { radius } => ([0.0; 3], radius),
-        crate::config::Blur::Adaptive { sigmas } => (sigmas, -2.0),
+        super::config::Blur::Gaussian { sigma, radius } => ([sigma, 0.0, 0.0], radius.unwrap_or(-1.0)),
+        super::config::Blur::Box { radius } => ([0.0; 3], radius),
+        super::config::Blur::Adaptive { sigmas } => (sigmas, -2.0),
     };
     let (eps0, eps1) = match c.regularization {
-        crate::config::Regularization::Normalized { eps_mul, eps_add } => (eps_mul, eps_add),
-        crate::config::Regularization::Tikhonov { eps } => (-1.0, eps),
+        crate::kernels::solve::Regularization::Normalized { eps_mul, eps_add } => (eps_mul, eps_add),
+        crate::kernels::solve::Regularization::Tikhonov { eps } => (-1.0, eps),
     };
     let words = [
         flr.width as u64,
@@ -241,7 +241,7 @@ fn plan_key(flr: &Flr, workers: usize, len: usize) -> u64 {
         u64::from(sigmas[2].to_bits()) | u64::from(radius.to_bits()) << 32,
         eps0.to_bits(),
         eps1.to_bits(),
-        u64::from(c.clamp_negative) | u64::from(c.adaptive_without_ao) << 1 | ((c.kernel == crate::config::Kernel::Scalar) as u64) << 2,
+        u64::from(c.clamp_negative) | u64::from(c.adaptive_without_ao) << 1 | ((c.kernel == crate::isa::Kernel::Scalar) as u64) << 2,
         u64::from(c.ao_demodulation.map_or(u32::MAX, f32::to_bits)),
         c.guides.channels() as u64 | u64::from(c.guides.ao_channel().is_some()) << 8,
         workers as u64,

@@ -21,7 +21,7 @@
 //! square root and division are correctly rounded, so the lanes and the tail
 //! give the same values. Cost at 1080p (x86-64-v3, Zen 4, one thread):
 //! +1.0–2.2 ms (~6 %), mostly the square root and the one division per pixel.
-//! The GPU shaders (`src/gpu/flr.wgsl`, `demod_*`) do the same arithmetic.
+//! The GPU shaders (`src/flr/flr.wgsl`, `demod_*`) do the same arithmetic.
 
 use wide::f32x8;
 

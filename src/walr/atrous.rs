@@ -40,8 +40,8 @@
 
 use super::store::Store;
 use super::{Prepared, Storage, Walr, G_INV_SCALE, G_N, G_P, G_VALID};
-use crate::config::Kernel;
 use crate::error::Error;
+use crate::isa::Kernel;
 use wide::f32x8;
 
 /// The 8 non-centre tap directions, in accumulation order.

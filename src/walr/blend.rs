@@ -141,7 +141,7 @@ impl Walr {
     ) -> Result<Report, Error> {
         let (zl, ps) = (self.z_row_values(), self.plane_stride());
         let gl = self.geo_row_len();
-        let simd = self.cfg.kernel == crate::config::Kernel::Simd;
+        let simd = self.cfg.kernel == crate::isa::Kernel::Simd;
         // true sample counts from the stored W (f16 stores 9^−t W_t)
         let t = self.cfg.iterations as u32;
         let true_w = |t: u32| (0..t).fold(1f32, |a, _| a / S::STEP);
@@ -207,7 +207,7 @@ impl Walr {
         let (w, h) = (self.width, self.height);
         let (zl, ps, tl) = (self.z_row_values(), self.plane_stride(), self.z_row_len());
         let rad = self.blend_radius();
-        let simd = self.cfg.kernel == crate::config::Kernel::Simd;
+        let simd = self.cfg.kernel == crate::isa::Kernel::Simd;
         let (scale, clamp) = (p.light_scale, self.cfg.clamp_negative);
         let fix = |v: f32| output_value(v, scale, clamp);
         for r in 0..out.height() {

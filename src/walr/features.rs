@@ -313,7 +313,7 @@ impl Walr {
             }
             let z = &mut z_rows[r * zl..(r + 1) * zl];
             let mut x0 = 0;
-            if self.cfg.kernel == crate::config::Kernel::Simd {
+            if self.cfg.kernel == crate::isa::Kernel::Simd {
                 while x0 + 8 <= w {
                     let (bad_guides, bad_noisy) = self.features_group8(p, geo, z, x0, cd.is_some(), inv_light);
                     rep.nonfinite_guides += bad_guides as u64;

@@ -57,10 +57,10 @@ mod regress;
 mod store;
 pub mod temporal;
 
-use crate::config::Kernel;
 use crate::error::{Arg, Error};
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
+use crate::isa::Kernel;
 
 pub use temporal::{History, TemporalConfig};
 

@@ -3,9 +3,9 @@
 
 use super::store::Store;
 use super::{Prepared, Report, Storage, Walr, GEO_FIXED, G_VALID};
-use crate::config::Kernel;
 use crate::error::Error;
 use crate::image::ImageViewMut;
+use crate::isa::Kernel;
 use crate::kernels::cholesky::{factor_floor, forward, substitute, Lane};
 use wide::f32x8;
 

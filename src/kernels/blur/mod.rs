@@ -9,10 +9,26 @@
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-use crate::config::MAX_RADIUS_CELLS;
 use crate::isa::Isa;
 use core::ops::Range;
 use wide::f64x4;
+
+/// Largest blur radius on the cell grid, in cells.
+pub const MAX_RADIUS_CELLS: usize = 64;
+
+/// A Gaussian window is truncated at this many σ (unless given a radius).
+pub const GAUSSIAN_TRUNCATION: f32 = 3.0;
+
+/// ⌈radius / block⌉ cells (a hair under a whole number of cells stays it);
+/// `usize::MAX` for a radius that is not finite and non-negative.
+pub fn radius_to_cells(radius: f32, block: usize) -> usize {
+    let cells = libm::ceilf(radius / block as f32 - 1e-4);
+    if cells.is_finite() && cells >= 0.0 {
+        cells as usize
+    } else {
+        usize::MAX
+    }
+}
 
 /// Gaussian taps `w[0..=r]` for offsets `0..=r` (symmetric), normalised so the
 /// full 1-D kernel sums to 1.

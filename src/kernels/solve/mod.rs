@@ -13,10 +13,22 @@ mod avx2;
 
 use super::cholesky::{self, F64Lanes};
 use super::CellLayout;
-use crate::config::Regularization;
 use crate::guides::MAX_GUIDES;
 use crate::isa::Isa;
 use wide::f64x4;
+
+/// How the per-cell normal equations are regularised.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Regularization {
+    /// The normalized-correlation regularized inverse (appendix eqs. 12–23):
+    /// `eps_mul` is ε (multiplicative, eq. 18), `eps_add` is ϵ (additive,
+    /// eqs. 18 and 22). Guides are standardised per frame first, so the result
+    /// does not depend on the world origin or the units of any guide.
+    Normalized { eps_mul: f64, eps_add: f64 },
+    /// Textbook Tikhonov (eq. 11): `(XᵀWX + ε I)⁻¹ XᵀWY` on the guides exactly
+    /// as given, weights normalised to sum 1.
+    Tikhonov { eps: f64 },
+}
 
 const N1: usize = MAX_GUIDES + 1;
 

@@ -5,6 +5,9 @@
 
 use crate::error::Error;
 use crate::guides::GuideSet;
+use crate::isa::Kernel;
+use crate::kernels::blur::{radius_to_cells, GAUSSIAN_TRUNCATION, MAX_RADIUS_CELLS};
+use crate::kernels::solve::Regularization;
 
 /// The window over which each local regression is fitted.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -30,29 +33,6 @@ impl Blur {
             _ => 1,
         }
     }
-}
-
-/// How the per-cell normal equations are regularised.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Regularization {
-    /// The normalized-correlation regularized inverse (appendix eqs. 12–23):
-    /// `eps_mul` is ε (multiplicative, eq. 18), `eps_add` is ϵ (additive,
-    /// eqs. 18 and 22). Guides are standardised per frame first, so the result
-    /// does not depend on the world origin or the units of any guide.
-    Normalized { eps_mul: f64, eps_add: f64 },
-    /// Textbook Tikhonov (eq. 11): `(XᵀWX + ε I)⁻¹ XᵀWY` on the guides exactly
-    /// as given, weights normalised to sum 1.
-    Tikhonov { eps: f64 },
-}
-
-/// Which kernel implementation runs (for testing SIMD against scalar).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Kernel {
-    /// SIMD where the block size allows it, scalar elsewhere.
-    #[default]
-    Simd,
-    /// Portable scalar code everywhere (the oracle for the SIMD paths).
-    Scalar,
 }
 
 /// Everything that defines an FLR run.
@@ -140,9 +120,6 @@ impl Default for FlrConfig {
     }
 }
 
-/// Largest blur radius on the cell grid, in cells.
-pub const MAX_RADIUS_CELLS: usize = 64;
-
 impl FlrConfig {
     /// The default configuration with another guide set.
     pub fn with_guides(guides: GuideSet) -> Self {
@@ -224,21 +201,10 @@ impl FlrConfig {
     /// Window half-width on the cell grid: ⌈radius / B⌉ (the largest window's).
     pub fn radius_cells(&self) -> usize {
         let r = match self.blur {
-            Blur::Gaussian { sigma, radius } => radius.unwrap_or(3.0 * sigma),
+            Blur::Gaussian { sigma, radius } => radius.unwrap_or(GAUSSIAN_TRUNCATION * sigma),
             Blur::Box { radius } => radius,
-            Blur::Adaptive { sigmas } => 3.0 * sigmas[2],
+            Blur::Adaptive { sigmas } => GAUSSIAN_TRUNCATION * sigmas[2],
         };
         radius_to_cells(r, self.block)
-    }
-}
-
-/// ⌈radius / block⌉ cells (a hair under a whole number of cells stays it);
-/// `usize::MAX` for a radius that is not finite and non-negative.
-pub(crate) fn radius_to_cells(radius: f32, block: usize) -> usize {
-    let cells = libm::ceilf(radius / block as f32 - 1e-4);
-    if cells.is_finite() && cells >= 0.0 {
-        cells as usize
-    } else {
-        usize::MAX
     }
 }

@@ -22,16 +22,17 @@
 //! accuracy drops, as for any f32 implementation, for guides whose offset
 //! from the frame's reference sample dwarfs their local variation.
 
-use crate::config::{FlrConfig, Regularization};
+use super::config::FlrConfig;
 use crate::error::Error;
 use crate::flr::{Flr, Grid, Report, MAX_SCALES};
 use crate::image::Layout;
 use crate::kernels::blur::Taps;
+use crate::kernels::solve::Regularization;
 use crate::kernels::{model_len, moment_count};
 
 /// The FLR shader module: entry points `reference`, `moments`, `finish_stats`,
 /// `blur_rows`, `blur_cols`, `solve`, `apply`.
-pub const FLR_WGSL: &str = include_str!("gpu/flr.wgsl");
+pub const FLR_WGSL: &str = include_str!("flr.wgsl");
 
 /// Most guide channels the shaders take (their arrays are sized for it).
 pub const GPU_MAX_GUIDES: usize = 8;
