@@ -95,26 +95,89 @@ impl FlrArgs {
             Some(d) => Err(format!("--device: '{d}' is not cpu or gpu")),
         }
     }
-    fn has_flr_flags(&self) -> bool {
-        self.guides.is_some()
-            || self.block.is_some()
-            || self.sigma.is_some()
-            || self.radius.is_some()
-            || self.box_radius.is_some()
-            || self.regularization.is_some()
-            || self.upsample.is_some()
-            || self.without_ao
-            || self.ao_demodulation.is_some()
+    /// Each method flag, whether it was given, and the methods that read it:
+    /// the one list the checks and their messages come from.
+    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 20] {
+        use Family::*;
+        [
+            ("--guides", self.guides.is_some(), &[Flr, Bmfr, Walr]),
+            ("--block", self.block.is_some(), &[Flr, Bmfr]),
+            ("--sigma", self.sigma.is_some(), &[Flr]),
+            ("--radius", self.radius.is_some(), &[Flr]),
+            ("--box", self.box_radius.is_some(), &[Flr]),
+            ("--regularization", self.regularization.is_some(), &[Flr]),
+            ("--upsample", self.upsample.is_some(), &[Flr]),
+            ("--without-ao", self.without_ao, &[Flr]),
+            ("--ao-demodulation", self.ao_demodulation.is_some(), &[Flr]),
+            // (only flr runs on the GPU: Method::build says so for the others)
+            ("--device", self.device.is_some(), &[Flr, Bmfr, Walr, Flnr]),
+            ("--shrinkage", self.shrinkage.is_some(), &[Bmfr]),
+            ("--iterations", self.iterations.is_some(), &[Walr]),
+            ("--near", self.near.is_some(), &[Walr]),
+            ("--far", self.far.is_some(), &[Walr]),
+            ("--no-tracing", self.no_tracing, &[Walr]),
+            ("--storage", self.storage.is_some(), &[Walr]),
+            ("--sdf-step", self.sdf_step.is_some(), &[Walr]),
+            ("--epsilon", self.epsilon.is_some(), &[Walr]),
+            ("--previous-weight", self.previous_weight.is_some(), &[Walr]),
+            ("--weights", self.weights.is_some(), &[Flnr]),
+        ]
     }
-    fn has_walr_flags(&self) -> bool {
-        self.iterations.is_some()
-            || self.near.is_some()
-            || self.far.is_some()
-            || self.no_tracing
-            || self.storage.is_some()
-            || self.sdf_step.is_some()
-            || self.epsilon.is_some()
-            || self.previous_weight.is_some()
+
+    /// Refuses the flags `family` does not read, naming whose they are and what `family` takes.
+    fn only_for(&self, family: Family) -> Result<(), String> {
+        let flags = self.flags();
+        let foreign: Vec<_> = flags.iter().filter(|(_, given, owners)| *given && !owners.contains(&family)).collect();
+        let Some((flag, _, owners)) = foreign.first() else { return Ok(()) };
+        let whose: Vec<&str> = owners.iter().map(|o| o.upper()).collect();
+        let article = if whose[0].starts_with('F') { "an" } else { "a" };
+        let also: Vec<&str> = foreign[1..].iter().map(|(f, _, _)| *f).collect();
+        let also = match also.len() {
+            0 => String::new(),
+            1 => format!(" (so is {})", also[0]),
+            _ => format!(" (so are {})", also.join(", ")),
+        };
+        // (--device cpu is accepted everywhere; only flr takes --device gpu)
+        let takes: Vec<&str> = flags
+            .iter()
+            .filter(|(f, _, o)| o.contains(&family) && (*f != "--device" || family == Family::Flr))
+            .map(|(f, _, _)| *f)
+            .collect();
+        let takes = takes.join(", ");
+        Err(format!(
+            "{flag} is {article} {} flag, not one of {}'s{also}; {} takes {takes}",
+            whose.join(" and "),
+            family.upper(),
+            family.lower()
+        ))
+    }
+}
+
+/// The methods as their flags see them (a temporal pipeline reads its single-frame method's flags).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Family {
+    Flr,
+    Bmfr,
+    Walr,
+    Flnr,
+}
+
+impl Family {
+    fn upper(self) -> &'static str {
+        match self {
+            Family::Flr => "FLR",
+            Family::Bmfr => "BMFR",
+            Family::Walr => "WALR",
+            Family::Flnr => "FLNR",
+        }
+    }
+    fn lower(self) -> &'static str {
+        match self {
+            Family::Flr => "flr",
+            Family::Bmfr => "bmfr",
+            Family::Walr => "walr",
+            Family::Flnr => "flnr",
+        }
     }
 }
 
@@ -196,14 +259,7 @@ impl FlrArgs {
         if let Some(m) = inputs.missing(&guides) {
             return Err(format!("--guides asks for '{m}' but the frame has no '{m}' layer"));
         }
-        if self.has_walr_flags() {
-            return Err(
-                "--iterations, --near, --far, --no-tracing, --storage, --sdf-step, --epsilon and --previous-weight are WALR flags".into()
-            );
-        }
-        if self.shrinkage.is_some() {
-            return Err("--shrinkage is a BMFR flag".into());
-        }
+        self.only_for(Family::Flr)?;
         let mut c = FlrConfig::with_guides(guides);
         if let Some(b) = self.block {
             c.block = b;
@@ -212,7 +268,7 @@ impl FlrArgs {
             (Some(r), None) => Blur::Box { radius: r },
             (Some(_), Some(_)) => return Err("--box and --sigma are two different windows: give one".into()),
             (None, None) if self.radius.is_none() => c.blur,
-            (None, None) => Blur::Gaussian { sigma: lrdenoise::config::DEFAULT_SIGMA, radius: self.radius },
+            (None, None) => Blur::Gaussian { sigma: lrdenoise::flr::config::DEFAULT_SIGMA, radius: self.radius },
             (None, Some(s)) => match parse_sigmas(s)? {
                 Blur::Gaussian { sigma, .. } => Blur::Gaussian { sigma, radius: self.radius },
                 _ if self.radius.is_some() => {
@@ -238,22 +294,7 @@ impl FlrArgs {
 
 /// BMFR's configuration from the shared flags.
 pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
-    if a.sigma.is_some()
-        || a.radius.is_some()
-        || a.box_radius.is_some()
-        || a.regularization.is_some()
-        || a.upsample.is_some()
-        || a.without_ao
-        || a.ao_demodulation.is_some()
-    {
-        return Err(
-            "--sigma, --radius, --box, --regularization, --upsample, --without-ao and --ao-demodulation are FLR flags; bmfr takes --guides, --block and --shrinkage"
-                .into(),
-        );
-    }
-    if a.has_walr_flags() {
-        return Err("--iterations, --near, --far, --no-tracing, --storage, --sdf-step, --epsilon and --previous-weight are WALR flags; bmfr takes --guides, --block and --shrinkage".into());
-    }
+    a.only_for(Family::Bmfr)?;
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
         None => GuideSet {
@@ -276,18 +317,7 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
 
 /// WALR's configuration from the shared flags.
 pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
-    if a.sigma.is_some()
-        || a.radius.is_some()
-        || a.box_radius.is_some()
-        || a.regularization.is_some()
-        || a.upsample.is_some()
-        || a.block.is_some()
-        || a.shrinkage.is_some()
-        || a.without_ao
-        || a.ao_demodulation.is_some()
-    {
-        return Err("--block, --sigma, --radius, --box, --regularization, --upsample, --without-ao, --ao-demodulation and --shrinkage are not WALR flags; walr takes --guides, --iterations, --near, --far, --no-tracing, --storage".into());
-    }
+    a.only_for(Family::Walr)?;
     let guides = match &a.guides {
         Some(s) => parse_guides(s)?,
         None => GuideSet { normal: true, position: true, depth: inputs.depth.is_some(), ..GuideSet::NONE },
@@ -508,9 +538,7 @@ impl Method {
             }
             _ if a.gpu()? => Err(format!("--device gpu: only flr runs on the GPU, not {name}")),
             "flnr" => {
-                if a.has_flr_flags() || a.has_walr_flags() {
-                    return Err("flnr takes only --weights (σ, ε, ϵ come with the weights; the guides are normal, depth, ao)".into());
-                }
+                a.only_for(Family::Flnr)?;
                 if let Some(m) = inputs.missing(&lrdenoise::flnr::INPUT_GUIDES) {
                     return Err(format!("flnr needs '{m}' but the frame has no '{m}' layer"));
                 }

@@ -9,7 +9,7 @@ use std::path::Path;
 /// `lrd shaders`: the shader module in four languages plus `dispatch.md`, the
 /// buffers, bindings, passes and parameter block for one frame size.
 pub fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Result<(), String> {
-    use lrdenoise::gpu::{GpuLayouts, GpuPlan, InputFormat};
+    use lrdenoise::flr::gpu::{GpuLayouts, GpuPlan, InputFormat};
     let (w, h) = parse_size(size)?;
     // a frame with every guide, so the guide set is --guides (default normal,depth,ao)
     let probe = Inputs {
@@ -40,7 +40,7 @@ pub fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Resul
         "# FLR dispatch for {w}x{h}, {} ({} guide channels)\n\n\
          One bind group for every pass; binding i = the i-th buffer below. Inputs planar f32 \
          ({input:?} inputs, GpuLayouts::planar); other layouts: set the offsets and strides of the parameter block \
-         (lrdenoise::gpu::GpuPlan::params).\n\n| binding | buffer | access | bytes |\n|---:|---|---|---:|\n",
+         (lrdenoise::flr::gpu::GpuPlan::params).\n\n| binding | buffer | access | bytes |\n|---:|---|---|---:|\n",
         methods::flag_line(&cfg),
         plan.guide_channels()
     );
@@ -51,7 +51,7 @@ pub fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Resul
     for p in plan.passes().iter() {
         md += &format!("| `{}` | {} x {} x {} |\n", p.name(), p.workgroups[0], p.workgroups[1], p.workgroups[2]);
     }
-    md += &format!("\nThe parameter block (binding 0, {} bytes) for these layouts is `params.bin`.\n", lrdenoise::gpu::PARAMS_BYTES);
+    md += &format!("\nThe parameter block (binding 0, {} bytes) for these layouts is `params.bin`.\n", lrdenoise::flr::gpu::PARAMS_BYTES);
     write("dispatch.md", md.as_bytes())?;
     write("params.bin", params.as_bytes())?;
     println!("wrote flr.wgsl, flr.spv, flr.metal, flr.hlsl, dispatch.md and params.bin to {}", out.display());

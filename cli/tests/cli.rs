@@ -269,7 +269,10 @@ fn bmfr_single_frame_temporal_and_flicker() {
     assert!(ok && so.contains("median"), "{e}");
     // normal + position: 12 f32 × 128 × 96
     assert!(so.contains("memcpy of the 0.6 MB"), "{so}");
-    fails_with(&["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--sigma", "3"], &["FLR flags"]);
+    fails_with(
+        &["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--sigma", "3"],
+        &["--sigma is an FLR flag", "bmfr takes --guides, --block, --shrinkage"],
+    );
     fails_with(&["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--block", "4"], &["block"]);
 }
 
@@ -298,8 +301,9 @@ fn walr_single_frame_temporal_flags_and_errors() {
     let room = data("room_7.exr");
     let x = tmp("w.exr");
     let x = x.to_str().unwrap();
-    fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--block", "8"], &["not WALR flags"]);
-    fails_with(&["denoise", &room, "-o", x, "--method", "flr", "--iterations", "3"], &["WALR flags"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--block", "8"], &["--block is an FLR and BMFR flag, not one of WALR's"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "flr", "--iterations", "3"], &["--iterations is a WALR flag"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "flr", "--iterations", "3", "--storage", "f16"], &["(so is --storage)"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--guides", "normal,depth"], &["normal and position"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--storage", "f8"], &["f16 or f32"]);
     fails_with(&["denoise", &room, "-o", x, "--method", "walr", "--near", "0.5", "--far", "0.1"], &["near/far"]);
@@ -311,7 +315,7 @@ fn walr_single_frame_temporal_flags_and_errors() {
     // the fixed blend (the default before the adaptive one)
     let (ok, so, e) = lrd(&["eval", &room, "--methods", "walr", "--previous-weight", "0.6", "--runs", "5"]);
     assert!(ok && so.contains("walr NDP t4 pw0.6 f32"), "{e}{so}");
-    fails_with(&["denoise", &room, "-o", x, "--method", "bmfr", "--previous-weight", "0.5"], &["WALR flags"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "bmfr", "--previous-weight", "0.5"], &["--previous-weight is a WALR flag"]);
     // one window (the paper's): no pw in the label
     let (ok, so, e) = lrd(&["eval", &room, "--methods", "walr", "--previous-weight", "0", "--runs", "5"]);
     assert!(ok && so.contains("walr NDP t4 f32") && !so.contains("pw"), "{e}{so}");
@@ -325,7 +329,8 @@ fn flnr_runs_with_bundled_and_given_weights() {
     assert!(so.contains("flnr["), "{so}");
     let x = tmp("f.exr");
     let x = x.to_str().unwrap();
-    fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--sigma", "3"], &["only --weights"]);
+    fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--sigma", "3"], &["--sigma is an FLR flag", "flnr takes --weights"]);
+    fails_with(&["denoise", &room, "-o", x, "--weights", "w.bin"], &["--weights is an FLNR flag", "flr takes --guides"]);
     let bad = tmp("bad.bin");
     std::fs::write(&bad, b"not a network").unwrap();
     fails_with(&["denoise", &room, "-o", x, "--method", "flnr", "--weights", bad.to_str().unwrap()], &["bad magic"]);
@@ -342,7 +347,7 @@ fn device_flag_and_shaders() {
     assert!(ok, "{e}");
     let spv = std::fs::read(dir.join("flr.spv")).unwrap();
     assert_eq!(&spv[..4], &0x0723_0203u32.to_le_bytes());
-    assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), lrdenoise::gpu::PARAMS_BYTES as u64);
+    assert_eq!(std::fs::metadata(dir.join("params.bin")).unwrap().len(), lrdenoise::flr::gpu::PARAMS_BYTES as u64);
     let md = std::fs::read_to_string(dir.join("dispatch.md")).unwrap();
     assert!(md.contains("640x360") && md.contains("| `moments` | 80 x 45 x 1 |") && md.contains("(4 guide channels)"), "{md}");
     let dir16 = tmp("shaders16");
