@@ -27,33 +27,82 @@ pub enum Arg {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Error {
     /// Width or height is zero, or too large to address.
-    InvalidSize { arg: Arg, width: usize, height: usize },
+    InvalidSize {
+        /// The image with the bad size.
+        arg: Arg,
+        /// Its width in pixels.
+        width: usize,
+        /// Its height in pixels.
+        height: usize,
+    },
     /// An image does not have the size the denoiser was created for.
-    SizeMismatch { arg: Arg, expected: (usize, usize), got: (usize, usize) },
+    SizeMismatch {
+        /// The image with the wrong size.
+        arg: Arg,
+        /// The denoiser's `(width, height)`.
+        expected: (usize, usize),
+        /// The image's `(width, height)`.
+        got: (usize, usize),
+    },
     /// Offset/strides address an element past the end of the buffer
     /// (`needed` elements, `len` given).
-    BufferTooSmall { arg: Arg, needed: usize, len: usize },
+    BufferTooSmall {
+        /// The image whose buffer is too small.
+        arg: Arg,
+        /// Elements its offset, strides and size address.
+        needed: usize,
+        /// Elements in the buffer given.
+        len: usize,
+    },
     /// A stride is unusable (zero where it must not be, or overflows).
-    InvalidStride { arg: Arg },
+    InvalidStride {
+        /// The image with the bad stride.
+        arg: Arg,
+    },
     /// Wrong number of channels for this image (e.g. a 2-channel normal).
-    ChannelCount { arg: Arg, expected: usize, got: usize },
+    ChannelCount {
+        /// The image with the wrong channel count.
+        arg: Arg,
+        /// Channels it must have.
+        expected: usize,
+        /// Channels it has.
+        got: usize,
+    },
     /// The frame lacks a guide the configuration asks for, or has one it does not.
     GuideMismatch,
     /// More guide channels than [`crate::MAX_GUIDES`].
-    TooManyGuides { got: usize },
+    TooManyGuides {
+        /// Guide channels given.
+        got: usize,
+    },
     /// A configuration value is out of range; the string names the field.
     InvalidConfig(&'static str),
     /// The scratch buffer is smaller than `scratch_len()`.
-    ScratchTooSmall { needed: usize, got: usize },
+    ScratchTooSmall {
+        /// Elements needed.
+        needed: usize,
+        /// Elements given.
+        got: usize,
+    },
     /// Tile/band index out of range, or a band slice of the wrong length.
-    InvalidTile { index: usize, count: usize },
+    InvalidTile {
+        /// The tile, band or row index given.
+        index: usize,
+        /// How many there are.
+        count: usize,
+    },
     /// This operation is not possible with these arguments (the string says why).
     Unsupported(&'static str),
     /// A tile of stage `stage` ([`crate::flr::Stage`] index) was run out of
     /// order: before the stage ahead of it completed or before the frame's
     /// prepare, a second time in one frame, with a worker that is busy, or with
     /// other arguments than the frame's prepare.
-    StageOrder { stage: u8, tile: usize },
+    StageOrder {
+        /// The stage's [`crate::flr::Stage`] index.
+        stage: u8,
+        /// The tile index within the stage.
+        tile: usize,
+    },
 }
 
 impl fmt::Display for Error {

@@ -17,9 +17,13 @@ pub const MAX_GUIDES: usize = 12;
 /// normal, depth, position, ao, user.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct GuideSet {
+    /// Shading normal, 3 channels.
     pub normal: bool,
+    /// Depth, 1 channel.
     pub depth: bool,
+    /// World-space position, 3 channels.
     pub position: bool,
+    /// Ambient occlusion, 1 channel.
     pub ao: bool,
     /// Number of single-channel user guides (0..=4).
     pub user: u8,

@@ -66,7 +66,9 @@ impl Layout {
 /// Read-only samples: f32 or f16.
 #[derive(Clone, Copy, Debug)]
 pub enum Samples<'a> {
+    /// 32-bit float samples.
     F32(&'a [f32]),
+    /// IEEE half-float samples.
     F16(&'a [f16]),
 }
 
@@ -364,18 +366,23 @@ impl<'a> ImageView<'a> {
         layout.offset += first * layout.channel_stride;
         Ok(ImageView { channels: count, layout, ..*self })
     }
+    /// Width in pixels.
     pub fn width(&self) -> usize {
         self.width
     }
+    /// Height in pixels.
     pub fn height(&self) -> usize {
         self.height
     }
+    /// Channels per pixel.
     pub fn channel_count(&self) -> usize {
         self.channels
     }
+    /// Where the samples lie in the slice.
     pub fn layout(&self) -> Layout {
         self.layout
     }
+    /// The whole underlying slice.
     pub fn samples(&self) -> Samples<'a> {
         self.samples
     }
@@ -603,7 +610,9 @@ impl<'a> ImageView<'a> {
 /// Mutable samples of an output image.
 #[derive(Debug)]
 pub enum SamplesMut<'a> {
+    /// 32-bit float samples.
     F32(&'a mut [f32]),
+    /// IEEE half-float samples.
     F16(&'a mut [f16]),
 }
 
@@ -644,12 +653,15 @@ impl<'a> ImageViewMut<'a> {
     pub fn interleaved(data: &'a mut [f32], width: usize, height: usize, channels: usize) -> Result<Self, Error> {
         Self::new(SamplesMut::F32(data), width, height, channels, Layout::interleaved(width, channels))
     }
+    /// Width in pixels.
     pub fn width(&self) -> usize {
         self.width
     }
+    /// Height in pixels.
     pub fn height(&self) -> usize {
         self.height
     }
+    /// Channels per pixel.
     pub fn channel_count(&self) -> usize {
         self.channels
     }

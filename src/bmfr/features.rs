@@ -32,10 +32,13 @@ pub struct FeatureSet {
     pub scaled: [bool; MAX_GUIDES],
     /// Channels whose square is a feature (after rescaling).
     pub squares: [usize; 3],
+    /// How many entries of `squares` are used (0, 1 or 3).
     pub n_squares: usize,
 }
 
 impl FeatureSet {
+    /// The features of `set` (at most 4 user channels); with `quadratic`, the
+    /// squares of the position channels, or of depth without position.
     pub fn new(set: &GuideSet, quadratic: bool) -> Self {
         let mut scaled = [false; MAX_GUIDES];
         let mut squares = [0; 3];
@@ -95,6 +98,7 @@ pub struct Worker<'w> {
     pub a: &'w mut [f32],
     /// The model's three channels, `ld` apart.
     pub model: &'w mut [f32],
+    /// Distance between columns of `a` and of `model` ([`padded_ld`] of B²).
     pub ld: usize,
     /// 1 where the pixel's own guides are finite (it can use the model).
     pub guide_ok: &'w mut [f32],
@@ -105,6 +109,8 @@ pub struct Worker<'w> {
 }
 
 impl<'w> Worker<'w> {
+    /// Splits `buf` for `b × b` blocks and `m` features; `None` if it is
+    /// shorter than [`worker_len`]`(b, m)`.
     pub fn split(buf: &'w mut [f32], b: usize, m: usize) -> Option<Self> {
         let n = b * b;
         if buf.len() < worker_len(b, m) {
@@ -195,6 +201,7 @@ pub struct Gathered {
     /// NaN/Inf counts over the block's pixels inside the image (mirrored
     /// copies are not counted twice).
     pub nonfinite_noisy: u64,
+    /// The same for the guides: pixels with a non-finite guide channel.
     pub nonfinite_guides: u64,
     /// Feature of guide channel `g`: `clamp((v − lo[g]) · inv[g], min[g], max[g])`
     /// (the per-block rescaling to `[0, 1]`; identity for normals and AO).
@@ -204,9 +211,15 @@ pub struct Gathered {
 /// The per-block affine map of every guide channel onto its feature.
 #[derive(Clone, Copy, Debug)]
 pub struct Scaling {
+    /// Per channel: subtracted first (the block's minimum for rescaled
+    /// channels, else 0).
     pub lo: [f32; MAX_GUIDES],
+    /// Per channel: the factor then applied (1 / the block's range for
+    /// rescaled channels, 0 for a constant one, else 1).
     pub inv: [f32; MAX_GUIDES],
+    /// Per channel: the lower clamp (0 for rescaled channels, else −∞).
     pub min: [f32; MAX_GUIDES],
+    /// Per channel: the upper clamp (1 for rescaled channels, else +∞).
     pub max: [f32; MAX_GUIDES],
 }
 
@@ -238,8 +251,11 @@ fn finite(x: f32) -> bool {
 /// fit matrix is built and when the model is applied from it.
 #[derive(Debug)]
 pub struct Band<'b> {
+    /// The channel planes, [`Band::plane`] apart, each `rows × stride` pixels.
     pub data: &'b mut [f32],
+    /// Rows per plane.
     pub rows: usize,
+    /// Pixels per row.
     pub stride: usize,
 }
 
@@ -302,6 +318,8 @@ pub struct Sources<'a> {
 }
 
 impl<'a> Sources<'a> {
+    /// The noisy image and the first `q` guide channels of `frame`
+    /// ([`Error::GuideMismatch`] where one is missing).
     pub fn new(frame: &CheckedFrame<'a>, q: usize) -> Result<Self, Error> {
         let view = |g: usize| frame.guides.get(g).copied().flatten().ok_or(Error::GuideMismatch);
         let mut views = [None; 1 + MAX_GUIDES];

@@ -118,6 +118,7 @@ impl BmfrConfig {
         BmfrConfig { guides, ..Default::default() }
     }
 
+    /// Checks every field.
     pub fn validate(&self) -> Result<(), Error> {
         self.guides.validate()?;
         if !(8..=64).contains(&self.block) {
@@ -168,6 +169,7 @@ impl Bmfr {
         Ok(Bmfr { cfg, width, height, fs: FeatureSet::new(&cfg.guides, cfg.quadratic) })
     }
 
+    /// The configuration.
     pub fn config(&self) -> &BmfrConfig {
         &self.cfg
     }

@@ -46,6 +46,7 @@ impl Default for TemporalConfig {
 }
 
 impl TemporalConfig {
+    /// Checks every field: blend weights in `(0, 1]`, limits finite and ≥ 0.
     pub fn validate(&self) -> Result<(), Error> {
         let unit = |v: f32| v > 0.0 && v <= 1.0;
         if !unit(self.noisy_alpha) || !unit(self.filtered_alpha) || !unit(self.taa_alpha) {

@@ -14,15 +14,26 @@ use crate::kernels::solve::Regularization;
 pub enum Blur {
     /// Gaussian of standard deviation `sigma`, truncated at `radius`
     /// (`None`: 3σ). Applied to the block grid with σ/B and ⌈radius/B⌉ cells.
-    Gaussian { sigma: f32, radius: Option<f32> },
+    Gaussian {
+        /// Standard deviation in output pixels.
+        sigma: f32,
+        /// Truncation radius in output pixels (`None`: 3σ).
+        radius: Option<f32>,
+    },
     /// Box of half-width `radius` (the guided filter's window), O(1) per cell.
-    Box { radius: f32 },
+    Box {
+        /// Half-width in output pixels.
+        radius: f32,
+    },
     /// Three Gaussian windows `sigmas[0] < sigmas[1] < sigmas[2]` (each
     /// truncated at 3σ), fitted side by side and blended per cell with weights
     /// 1 / (estimated squared error): small windows where the light changes
     /// faster than the guides explain, large ones where it does not
     /// (`flr::adaptive`). The default, with [`DEFAULT_SIGMAS`].
-    Adaptive { sigmas: [f32; 3] },
+    Adaptive {
+        /// The three standard deviations in output pixels, increasing.
+        sigmas: [f32; 3],
+    },
 }
 
 impl Blur {

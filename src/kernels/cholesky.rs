@@ -76,11 +76,15 @@ pub fn solve(l: &[f64], n: usize, ld: usize, b: &mut [f64], nrhs: usize) {
 pub trait F64Lanes:
     Copy + core::ops::Add<Output = Self> + core::ops::Sub<Output = Self> + core::ops::Mul<Output = Self> + core::ops::Div<Output = Self>
 {
+    /// Cells per value: 1 or 4.
     const LANES: usize;
+    /// `v` in every lane.
     fn splat(v: f64) -> Self;
+    /// Absolute value per lane.
     fn abs_(self) -> Self;
     /// `self` where `self > o`, else `o` (NaN → `o`).
     fn max_(self, o: Self) -> Self;
+    /// Square root per lane.
     fn sqrt_(self) -> Self;
     /// Bit `l` set where lane `l` is not (`self > floor` and finite).
     fn not_above(self, floor: Self) -> u32;
@@ -237,8 +241,11 @@ pub fn solve_lead_n<T: F64Lanes, const N: usize>(l: &[[T; N]; N], inv_diag: &[T;
 pub trait Lane:
     Copy + core::ops::Add<Output = Self> + core::ops::Sub<Output = Self> + core::ops::Mul<Output = Self> + core::ops::Div<Output = Self>
 {
+    /// `v` in every lane.
     fn splat(v: f32) -> Self;
+    /// `self` where `self > o`, else `o` (NaN → `o`).
     fn max_(self, o: Self) -> Self;
+    /// Square root per lane.
     fn sqrt_(self) -> Self;
 }
 

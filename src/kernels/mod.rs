@@ -40,17 +40,24 @@ pub const fn model_len(q: usize) -> usize {
 /// Offsets of each moment group inside a cell.
 #[derive(Clone, Copy, Debug)]
 pub struct CellLayout {
+    /// Guide channel count Q.
     pub q: usize,
+    /// `s = Σw g` (Q values; `n = Σw` is at 0).
     pub s: usize,
+    /// `S = Σw g gᵀ`, upper triangle row-major ([`packed_len`] values).
     pub ss: usize,
+    /// `t = Σw y` (3 values).
     pub t: usize,
+    /// `P = Σw g yᵀ` (Q×3, guide-major).
     pub p: usize,
     /// The energy moment `e = Σw ℓ²`.
     pub e: usize,
+    /// Moments per cell ([`moment_count`]).
     pub k: usize,
 }
 
 impl CellLayout {
+    /// The layout for `q` guide channels.
     pub const fn new(q: usize) -> Self {
         let s = 1;
         let ss = s + q;

@@ -150,12 +150,15 @@ impl<'b> UNet<'b> {
         Ok(UNet { in_ch, out_ch, levels, widths, sigmas, windows, eps, layers, count: n })
     }
 
+    /// Input channels (1..=128).
     pub fn in_channels(&self) -> usize {
         self.in_ch
     }
+    /// Output channels (1..=128).
     pub fn out_channels(&self) -> usize {
         self.out_ch
     }
+    /// U-Net levels L (0..=[`MAX_LEVELS`]).
     pub fn levels(&self) -> usize {
         self.levels
     }

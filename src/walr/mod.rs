@@ -172,6 +172,7 @@ impl WalrConfig {
         WalrConfig { guides, ..Default::default() }
     }
 
+    /// Checks every field.
     pub fn validate(&self) -> Result<(), Error> {
         self.guides.validate()?;
         if !self.guides.normal || !self.guides.position {
@@ -273,9 +274,11 @@ impl Walr {
         }
         Ok(Walr { cfg, width, height, m: cfg.feature_count() })
     }
+    /// The configuration.
     pub fn config(&self) -> &WalrConfig {
         &self.cfg
     }
+    /// Frame size.
     pub fn size(&self) -> (usize, usize) {
         (self.width, self.height)
     }

@@ -47,6 +47,7 @@ impl Default for TemporalConfig {
 }
 
 impl TemporalConfig {
+    /// Checks every field.
     pub fn validate(&self) -> Result<(), Error> {
         if !(self.max_samples >= 1.0 && self.max_samples <= 1e6) {
             return Err(Error::InvalidConfig("temporal.max_samples (1..=1e6)"));

@@ -57,8 +57,11 @@ pub fn lerp_rows(models: &[f32], cells_x: usize, cells_y: usize, ml: usize, bloc
 /// reference `m` each is measured from (`d = g − m`).
 #[derive(Clone, Copy, Debug)]
 pub struct RowGuides<'a> {
+    /// Per guide channel `q < Q`: its row's `width` raw values.
     pub rows: [&'a [f32]; MAX_GUIDES],
+    /// Per guide channel: the frame reference `m`.
     pub reference: [f32; MAX_GUIDES],
+    /// Pixels in the row.
     pub width: usize,
 }
 

@@ -34,7 +34,9 @@ pub fn radius_to_cells(radius: f32, block: usize) -> usize {
 /// full 1-D kernel sums to 1.
 #[derive(Clone, Copy, Debug)]
 pub struct Taps {
+    /// Radius r in cells.
     pub radius: usize,
+    /// Weights for offsets `0..=radius`, zero beyond.
     pub w: [f64; MAX_RADIUS_CELLS + 1],
     /// Box filter (all weights 1, sliding window) instead of explicit taps.
     pub is_box: bool,

@@ -26,8 +26,11 @@ const MAX_K: usize = super::moment_count(MAX_GUIDES);
 /// guide holding `g − m` (zero where excluded).
 #[derive(Clone, Copy, Debug)]
 pub struct BandPlanes<'a> {
+    /// The planes, `rows × width` values each, one after another.
     pub data: &'a [f32],
+    /// Rows per plane.
     pub rows: usize,
+    /// Pixels per row.
     pub width: usize,
 }
 
@@ -130,10 +133,15 @@ pub const MAX_ROWS: usize = 16;
 /// is divided by `s(ao)` as its vectors are built (`None`: taken as it is).
 #[derive(Clone, Copy, Debug)]
 pub struct BandRows<'a> {
+    /// Per band row: noisy r, g, b, then each guide channel's row.
     pub planes: [[&'a [f32]; 3 + MAX_GUIDES]; MAX_ROWS],
+    /// Rows in the band (at most [`MAX_ROWS`]).
     pub rows: usize,
+    /// Pixels per row.
     pub width: usize,
+    /// Per guide channel: the frame reference `m`.
     pub reference: [f32; MAX_GUIDES],
+    /// The AO demodulation: guide index and offset (`None`: off).
     pub demod: Option<(usize, f32)>,
 }
 

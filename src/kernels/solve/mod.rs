@@ -24,10 +24,18 @@ pub enum Regularization {
     /// `eps_mul` is ε (multiplicative, eq. 18), `eps_add` is ϵ (additive,
     /// eqs. 18 and 22). Guides are standardised per frame first, so the result
     /// does not depend on the world origin or the units of any guide.
-    Normalized { eps_mul: f64, eps_add: f64 },
+    Normalized {
+        /// ε, multiplicative (eq. 18).
+        eps_mul: f64,
+        /// ϵ, additive (eqs. 18 and 22).
+        eps_add: f64,
+    },
     /// Textbook Tikhonov (eq. 11): `(XᵀWX + ε I)⁻¹ XᵀWY` on the guides exactly
     /// as given, weights normalised to sum 1.
-    Tikhonov { eps: f64 },
+    Tikhonov {
+        /// ε, added to the diagonal.
+        eps: f64,
+    },
 }
 
 const N1: usize = MAX_GUIDES + 1;
@@ -41,6 +49,7 @@ pub struct SolveParams {
     pub mean: [f64; MAX_GUIDES],
     /// Frame standard deviation of each guide (≥ a tiny floor, 1 for constants).
     pub scale: [f64; MAX_GUIDES],
+    /// The regulariser.
     pub regularization: Regularization,
     /// 1 / (total window weight): turns sums into weighted averages (Tikhonov).
     pub weight_norm: f64,
@@ -51,6 +60,7 @@ pub struct SolveParams {
 /// Outcome of one cell's solve.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct CellOutcome {
+    /// The cell is empty (window weight at most `min_weight`); its model is 0.
     pub empty: bool,
     /// Variables dropped by the pivot floor.
     pub dropped: u32,

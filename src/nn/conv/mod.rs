@@ -15,10 +15,15 @@ use half::f16;
 /// A convolution: shapes and its f16 parameters (weights `[out][in][k][k]`, then biases).
 #[derive(Clone, Copy, Debug)]
 pub struct ConvDesc<'b> {
+    /// Input channels.
     pub cin: usize,
+    /// Output channels.
     pub cout: usize,
+    /// Kernel side: 3 or 1.
     pub k: usize,
+    /// 1, or 2 (the output is half the input, rounded up).
     pub stride: usize,
+    /// The f16 parameters, little-endian bytes.
     pub params: &'b [u8],
 }
 
@@ -49,7 +54,9 @@ impl ConvDesc<'_> {
 /// The activation after a convolution.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Act {
+    /// Leaky ReLU, slope 0.01 below 0.
     Leaky,
+    /// Logistic sigmoid `1 / (1 + e^−x)`.
     Sigmoid,
 }
 
