@@ -51,7 +51,7 @@ const IN_CHANNELS: usize = 8;
 /// f32, 91 MB, for the bundled network) are a tenth of the whole frame's, and
 /// a 1080p frame still has 12 tiles to spread over threads.
 pub const DEFAULT_TILE: usize = 512;
-/// Smallest tile edge [`Flnr::with_tile`] accepts: for networks of up to 3
+/// Smallest tile edge ([`FlnrConfig::tile`]) a plan accepts: for networks of up to 3
 /// levels (tested; the bundled one has 2) every level of a tile's input stays
 /// wide enough for the vectorised convolution paths, which is what keeps
 /// tiles bit-identical to the whole frame (deeper networks may differ in the
@@ -61,16 +61,22 @@ pub const MIN_TILE: usize = 64;
 /// A rectangle of pixels `[x0, x1) × [y0, y1)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Rect {
+    /// First column.
     pub x0: usize,
+    /// First row.
     pub y0: usize,
+    /// One past the last column.
     pub x1: usize,
+    /// One past the last row.
     pub y1: usize,
 }
 
 impl Rect {
+    /// Width in pixels.
     pub fn width(&self) -> usize {
         self.x1 - self.x0
     }
+    /// Height in pixels.
     pub fn height(&self) -> usize {
         self.y1 - self.y0
     }
@@ -180,7 +186,7 @@ impl<'w> Flnr<'w> {
     pub fn flr(&self) -> &Flr {
         &self.flr
     }
-    /// The tile edge asked for ([`Flnr::with_tile`]).
+    /// The tile edge asked for ([`FlnrConfig::tile`]).
     pub fn tile(&self) -> usize {
         self.tile
     }

@@ -33,6 +33,7 @@
 #![no_std]
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![warn(missing_debug_implementations)]
+#![warn(missing_docs)]
 
 #[cfg(feature = "bmfr")]
 pub mod bmfr;
@@ -70,7 +71,10 @@ pub use flnr::{Flnr, FlnrConfig};
 #[cfg(feature = "flr")]
 pub use flr::config::{Blur, FlrConfig};
 #[cfg(feature = "flr")]
-pub use flr::{CheckedFrame, Flr, Parts, ScratchLayout, Stage, Stats, StatsSums, Tiled};
+pub use flr::{CheckedFrame, Flr, Stage, Tiled};
+#[cfg(feature = "flr")]
+#[doc(hidden)]
+pub use flr::{Parts, ScratchLayout, Stats, StatsSums};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 pub use history::History;

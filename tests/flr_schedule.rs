@@ -166,3 +166,42 @@ fn outputs_whose_elements_overlap_are_refused() {
     assert!(Layout { offset: 0, pixel_stride: 3, row_stride: 0, channel_stride: 1 }.elements_distinct(w, 1, 3));
     assert!(Layout { offset: 0, pixel_stride: 0, row_stride: 3, channel_stride: 1 }.elements_distinct(1, h, 3));
 }
+
+/// The GPU's dispatches follow the CPU's stage order: frame-wide passes in
+/// `Stage` order, each window's blur and solve in order between Stats and
+/// Blend, every stage that does work present (Blend with the adaptive window only).
+#[test]
+fn gpu_passes_follow_the_stage_order() {
+    use lrdenoise::flr::gpu::GpuPlan;
+    let all = GuideSet { normal: true, depth: true, ao: true, ..GuideSet::NONE };
+    let d = FlrConfig::with_guides(all);
+    let configs = [
+        d,
+        FlrConfig { adaptive_without_ao: true, ..d },
+        FlrConfig { blur: Blur::Gaussian { sigma: 12.0, radius: None }, ..d },
+        FlrConfig { blur: Blur::Adaptive { sigmas: [2.0, 3.0, 4.0] }, block: 4, ..d },
+    ];
+    for cfg in configs {
+        let plan = GpuPlan::new(cfg, 301, 173).unwrap();
+        let passes = plan.passes();
+        let windows = cfg.blur.scale_count();
+        for s in 0..windows {
+            let seq: Vec<Stage> = passes.iter().filter(|p| p.window as usize == s || !is_window_stage(p.stage)).map(|p| p.stage).collect();
+            assert!(seq.windows(2).all(|w| w[0] <= w[1]), "window {s}: {seq:?} ({cfg:?})");
+        }
+        for stage in Stage::ALL {
+            let present = passes.iter().any(|p| p.stage == stage);
+            assert_eq!(present, stage != Stage::Blend || windows > 1, "{stage:?} ({cfg:?})");
+        }
+        for s in 0..windows {
+            assert!(passes.iter().any(|p| p.window as usize == s && p.stage == Stage::BlurRows));
+            assert!(passes.iter().any(|p| p.window as usize == s && p.stage == Stage::BlurColsSolve));
+        }
+        assert_eq!(passes.first().unwrap().stage, Stage::Prepare);
+        assert_eq!(passes.last().unwrap().stage, Stage::Apply);
+    }
+}
+
+fn is_window_stage(s: Stage) -> bool {
+    matches!(s, Stage::BlurRows | Stage::BlurColsSolve)
+}

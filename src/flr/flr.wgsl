@@ -1,7 +1,7 @@
 // FLR (Fast Local Regression) as WGSL compute shaders: the stages of the CPU
 // path (src/flr, src/kernels) in f32. One module, one bind group (bindings 0–7)
 // shared by every entry point; run the entry points in this order, each once
-// per frame, with the workgroup counts of `lrdenoise::gpu::GpuPlan::passes`:
+// per frame, with the workgroup counts of `lrdenoise::flr::gpu::GpuPlan::passes`:
 //
 //   reference → moments → finish_stats → blur_rows → blur_cols → solve → apply
 //
@@ -9,7 +9,7 @@
 // blurred grid goes to `tmp` instead of `cells`, its solve also writes
 // variance estimates, and the other windows and the blend run before apply:
 //
-//   … finish_stats → [pool] → blur_rows → blur_cols → solve → blur_rows_1 →
+//   … moments → [pool] → finish_stats → blur_rows → blur_cols → solve → blur_rows_1 →
 //   blur_cols_1 → solve_1 → blur_rows_2 → blur_cols_2 → solve_2 → blend → apply
 //
 // (`pool` when a window is fitted on the 2×2-pooled grid). Regions of `tmp`

@@ -23,6 +23,7 @@
 //! from the frame's reference sample dwarfs their local variation.
 
 use super::config::FlrConfig;
+use super::schedule::Stage;
 use crate::error::Error;
 use crate::flr::{Flr, Grid, Report, MAX_SCALES};
 use crate::image::Layout;
@@ -47,56 +48,82 @@ pub const STATS_BYTES: u64 = 128;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpuParams {
+    /// Output width in pixels.
     pub width: u32,
+    /// Output height in pixels.
     pub height: u32,
+    /// Model grid width in cells (the output models' grid).
     pub cells_x: u32,
+    /// Model grid height in cells.
     pub cells_y: u32,
+    /// Block size B in output pixels ([`FlrConfig::block`]).
     pub block: u32,
+    /// Guide channel count Q.
     pub q: u32,
+    /// Moments per cell ([`moment_count`] of Q).
     pub k: u32,
+    /// Model length per cell ([`model_len`] of Q).
     pub ml: u32,
+    /// Window 0's blur radius in cells (`taps[0..=radius]` are used).
     pub radius: u32,
+    /// 1: clamp negative output to 0 ([`FlrConfig::clamp_negative`]).
     pub clamp_negative: u32,
+    /// 1: [`Regularization::Tikhonov`]; 0: [`Regularization::Normalized`].
     pub tikhonov: u32,
     /// 1 when noisy and guides are f16.
     pub input_f16: u32,
+    /// ε of [`Regularization::Normalized`] (0 with Tikhonov).
     pub eps_mul: f32,
+    /// ϵ of [`Regularization::Normalized`] (0 with Tikhonov).
     pub eps_add: f32,
+    /// ε of [`Regularization::Tikhonov`] (0 with the normalized regulariser).
     pub eps_tikhonov: f32,
+    /// 1 / (window 0's total window weight).
     pub weight_norm: f32,
+    /// A cell of window 0 whose window weight is at most this is empty.
     pub min_weight: f32,
-    /// Noisy and fit-guide resolution, and the block size there.
+    /// Noisy and fit-guide width (`width` unless upsampling).
     pub in_width: u32,
+    /// Noisy and fit-guide height (`height` unless upsampling).
     pub in_height: u32,
+    /// Block size at the noisy resolution (`block / upsample`).
     pub fit_block: u32,
-    /// offset, pixel stride, row stride, channel stride (elements).
+    /// Noisy layout: offset, pixel stride, row stride, channel stride (elements).
     pub noisy: [u32; 4],
+    /// Output layout, as `noisy`.
     pub output: [u32; 4],
     /// Per guide channel: offset, pixel stride, row stride, 0 (output resolution).
     pub guide: [[u32; 4]; GPU_MAX_GUIDES],
     /// The same for the guides the moments are taken from (noisy resolution).
     pub guide_fit: [[u32; 4]; GPU_MAX_GUIDES],
+    /// Window 0's blur taps `w[0..=radius]`, zero beyond.
     pub taps: [f32; TAPS],
     /// 1, or 3 with the adaptive window.
     pub windows: u32,
-    /// The 2×2-pooled moment grid in `tmp` (element offset, `u32::MAX`
-    /// without) and its size.
+    /// The 2×2-pooled moment grid's element offset in `tmp` (`u32::MAX`
+    /// without).
     pub pooled_off: u32,
+    /// The pooled grid's width in cells (0 without).
     pub pooled_x: u32,
+    /// The pooled grid's height in cells (0 without).
     pub pooled_y: u32,
+    /// Each window's grid and buffer regions (unused entries zero).
     pub win: [GpuWindow; 3],
     /// Taps of windows 1 and 2.
     pub taps_12: [[f32; TAPS]; 2],
     /// [`FlrConfig::adaptive_without_ao`]: the guide channel (AO) window 0
-    /// is also fitted without (`u32::MAX`: off), and where that fit's models
-    /// and variances go in `models`.
+    /// is also fitted without (`u32::MAX`: off).
     pub without: u32,
+    /// Element offset in `models` of that fit's models (`u32::MAX`: off).
     pub without_model_off: u32,
+    /// Element offset in `models` of that fit's variances (`u32::MAX`: off).
     pub without_var_off: u32,
     /// [`FlrConfig::ao_demodulation`] where it applies: the AO channel
-    /// (`u32::MAX`: off) and the offset `c` of `s = √(ao + c)`.
+    /// (`u32::MAX`: off).
     pub demod_ao: u32,
+    /// The offset `c` of the demodulation `s = √(ao + c)`.
     pub demod_offset: f32,
+    /// Padding to the WGSL layout; zero.
     pub pad_demod: [u32; 3],
 }
 
@@ -106,23 +133,36 @@ pub struct GpuParams {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GpuWindow {
+    /// Grid width in cells.
     pub cells_x: u32,
+    /// Grid height in cells.
     pub cells_y: u32,
     /// Block cells per cell side: 1, or 2 on the pooled grid.
     pub factor: u32,
+    /// Blur radius in cells.
     pub radius: u32,
+    /// Buffer the blur reads the moments from (0 = cells, 1 = tmp).
     pub src_buf: u32,
+    /// Element offset of those moments in `src_buf`.
     pub src_off: u32,
+    /// Buffer the blurred grid goes to (what the solve reads).
     pub out_buf: u32,
+    /// Element offset of the blurred grid in `out_buf`.
     pub out_off: u32,
+    /// Element offset of the row-blurred grid in `tmp`.
     pub tmp_off: u32,
+    /// Element offset of this window's models in `models`.
     pub model_off: u32,
-    /// `u32::MAX`: no variance estimates (one window).
+    /// Element offset of the variance estimates in `models`; `u32::MAX`: no
+    /// variance estimates (one window).
     pub var_off: u32,
+    /// 1 / (this window's total window weight).
     pub weight_norm: f32,
+    /// A cell whose window weight is at most this is empty.
     pub min_weight: f32,
     /// 4πσ² in input pixels.
     pub area: f32,
+    /// Padding to the WGSL layout; zero.
     pub pad: [u32; 2],
 }
 
@@ -171,26 +211,38 @@ pub enum GpuBuffer {
 /// How a buffer is bound.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Access {
+    /// Uniform buffer.
     Uniform,
+    /// Read-only storage buffer.
     ReadOnlyStorage,
+    /// Read-write storage buffer.
     ReadWriteStorage,
 }
 
 /// One buffer of the bind group.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BufferDesc {
+    /// Which buffer.
     pub buffer: GpuBuffer,
+    /// Its binding index in group 0.
     pub binding: u32,
+    /// How it is bound.
     pub access: Access,
     /// Minimum size in bytes (for inputs and output: for the layouts given).
     pub bytes: u64,
 }
 
-/// One dispatch: the entry point and its workgroup counts.
+/// One dispatch: the CPU stage it computes, the entry point and its workgroup counts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Pass {
+    /// The stage of [`Stage::ALL`] this dispatch computes (for the window
+    /// `window` of the adaptive window's per-window stages).
+    pub stage: Stage,
+    /// The window a per-window pass (blur, solve) works on; 0 otherwise.
+    pub window: u8,
     /// The entry point's name, NUL-terminated (the C API hands it out as is).
     pub entry: &'static core::ffi::CStr,
+    /// Workgroups along x, y and z.
     pub workgroups: [u32; 3],
 }
 
@@ -205,6 +257,7 @@ impl Pass {
 /// Sample format of the noisy and guide buffers (the output is always f32).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum InputFormat {
+    /// 32-bit IEEE floats (the default).
     #[default]
     F32,
     /// IEEE half floats, read with `unpack2x16float` (core WGSL: no device
@@ -235,8 +288,11 @@ pub struct GpuLayouts {
     pub input: InputFormat,
     /// At the noisy resolution (output size / upsample).
     pub noisy: Layout,
+    /// Guide channel `q`'s layout at the output resolution, for `q` < Q.
     pub guides: [Layout; GPU_MAX_GUIDES],
+    /// Guide channel `q`'s layout at the noisy resolution (the moments').
     pub guides_fit: [Layout; GPU_MAX_GUIDES],
+    /// The output's layout (f32, 3 channels).
     pub output: Layout,
 }
 
@@ -289,9 +345,9 @@ pub struct Passes {
 
 impl Passes {
     /// Appends a pass ([`GpuPlan::passes`] never makes more than [`MAX_PASSES`]).
-    fn push(&mut self, entry: &'static core::ffi::CStr, workgroups: [u32; 3]) {
+    fn push(&mut self, stage: Stage, window: usize, entry: &'static core::ffi::CStr, workgroups: [u32; 3]) {
         if let Some(slot) = self.list.get_mut(self.len) {
-            *slot = Pass { entry, workgroups };
+            *slot = Pass { stage, window: window as u8, entry, workgroups };
             self.len += 1;
         }
     }
@@ -463,39 +519,44 @@ impl GpuPlan {
     pub fn guide_channels(&self) -> usize {
         self.flr.guide_channels()
     }
+    /// The configuration planned for.
     pub fn config(&self) -> &FlrConfig {
         self.flr.config()
     }
 
     /// The dispatches of one frame, in order: seven with one window, up to
     /// [`MAX_PASSES`] with the adaptive window (see the shader's header).
+    /// They follow FLR's stage order ([`Stage::ALL`]), except that the
+    /// per-window stages run window after window (BlurRows and BlurColsSolve
+    /// of window 0, then of window 1, ...: the windows share `tmp`).
     pub fn passes(&self) -> Passes {
         let k = moment_count(self.guide_channels());
         let g = |n: usize, d: usize| n.div_ceil(d) as u32;
         let (cx, cy) = (self.cells_x() as u32, self.cells_y() as u32);
         let grid = |s: usize| [g(self.grid(s).cells_x * k, 64), self.grid(s).cells_y as u32, 1];
         let solve = |s: usize| [g(self.grid(s).cells_x, 64), self.grid(s).cells_y as u32, 1];
-        let mut p = Passes { list: [Pass { entry: c"", workgroups: [0; 3] }; MAX_PASSES], len: 0 };
-        p.push(c"reference", [1, 1, 1]);
-        p.push(c"moments", [cx, cy, 1]);
-        p.push(c"finish_stats", [1, 1, 1]);
+        let none = Pass { stage: Stage::Prepare, window: 0, entry: c"", workgroups: [0; 3] };
+        let mut p = Passes { list: [none; MAX_PASSES], len: 0 };
+        p.push(Stage::Prepare, 0, c"reference", [1, 1, 1]);
+        p.push(Stage::Moments, 0, c"moments", [cx, cy, 1]);
         if let Some(s) = self.flr.pooled_window() {
-            p.push(c"pool", grid(s));
+            p.push(Stage::Moments, 0, c"pool", grid(s));
         }
+        p.push(Stage::Stats, 0, c"finish_stats", [1, 1, 1]);
         const NAMES: [[&core::ffi::CStr; 3]; MAX_SCALES] = [
             [c"blur_rows", c"blur_cols", c"solve"],
             [c"blur_rows_1", c"blur_cols_1", c"solve_1"],
             [c"blur_rows_2", c"blur_cols_2", c"solve_2"],
         ];
         for (s, [rows, cols, solve_s]) in NAMES.iter().enumerate().take(self.windows()) {
-            p.push(rows, grid(s));
-            p.push(cols, grid(s));
-            p.push(solve_s, solve(s));
+            p.push(Stage::BlurRows, s, rows, grid(s));
+            p.push(Stage::BlurColsSolve, s, cols, grid(s));
+            p.push(Stage::BlurColsSolve, s, solve_s, solve(s));
         }
         if self.windows() > 1 {
-            p.push(c"blend", [g(self.cells_x(), 64), cy, 1]);
+            p.push(Stage::Blend, 0, c"blend", [g(self.cells_x(), 64), cy, 1]);
         }
-        p.push(c"apply", [g(self.size().0, 8), g(self.size().1, 8), 1]);
+        p.push(Stage::Apply, 0, c"apply", [g(self.size().0, 8), g(self.size().1, 8), 1]);
         p
     }
 

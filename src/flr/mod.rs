@@ -4,29 +4,23 @@
 //! [`Flr::denoise`] runs the same tiles on one thread in a cache-friendly
 //! order, bit-identical to running them stage by stage.
 //!
-//! Stages and what each tile reads → writes:
-//!
-//! | stage | reads | writes |
-//! |---|---|---|
-//! | [`Flr::prepare`] (once) | a few guide samples | `Stats` reference |
-//! | [`Flr::moments_tile`] | frame rows of the band | `cells` band |
-//! | [`Flr::blur_rows_tile`] | `cells` band | `tmp` band |
-//! | [`Flr::finish_stats`] (once) | all `cells` | `Stats` mean/scale |
-//! | or [`Flr::stats_tile`] | `cells` band | `StatsSums` (in tile order) |
-//! | [`Flr::blur_cols_tile`] | all `tmp` | `cells` band |
-//! | [`Flr::solve_tile`] | `cells` band | `models` band |
-//! | [`Flr::apply_tile`] | all `models`, frame rows | output rows |
+//! A caller needs [`Flr::new`], [`Flr::scratch_len`] and [`Flr::denoise`],
+//! or for threads [`Flr::denoise_parallel`] / [`Flr::tiled`] and
+//! [`Tiled::run`]. The stage kernels they run (`prepare`, `moments_tile`,
+//! `finish_stats`, `blur_rows_tile_at`, `blur_cols_tiles_at`, `solve_tile_at`,
+//! `blend_tile`, `apply_tile`, and their tile ranges) stay public for the
+//! benches, fuzz targets and tests, hidden from the documentation: they check
+//! their slices but not the stage order.
 //!
 //! With an adaptive window ([`Blur::Adaptive`], three window sizes) the blur
 //! and solve stages run once per window `s` (`*_at(s, ..)`, the blurred grid of
 //! window 0 into `first`, the others into `blurred`; each window's models and
 //! variances into `scale_models` / `variances`), and [`Flr::blend_tile`] then
 //! writes `models` from them. The larger windows are fitted on the moment grid
-//! pooled 2×2 ([`Flr::pool_tile`]: `cells` band → `pooled` band, after stage 1;
-//! [`Flr::window_pooled`], [`Flr::window_grid`]). With
-//! [`FlrConfig::adaptive_without_ao`] window 0's solve also fits each cell
-//! without AO (from the same Cholesky factor, [`Flr::fits_per_cell`]) and the
-//! blend weighs that fit as a fourth candidate. See [`adaptive`].
+//! pooled 2×2 (`pool_tile`: `cells` band → `pooled` band, in the moments
+//! stage). With [`FlrConfig::adaptive_without_ao`] window 0's solve also fits
+//! each cell without AO (from the same Cholesky factor) and the blend weighs
+//! that fit as a fourth candidate. See [`adaptive`].
 
 pub mod adaptive;
 pub mod config;
@@ -59,6 +53,7 @@ pub const TILE_CELL_ROWS: usize = 4;
 /// The cell grid one window is fitted on: the block grid, or (the larger
 /// windows of [`Blur::Adaptive`], see [`adaptive::POOL_MIN_SIGMA`]) its 2×2
 /// pooling, cells of 2B × 2B pixels.
+#[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Grid {
     /// Cells per row and per column.
@@ -121,13 +116,17 @@ fn count_zero(mask: &[f32]) -> usize {
 /// standard deviation used to standardise guides in the normalized solve.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stats {
+    /// Per guide channel: the frame sample its moments are measured from.
     pub reference: [f32; MAX_GUIDES],
+    /// Per guide channel: the frame mean, relative to `reference`.
     pub mean: [f64; MAX_GUIDES],
+    /// Per guide channel: the frame standard deviation (1 for constants).
     pub scale: [f64; MAX_GUIDES],
 }
 
 /// Running sums of the cells' weights, guide sums and guide squares
 /// ([`Flr::stats_tile`]), turned into [`Stats`] by [`Flr::finish_stats_sums`].
+#[doc(hidden)]
 #[derive(Clone, Copy, Debug, Default)]
 pub struct StatsSums {
     pub n: f64,
@@ -152,6 +151,7 @@ pub struct CheckedFrame<'a> {
 }
 
 /// The scratch buffer split into its regions.
+#[doc(hidden)]
 #[derive(Debug)]
 pub struct Parts<'s> {
     /// Moment grid, `cells_x * cells_y * k` f64.
@@ -177,6 +177,7 @@ pub struct Parts<'s> {
 }
 
 /// [`Flr::scratch_layout`]: each region's f64 range in the scratch.
+#[doc(hidden)]
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ScratchLayout {
     pub cells: core::ops::Range<usize>,
@@ -259,6 +260,7 @@ impl Flr {
         })
     }
 
+    /// The configuration.
     pub fn config(&self) -> &FlrConfig {
         &self.cfg
     }
@@ -271,6 +273,7 @@ impl Flr {
         (self.in_w, self.in_h)
     }
     /// Model grid size.
+    #[doc(hidden)]
     pub fn cells(&self) -> (usize, usize) {
         (self.cells_x, self.cells_y)
     }
@@ -308,23 +311,27 @@ impl Flr {
     }
     /// Where tile `t`'s band lies in `cells` (and `tmp`): tiles are consecutive
     /// row bands, so `&mut cells[range]` is that tile's slice.
+    #[doc(hidden)]
     pub fn cells_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.tile_rows(t)?;
         let row = self.cells_x * self.lay.k;
         Ok(a * row..b * row)
     }
     /// Where tile `t`'s band lies in `models`.
+    #[doc(hidden)]
     pub fn models_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.tile_rows(t)?;
         let row = self.cells_x * self.ml;
         Ok(a * row..b * row)
     }
     /// f64 values in `cells` (and `tmp`) for tile `t`.
+    #[doc(hidden)]
     pub fn cells_tile_len(&self, t: usize) -> Result<usize, Error> {
         let (a, b) = self.tile_rows(t)?;
         Ok((b - a) * self.cells_x * self.lay.k)
     }
     /// f32 values in `models` for tile `t`.
+    #[doc(hidden)]
     pub fn models_tile_len(&self, t: usize) -> Result<usize, Error> {
         let (a, b) = self.tile_rows(t)?;
         Ok((b - a) * self.cells_x * self.ml)
@@ -333,6 +340,7 @@ impl Flr {
         self.cells_x * self.cells_y * self.lay.k
     }
     /// The grid window `s` is fitted on (the block grid, or its 2×2 pooling).
+    #[doc(hidden)]
     pub fn window_grid(&self, s: usize) -> Result<Grid, Error> {
         Ok(self.grids[self.scale(s)?])
     }
@@ -344,11 +352,13 @@ impl Flr {
     }
     /// Whether window `s` is fitted on the pooled grid: its blur then reads
     /// `pooled` (written by [`Flr::pool_tile`]) instead of `cells`.
+    #[doc(hidden)]
     pub fn window_pooled(&self, s: usize) -> bool {
         s < self.scale_count() && self.grids[s].factor > 1
     }
     /// The first window fitted on the pooled grid (its tile ranges are those
     /// of `pooled`), if any.
+    #[doc(hidden)]
     pub fn pooled_window(&self) -> Option<usize> {
         (1..self.scale_count()).find(|&s| self.window_pooled(s))
     }
@@ -360,12 +370,14 @@ impl Flr {
     }
     /// Where tile `t` lies in window `s`'s moment grids (`cells` or `pooled`,
     /// `tmp`, `first` / `blurred`): [`Flr::cells_tile_range`] on the block grid.
+    #[doc(hidden)]
     pub fn window_cells_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
         let row = self.grids[s].cells_x * self.lay.k;
         Ok(a * row..b * row)
     }
     /// f64 values of window `s`'s moment grid (0 past the last window).
+    #[doc(hidden)]
     pub fn window_grid_len(&self, s: usize) -> usize {
         if s >= self.scale_count() {
             return 0;
@@ -375,6 +387,7 @@ impl Flr {
     /// Where tile `t` of window `s` lies in `scale_models` (windows one after another).
     /// With [`FlrConfig::adaptive_without_ao`], window 0 holds two models per
     /// cell ([`Flr::fits_per_cell`]).
+    #[doc(hidden)]
     pub fn scale_models_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
         let row = self.grids[s].cells_x * self.ml * self.fits_per_cell(s);
@@ -383,6 +396,7 @@ impl Flr {
     }
     /// Where tile `t` of window `s` lies in `variances` (one f64 per cell of
     /// the window's grid, windows one after another).
+    #[doc(hidden)]
     pub fn scale_variances_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
         let row = self.grids[s].cells_x * self.fits_per_cell(s);
@@ -392,12 +406,14 @@ impl Flr {
     /// Fits per cell in window `s`'s model and variance grids: 2 for window 0
     /// with [`FlrConfig::adaptive_without_ao`] (per cell its model, then its
     /// AO-free fit's; its variance, then the AO-free fit's), else 1.
+    #[doc(hidden)]
     pub fn fits_per_cell(&self, s: usize) -> usize {
         1 + usize::from(s == 0 && self.without_guide().is_some())
     }
     /// The guide window 0 is also fitted without ([`FlrConfig::adaptive_without_ao`]: AO).
     /// The AO channel and offset of [`FlrConfig::ao_demodulation`], when it
     /// applies ([`FlrConfig::demodulation`]).
+    #[doc(hidden)]
     pub fn demodulation(&self) -> Option<(usize, f32)> {
         self.cfg.demodulation()
     }
@@ -426,6 +442,7 @@ impl Flr {
         self.cells_x * self.cells_y * self.ml
     }
     /// f32 values of one worker's private buffer.
+    #[doc(hidden)]
     pub fn worker_len(&self) -> usize {
         let pw = self.cells_x * self.bin;
         let gathered = BandPlanes::len(self.q, self.bin, pw);
@@ -436,6 +453,7 @@ impl Flr {
         moments.max(apply)
     }
     /// Scratch length in f64 elements for `workers` concurrent workers.
+    #[doc(hidden)]
     pub fn scratch_len_for(&self, workers: usize) -> usize {
         2 * self.grid_len() + self.models_len().div_ceil(2) + (workers.max(1) * self.worker_len()).div_ceil(2) + self.adaptive_len()
     }
@@ -448,6 +466,7 @@ impl Flr {
     /// elements ([`Flr::split_scratch`]'s layout; the f32 regions `models`,
     /// `workers` and `scale_models` are packed two per f64). For callers that
     /// hand regions to concurrent workers through raw pointers (the C API).
+    #[doc(hidden)]
     pub fn scratch_layout(&self, workers: usize) -> ScratchLayout {
         let mut at = 0;
         let mut next = |len: usize| {
@@ -469,6 +488,7 @@ impl Flr {
     }
 
     /// Splits `scratch` (at least `scratch_len_for(workers)` long) into its regions.
+    #[doc(hidden)]
     pub fn split_scratch<'s>(&self, scratch: &'s mut [f64], workers: usize) -> Result<Parts<'s>, Error> {
         let needed = self.scratch_len_for(workers);
         if scratch.len() < needed {
@@ -515,6 +535,7 @@ impl Flr {
 
     /// Stage 0: picks the per-guide reference (the first finite value among
     /// 16 fixed sample positions), so moments are accumulated near zero.
+    #[doc(hidden)]
     pub fn prepare(&self, frame: &CheckedFrame<'_>) -> Stats {
         let mut st = Stats::default();
         for (q, r) in st.reference.iter_mut().enumerate().take(self.q) {
@@ -540,6 +561,7 @@ impl Flr {
     }
 
     /// Stage 1: moments of tile `t` into `cells_tile` (`cells_tile_len(t)`).
+    #[doc(hidden)]
     pub fn moments_tile(
         &self,
         frame: &CheckedFrame<'_>,
@@ -760,6 +782,7 @@ impl Flr {
     /// Stage 2: frame mean and standard deviation of each guide, from all cells.
     /// (The same as [`Flr::stats_tile`] over every tile in order, then
     /// [`Flr::finish_stats_sums`].)
+    #[doc(hidden)]
     pub fn finish_stats(&self, cells: &[f64], stats: &mut Stats) -> Result<(), Error> {
         if cells.len() != self.grid_len() {
             return Err(Error::InvalidTile { index: 0, count: 1 });
@@ -773,6 +796,7 @@ impl Flr {
     /// Stage 2 split by tile: adds tile `t`'s cells (its `cells` band, before
     /// the vertical blur overwrites it) to `sums`. Tiles added in order
     /// 0, 1, … give exactly [`Flr::finish_stats`]'s sums.
+    #[doc(hidden)]
     pub fn stats_tile(&self, t: usize, cells_tile: &[f64], sums: &mut StatsSums) -> Result<(), Error> {
         if cells_tile.len() != self.cells_tile_len(t)? {
             return Err(Error::InvalidTile { index: t, count: self.tile_count() });
@@ -796,6 +820,7 @@ impl Flr {
 
     /// Stage 2's end: the mean and standard deviation of each guide from the
     /// sums of every cell.
+    #[doc(hidden)]
     pub fn finish_stats_sums(&self, sums: &StatsSums, stats: &mut Stats) {
         let (n, s, ss) = (sums.n, &sums.s, &sums.ss);
         for a in 0..self.q {
@@ -809,6 +834,7 @@ impl Flr {
     }
 
     /// Stage 3: horizontal blur of tile `t`: `cells` band → `tmp_tile`.
+    #[doc(hidden)]
     pub fn blur_rows_tile(&self, t: usize, cells: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
         self.blur_rows_tile_at(0, t, cells, tmp_tile)
     }
@@ -826,6 +852,7 @@ impl Flr {
     /// (`cells_tile_range(t)`) 2×2 into its band of `pooled`
     /// (`window_cells_tile_range(s, t)` of a pooled window `s`). Moments are
     /// sums, so a pooled cell is exactly the moments of its 2B × 2B pixels.
+    #[doc(hidden)]
     pub fn pool_tile(&self, t: usize, cells_tile: &[f64], pooled_tile: &mut [f64]) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: t, count: self.tile_count() };
         let s = self.pooled_window().ok_or(bad)?;
@@ -853,6 +880,7 @@ impl Flr {
     /// Stage 3 for window `s` (`s < scale_count()`): `src` is `cells`, or
     /// `pooled` for a pooled window ([`Flr::window_pooled`]); `tmp_tile` is
     /// `window_cells_tile_range(s, t)` of `tmp`.
+    #[doc(hidden)]
     pub fn blur_rows_tile_at(&self, s: usize, t: usize, src: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
         let (r0, r1) = self.window_tile_rows(self.scale(s)?, t)?;
         let row_len = self.grids[s].cells_x * self.lay.k;
@@ -877,6 +905,7 @@ impl Flr {
     }
 
     /// Stage 4: vertical blur of tile `t`: all of `tmp` → `cells_tile`.
+    #[doc(hidden)]
     pub fn blur_cols_tile(&self, t: usize, tmp: &[f64], cells_tile: &mut [f64]) -> Result<(), Error> {
         self.blur_cols_tiles(t..t + 1, tmp, cells_tile)
     }
@@ -885,6 +914,7 @@ impl Flr {
     /// bit-identical to one tile at a time, and each source row of a Gaussian
     /// is fetched from memory fewer times (a tile's 4 rows read 4 + 2r source
     /// rows). The box blur's sliding window still restarts at every tile.
+    #[doc(hidden)]
     pub fn blur_cols_tiles(&self, tiles: core::ops::Range<usize>, tmp: &[f64], cells_band: &mut [f64]) -> Result<(), Error> {
         self.blur_cols_tiles_at(0, tiles, tmp, cells_band)
     }
@@ -892,6 +922,7 @@ impl Flr {
     /// [`Flr::blur_cols_tiles`] for window `s` on its grid; `tmp` is that
     /// window's whole row-blurred grid, `out_band` the band of the grid its
     /// solve reads (`cells`, or `first` / `blurred`).
+    #[doc(hidden)]
     pub fn blur_cols_tiles_at(&self, s: usize, tiles: core::ops::Range<usize>, tmp: &[f64], out_band: &mut [f64]) -> Result<(), Error> {
         let taps = &self.taps[self.scale(s)?];
         let cells_band = out_band;
@@ -952,12 +983,14 @@ impl Flr {
     }
 
     /// Stage 5: solve every cell of tile `t`: `cells` band → `models_tile`.
+    #[doc(hidden)]
     pub fn solve_tile(&self, stats: &Stats, t: usize, cells_tile: &[f64], models_tile: &mut [f32]) -> Result<Report, Error> {
         self.solve_tile_at(0, stats, t, cells_tile, models_tile, &mut [])
     }
 
     /// Stage 5 for window `s`: also writes each cell's variance estimate to
     /// `variances_tile` (one f64 per cell of the tile; empty to skip it).
+    #[doc(hidden)]
     pub fn solve_tile_at(
         &self,
         s: usize,
@@ -1021,6 +1054,7 @@ impl Flr {
     /// and variance are interpolated bilinearly to each block-grid cell).
     /// With [`FlrConfig::adaptive_without_ao`], window 0's AO-free fit (made
     /// by its solve, [`Flr::fits_per_cell`]) is blended as a fourth candidate.
+    #[doc(hidden)]
     pub fn blend_tile(
         &self,
         t: usize,
@@ -1056,6 +1090,7 @@ impl Flr {
 
     /// Stage 6: apply the models to the output rows of tile `t`. `out_band`
     /// holds exactly those rows (`tile_pixel_rows(t)`), numbered from 0.
+    #[doc(hidden)]
     pub fn apply_tile(
         &self,
         frame: &CheckedFrame<'_>,
