@@ -217,43 +217,24 @@ impl Flr {
     }
 }
 
-/// FNV-1a over the plan's sizes and options, the worker count and the scratch length.
+/// FNV-1a over the plan's size and configuration, the worker count and the
+/// scratch length. The configuration is hashed through its `Debug` text, so
+/// every field (and any field added later) takes part without a list here.
 fn plan_key(flr: &Flr, workers: usize, len: usize) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    let c = flr.config();
-    let (sigmas, radius) = match c.blur {
-        super::config::Blur::Gaussian { sigma, radius } => ([sigma, 0.0, 0.0], radius.unwrap_or(-1.0)),
-        super::config::Blur::Box { radius } => ([0.0; 3], radius),
-        super::config::Blur::Adaptive { sigmas } => (sigmas, -2.0),
-    };
-    let (eps0, eps1) = match c.regularization {
-        crate::kernels::solve::Regularization::Normalized { eps_mul, eps_add } => (eps_mul, eps_add),
-        crate::kernels::solve::Regularization::Tikhonov { eps } => (-1.0, eps),
-    };
-    let words = [
-        flr.width as u64,
-        flr.height as u64,
-        c.block as u64,
-        c.upsample as u64,
-        flr.q as u64,
-        flr.scale_count() as u64,
-        u64::from(sigmas[0].to_bits()) | u64::from(sigmas[1].to_bits()) << 32,
-        u64::from(sigmas[2].to_bits()) | u64::from(radius.to_bits()) << 32,
-        eps0.to_bits(),
-        eps1.to_bits(),
-        u64::from(c.clamp_negative) | u64::from(c.adaptive_without_ao) << 1 | ((c.kernel == crate::isa::Kernel::Scalar) as u64) << 2,
-        u64::from(c.ao_demodulation.map_or(u32::MAX, f32::to_bits)),
-        c.guides.channels() as u64 | u64::from(c.guides.ao_channel().is_some()) << 8,
-        workers as u64,
-        len as u64,
-    ];
-    for w in words {
-        for b in w.to_le_bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
+    struct Fnv(u64);
+    impl core::fmt::Write for Fnv {
+        fn write_str(&mut self, s: &str) -> core::fmt::Result {
+            for b in s.bytes() {
+                self.0 ^= u64::from(b);
+                self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+            }
+            Ok(())
         }
     }
-    h
+    let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+    // Writing into `Fnv` cannot fail.
+    let _ = core::fmt::Write::write_fmt(&mut h, format_args!("{:?} {:?} {workers} {len}", flr.config(), flr.size()));
+    h.0
 }
 
 impl<'s> Tiled<'s> {
