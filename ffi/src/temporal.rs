@@ -1,0 +1,190 @@
+//! What BMFR's and WALR's entry points share: the caller-owned
+//! [`LrdHistory`], the scratch and history buffers, and the single-frame and
+//! temporal runs over the core's [`TemporalDenoiser`].
+
+use crate::images::{
+    byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, view, view_mut, LrdFrame, LrdImage, LrdImageMut,
+};
+use crate::status::{status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
+use core::ffi::c_void;
+use lrdenoise_core::{Denoiser, Error, Frame, ImageViewMut, Report, TemporalDenoiser};
+
+/// The caller-owned state of a temporal pipeline (BMFR or WALR): `data`
+/// (4-byte aligned, at least the history size from `lrd_bmfr_temporal_sizes` /
+/// `lrd_walr_temporal_sizes`) and the number of frames accumulated. Set
+/// `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
+/// call advances it. The contents of `data` are ignored while `frames == 0`.
+/// One history serves one method, size and configuration.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdHistory {
+    pub data: *mut c_void,
+    pub bytes: usize,
+    pub frames: u32,
+}
+
+fn f32_bytes(len: usize) -> Result<usize, LrdStatus> {
+    len.checked_mul(4).ok_or(LRD_STATUS_INVALID_ARGUMENT)
+}
+
+fn f64_bytes(len: usize) -> Result<usize, LrdStatus> {
+    len.checked_mul(8).ok_or(LRD_STATUS_INVALID_ARGUMENT)
+}
+
+/// `bytes` bytes at `ptr` as f64 scratch (8-byte aligned, at least `needed` bytes).
+///
+/// # Safety
+/// `ptr` must point to `bytes` writable bytes, exclusively ours for `'a`.
+unsafe fn f64_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Result<&'a mut [f64], LrdStatus> {
+    check_scratch(ptr)?;
+    if bytes < needed {
+        return Err(LRD_STATUS_BUFFER_TOO_SMALL);
+    }
+    // SAFETY: non-null, 8-byte aligned, at least `needed` bytes (caller's contract).
+    Ok(unsafe { core::slice::from_raw_parts_mut(ptr as *mut f64, needed / 8) })
+}
+
+/// `bytes` bytes at `ptr` as f32 (4-byte aligned, at least `needed` bytes).
+///
+/// # Safety
+/// `ptr` must point to `bytes` writable bytes, exclusively ours for `'a`.
+unsafe fn f32_buffer<'a>(ptr: *mut c_void, bytes: usize, needed: usize) -> Result<&'a mut [f32], LrdStatus> {
+    if ptr.is_null() {
+        return Err(LRD_STATUS_NULL_POINTER);
+    }
+    if !(ptr as usize).is_multiple_of(4) {
+        return Err(LRD_STATUS_INVALID_ARGUMENT);
+    }
+    if bytes < needed {
+        return Err(LRD_STATUS_BUFFER_TOO_SMALL);
+    }
+    // SAFETY: non-null, aligned, at least `needed` bytes (caller's contract).
+    Ok(unsafe { core::slice::from_raw_parts_mut(ptr as *mut f32, needed / 4) })
+}
+
+/// BMFR's and WALR's single frame at a frame index (their per-frame grid
+/// offsets), over the f64 scratch of [`Denoiser`]; everything else the C
+/// entry points of both call goes through the core's [`TemporalDenoiser`].
+pub(crate) trait AtIndex: TemporalDenoiser {
+    fn denoise_at(&self, f: &Frame<'_>, index: u32, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error>;
+}
+
+macro_rules! at_index {
+    ($ty:ty) => {
+        impl AtIndex for $ty {
+            fn denoise_at(&self, f: &Frame<'_>, index: u32, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+                let len = <$ty>::scratch_len(self);
+                let got = 2 * scratch.len();
+                let s = bytemuck::cast_slice_mut::<f64, f32>(scratch).get_mut(..len).ok_or(Error::ScratchTooSmall { needed: len, got })?;
+                <$ty>::denoise(self, f, index, s, out)
+            }
+        }
+    };
+}
+
+#[cfg(feature = "bmfr")]
+at_index!(lrdenoise_core::Bmfr);
+#[cfg(feature = "walr")]
+at_index!(lrdenoise_core::Walr);
+
+pub(crate) fn scratch_size<M: Denoiser>(plan: M, bytes: *mut usize) -> Result<(), LrdStatus> {
+    let b = f64_bytes(plan.scratch_len())?;
+    // SAFETY: checked for NULL; caller passes a valid pointer.
+    *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
+    Ok(())
+}
+
+pub(crate) fn temporal_sizes<M: TemporalDenoiser>(plan: M, scratch_bytes: *mut usize, history_bytes: *mut usize) -> Result<(), LrdStatus> {
+    let (s, h) = (f64_bytes(plan.temporal_scratch_len())?, f32_bytes(plan.history_len())?);
+    // SAFETY: checked for NULL; caller passes valid pointers.
+    unsafe {
+        *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
+        *history_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = h;
+    }
+    Ok(())
+}
+
+/// A single frame of a temporal method (`plan(width, height)` from the output size).
+///
+/// # Safety
+/// The pointers satisfy the contracts of the `lrd_*_denoise` entry points.
+#[allow(clippy::too_many_arguments)]
+pub(crate) unsafe fn denoise_single<M: AtIndex>(
+    plan: impl FnOnce(u32, u32) -> Result<M, LrdStatus>,
+    frame: *const LrdFrame,
+    index: u32,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> Result<(), LrdStatus> {
+    // SAFETY: NULL-checked; the caller passes valid pointers. The images satisfy
+    // the LrdImage contract; the scratch is checked (NULL, alignment, size) and
+    // `out` is exclusively ours.
+    unsafe {
+        let (frame, out) = frame_and_out(frame, out)?;
+        let m = plan(out.width, out.height)?;
+        check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
+        let f = frame_views(frame, false)?;
+        let s = f64_buffer(scratch, scratch_bytes, f64_bytes(m.scratch_len())?)?;
+        let mut o = view_mut(out, 0, out.height as usize)?;
+        let r = m.denoise_at(&f, index, s, &mut o).map_err(status_of)?;
+        write_report(report, r);
+    }
+    Ok(())
+}
+
+/// One frame of a temporal pipeline; advances `history.frames`.
+///
+/// # Safety
+/// The pointers satisfy the contracts of the `lrd_*_denoise_temporal` entry
+/// points; the history buffer must not overlap the scratch or the images.
+#[allow(clippy::too_many_arguments)]
+pub(crate) unsafe fn denoise_temporal<M: TemporalDenoiser>(
+    plan: impl FnOnce(u32, u32) -> Result<M, LrdStatus>,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> Result<(), LrdStatus> {
+    // SAFETY: as in `denoise_single`; the history buffer is checked the same way.
+    unsafe {
+        let frame = frame.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?;
+        let out = out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?;
+        let hist = history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?;
+        let m = plan(out.width, out.height)?;
+        let ranges = [(scratch as usize, scratch_bytes), (hist.data as usize, hist.bytes)];
+        check_output_disjoint(out, frame, &ranges)?;
+        if !motion.is_null() {
+            let mi = &*motion;
+            let mr = byte_range(mi.data, mi.format, mi.width, mi.height, 2, (mi.pixel_stride, mi.row_stride, mi.channel_stride));
+            let o = byte_range(out.data, out.format, out.width, out.height, 3, (out.pixel_stride, out.row_stride, out.channel_stride));
+            if let (Some((a, b)), Some((c, d))) = (mr, o) {
+                if a < d && c < b {
+                    return Err(LRD_STATUS_INVALID_ARGUMENT);
+                }
+            }
+        }
+        // the history is written too: it must not overlap the scratch either
+        let (s0, h0) = (scratch as usize, hist.data as usize);
+        if !hist.data.is_null() && s0 < h0.saturating_add(hist.bytes) && h0 < s0.saturating_add(scratch_bytes) {
+            return Err(LRD_STATUS_INVALID_ARGUMENT);
+        }
+        let f = frame_views(frame, false)?;
+        let mv = match motion.as_ref() {
+            Some(mi) => view(mi, 2)?,
+            None => None,
+        };
+        let s = f64_buffer(scratch, scratch_bytes, f64_bytes(m.temporal_scratch_len())?)?;
+        let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(m.history_len())?)?;
+        let mut h = lrdenoise_core::History::resume(hd, hist.frames);
+        let mut o = view_mut(out, 0, out.height as usize)?;
+        let r = m.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
+        hist.frames = h.frames();
+        write_report(report, r);
+    }
+    Ok(())
+}
