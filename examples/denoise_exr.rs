@@ -69,7 +69,7 @@ fn run() -> Result<(), String> {
     let mut args = std::env::args().skip(1);
     let input = args.next().unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/data/room_7.exr").into());
     let output = args.next().unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/target/denoised.exr").into());
-    // `lrdenoise::Error` implements `Display` (and `std::error::Error` with the crate's `std` feature)
+    // `lrdenoise::Error` implements `Display` and `core::error::Error`
     let lrd = |e: lrdenoise::Error| format!("lrdenoise: {e}");
 
     let exr = Exr::read(&input)?;

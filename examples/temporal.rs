@@ -81,7 +81,7 @@ fn run() -> Result<(), String> {
     let walr = args.iter().any(|a| a == "walr");
     let dir = args.iter().find(|a| !matches!(a.as_str(), "bmfr" | "walr")).cloned();
     let dir = dir.unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/data/seq_box_7").into());
-    // `lrdenoise::Error` implements `Display` (and `std::error::Error` with the crate's `std` feature)
+    // `lrdenoise::Error` implements `Display` and `core::error::Error`
     let lrd = |e: lrdenoise::Error| format!("lrdenoise: {e}");
 
     let mut paths: Vec<String> = std::fs::read_dir(&dir)

@@ -140,7 +140,6 @@ impl fmt::Display for Error {
     }
 }
 
-#[cfg(feature = "std")]
-extern crate std;
-#[cfg(feature = "std")]
-impl std::error::Error for Error {}
+/// `core::error::Error` is `std::error::Error`: `?` converts it to
+/// `Box<dyn std::error::Error>` in a `std` program, with or without `std` here.
+impl core::error::Error for Error {}

@@ -31,7 +31,7 @@
 //! whole frame's (the zero padding at the frame's border is the same; a
 //! tile's own border effects stay inside its halo; tested). The halo is
 //! recomputed: ~1.16× the network's arithmetic at 512 px tiles, ~1.34× at 256
-//! (`cargo run --release --example flnr_tiles` times the tile sizes). The
+//! (`cargo bench --bench flnr_tiles` times the tile sizes). The
 //! tiles are independent: [`Flnr::network_tile`] runs one, on any thread.
 
 use crate::error::{Arg, Error};

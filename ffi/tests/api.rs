@@ -193,7 +193,7 @@ fn gpu_dispatch_description() {
     assert_eq!((cfg.blur, cfg.sigmas), (LrdBlur::LRD_BLUR_ADAPTIVE as u32, [6.0, 12.0, 20.0]));
     assert_eq!(d.pass_count, 15);
     let names: Vec<&str> = d.passes.iter().map(|p| unsafe { CStr::from_ptr(p.entry) }.to_str().unwrap()).collect();
-    assert_eq!(names[3], "pool");
+    assert_eq!(names[2], "pool");
     assert_eq!(names[13..], ["blend", "apply"]);
     let mut single = cfg;
     single.blur = LrdBlur::LRD_BLUR_GAUSSIAN as u32;

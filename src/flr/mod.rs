@@ -666,7 +666,7 @@ impl Flr {
         // While this band's blocks are summed, the next band's noisy rows are
         // asked into L2, a slice before each block, so that their
         // de-interleaving at the start of the next band waits less on memory
-        // (1080p Q5 v3, `examples/stages`: moments ~3 % faster with it;
+        // (1080p Q5 v3, `benches/stages.rs`: moments ~3 % faster with it;
         // asking for the next band's guide rows as well is slower).
         let (next_y0, next_rows) = (y0 + bin, bin.min(self.in_h.saturating_sub(y0 + bin)));
         let noisy = frame.noisy;

@@ -237,7 +237,7 @@ fn load_at(s: &[f32], i: usize) -> f32x8 {
 /// (14.3 ms instead of 7.7 for 1080p's moments without). Two distances: into
 /// L1 three lines ahead, and into L2 eight lines ahead, which lets more
 /// misses be in flight than L1 alone can track (x86-64-v3, 1080p, Q = 5,
-/// `examples/stages`: 6.8–6.9 ms with the L2 prefetch, 7.3–7.8 ms without;
+/// `benches/stages.rs`: 6.8–6.9 ms with the L2 prefetch, 7.3–7.8 ms without;
 /// L1 alone at 24–192 values ahead made no difference).
 const PREFETCH_AHEAD: usize = 48;
 const PREFETCH_L2_AHEAD: usize = 128;
