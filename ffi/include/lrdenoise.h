@@ -19,25 +19,47 @@
 #include <stdbool.h>
 
 /**
- * Guide bits for [`LrdFlrConfig::guides`].
+ * Guide bits for [`LrdFlrConfig::guides`] and the `guides` of LrdBmfrConfig
+ * and LrdWalrConfig; other bits return LRD_STATUS_INVALID_CONFIG.
+ * LRD_GUIDE_NORMAL: the normal guide (`LrdGuides.normal`, 3 channels).
  */
 #define LRD_GUIDE_NORMAL 1
 
+/**
+ * Guide bit: the depth guide (`LrdGuides.depth`, 1 channel).
+ */
 #define LRD_GUIDE_DEPTH 2
 
+/**
+ * Guide bit: the world-position guide (`LrdGuides.position`, 3 channels).
+ */
 #define LRD_GUIDE_POSITION 4
 
+/**
+ * Guide bit: the ambient-occlusion guide (`LrdGuides.ao`, 1 channel).
+ */
 #define LRD_GUIDE_AO 8
 
 /**
  * Feature bits returned by `lrd_features()`.
+ * LRD_FEATURE_FLR: FLR's feature, with `lrd_gpu_dispatch`, is compiled in
+ * (the CPU `lrd_flr_*` entry points are always present).
  */
 #define LRD_FEATURE_FLR 1
 
+/**
+ * Feature bit: BMFR (`lrd_bmfr_*`) is compiled in.
+ */
 #define LRD_FEATURE_BMFR 2
 
+/**
+ * Feature bit: WALR (`lrd_walr_*`) is compiled in.
+ */
 #define LRD_FEATURE_WALR 4
 
+/**
+ * Feature bit: FLNR (`lrd_flnr_*`) is compiled in.
+ */
 #define LRD_FEATURE_FLNR 8
 
 /**
@@ -194,7 +216,13 @@ enum LrdFormat
   : uint32_t
 #endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
  {
+  /**
+   * IEEE 754 binary32 (`float`): 4-byte elements, 4-byte aligned.
+   */
   LRD_FORMAT_F32 = 0,
+  /**
+   * IEEE 754 binary16 (half): 2-byte elements, 2-byte aligned.
+   */
   LRD_FORMAT_F16 = 1,
 };
 #ifndef __cplusplus
@@ -213,7 +241,14 @@ enum LrdBlur
   : uint32_t
 #endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
  {
+  /**
+   * One Gaussian window of standard deviation `sigma`, truncated at
+   * `radius` (< 0: 3·sigma).
+   */
   LRD_BLUR_GAUSSIAN = 0,
+  /**
+   * A box of half-width `radius` (≥ 0; the guided filter's window).
+   */
   LRD_BLUR_BOX = 1,
   /**
    * Three Gaussian windows (`sigmas`) blended per cell; whole frame or
@@ -290,7 +325,16 @@ typedef struct LrdFlrConfig {
    * LrdRegularization.
    */
   uint32_t regularization;
+  /**
+   * LRD_REGULARIZATION_NORMALIZED: ε, the multiplicative regulariser, in
+   * [0, 1) (default 1e-3). Ignored by LRD_REGULARIZATION_TIKHONOV.
+   */
   double eps_mul;
+  /**
+   * LRD_REGULARIZATION_NORMALIZED: ϵ, the additive regulariser, in [0, 1)
+   * and not 0 together with `eps_mul` (default 1e-2).
+   * LRD_REGULARIZATION_TIKHONOV: ε added to the diagonal, > 0.
+   */
   double eps_add;
   /**
    * 1, 2 or 4 (joint denoise + upsample).
@@ -327,24 +371,72 @@ typedef struct LrdFlrConfig {
  * (channels−1)·channel_stride + element size` bytes and be aligned to the element size.
  */
 typedef struct LrdImage {
+  /**
+   * First element: channel 0 of pixel (0, 0). Aligned to the element size.
+   * NULL marks an absent guide; the noisy image must not be NULL.
+   */
   const void *data;
+  /**
+   * An LrdFormat value (LRD_FORMAT_F32 or LRD_FORMAT_F16); any other value
+   * returns LRD_STATUS_INVALID_ARGUMENT.
+   */
   uint32_t format;
+  /**
+   * Width in pixels, > 0.
+   */
   uint32_t width;
+  /**
+   * Height in pixels, > 0.
+   */
   uint32_t height;
+  /**
+   * Bytes from one pixel to the next in a row, a multiple of the element
+   * size; 0: channels × `channel_stride` (packed). A larger stride skips
+   * extra channels (e.g. the alpha of RGBA).
+   */
   size_t pixel_stride;
+  /**
+   * Bytes from one row to the next, a multiple of the element size;
+   * 0: `width` × `pixel_stride`.
+   */
   size_t row_stride;
+  /**
+   * Bytes from one channel to the next within a pixel, a multiple of the
+   * element size; 0: the element size (interleaved). Planar images set it
+   * to the distance between planes in bytes and `pixel_stride` to the
+   * element size.
+   */
   size_t channel_stride;
 } LrdImage;
 
 /**
  * Guide images of one frame; absent guides have `data == NULL`.
  * normal: 3 channels, depth: 1, position: 3, ao: 1, user: 1 each.
+ * The guides present must be exactly the call's guide set (the
+ * configuration's `guides` bits and `user_guides`; FLNR: normal, depth and
+ * AO), else LRD_STATUS_GUIDE_MISMATCH.
  */
 typedef struct LrdGuides {
+  /**
+   * Shading normal (x, y, z), 3 channels (LRD_GUIDE_NORMAL).
+   */
   struct LrdImage normal;
+  /**
+   * Camera distance, 1 channel (LRD_GUIDE_DEPTH).
+   */
   struct LrdImage depth;
+  /**
+   * World-space position (x, y, z), 3 channels (LRD_GUIDE_POSITION).
+   */
   struct LrdImage position;
+  /**
+   * Ambient occlusion in [0, 1] (0: occluded, 1: open), 1 channel (LRD_GUIDE_AO).
+   */
   struct LrdImage ao;
+  /**
+   * Single-channel user guides: the first `user_guides` (configuration)
+   * entries present, the rest NULL.
+   */
   struct LrdImage user[4];
 } LrdGuides;
 
@@ -356,8 +448,20 @@ typedef struct LrdGuides {
  * then applied to `guides`). Leave all its `data` NULL for plain FLR.
  */
 typedef struct LrdFrame {
+  /**
+   * Noisy RGB, 3 channels (not NULL): the output's size, or for FLR
+   * with `upsample` > 1 the output's size / upsample, rounded up.
+   */
   struct LrdImage noisy;
+  /**
+   * Guides at the output's size.
+   */
   struct LrdGuides guides;
+  /**
+   * FLR only: guides at the noisy image's size (see above); all `data`
+   * NULL otherwise (BMFR, WALR and FLNR return LRD_STATUS_UNSUPPORTED if
+   * any is set).
+   */
   struct LrdGuides guides_low;
 } LrdFrame;
 
@@ -365,12 +469,37 @@ typedef struct LrdFrame {
  * A writable image (the output), same conventions as [`LrdImage`].
  */
 typedef struct LrdImageMut {
+  /**
+   * First element: channel 0 of pixel (0, 0); not NULL, aligned to the
+   * element size. Receives RGB (3 channels). The image must not overlap
+   * any other buffer of the call, and no two of its elements may share
+   * memory (LRD_STATUS_INVALID_ARGUMENT).
+   */
   void *data;
+  /**
+   * An LrdFormat value (LRD_FORMAT_F32 or LRD_FORMAT_F16).
+   */
   uint32_t format;
+  /**
+   * Width in pixels, > 0: the output size the call denoises to.
+   */
   uint32_t width;
+  /**
+   * Height in pixels, > 0.
+   */
   uint32_t height;
+  /**
+   * Bytes from one pixel to the next in a row (0: 3 × `channel_stride`);
+   * a larger stride leaves extra channels (e.g. alpha) untouched.
+   */
   size_t pixel_stride;
+  /**
+   * Bytes from one row to the next (0: `width` × `pixel_stride`).
+   */
   size_t row_stride;
+  /**
+   * Bytes from one channel to the next within a pixel (0: the element size).
+   */
   size_t channel_stride;
 } LrdImageMut;
 
@@ -378,10 +507,27 @@ typedef struct LrdImageMut {
  * What happened during a run (added to by every call that takes one).
  */
 typedef struct LrdReport {
+  /**
+   * Input pixels with a NaN or infinite noisy value (left out of the fit).
+   */
   uint64_t nonfinite_noisy;
+  /**
+   * Input pixels with a NaN or infinite guide value (left out of the fit;
+   * WALR treats them as "no geometry").
+   */
   uint64_t nonfinite_guides;
+  /**
+   * Output pixels whose own guides were not finite, or that had no usable
+   * sample: given a local mean (or 0 where there was none).
+   */
   uint64_t fallback_pixels;
+  /**
+   * FLR, BMFR: blocks without any valid pixel.
+   */
   uint64_t empty_blocks;
+  /**
+   * FLR: cells whose window held no valid pixel (output 0 there).
+   */
   uint64_t empty_cells;
   /**
    * FLR: pivots floored in the solve; BMFR: features dropped by the QR.
@@ -481,8 +627,20 @@ typedef struct LrdBmfrConfig {
  * One history serves one method, size and configuration.
  */
 typedef struct LrdHistory {
+  /**
+   * The history buffer: not NULL, 4-byte aligned, read and written by each
+   * temporal call. It must not overlap the scratch, the images or `out`.
+   */
   void *data;
+  /**
+   * Size of `data` in bytes, at least the history size of the
+   * `..._temporal_sizes` call (else LRD_STATUS_BUFFER_TOO_SMALL).
+   */
   size_t bytes;
+  /**
+   * Frames accumulated: 0 starts a new sequence; each successful temporal
+   * call increments it (wrapping past UINT32_MAX to 1, never to 0).
+   */
   uint32_t frames;
 } LrdHistory;
 
@@ -540,6 +698,10 @@ typedef struct LrdWalrConfig {
    * pole of the octahedral normal map; false: the frame's mean normal.
    */
   bool has_view;
+  /**
+   * With `has_view`: the direction towards the camera, finite and not
+   * zero (need not be unit length); ignored otherwise (default 0, 0, 1).
+   */
   float view[3];
   /**
    * Clamp negative output to 0 (true).
@@ -589,6 +751,9 @@ typedef struct LrdGpuPass {
    * Static, NUL-terminated entry point name.
    */
   const char *entry;
+  /**
+   * Workgroup counts along x, y and z (the arguments of `dispatchWorkgroups`).
+   */
   uint32_t workgroups[3];
 } LrdGpuPass;
 
@@ -607,14 +772,22 @@ typedef struct LrdGpuPass {
  * adaptive window (`LRD_BLUR_ADAPTIVE`).
  */
 typedef struct LrdGpuDispatch {
+  /**
+   * The dispatches, in order; entries from `pass_count` on are unused
+   * (`entry` NULL, `workgroups` 0).
+   */
   struct LrdGpuPass passes[15];
+  /**
+   * Number of valid entries of `passes` (7 with one window, at most 15).
+   */
   uint32_t pass_count;
   /**
    * Minimum size of each buffer in bytes, in binding order.
    */
   uint64_t buffer_bytes[8];
   /**
-   * Contents of the uniform parameter block (binding 0).
+   * Contents of the uniform parameter block (binding 0): upload these
+   * bytes unchanged.
    */
   uint8_t params[1424];
 } LrdGpuDispatch;

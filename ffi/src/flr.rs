@@ -13,7 +13,10 @@ use lrdenoise_core::{Blur, Flr, FlrConfig, Kernel, Regularization};
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LrdBlur {
+    /// One Gaussian window of standard deviation `sigma`, truncated at
+    /// `radius` (< 0: 3·sigma).
     LRD_BLUR_GAUSSIAN = 0,
+    /// A box of half-width `radius` (≥ 0; the guided filter's window).
     LRD_BLUR_BOX = 1,
     /// Three Gaussian windows (`sigmas`) blended per cell; whole frame or
     /// tiled (the tiled run then needs LRD_STAGE_BLEND).
@@ -50,7 +53,12 @@ pub struct LrdFlrConfig {
     pub sigmas: [f32; 3],
     /// LrdRegularization.
     pub regularization: u32,
+    /// LRD_REGULARIZATION_NORMALIZED: ε, the multiplicative regulariser, in
+    /// [0, 1) (default 1e-3). Ignored by LRD_REGULARIZATION_TIKHONOV.
     pub eps_mul: f64,
+    /// LRD_REGULARIZATION_NORMALIZED: ϵ, the additive regulariser, in [0, 1)
+    /// and not 0 together with `eps_mul` (default 1e-2).
+    /// LRD_REGULARIZATION_TIKHONOV: ε added to the diagonal, > 0.
     pub eps_add: f64,
     /// 1, 2 or 4 (joint denoise + upsample).
     pub upsample: u32,

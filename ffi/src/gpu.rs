@@ -13,6 +13,7 @@ use core::ffi::c_char;
 pub struct LrdGpuPass {
     /// Static, NUL-terminated entry point name.
     pub entry: *const c_char,
+    /// Workgroup counts along x, y and z (the arguments of `dispatchWorkgroups`).
     pub workgroups: [u32; 3],
 }
 
@@ -31,11 +32,15 @@ pub struct LrdGpuPass {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdGpuDispatch {
+    /// The dispatches, in order; entries from `pass_count` on are unused
+    /// (`entry` NULL, `workgroups` 0).
     pub passes: [LrdGpuPass; 15],
+    /// Number of valid entries of `passes` (7 with one window, at most 15).
     pub pass_count: u32,
     /// Minimum size of each buffer in bytes, in binding order.
     pub buffer_bytes: [u64; 8],
-    /// Contents of the uniform parameter block (binding 0).
+    /// Contents of the uniform parameter block (binding 0): upload these
+    /// bytes unchanged.
     pub params: [u8; 1424],
 }
 

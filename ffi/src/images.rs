@@ -12,7 +12,9 @@ use lrdenoise_core::{Frame, GuideSet, Guides, ImageView, ImageViewMut, Layout};
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LrdFormat {
+    /// IEEE 754 binary32 (`float`): 4-byte elements, 4-byte aligned.
     LRD_FORMAT_F32 = 0,
+    /// IEEE 754 binary16 (half): 2-byte elements, 2-byte aligned.
     LRD_FORMAT_F16 = 1,
 }
 
@@ -24,12 +26,27 @@ pub enum LrdFormat {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdImage {
+    /// First element: channel 0 of pixel (0, 0). Aligned to the element size.
+    /// NULL marks an absent guide; the noisy image must not be NULL.
     pub data: *const c_void,
+    /// An LrdFormat value (LRD_FORMAT_F32 or LRD_FORMAT_F16); any other value
+    /// returns LRD_STATUS_INVALID_ARGUMENT.
     pub format: u32,
+    /// Width in pixels, > 0.
     pub width: u32,
+    /// Height in pixels, > 0.
     pub height: u32,
+    /// Bytes from one pixel to the next in a row, a multiple of the element
+    /// size; 0: channels × `channel_stride` (packed). A larger stride skips
+    /// extra channels (e.g. the alpha of RGBA).
     pub pixel_stride: usize,
+    /// Bytes from one row to the next, a multiple of the element size;
+    /// 0: `width` × `pixel_stride`.
     pub row_stride: usize,
+    /// Bytes from one channel to the next within a pixel, a multiple of the
+    /// element size; 0: the element size (interleaved). Planar images set it
+    /// to the distance between planes in bytes and `pixel_stride` to the
+    /// element size.
     pub channel_stride: usize,
 }
 
@@ -37,24 +54,44 @@ pub struct LrdImage {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdImageMut {
+    /// First element: channel 0 of pixel (0, 0); not NULL, aligned to the
+    /// element size. Receives RGB (3 channels). The image must not overlap
+    /// any other buffer of the call, and no two of its elements may share
+    /// memory (LRD_STATUS_INVALID_ARGUMENT).
     pub data: *mut c_void,
+    /// An LrdFormat value (LRD_FORMAT_F32 or LRD_FORMAT_F16).
     pub format: u32,
+    /// Width in pixels, > 0: the output size the call denoises to.
     pub width: u32,
+    /// Height in pixels, > 0.
     pub height: u32,
+    /// Bytes from one pixel to the next in a row (0: 3 × `channel_stride`);
+    /// a larger stride leaves extra channels (e.g. alpha) untouched.
     pub pixel_stride: usize,
+    /// Bytes from one row to the next (0: `width` × `pixel_stride`).
     pub row_stride: usize,
+    /// Bytes from one channel to the next within a pixel (0: the element size).
     pub channel_stride: usize,
 }
 
 /// Guide images of one frame; absent guides have `data == NULL`.
 /// normal: 3 channels, depth: 1, position: 3, ao: 1, user: 1 each.
+/// The guides present must be exactly the call's guide set (the
+/// configuration's `guides` bits and `user_guides`; FLNR: normal, depth and
+/// AO), else LRD_STATUS_GUIDE_MISMATCH.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdGuides {
+    /// Shading normal (x, y, z), 3 channels (LRD_GUIDE_NORMAL).
     pub normal: LrdImage,
+    /// Camera distance, 1 channel (LRD_GUIDE_DEPTH).
     pub depth: LrdImage,
+    /// World-space position (x, y, z), 3 channels (LRD_GUIDE_POSITION).
     pub position: LrdImage,
+    /// Ambient occlusion in [0, 1] (0: occluded, 1: open), 1 channel (LRD_GUIDE_AO).
     pub ao: LrdImage,
+    /// Single-channel user guides: the first `user_guides` (configuration)
+    /// entries present, the rest NULL.
     pub user: [LrdImage; 4],
 }
 
@@ -66,15 +103,26 @@ pub struct LrdGuides {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdFrame {
+    /// Noisy RGB, 3 channels (not NULL): the output's size, or for FLR
+    /// with `upsample` > 1 the output's size / upsample, rounded up.
     pub noisy: LrdImage,
+    /// Guides at the output's size.
     pub guides: LrdGuides,
+    /// FLR only: guides at the noisy image's size (see above); all `data`
+    /// NULL otherwise (BMFR, WALR and FLNR return LRD_STATUS_UNSUPPORTED if
+    /// any is set).
     pub guides_low: LrdGuides,
 }
 
-/// Guide bits for [`LrdFlrConfig::guides`].
+/// Guide bits for [`LrdFlrConfig::guides`] and the `guides` of LrdBmfrConfig
+/// and LrdWalrConfig; other bits return LRD_STATUS_INVALID_CONFIG.
+/// LRD_GUIDE_NORMAL: the normal guide (`LrdGuides.normal`, 3 channels).
 pub const LRD_GUIDE_NORMAL: u32 = 1;
+/// Guide bit: the depth guide (`LrdGuides.depth`, 1 channel).
 pub const LRD_GUIDE_DEPTH: u32 = 2;
+/// Guide bit: the world-position guide (`LrdGuides.position`, 3 channels).
 pub const LRD_GUIDE_POSITION: u32 = 4;
+/// Guide bit: the ambient-occlusion guide (`LrdGuides.ao`, 1 channel).
 pub const LRD_GUIDE_AO: u32 = 8;
 
 /// Element layout of an image: (element size, channel/pixel/row strides in elements, elements spanned).

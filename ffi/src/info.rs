@@ -4,9 +4,14 @@
 use core::ffi::c_char;
 
 /// Feature bits returned by `lrd_features()`.
+/// LRD_FEATURE_FLR: FLR's feature, with `lrd_gpu_dispatch`, is compiled in
+/// (the CPU `lrd_flr_*` entry points are always present).
 pub const LRD_FEATURE_FLR: u32 = 1;
+/// Feature bit: BMFR (`lrd_bmfr_*`) is compiled in.
 pub const LRD_FEATURE_BMFR: u32 = 2;
+/// Feature bit: WALR (`lrd_walr_*`) is compiled in.
 pub const LRD_FEATURE_WALR: u32 = 4;
+/// Feature bit: FLNR (`lrd_flnr_*`) is compiled in.
 pub const LRD_FEATURE_FLNR: u32 = 8;
 
 /// The library version, e.g. "0.1.0" (static, NUL-terminated).

@@ -5,6 +5,7 @@
 //! to [`LrdStatus`], and runs under `catch_unwind`, so no panic crosses the
 //! boundary.
 
+#![warn(missing_docs)]
 #![allow(clippy::missing_safety_doc)] // the safety contract is in the header comments
 #![allow(non_camel_case_types)]
 

@@ -44,10 +44,17 @@ use LrdStatus::*;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default)]
 pub struct LrdReport {
+    /// Input pixels with a NaN or infinite noisy value (left out of the fit).
     pub nonfinite_noisy: u64,
+    /// Input pixels with a NaN or infinite guide value (left out of the fit;
+    /// WALR treats them as "no geometry").
     pub nonfinite_guides: u64,
+    /// Output pixels whose own guides were not finite, or that had no usable
+    /// sample: given a local mean (or 0 where there was none).
     pub fallback_pixels: u64,
+    /// FLR, BMFR: blocks without any valid pixel.
     pub empty_blocks: u64,
+    /// FLR: cells whose window held no valid pixel (output 0 there).
     pub empty_cells: u64,
     /// FLR: pivots floored in the solve; BMFR: features dropped by the QR.
     pub dropped_pivots: u64,

@@ -18,8 +18,14 @@ use lrdenoise_core::{Denoiser, Error, Frame, ImageViewMut, Report, TemporalDenoi
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdHistory {
+    /// The history buffer: not NULL, 4-byte aligned, read and written by each
+    /// temporal call. It must not overlap the scratch, the images or `out`.
     pub data: *mut c_void,
+    /// Size of `data` in bytes, at least the history size of the
+    /// `..._temporal_sizes` call (else LRD_STATUS_BUFFER_TOO_SMALL).
     pub bytes: usize,
+    /// Frames accumulated: 0 starts a new sequence; each successful temporal
+    /// call increments it (wrapping past UINT32_MAX to 1, never to 0).
     pub frames: u32,
 }
 

@@ -39,6 +39,8 @@ pub struct LrdWalrConfig {
     /// Use `view` (direction towards the camera, in the normals' space) as the
     /// pole of the octahedral normal map; false: the frame's mean normal.
     pub has_view: bool,
+    /// With `has_view`: the direction towards the camera, finite and not
+    /// zero (need not be unit length); ignored otherwise (default 0, 0, 1).
     pub view: [f32; 3],
     /// Clamp negative output to 0 (true).
     pub clamp_negative: bool,
