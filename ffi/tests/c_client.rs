@@ -1,7 +1,8 @@
 //! Builds the C client (`ffi/examples/client.c`) against the static library with
-//! `gcc -std=c99 -Wall -Wextra -Werror`, runs it (under valgrind memcheck when
-//! installed; required when LRD_REQUIRE_VALGRIND is set), checks the header also
+//! `gcc -std=c99 -Wall -Wextra -Werror`, runs it, checks the header also
 //! compiles as C++17, and compares the client's output with the Rust API's.
+//! The same run under valgrind memcheck is `#[ignore]`d (it needs valgrind and
+//! takes minutes): `cargo test -p lrdenoise-ffi -- --ignored` runs it, as CI does.
 
 use lrdenoise_core::{Flr, FlrConfig, Frame, Guides, ImageView, ImageViewMut};
 use std::path::PathBuf;
@@ -46,6 +47,16 @@ fn root() -> PathBuf {
 
 #[test]
 fn c_client_matches_rust() {
+    run_client(false);
+}
+
+#[test]
+#[ignore = "needs valgrind (memcheck); run with --ignored, CI does"]
+fn c_client_under_valgrind() {
+    run_client(true);
+}
+
+fn run_client(memcheck: bool) {
     let profile = if cfg!(debug_assertions) { "debug" } else { "release" };
     let mut build = Command::new(env!("CARGO"));
     build.current_dir(root()).args(["build", "-p", "lrdenoise-ffi"]);
@@ -56,7 +67,7 @@ fn c_client_matches_rust() {
     let target = std::env::var("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|_| root().join("target"));
     let lib = target.join(profile).join("liblrdenoise.a");
     assert!(lib.exists(), "{} missing", lib.display());
-    let dir = std::env::temp_dir().join(format!("lrd-c-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("lrd-c-{}-{memcheck}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let exe = dir.join("client");
     let inc = root().join("ffi/include");
@@ -84,11 +95,8 @@ fn c_client_matches_rust() {
 
     let raw = dir.join("out.raw");
     let blob = root().join("train/flnr.bin");
-    let have_valgrind = Command::new("valgrind").arg("--version").output().is_ok();
-    if std::env::var("LRD_REQUIRE_VALGRIND").is_ok() {
-        assert!(have_valgrind, "valgrind required but not installed");
-    }
-    let out = if have_valgrind {
+    let out = if memcheck {
+        assert!(Command::new("valgrind").arg("--version").output().is_ok(), "valgrind is not installed");
         Command::new("valgrind")
             .args(["--error-exitcode=3", "--leak-check=full", "--errors-for-leak-kinds=definite", "-q"])
             .arg(&exe)
@@ -97,7 +105,6 @@ fn c_client_matches_rust() {
             .output()
             .unwrap()
     } else {
-        eprintln!("valgrind not installed: running the client without memcheck");
         Command::new(&exe).arg(&raw).arg(&blob).output().unwrap()
     };
     let stdout = String::from_utf8_lossy(&out.stdout);

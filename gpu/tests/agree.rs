@@ -3,9 +3,10 @@
 //! regularizations, the box blur, and the degenerate cases of the FLR tests
 //! (constant, all-zero, duplicated, linearly dependent guides; NaN/Inf).
 //!
-//! Needs a wgpu adapter: in CI, Mesa's lavapipe (`mesa-vulkan-drivers`). Where
-//! none exists each test prints `SKIPPED: no GPU adapter` and returns, unless
-//! `LRD_REQUIRE_GPU=1` (set by `.ci/run`), which makes a missing adapter fail.
+//! The tests that run shaders need a wgpu adapter (in CI, Mesa's lavapipe,
+//! `mesa-vulkan-drivers`): they are `#[ignore]`d, so a plain `cargo test`
+//! reports them as ignored, and fail when run without one
+//! (`cargo test -p lrdenoise-gpu -- --ignored`; `.ci/run` does).
 
 #[path = "../../tests/common/mod.rs"]
 mod common;
@@ -20,14 +21,14 @@ const MEAN_TOL: f64 = 1e-4;
 /// Worst single value, relative to the mean |CPU| (a pixel near a hard edge).
 const MAX_TOL: f64 = 1e-3;
 
-fn gpu(cfg: FlrConfig, w: usize, h: usize) -> Option<GpuFlr> {
+/// Why the shader tests are ignored by default.
+const NEEDS_ADAPTER: &str = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does";
+
+/// The GPU executor (a failure that says so where there is no adapter).
+fn gpu(cfg: FlrConfig, w: usize, h: usize) -> GpuFlr {
     match GpuFlr::new(cfg, w, h) {
-        Ok(g) => Some(g),
-        Err(GpuError::NoAdapter(why)) => {
-            assert!(std::env::var("LRD_REQUIRE_GPU").is_err(), "LRD_REQUIRE_GPU is set but there is no adapter: {why}");
-            eprintln!("SKIPPED: no GPU adapter ({why})");
-            None
-        }
+        Ok(g) => g,
+        Err(GpuError::NoAdapter(why)) => panic!("no GPU adapter ({why}): {NEEDS_ADAPTER}"),
         Err(e) => panic!("{e}"),
     }
 }
@@ -40,8 +41,8 @@ fn rel_diff(gpu: &[f32], cpu: &[f32]) -> (f64, f64) {
 }
 
 /// Runs both paths; returns (mean, max) relative differences and both reports.
-fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(f64, f64, Report, Report)> {
-    let mut g = gpu(cfg, f.w, f.h)?;
+fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> (f64, f64, Report, Report) {
+    let mut g = gpu(cfg, f.w, f.h);
     let frame = f.frame(set);
     let (cpu, rep_cpu) = run_frame(cfg, f.w, f.h, &frame);
     let mut out = vec![0f32; 3 * f.w * f.h];
@@ -51,23 +52,23 @@ fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(f64, f64, Report
     }
     assert!(out.iter().all(|v| v.is_finite()), "GPU output not finite");
     let (mean, max) = rel_diff(&out, &cpu);
-    Some((mean, max, rep_cpu, rep_gpu))
+    (mean, max, rep_cpu, rep_gpu)
 }
 
 /// Mean relative difference between two configurations' GPU outputs on one
-/// frame (what an option moves; the callers have an adapter).
+/// frame (what an option moves).
 fn gpu_difference(a: FlrConfig, b: FlrConfig, f: &Owned, set: GuideSet) -> f64 {
     let frame = f.frame(set);
     let run = |c: FlrConfig| {
         let mut out = vec![0f32; 3 * f.w * f.h];
-        gpu(c, f.w, f.h).unwrap().denoise(&frame, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap()).unwrap();
+        gpu(c, f.w, f.h).denoise(&frame, &mut ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap()).unwrap();
         out
     };
     rel_diff(&run(b), &run(a)).0
 }
 
-fn check(name: &str, cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(Report, Report)> {
-    let (mean, max, rc, rg) = compare(cfg, f, set)?;
+fn check(name: &str, cfg: FlrConfig, f: &Owned, set: GuideSet) -> (Report, Report) {
+    let (mean, max, rc, rg) = compare(cfg, f, set);
     eprintln!("{name}: {}x{} mean {mean:.2e} max {max:.2e}", f.w, f.h);
     assert!(mean < MEAN_TOL && max < MAX_TOL, "{name} {}x{}: mean {mean:.2e} max {max:.2e}", f.w, f.h);
     assert_eq!(
@@ -76,10 +77,11 @@ fn check(name: &str, cfg: FlrConfig, f: &Owned, set: GuideSet) -> Option<(Report
         "{name}"
     );
     assert_eq!((rc.empty_blocks, rc.empty_cells), (rg.empty_blocks, rg.empty_cells), "{name}");
-    Some((rc, rg))
+    (rc, rg)
 }
 
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn frames_sizes_and_guide_sets() {
     let sets = [
         GuideSet::NORMAL_DEPTH_AO,
@@ -92,15 +94,14 @@ fn frames_sizes_and_guide_sets() {
         for set in sets {
             for block in [8, 4, 16] {
                 let c = cfg(set, block);
-                if check(&format!("set {set:?} B{block}"), c, &f, set).is_none() {
-                    return;
-                }
+                check(&format!("set {set:?} B{block}"), c, &f, set);
             }
         }
     }
 }
 
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn regularizations_and_box_blur() {
     let f = Owned::synthetic(96, 64, 7, 0.6);
     let set = GuideSet::NORMAL_DEPTH_AO;
@@ -111,9 +112,7 @@ fn regularizations_and_box_blur() {
         ("B1", cfg(set, 1)),
     ];
     for (name, c) in configs {
-        if check(name, c, &f, set).is_none() {
-            return;
-        }
+        check(name, c, &f, set);
     }
 }
 
@@ -121,15 +120,14 @@ fn regularizations_and_box_blur() {
 /// pooled (σ 6/12/20 at B = 8), not pooled (B = 16), one of each (σ 6/8/20);
 /// sizes odd and tiny; the degenerate and NaN/Inf frames.
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn adaptive_window() {
     let set = GuideSet::NORMAL_DEPTH_AO;
     let adaptive = |sigmas: [f32; 3], block: usize| FlrConfig { blur: Blur::Adaptive { sigmas }, ..cfg(set, block) };
     for (w, h, seed) in [(96, 64, 7), (75, 61, 2), (7, 3, 4), (1, 1, 5), (33, 70, 6)] {
         let f = Owned::synthetic(w, h, seed, 0.6);
         for (sigmas, block) in [([6.0, 12.0, 20.0], 8), ([6.0, 12.0, 20.0], 16), ([6.0, 8.0, 20.0], 8), ([3.0, 6.0, 10.0], 4)] {
-            if check(&format!("adaptive {sigmas:?} B{block}"), adaptive(sigmas, block), &f, set).is_none() {
-                return;
-            }
+            check(&format!("adaptive {sigmas:?} B{block}"), adaptive(sigmas, block), &f, set);
         }
     }
     // no guides (a blend of three blurs), every guide, and B = 1 (pooled cells of 2×2 pixels)
@@ -137,9 +135,7 @@ fn adaptive_window() {
     let all = GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 };
     for (set, block) in [(GuideSet::NONE, 8), (all, 8), (set, 1)] {
         let c = FlrConfig { guides: set, ..adaptive([6.0, 12.0, 20.0], block) };
-        if check(&format!("adaptive {set:?} B{block}"), c, &f, set).is_none() {
-            return;
-        }
+        check(&format!("adaptive {set:?} B{block}"), c, &f, set);
     }
     let mut f = Owned::synthetic(64, 48, 2, 0.6);
     f.noisy[3 * 7] = f32::NAN;
@@ -155,6 +151,7 @@ fn adaptive_window() {
 /// user guide (the system reordered), both regularizations, sizes odd and
 /// tiny, NaN/Inf; and its output differs from the three-window blend.
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn adaptive_without_ao() {
     let base = GuideSet::NORMAL_DEPTH_AO;
     for (set, user) in [(base, false), (GuideSet { user: 1, ..base }, true)] {
@@ -166,10 +163,8 @@ fn adaptive_without_ao() {
             for reg in [Regularization::Normalized { eps_mul: 1e-3, eps_add: 1e-2 }, Regularization::Tikhonov { eps: 1e-3 }] {
                 let three = FlrConfig { regularization: reg, ..adaptive(cfg(set, 8)) };
                 let four = FlrConfig { adaptive_without_ao: true, ..three };
-                let Some((mean, max, _, _)) = compare(three, &f, set) else { return };
-                if check(&format!("without AO {set:?} {reg:?}"), four, &f, set).is_none() {
-                    return;
-                }
+                let (mean, max, _, _) = compare(three, &f, set);
+                check(&format!("without AO {set:?} {reg:?}"), four, &f, set);
                 assert!(mean < MEAN_TOL && max < MAX_TOL);
                 if w * h > 1000 {
                     // the candidate changes the result by far more than the GPU's tolerance
@@ -191,6 +186,7 @@ fn adaptive_without_ao() {
 /// a tiny offset (s down to 1e-3), AO outside [0, 1] and NaN; and it moves
 /// the output by far more than the GPU's tolerance.
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn ao_demodulation() {
     let set = GuideSet::NORMAL_DEPTH_AO;
     for (w, h, seed) in [(96, 64, 3), (37, 29, 8), (1, 1, 2)] {
@@ -207,9 +203,7 @@ fn ao_demodulation() {
             assert!(on.ao_demodulation.is_some());
             for demod in [None, on.ao_demodulation, Some(1e-6)] {
                 let c = FlrConfig { ao_demodulation: demod, ..on };
-                if check(&format!("ao demodulation {demod:?} {blur:?}"), c, &f, set).is_none() {
-                    return;
-                }
+                check(&format!("ao demodulation {demod:?} {blur:?}"), c, &f, set);
             }
             if w * h > 1000 {
                 let m = gpu_difference(FlrConfig { ao_demodulation: None, ..on }, on, &f, set);
@@ -225,6 +219,7 @@ fn ao_demodulation() {
 }
 
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn degenerate_guides_and_nonfinite_inputs() {
     let base = Owned::synthetic(64, 48, 2, 0.6);
     let n = base.w * base.h;
@@ -238,9 +233,7 @@ fn degenerate_guides_and_nonfinite_inputs() {
     for (name, u) in cases {
         let mut f = base.clone();
         f.user = vec![u];
-        if check(name, cfg(set, 8), &f, set).is_none() {
-            return;
-        }
+        check(name, cfg(set, 8), &f, set);
     }
     // NaN and Inf in the noisy image and in guides: excluded and counted alike
     let mut f = base.clone();
@@ -249,9 +242,8 @@ fn degenerate_guides_and_nonfinite_inputs() {
     f.depth[900] = f32::NAN;
     f.normal[3 * 1200 + 2] = f32::NEG_INFINITY;
     let set = GuideSet::NORMAL_DEPTH_AO;
-    if let Some((rc, _)) = check("nan/inf", cfg(set, 8), &f, set) {
-        assert_eq!((rc.nonfinite_noisy, rc.nonfinite_guides, rc.fallback_pixels), (2, 2, 2));
-    }
+    let (rc, _) = check("nan/inf", cfg(set, 8), &f, set);
+    assert_eq!((rc.nonfinite_noisy, rc.nonfinite_guides, rc.fallback_pixels), (2, 2, 2));
 }
 
 #[test]
@@ -274,6 +266,7 @@ fn plan_errors() {
 /// Guides far from zero: the frame reference removes a common offset exactly,
 /// so world positions at 1e4 and depth at 1e3 cost no accuracy.
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn large_offsets() {
     let mut f = Owned::synthetic(80, 64, 9, 0.5);
     for v in f.position.iter_mut() {
@@ -288,6 +281,7 @@ fn large_offsets() {
 
 /// f16 input buffers: the GPU reads the halves the CPU reads from f16 views.
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn f16_inputs() {
     let f = Owned::synthetic(75, 61, 11, 0.5);
     let set = GuideSet::NORMAL_DEPTH_AO;
@@ -303,12 +297,9 @@ fn adaptive(c: FlrConfig) -> FlrConfig {
 
 fn f16_case(f: &Owned, c: FlrConfig) {
     use half::f16;
-    let Some(mut g) = (match GpuFlr::with_input(c, f.w, f.h, gpu::InputFormat::F16) {
-        Err(GpuError::NoAdapter(_)) if std::env::var("LRD_REQUIRE_GPU").is_err() => None,
-        r => Some(r.unwrap()),
-    }) else {
-        eprintln!("SKIPPED: no GPU adapter");
-        return;
+    let mut g = match GpuFlr::with_input(c, f.w, f.h, gpu::InputFormat::F16) {
+        Err(GpuError::NoAdapter(why)) => panic!("no GPU adapter ({why}): {NEEDS_ADAPTER}"),
+        r => r.unwrap(),
     };
     let h16 = |v: &[f32]| v.iter().map(|x| f16::from_f32(*x)).collect::<Vec<_>>();
     let (noisy, normal, depth, ao) = (h16(&f.noisy), h16(&f.normal), h16(&f.depth), h16(&f.ao));
@@ -335,6 +326,7 @@ fn f16_case(f: &Owned, c: FlrConfig) {
 /// and a separate full-resolution fit set (FLNR's X'_model): the GPU takes the
 /// moments from the same guides as the CPU.
 #[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn upsampling_and_separate_fit_guides() {
     let f = Owned::synthetic(101, 67, 12, 0.5);
     let (w, h) = (f.w, f.h);
@@ -364,14 +356,14 @@ fn upsampling_and_separate_fit_guides() {
         let c = FlrConfig { upsample: u, ..cfg(set, 8) };
         for c in [adaptive(c), c] {
             let (cpu, _) = run_frame(c, w, h, &frame);
-            let Some(mut g) = gpu(c, w, h) else { return };
+            let mut g = gpu(c, w, h);
             let mut out = vec![0f32; 3 * w * h];
             g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
             let (mean, _) = rel_diff(&out, &cpu);
             eprintln!("upsample {u}, {:?}: mean {mean:.2e}", c.blur);
             assert!(mean < MEAN_TOL, "upsample {u}, {:?}: {mean:.2e}", c.blur);
         }
-        let Some(mut g) = gpu(c, w, h) else { return };
+        let mut g = gpu(c, w, h);
         let mut out = vec![0f32; 3 * w * h];
         // and the same executor still runs frames without a separate set at upsample 1
         if u == 1 {
@@ -384,7 +376,7 @@ fn upsampling_and_separate_fit_guides() {
     }
     // upsampling without low-resolution guides is refused, as on the CPU
     let c = FlrConfig { upsample: 2, ..cfg(set, 8) };
-    let Some(mut g) = gpu(c, w, h) else { return };
+    let mut g = gpu(c, w, h);
     let noisy = every(&f.noisy, 3, 2);
     let frame = Frame::new(iv(&noisy, w.div_ceil(2), h.div_ceil(2), 3), f.guides(set));
     let mut out = vec![0f32; 3 * w * h];
