@@ -198,7 +198,7 @@ fn frame_name(p: &Path) -> String {
 }
 
 /// Sequence key of a frame: its directory when named `frame_NNNN.exr` (the
-/// layout of shared/DATA.md), else `None` (a lone frame).
+/// layout of docs/DATA.md), else `None` (a lone frame).
 fn sequence_of(p: &Path) -> Option<PathBuf> {
     let stem = p.file_stem()?.to_string_lossy().to_string();
     stem.strip_prefix("frame_").filter(|n| n.chars().all(|c| c.is_ascii_digit())).and_then(|_| p.parent().map(Path::to_path_buf))

@@ -1,4 +1,4 @@
-//! Reading and writing frames in the layout of `shared/DATA.md`: one
+//! Reading and writing frames in the layout of `docs/DATA.md`: one
 //! multi-layer EXR, channels named `layer.component`, half or float.
 
 use exr::prelude::{read, AnyChannel, AnyChannels, Encoding, FlatSamples, Image, LayerAttributes, ReadChannels, ReadLayers, WritableImage};

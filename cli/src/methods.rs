@@ -1,4 +1,4 @@
-//! Methods and their flags. The FLR flags mean exactly what issue #2 says:
+//! Methods and their flags. The FLR flags:
 //! `--guides normal,depth,ao` (default: those of normal, depth, ao present),
 //! `--block B`, `--sigma S`, `--radius R` (full-resolution pixels; default 3σ),
 //! or `--sigma S0,S1,S2` (the adaptive window: three sizes blended per cell),

@@ -1,4 +1,4 @@
-//! The quality protocol of `shared/DATA.md`, exactly: compare `I = albedo·Ŷ`
+//! The quality protocol of `docs/DATA.md`, exactly: compare `I = albedo·Ŷ`
 //! with `R = albedo·reference`; tone map with the mean luminance of `R`; PSNR,
 //! SSIM (scikit-image defaults: 7×7 uniform window, K1 0.01, K2 0.03, sample
 //! covariance, reflect padding, border of 3 cropped) and LDR-FLIP on the tone

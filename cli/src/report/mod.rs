@@ -165,7 +165,13 @@ pub fn write_report(
         records.extend(peer);
     }
     let mean = means(&records);
-    let refs: Vec<&Record> = mean.iter().collect();
+    // Rows that cover fewer frames (peers measured on the stills only) are
+    // compared on the frames every row covers: the plot and the first table.
+    let common = common_frames(&records);
+    let partial = common.len() < images.len();
+    let mean_common =
+        if partial { means(&records.iter().filter(|r| common.contains(&r.frame)).cloned().collect::<Vec<_>>()) } else { mean.clone() };
+    let refs: Vec<&Record> = mean_common.iter().collect();
     plot(out, &refs)?;
     // the strips: by default the noisy input and each method's best configuration
     let keep: Vec<String> = best_per_method(&mean).iter().map(|r| r.config.clone()).collect();
@@ -179,13 +185,19 @@ pub fn write_report(
     md += "# lrdenoise report\n\n";
     md += &format!(
         "{} frame(s), {w}x{h} (first frame); {threads} thread(s); {cpu}; SIMD level `{}` (compiled; run-time choice for FLR's moments, solve and apply, BMFR's QR and FLNR's 3×3 layers: `{:?}`); time = median of {} runs after a warm-up, denoiser only (no I/O). \
-         Metrics follow shared/DATA.md (albedo-modulated, tone-mapped PSNR/SSIM/LDR-FLIP, linear rMSE). Peer rows (if any) were measured by their own tools.\n\n",
+         Metrics follow docs/DATA.md (albedo-modulated, tone-mapped PSNR/SSIM/LDR-FLIP, linear rMSE). Peer rows (if any) were measured by their own tools.\n\n",
         images.len(),
         lrdenoise::SIMD_LEVEL,
         lrdenoise::isa::Isa::detect(),
         opt.runs
     );
-    md += "## Mean over frames\n\n";
+    if partial {
+        md += &format!("## Mean over the {} frames every row covers ({})\n\nThe plot shows these.\n\n", common.len(), common.join(", "));
+        md += &table(&mean_common, false);
+        md += "\n## Mean over all frames (a row's own frames: peers cover fewer)\n\n";
+    } else {
+        md += "## Mean over frames\n\n";
+    }
     md += &table(&mean, false);
     md += "\n### Configuration names\n\n";
     md += LEGEND;
@@ -205,6 +217,20 @@ pub fn write_report(
     let json = serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?;
     std::fs::write(out.join("records.json"), json).map_err(|e| e.to_string())?;
     Ok(mean)
+}
+
+/// The frames every configuration (other than the noisy inputs) has a row
+/// for, in the order they first appear.
+fn common_frames(records: &[Record]) -> Vec<String> {
+    let mut frames: Vec<String> = vec![];
+    for r in records {
+        if !frames.contains(&r.frame) {
+            frames.push(r.frame.clone());
+        }
+    }
+    let configs: Vec<&str> = records.iter().filter(|r| r.method != "noisy").map(|r| r.config.as_str()).collect();
+    frames.retain(|f| configs.iter().all(|c| records.iter().any(|r| r.config == *c && &r.frame == f)));
+    frames
 }
 
 /// The line naming what `lrd report` / `lrd demo` wrote.
