@@ -40,6 +40,7 @@ pub mod bmfr;
 mod convert;
 mod denoiser;
 pub mod error;
+pub mod fireflies;
 #[cfg(feature = "flnr")]
 pub mod flnr;
 #[cfg(feature = "flr")]

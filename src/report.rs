@@ -22,6 +22,8 @@ pub struct Report {
     /// Temporal pipelines: pixels without usable history (disocclusion,
     /// motion out of the frame; the first frame is not counted).
     pub history_rejected: u64,
+    /// Noisy samples scaled down by the firefly clamp ([`crate::fireflies`]).
+    pub clamped_fireflies: u64,
 }
 
 impl core::ops::AddAssign for Report {
@@ -33,5 +35,6 @@ impl core::ops::AddAssign for Report {
         self.empty_cells += o.empty_cells;
         self.dropped_pivots += o.dropped_pivots;
         self.history_rejected += o.history_rejected;
+        self.clamped_fireflies += o.clamped_fireflies;
     }
 }

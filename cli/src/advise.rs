@@ -93,7 +93,7 @@ pub fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: us
         variants.push(Variant::method("walr", FlrArgs { previous_weight: pw("0.6"), ..Default::default() }));
         variants.push(Variant::method("walr", FlrArgs { previous_weight: pw("0"), ..Default::default() }));
     }
-    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: false };
+    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: false, inject: lrdenoise_cli::inject::Injection::Clean };
     let (records, _) = evaluate(&[frame.to_path_buf()], &variants, &opt)?;
     let noisy = records.iter().find(|r| r.method == "noisy").map(|r| r.psnr).unwrap_or(f64::NAN);
     // each row with the configuration it ran (the verdicts compare configurations, not flag strings)

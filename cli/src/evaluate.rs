@@ -5,6 +5,7 @@ use crate::methods::{Built, FlrArgs, Method};
 use crate::runner::Inputs;
 use indicatif::{ProgressBar, ProgressStyle};
 use lrdenoise_cli::exrio::ExrFrame;
+use lrdenoise_cli::inject::Injection;
 use lrdenoise_cli::metrics::{score, Scores};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -53,6 +54,7 @@ impl Variant {
         add("previous-weight", a.previous_weight.clone());
         add("storage", a.storage.clone());
         add("ao-demodulation", a.ao_demodulation.clone());
+        add("fireflies", a.fireflies.clone());
         if a.without_ao {
             s += " --without-ao";
         }
@@ -92,6 +94,10 @@ pub struct Record {
     /// (`metrics::flicker`); `None` elsewhere.
     #[serde(default)]
     pub flicker: Option<f64>,
+    /// The robustness case of the input (`inject::Injection::name`; "clean"
+    /// or empty for the frame as rendered).
+    #[serde(default)]
+    pub inject: String,
     /// The index in `evaluate`'s `variants` of the variant that made this
     /// row (`lrd advise` reads the configuration from it); not in the JSON.
     #[serde(skip)]
@@ -191,6 +197,8 @@ pub struct EvalOptions {
     pub runs: usize,
     pub threads: usize,
     pub keep_images: bool,
+    /// Outliers injected into every frame's noisy layer before it is denoised.
+    pub inject: Injection,
 }
 
 fn frame_name(p: &Path) -> String {
@@ -223,7 +231,10 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
     let mut images = vec![];
     let mut carry: Vec<Option<Carry>> = variants.iter().map(|_| None).collect();
     for path in frames {
-        let exr = ExrFrame::read(path)?;
+        let mut exr = ExrFrame::read(path)?;
+        // a sequence's frames get different pixels: salted by their number
+        let salt = frame_name(path).strip_prefix("frame_").and_then(|n| n.parse::<u64>().ok()).unwrap_or(0);
+        opt.inject.apply(&mut exr, salt).map_err(|e| format!("{}: {e}", path.display()))?;
         if !exr.has("reference") {
             pb.suspend(|| eprintln!("{}: no 'reference' layer, skipped", path.display()));
             pb.inc(variants.len() as u64);
@@ -313,6 +324,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 height: h,
                 flags: built.flags.clone(),
                 flicker,
+                inject: opt.inject.name(),
                 variant: Some(vi),
             });
             if let Some(sq) = &seq {
@@ -360,6 +372,7 @@ pub fn means(records: &[Record]) -> Vec<Record> {
                     let f: Vec<f64> = rs.iter().filter_map(|r| r.flicker).collect();
                     (!f.is_empty()).then(|| f.iter().sum::<f64>() / f.len() as f64)
                 },
+                inject: rs[0].inject.clone(),
                 variant: rs[0].variant,
             }
         })

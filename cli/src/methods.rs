@@ -81,6 +81,9 @@ pub struct FlrArgs {
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
+    /// Firefly clamp strength K: a noisy sample brighter than K times the robust mean luminance of its 72x8 neighbourhood is scaled down to that level (default 16), or "off"
+    #[arg(long, value_name = "K|off")]
+    pub fireflies: Option<String>,
     /// FLR: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
     #[arg(long)]
     pub device: Option<String>,
@@ -97,7 +100,7 @@ impl FlrArgs {
     }
     /// Each method flag, whether it was given, and the methods that read it:
     /// the one list the checks and their messages come from.
-    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 20] {
+    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 21] {
         use Family::*;
         [
             ("--guides", self.guides.is_some(), &[Flr, Bmfr, Walr]),
@@ -121,6 +124,7 @@ impl FlrArgs {
             ("--epsilon", self.epsilon.is_some(), &[Walr]),
             ("--previous-weight", self.previous_weight.is_some(), &[Walr]),
             ("--weights", self.weights.is_some(), &[Flnr]),
+            ("--fireflies", self.fireflies.is_some(), &[Flr]),
         ]
     }
 
@@ -188,6 +192,17 @@ pub fn parse_ao_demodulation(s: &str) -> Result<Option<f32>, String> {
         v => match v.parse::<f32>() {
             Ok(c) if c.is_finite() && c > 0.0 => Ok(Some(c)),
             _ => Err(format!("--ao-demodulation: '{v}' is not 'off' or a number > 0")),
+        },
+    }
+}
+
+/// `--fireflies`: "off" or the clamp strength K (≥ 1).
+pub fn parse_fireflies(s: &str) -> Result<Option<f32>, String> {
+    match s {
+        "off" | "none" => Ok(None),
+        v => match v.parse::<f32>() {
+            Ok(k) if lrdenoise::fireflies::valid_strength(k) => Ok(Some(k)),
+            _ => Err(format!("--fireflies: '{v}' is not 'off' or a number >= 1")),
         },
     }
 }
@@ -286,6 +301,9 @@ impl FlrArgs {
         c.adaptive_without_ao = self.without_ao; // validate() says when it cannot apply
         if let Some(d) = &self.ao_demodulation {
             c.ao_demodulation = parse_ao_demodulation(d)?;
+        }
+        if let Some(f) = &self.fireflies {
+            c.fireflies = parse_fireflies(f)?;
         }
         c.validate().map_err(|e| format!("flr flags: {e}"))?;
         Ok(c)

@@ -361,6 +361,13 @@ typedef struct LrdFlrConfig {
    * 0 turns it off. Default 0.1 (`lrd_flr_config_default`).
    */
   float ao_demodulation;
+  /**
+   * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
+   * luminance exceeds k times the third brightest 8x8 cell of its
+   * 104x8-pixel neighbourhood is scaled down to that level before the fit
+   * (see the core's `fireflies` module); 0 turns it off. Default 1.5.
+   */
+  float fireflies;
 } LrdFlrConfig;
 
 /**
@@ -538,6 +545,10 @@ typedef struct LrdReport {
    * motion out of the frame; the first frame is not counted).
    */
   uint64_t history_rejected;
+  /**
+   * Noisy samples scaled down by the firefly clamp.
+   */
+  uint64_t clamped_fireflies;
 } LrdReport;
 
 /**

@@ -75,6 +75,11 @@ pub struct LrdFlrConfig {
     /// fit, the output multiplied back; see `FlrConfig::ao_demodulation`);
     /// 0 turns it off. Default 0.1 (`lrd_flr_config_default`).
     pub ao_demodulation: f32,
+    /// The firefly clamp's threshold factor k (>= 1): a noisy sample whose
+    /// luminance exceeds k times the third brightest 8x8 cell of its
+    /// 104x8-pixel neighbourhood is scaled down to that level before the fit
+    /// (see the core's `fireflies` module); 0 turns it off. Default 1.5.
+    pub fireflies: f32,
 }
 
 /// Stages of a tiled FLR run, numbered in the order they run (the core's
@@ -135,6 +140,7 @@ pub(crate) fn config(c: &LrdFlrConfig) -> Result<FlrConfig, LrdStatus> {
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
         adaptive_without_ao: c.adaptive_without_ao,
         ao_demodulation: (c.ao_demodulation != 0.0).then_some(c.ao_demodulation),
+        fireflies: (c.fireflies != 0.0).then_some(c.fireflies),
     };
     cfg.validate().map_err(status_of)?;
     Ok(cfg)
@@ -189,6 +195,7 @@ pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
         scalar_kernels: false,
         adaptive_without_ao: d.adaptive_without_ao,
         ao_demodulation: d.ao_demodulation.unwrap_or(0.0),
+        fireflies: d.fireflies.unwrap_or(0.0),
     }
 }
 

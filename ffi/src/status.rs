@@ -61,6 +61,8 @@ pub struct LrdReport {
     /// Temporal pipelines: pixels whose history was rejected (disocclusion,
     /// motion out of the frame; the first frame is not counted).
     pub history_rejected: u64,
+    /// Noisy samples scaled down by the firefly clamp.
+    pub clamped_fireflies: u64,
 }
 
 pub(crate) fn status_of(e: Error) -> LrdStatus {
@@ -95,6 +97,7 @@ pub(crate) fn write_report(report: *mut LrdReport, r: Report) {
         out.empty_cells += r.empty_cells;
         out.dropped_pivots += r.dropped_pivots;
         out.history_rejected += r.history_rejected;
+        out.clamped_fireflies += r.clamped_fireflies;
     }
 }
 

@@ -19,8 +19,8 @@ fuzz_target!(|d: &[u8]| {
     };
     let guides = GuideSet { normal: d[7] & 1 != 0, depth: d[7] & 2 != 0, position: d[7] & 4 != 0, ao: d[7] & 8 != 0, user: 0 };
     let pad = d[8] as usize % 3; // extra elements per pixel (RGBA-like strides)
-    // the adaptive window (with the AO-free candidate when AO is a guide and
-    // bit 3 is set) is checked whole-frame only: its staged order is longer
+                                 // the adaptive window (with the AO-free candidate when AO is a guide and
+                                 // bit 3 is set) is checked whole-frame only: its staged order is longer
     let adaptive = d[9] & 4 != 0;
     let blur = match (adaptive, d[9] & 1) {
         (true, _) => Blur::Adaptive { sigmas: [sigma, 2.0 * sigma, 3.5 * sigma] },
@@ -39,6 +39,13 @@ fuzz_target!(|d: &[u8]| {
             1 => None,
             2 => Some(1e-6),
             _ => FlrConfig::default().ao_demodulation,
+        },
+        // the firefly clamp: default, off, the tightest factor, or a huge one
+        fireflies: match d[9] >> 6 {
+            1 => None,
+            2 => Some(1.0),
+            3 => Some(1e6),
+            _ => FlrConfig::default().fireflies,
         },
         ..FlrConfig::default()
     };

@@ -4,6 +4,7 @@
 //! (see docs/METHODS.md, FLR).
 
 use crate::error::Error;
+use crate::fireflies;
 use crate::guides::GuideSet;
 use crate::isa::Kernel;
 use crate::kernels::blur::{radius_to_cells, GAUSSIAN_TRUNCATION, MAX_RADIUS_CELLS};
@@ -92,6 +93,12 @@ pub struct FlrConfig {
     /// not invariant to an affine change of the AO channel (DATA.md fixes AO
     /// to [0, 1]); every other guide stays invariant. CPU and GPU paths.
     pub ao_demodulation: Option<f32>,
+    /// The firefly clamp's strength `k` ([`crate::fireflies`]): a noisy
+    /// sample whose luminance is above `k` times the robust mean of its
+    /// 72 × 8 pixel neighbourhood is scaled down to that level before the
+    /// moments are taken. `None` turns it off. Default
+    /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`.
+    pub fireflies: Option<f32>,
 }
 
 // Defaults tuned on the training scenes (tools/render.py --split train, 256×256,
@@ -127,6 +134,7 @@ impl Default for FlrConfig {
             kernel: Kernel::Simd,
             adaptive_without_ao: false,
             ao_demodulation: Some(DEFAULT_AO_OFFSET),
+            fireflies: Some(fireflies::DEFAULT_STRENGTH),
         }
     }
 }
@@ -178,6 +186,11 @@ impl FlrConfig {
         if let Some(c) = self.ao_demodulation {
             if !(c.is_finite() && c > 0.0) {
                 return Err(Error::InvalidConfig("ao_demodulation offset (must be finite and > 0)"));
+            }
+        }
+        if let Some(k) = self.fireflies {
+            if !fireflies::valid_strength(k) {
+                return Err(Error::InvalidConfig("fireflies strength (must be finite and >= 1)"));
             }
         }
         let reg_ok = |v: f64| (0.0..1.0).contains(&v);

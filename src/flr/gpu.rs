@@ -693,6 +693,7 @@ impl GpuPlan {
             empty_cells: counter(4),
             dropped_pivots: counter(5),
             history_rejected: 0,
+            clamped_fireflies: 0,
         }
     }
 }

@@ -30,6 +30,7 @@ pub mod schedule;
 pub use schedule::{Stage, Tiled};
 
 use crate::error::{Arg, Error};
+use crate::fireflies;
 use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::isa::Kernel;
@@ -444,13 +445,27 @@ impl Flr {
     /// f32 values of one worker's private buffer.
     #[doc(hidden)]
     pub fn worker_len(&self) -> usize {
+        // moments in place: colour rows, guide rows that are not planar f32,
+        // the edge block gathered; or the gathered band
+        let apply = self.q * self.width + 2 * self.cells_x * self.ml + 3 * self.width;
+        (self.moments_worker_len() + self.firefly_len()).max(apply)
+    }
+
+    /// Worker values the moments take besides the firefly clamp's.
+    fn moments_worker_len(&self) -> usize {
         let pw = self.cells_x * self.bin;
         let gathered = BandPlanes::len(self.q, self.bin, pw);
-        // in place: colour rows, guide rows that are not planar f32, the edge block gathered
         let in_place = (3 + self.q) * self.bin * self.in_w + BandPlanes::len(self.q, self.bin, self.bin);
-        let moments = gathered.max(in_place);
-        let apply = self.q * self.width + 2 * self.cells_x * self.ml + 3 * self.width;
-        moments.max(apply)
+        gathered.max(in_place)
+    }
+
+    /// Worker values of the firefly clamp: a row of colour and a band's thresholds.
+    fn firefly_len(&self) -> usize {
+        if self.cfg.fireflies.is_some() {
+            3 * self.in_w + fireflies::work_len(self.in_w)
+        } else {
+            0
+        }
     }
     /// Scratch length in f64 elements for `workers` concurrent workers.
     #[doc(hidden)]
@@ -577,13 +592,16 @@ impl Flr {
         let row_len = self.cells_x * self.lay.k;
         let mut rep = Report::default();
         let mut block_scratch = BlockScratch::default();
+        let (worker, clamp_work) = worker.split_at_mut(self.moments_worker_len());
+        let mut clamp =
+            self.cfg.fireflies.map(|k| FireflyClamp { k, band: None, width: self.in_w, work: &mut clamp_work[..self.firefly_len()] });
         for (j, cells_row) in (r0..r1).zip(cells_tile.chunks_exact_mut(row_len)) {
             rep += if self.reads_in_place(j) {
-                self.moments_in_place(frame, stats, (t, j), cells_row, worker, &mut block_scratch)?
+                self.moments_in_place(frame, stats, (t, j), cells_row, worker, &mut block_scratch, clamp.as_mut())?
             } else {
                 // (Splitting rows into column chunks to keep the planes in L2 was
                 // measured slower: whole rows it is.)
-                self.moments_chunk(frame, stats, (t, j, 0, self.cells_x), cells_row, worker, &mut block_scratch)?
+                self.moments_chunk(frame, stats, (t, j, 0, self.cells_x), cells_row, worker, &mut block_scratch, clamp.as_mut())?
             };
         }
         Ok(rep)
@@ -607,6 +625,7 @@ impl Flr {
         cells: &mut [f64],
         worker: &mut [f32],
         block_scratch: &mut BlockScratch,
+        mut clamp: Option<&mut FireflyClamp<'_>>,
     ) -> Result<Report, Error> {
         let (bin, w, q) = (self.bin, self.in_w, self.q);
         let bad = Error::InvalidTile { index: t, count: 0 };
@@ -617,6 +636,20 @@ impl Flr {
             let (p0, p12) = rgb.split_at_mut(w);
             let (p1, p2) = p12.split_at_mut(w);
             frame.noisy.read_row_n(y0 + r, 0, [p0, p1, p2]).ok_or(bad)?;
+        }
+        let mut clamped = 0;
+        if let Some(c) = clamp.as_deref_mut() {
+            if bin == fireflies::CELL {
+                // the band is the clamp's band: its thresholds from the rows in hand
+                c.fill_from(j, colour.chunks_exact(3 * w).map(|c| [&c[..w], &c[w..2 * w], &c[2 * w..]]))?;
+            }
+            // the whole blocks; a partial block at the right edge is clamped as it is gathered
+            let wp = (w / bin).min(self.cells_x) * bin;
+            for (r, rgb) in colour.chunks_exact_mut(3 * w).enumerate() {
+                let (p0, p12) = rgb.split_at_mut(w);
+                let (p1, p2) = p12.split_at_mut(w);
+                clamped += c.clamp(frame, y0 + r, 0, [&mut p0[..wp], &mut p1[..wp], &mut p2[..wp]])?;
+            }
         }
         let mut borrowed = [false; MAX_GUIDES];
         for (g, b) in borrowed.iter_mut().enumerate().take(q) {
@@ -685,10 +718,11 @@ impl Flr {
             nonfinite_noisy: counts.nonfinite_noisy as u64,
             nonfinite_guides: counts.nonfinite_guides as u64,
             empty_blocks: counts.empty_blocks as u64,
+            clamped_fireflies: clamped as u64,
             ..Report::default()
         };
         if whole < self.cells_x {
-            rep += self.moments_chunk(frame, stats, (t, j, whole, self.cells_x - whole), cells_edge, edge, block_scratch)?;
+            rep += self.moments_chunk(frame, stats, (t, j, whole, self.cells_x - whole), cells_edge, edge, block_scratch, clamp)?;
         }
         Ok(rep)
     }
@@ -703,6 +737,7 @@ impl Flr {
         cells: &mut [f64],
         worker: &mut [f32],
         block_scratch: &mut BlockScratch,
+        mut clamp: Option<&mut FireflyClamp<'_>>,
     ) -> Result<Report, Error> {
         let pw = ncx * self.bin; // chunk width (whole blocks)
         let x0 = c0 * self.bin;
@@ -735,6 +770,10 @@ impl Flr {
                 let (p1, p2) = p12.split_at_mut(plane);
                 let rgb = [&mut p0[o..o + vw], &mut p1[o..o + vw], &mut p2[o..o + vw]];
                 frame.noisy.read_row_n(y, x0, rgb).ok_or(bad)?;
+                if let Some(c) = clamp.as_deref_mut() {
+                    let rgb = [&mut p0[o..o + vw], &mut p1[o..o + vw], &mut p2[o..o + vw]];
+                    rep.clamped_fireflies += c.clamp(frame, y, x0, rgb)? as u64;
+                }
                 if let Some((ao, c)) = self.demodulation() {
                     // AO's plane gets its raw row first (centred in the loop below)
                     let a = &mut guides[ao * plane + o..ao * plane + o + vw];
@@ -1303,6 +1342,50 @@ impl Flr {
             }
         }
         Ok(rep)
+    }
+}
+
+/// The firefly clamp of one moments call ([`crate::fireflies`]): `work` holds
+/// a row of colour, then the thresholds of `band`, the clamp band last computed.
+struct FireflyClamp<'w> {
+    k: f32,
+    band: Option<usize>,
+    width: usize,
+    work: &'w mut [f32],
+}
+
+impl FireflyClamp<'_> {
+    /// Computes the thresholds of `band` from its rows.
+    fn fill_from<'r>(&mut self, band: usize, rows: impl Iterator<Item = [&'r [f32]; 3]>) -> Result<(), Error> {
+        let work = &mut self.work[3 * self.width..];
+        let mut t = fireflies::Thresholds::new(work, self.width).ok_or(Error::InvalidTile { index: band, count: 0 })?;
+        for rgb in rows {
+            t.add_row(rgb);
+        }
+        t.finish(self.k);
+        self.band = Some(band);
+        Ok(())
+    }
+
+    /// Clamps row `y`'s pixels `x0..` (`rgb`), computing the thresholds of
+    /// its band from the frame unless they are in hand. Returns the count clamped.
+    fn clamp(&mut self, frame: &CheckedFrame<'_>, y: usize, x0: usize, rgb: [&mut [f32]; 3]) -> Result<usize, Error> {
+        let (w, band) = (self.width, y / fireflies::CELL);
+        if self.band != Some(band) {
+            let bad = Error::InvalidTile { index: band, count: 0 };
+            let (row, work) = self.work.split_at_mut(3 * w);
+            let mut t = fireflies::Thresholds::new(work, w).ok_or(bad)?;
+            let (a, bc) = row.split_at_mut(w);
+            let (b, c) = bc.split_at_mut(w);
+            let rows = band * fireflies::CELL..((band + 1) * fireflies::CELL).min(frame.noisy.height());
+            for yy in rows {
+                frame.noisy.read_row_n(yy, 0, [&mut *a, &mut *b, &mut *c]).ok_or(bad)?;
+                t.add_row([a, b, c]);
+            }
+            t.finish(self.k);
+            self.band = Some(band);
+        }
+        Ok(fireflies::clamp_row(rgb, x0, fireflies::finished(&self.work[3 * w..], w)))
     }
 }
 

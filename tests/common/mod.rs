@@ -471,8 +471,9 @@ pub fn diff(a: &[f32], b: &[f64]) -> (f64, f64) {
 }
 
 /// The defaults with one Gaussian window of the default σ (what the f64
-/// reference computes), `block`, and clamping off (the reference does not clamp).
+/// reference computes), `block`, and clamping off (the reference clamps
+/// neither negative output nor fireflies; tests/flr_fireflies.rs tests the latter).
 pub fn cfg(set: GuideSet, block: usize) -> FlrConfig {
     let blur = Blur::Gaussian { sigma: lrdenoise::flr::config::DEFAULT_SIGMA, radius: None };
-    FlrConfig { guides: set, block, blur, clamp_negative: false, ..FlrConfig::default() }
+    FlrConfig { guides: set, block, blur, clamp_negative: false, fireflies: None, ..FlrConfig::default() }
 }
