@@ -161,12 +161,13 @@ impl ExrFrame {
         self.layers.contains_key(name)
     }
 
-    /// Writes the given layers (half floats, except `position`/`depth`/`denoised`
-    /// which stay f32), ZIP compressed.
+    /// Writes the given layers (half floats, except `position`, `depth`,
+    /// `motion`, `denoised` and `noisy`, which stay f32: the injected outliers
+    /// of the robustness protocol can exceed half's range of 65504), ZIP compressed.
     pub fn write(path: &Path, width: usize, height: usize, layers: &[(&str, &Layer)]) -> Result<(), String> {
         let mut chans: Vec<AnyChannel<FlatSamples>> = vec![];
         for (lname, l) in layers {
-            let full = matches!(*lname, "position" | "depth" | "denoised" | "motion");
+            let full = matches!(*lname, "position" | "depth" | "denoised" | "motion" | "noisy");
             for (c, p) in l.comps.iter().zip(&l.planes) {
                 let name = if lname.is_empty() { c.clone() } else { format!("{lname}.{c}") };
                 let samples =

@@ -9,6 +9,7 @@ mod report;
 mod runner;
 mod shaders;
 
+use lrdenoise_cli::inject::Injection;
 use lrdenoise_cli::{exrio, metrics};
 
 use clap::{Parser, Subcommand};
@@ -74,16 +75,19 @@ enum Cmd {
         /// Threads (default: all cores)
         #[arg(long)]
         threads: Option<usize>,
+        /// Outliers to inject into each frame's noisy layer first (docs/DATA.md's robustness protocol, fixed seed): clean, fireflies:P:K (probability P, K x the mean luminance) or nonfinite:P (P NaN and P +Inf); or "all": every case of the protocol in turn (clean, fireflies:1e-4:1000, fireflies:1e-3:100, nonfinite:1e-3), printed as the robustness table of `lrd report` (mean PSNR per case, drop from clean), with --json holding every case's records
+        #[arg(long, value_parser = parse_inject, default_value = "clean", value_name = "CASE|all")]
+        inject: InjectArg,
     },
-    /// Evaluate every method and configuration; write DIR/report.md, plot.svg/png and image strips
+    /// Evaluate every method and configuration; write DIR/report.md, plot.svg/png, image strips and the robustness table (outliers injected into the stills)
     Report {
         /// Frames with a `reference` layer, or directories of them (a directory of frame_NNNN.exr is a sequence)
         #[arg(required = true)]
         frames: Vec<PathBuf>,
-        /// Directory to write report.md, plot.png, plot.svg, records.json and strip_FRAME.png to (created if missing)
+        /// Directory to write report.md, plot.png, plot.svg, records.json, strip_FRAME.png, robustness.json and robustness/CASE/FRAME.exr (the stills with each case's outliers) to (created if missing)
         #[arg(short, long, value_name = "DIR")]
         output: PathBuf,
-        /// JSON files of records produced elsewhere (same schema as `eval --json`), merged into tables and plot
+        /// JSON files of records produced elsewhere (same schema as `eval --json`), merged into tables and plot; records whose `inject` names an outlier case (tools/peers.py --inject-name) go to the robustness table only
         #[arg(long)]
         peers: Vec<PathBuf>,
         /// Timed runs per measurement (after one warm-up; at least 5)
@@ -163,6 +167,28 @@ enum Cmd {
         #[arg(long)]
         full_strips: bool,
     },
+}
+
+/// `lrd eval --inject`: one case, or every case of the robustness protocol.
+#[derive(Clone, Copy, Debug)]
+enum InjectArg {
+    One(Injection),
+    All,
+}
+
+fn parse_inject(s: &str) -> Result<InjectArg, String> {
+    if s == "all" {
+        Ok(InjectArg::All)
+    } else {
+        Injection::parse(s).map(InjectArg::One).map_err(|e| {
+            let known = ["clean", "fireflies:", "nonfinite:"].iter().any(|k| s.starts_with(k));
+            if known {
+                e
+            } else {
+                format!("{e}, or all (every case in turn)")
+            }
+        })
+    }
 }
 
 /// Flags shared by `denoise` and `denoise-seq`.
@@ -309,18 +335,29 @@ fn run(cli: Cli) -> Result<(), String> {
                 output.display()
             );
         }
-        Cmd::Eval { frames, methods, flr, json, runs, threads } => {
+        Cmd::Eval { frames, methods, flr, json, runs, threads, inject } => {
             let mut variants = vec![Variant::noisy("noisy")];
             for m in methods {
                 variants.push(Variant::method(m.as_str(), flr.clone()));
             }
             let t = threads_or_all(threads);
-            let (records, _) =
-                evaluate(&list_frames(&frames)?, &variants, &EvalOptions { runs: runs.max(5), threads: t, keep_images: false })?;
+            let frames = list_frames(&frames)?;
+            let records = match inject {
+                InjectArg::One(inject) => {
+                    evaluate(&frames, &variants, &EvalOptions { runs: runs.max(5), threads: t, keep_images: false, inject })?.0
+                }
+                InjectArg::All => report::robustness::run_cases(&frames, &variants, runs.max(5), t)?,
+            };
             if records.is_empty() {
                 return Err("no frame with a 'reference' layer: nothing to evaluate".into());
             }
-            print_table(&records);
+            match inject {
+                InjectArg::One(_) => print_table(&records),
+                InjectArg::All => {
+                    println!("Robustness (docs/DATA.md): mean PSNR dB per case; drop = clean minus the case\n");
+                    print!("{}", report::robustness::table(&records));
+                }
+            }
             if let Some(j) = json {
                 std::fs::write(&j, serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?)
                     .map_err(|e| format!("{}: {e}", j.display()))?;

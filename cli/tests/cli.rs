@@ -482,6 +482,7 @@ fn closed_stdout_ends_quietly() {
 /// `lrd report` on one frame: the tables with the legend of configuration
 /// names, the plot, and a strip of the main configurations (noisy, the best of
 /// each method, reference: at most 8 panels); `--full-strips` shows them all.
+/// The robustness section, with the injected stills and their records.
 #[test]
 fn report_writes_legend_plot_and_capped_strips() {
     let dir = tmp("report");
@@ -493,10 +494,62 @@ fn report_writes_legend_plot_and_capped_strips() {
     for f in ["plot.png", "plot.svg", "records.json", "strip_room_7.png"] {
         assert!(std::fs::metadata(dir.join(f)).unwrap().len() > 1000, "{f}");
     }
+    // the robustness table: a row per method at its defaults and FLR without
+    // its firefly clamp, a column per case and a drop per injected case; the
+    // injected stills and every record beside it
+    let rob = &md[md.find("## Robustness (outliers injected into the noisy input)").expect("robustness section")..];
+    let rows: Vec<&str> = rob.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| config")).collect();
+    assert_eq!(rows.len(), 5, "{rob}");
+    assert!(rows[1].contains("(--fireflies off)") && rows.iter().any(|r| r.starts_with("| flnr")), "{rob}");
+    assert!(rows.iter().all(|r| r.matches('|').count() == 9 && !r.contains('–')), "{rob}");
+    assert!(rob.contains("tools/peers.py") && rob.contains("--inject-name"), "{rob}");
+    for case in ["ff1e-4x1000", "ff1e-3x100", "nan-inf1e-3"] {
+        assert!(dir.join("robustness").join(case).join("room_7.exr").exists(), "{case}");
+    }
+    let recs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("robustness.json")).unwrap()).unwrap();
+    assert_eq!(recs.as_array().unwrap().len(), 5 * 4);
+    // an injected frame on disk (noisy layer in f32) scores as the injection in memory
+    let ff = dir.join("robustness/ff1e-3x100/room_7.exr");
+    let evj = tmp("report_ff.json");
+    let (ok, _, e) = lrd(&["eval", ff.to_str().unwrap(), "--runs", "5", "--json", evj.to_str().unwrap()]);
+    assert!(ok, "{e}");
+    let ev: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&evj).unwrap()).unwrap();
+    let in_memory = recs.as_array().unwrap().iter().find(|r| r["inject"] == "ff1e-3x100" && r["method"] == "flr").unwrap();
+    let diff = (ev[1]["psnr"].as_f64().unwrap() - in_memory["psnr"].as_f64().unwrap()).abs();
+    assert!(diff < 1e-9, "{} vs {in_memory}", ev[1]);
     let strip = image::image_dimensions(dir.join("strip_room_7.png")).unwrap();
     assert!(strip.0 <= 8 * 256 && strip.0 >= 4 * 256, "{strip:?}");
     let full = tmp("report_full");
     let (ok, _, e) = lrd(&["report", &data("room_7.exr"), "-o", full.to_str().unwrap(), "--runs", "5", "--full-strips"]);
     assert!(ok, "{e}");
     assert!(image::image_dimensions(full.join("strip_room_7.png")).unwrap().0 > 16 * 256);
+}
+
+/// `lrd eval --inject`: the records name their case; `--inject all` runs the
+/// four cases of the robustness protocol and prints their table.
+#[test]
+fn eval_injects_outliers() {
+    let room = data("room_7.exr");
+    let json = tmp("inject.json");
+    let j = json.to_str().unwrap();
+    let (ok, _, e) = lrd(&["eval", "--inject", "fireflies:1e-3:100", &room, "--runs", "5", "--threads", "1", "--json", j]);
+    assert!(ok, "{e}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let recs = v.as_array().unwrap();
+    assert_eq!(recs.len(), 2);
+    assert!(recs.iter().all(|r| r["inject"] == "ff1e-3x100"), "{v}");
+    let injected_flr = recs[1]["psnr"].as_f64().unwrap();
+    let (ok, so, e) = lrd(&["eval", "--inject", "all", &room, "--methods", "flr,bmfr", "--runs", "5", "--threads", "1", "--json", j]);
+    assert!(ok, "{e}");
+    assert!(so.contains("| config | clean | 0.01 % × 1000 | 0.1 % × 100 |") && so.contains("drop, 0.1 % × 100"), "{so}");
+    assert!(so.lines().any(|l| l.starts_with("| flr ")) && so.lines().any(|l| l.starts_with("| bmfr ")), "{so}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let cases: Vec<&str> = v.as_array().unwrap().iter().map(|r| r["inject"].as_str().unwrap()).collect();
+    assert_eq!(cases.len(), 3 * 4); // (noisy, flr, bmfr) x 4 cases
+    for c in ["clean", "ff1e-4x1000", "ff1e-3x100", "nan-inf1e-3"] {
+        assert_eq!(cases.iter().filter(|x| **x == c).count(), 3, "{c}");
+    }
+    let flr_ff = v.as_array().unwrap().iter().find(|r| r["method"] == "flr" && r["inject"] == "ff1e-3x100").unwrap();
+    assert_eq!(flr_ff["psnr"].as_f64().unwrap(), injected_flr);
+    fails_with(&["eval", &room, "--inject", "most"], &["--inject", "all"]);
 }

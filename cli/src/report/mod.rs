@@ -1,8 +1,10 @@
 //! `lrd report` and `lrd demo`: the configurations compared, report.md
 //! (tables, a legend of the configuration names), the error-versus-runtime
-//! plot ([`plot`]) and the per-frame image strips ([`strips`]).
+//! plot ([`plot`]), the per-frame image strips ([`strips`]) and the
+//! robustness table ([`robustness`]).
 
 mod plot;
+pub mod robustness;
 mod strips;
 
 use crate::evaluate::{evaluate, means, EvalOptions, Record, Variant};
@@ -154,16 +156,19 @@ pub fn write_report(
     full_strips: bool,
 ) -> Result<Vec<Record>, String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: true };
+    let opt = EvalOptions { runs: runs.max(5), threads, keep_images: true, inject: lrdenoise_cli::inject::Injection::Clean };
     let (mut records, images) = evaluate(frames, &report_variants(), &opt)?;
     if records.is_empty() {
         return Err("no frame with a 'reference' layer: nothing to report".into());
     }
+    let mut peer_records = vec![];
     for p in peers {
         let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
         let peer: Vec<Record> = serde_json::from_str(&text).map_err(|e| format!("{}: not a JSON list of records ({e})", p.display()))?;
-        records.extend(peer);
+        peer_records.extend(peer);
     }
+    // peers on injected frames go to the robustness table only
+    records.extend(peer_records.iter().filter(|r| robustness::is_clean(r)).cloned());
     let mean = means(&records);
     // Rows that cover fewer frames (peers measured on the stills only) are
     // compared on the frames every row covers: the plot and the first table.
@@ -213,6 +218,7 @@ pub fn write_report(
     for s in &strips {
         md += &format!("![{s}]({s})\n\n");
     }
+    md += &robustness::section(frames, out, &peer_records, threads)?;
     std::fs::write(out.join("report.md"), md).map_err(|e| format!("{}: {e}", out.display()))?;
     let json = serde_json::to_string_pretty(&records).map_err(|e| e.to_string())?;
     std::fs::write(out.join("records.json"), json).map_err(|e| e.to_string())?;
@@ -235,7 +241,11 @@ fn common_frames(records: &[Record]) -> Vec<String> {
 
 /// The line naming what `lrd report` / `lrd demo` wrote.
 pub fn report_written(out: &Path) -> String {
-    format!("report: {} (with plot.png, plot.svg, records.json and strip_FRAME.png in {})", out.join("report.md").display(), out.display())
+    format!(
+        "report: {} (with plot.png, plot.svg, records.json, strip_FRAME.png, robustness.json and the injected stills robustness/CASE/FRAME.exr in {})",
+        out.join("report.md").display(),
+        out.display()
+    )
 }
 
 pub use plot::plot;
