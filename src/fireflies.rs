@@ -37,6 +37,7 @@
 //! but two of their neighbourhood, by the factor `k`, lose energy.
 
 use crate::kernels::LUMA;
+use wide::f32x8;
 
 /// Cell side and band height in pixels.
 pub const CELL: usize = 8;
@@ -59,18 +60,64 @@ pub const fn cells(width: usize) -> usize {
     width.div_ceil(CELL)
 }
 
-/// f32 values [`Thresholds`] needs for a band of width `width`.
+/// Padding on each side of the per-cell arrays [`Thresholds::finish`] reads
+/// eight cells at a time, plus the last vector's overrun.
+const PAD: usize = REACH + CELL;
+
+/// f32 values [`Thresholds`] needs for a band of width `width`: per-lane sums
+/// and maxima, then padded per-cell sums, maxima and counts, then the thresholds.
 pub const fn work_len(width: usize) -> usize {
-    4 * cells(width)
+    let n = cells(width);
+    2 * CELL * n + 3 * (n + 2 * PAD) + n
 }
 
-/// The thresholds of one band, built row by row.
+/// The thresholds of one band, built row by row. Each cell accumulates its
+/// sums and maxima per lane (the pixel's column within the cell) and reduces
+/// them in [`Thresholds::finish`], so a band's rows are read eight pixels at a
+/// time (`wide`) and a partial cell at the right edge, lane by lane, with the
+/// same arithmetic.
 #[derive(Debug)]
 pub struct Thresholds<'a> {
+    /// Per cell, eight lanes.
     sums: &'a mut [f32],
-    counts: &'a mut [f32],
     maxima: &'a mut [f32],
+    /// Per cell with [`PAD`] zeros on each side: the reduced sums and maxima
+    /// (filled by `finish`) and the finite samples' counts.
+    cell_sums: &'a mut [f32],
+    cell_maxima: &'a mut [f32],
+    counts: &'a mut [f32],
     thresholds: &'a mut [f32],
+}
+
+/// Eight lanes from a slice of at most eight (missing lanes 0).
+#[inline(always)]
+fn lanes(v: &[f32]) -> f32x8 {
+    let mut a = [0f32; CELL];
+    let n = v.len().min(CELL);
+    a[..n].copy_from_slice(&v[..n]);
+    f32x8::from(a)
+}
+
+/// Eight lanes from a slice of exactly eight.
+#[inline(always)]
+fn load(v: &[f32]) -> f32x8 {
+    f32x8::from(<[f32; CELL]>::try_from(v).unwrap_or_default())
+}
+
+/// Eight pixels added to a cell's lane sums and maxima; returns them and the
+/// mask of finite lanes (as bits; a count for a whole cell).
+#[inline(always)]
+fn add8(r: f32x8, g: f32x8, b: f32x8, sum: f32x8, max: f32x8) -> (f32x8, f32x8, u32) {
+    let l = luma8(r, g, b);
+    let finite = l.abs().simd_le(f32x8::splat(f32::MAX));
+    let v = finite.select(l.fast_max(f32x8::ZERO).fast_min(f32x8::splat(LUMA_CAP)), f32x8::ZERO);
+    (sum + v, max.fast_max(v), finite.to_bitmask())
+}
+
+/// Luminance of eight pixels (the scalar expression on each lane).
+#[inline(always)]
+fn luma8(r: f32x8, g: f32x8, b: f32x8) -> f32x8 {
+    f32x8::splat(LUMA[0]) * r + f32x8::splat(LUMA[1]) * g + f32x8::splat(LUMA[2]) * b
 }
 
 impl<'a> Thresholds<'a> {
@@ -78,67 +125,89 @@ impl<'a> Thresholds<'a> {
     /// `None` if `work` is too short.
     pub fn new(work: &'a mut [f32], width: usize) -> Option<Self> {
         let n = cells(width);
-        let (sums, rest) = work.get_mut(..4 * n)?.split_at_mut(n);
-        let (counts, rest) = rest.split_at_mut(n);
-        let (maxima, thresholds) = rest.split_at_mut(n);
+        let (sums, rest) = work.get_mut(..work_len(width))?.split_at_mut(CELL * n);
+        let (maxima, rest) = rest.split_at_mut(CELL * n);
+        let (cell_sums, rest) = rest.split_at_mut(n + 2 * PAD);
+        let (cell_maxima, rest) = rest.split_at_mut(n + 2 * PAD);
+        let (counts, thresholds) = rest.split_at_mut(n + 2 * PAD);
         sums.fill(0.0);
-        counts.fill(0.0);
         maxima.fill(0.0);
-        Some(Thresholds { sums, counts, maxima, thresholds })
+        cell_sums.fill(0.0);
+        cell_maxima.fill(0.0);
+        counts.fill(0.0);
+        Some(Thresholds { sums, maxima, cell_sums, cell_maxima, counts, thresholds })
     }
 
     /// Adds one whole row of the band (planar channels, pixels `0..width`).
     pub fn add_row(&mut self, rgb: [&[f32]; 3]) {
         let [r, g, b] = rgb;
-        for (((r, g), b), ((s, c), m)) in r
-            .chunks(CELL)
-            .zip(g.chunks(CELL))
-            .zip(b.chunks(CELL))
-            .zip(self.sums.iter_mut().zip(self.counts.iter_mut()).zip(self.maxima.iter_mut()))
-        {
-            let (mut sum, mut count, mut max) = (0f32, 0f32, *m);
-            for ((&r, &g), &b) in r.iter().zip(g).zip(b) {
-                let l = LUMA[0] * r + LUMA[1] * g + LUMA[2] * b;
-                let finite = l.abs() <= f32::MAX;
-                let l = if finite { l.clamp(0.0, LUMA_CAP) } else { 0.0 };
-                sum += l;
-                max = max.max(l);
-                count += finite as u32 as f32;
-            }
-            *s += sum;
-            *c += count;
-            *m = max;
+        let n = r.len().min(g.len()).min(b.len()).min(CELL * self.thresholds.len());
+        let whole = n / CELL;
+        let counts = &mut self.counts[PAD..];
+        let cells = self.sums.chunks_exact_mut(CELL).zip(self.maxima.chunks_exact_mut(CELL)).zip(counts.iter_mut());
+        let pixels =
+            r[..whole * CELL].chunks_exact(CELL).zip(g[..whole * CELL].chunks_exact(CELL)).zip(b[..whole * CELL].chunks_exact(CELL));
+        for (((r, g), b), ((s, m), c)) in pixels.zip(cells) {
+            let (sum, top, finite) = add8(load(r), load(g), load(b), load(s), load(m));
+            s.copy_from_slice(&sum.to_array());
+            m.copy_from_slice(&top.to_array());
+            *c += finite.count_ones() as f32;
+        }
+        if whole * CELL < n {
+            // the partial cell at the right edge: its lanes past the row's end stay empty
+            let (o, i) = (whole * CELL, whole);
+            let (Some(s), Some(m), Some(c)) =
+                (self.sums.get_mut(CELL * i..CELL * (i + 1)), self.maxima.get_mut(CELL * i..CELL * (i + 1)), self.counts.get_mut(PAD + i))
+            else {
+                return;
+            };
+            let (sum, top, count) = add8(lanes(&r[o..n]), lanes(&g[o..n]), lanes(&b[o..n]), load(s), load(m));
+            s.copy_from_slice(&sum.to_array());
+            m.copy_from_slice(&top.to_array());
+            *c += (count & ((1u32 << (n - o)) - 1)).count_ones() as f32;
         }
     }
 
-    /// Turns the sums into thresholds for the factor `k`.
+    /// Turns the sums into thresholds for the factor `k`. Eight cells at a
+    /// time, each lane over its window in the same order as one cell alone:
+    /// the padding's zeros add nothing and never are the largest sum.
     pub fn finish(self, k: f32) -> &'a [f32] {
-        let n = self.sums.len();
-        for i in 0..n {
-            let (lo, hi) = (i.saturating_sub(REACH), (i + REACH + 1).min(n));
-            let (mut sum, mut count, mut top, mut top_count) = (0f64, 0f64, -1f32, 0f32);
-            let mut maxima = [0f32; 3];
-            for j in lo..hi {
-                sum += self.sums[j] as f64;
-                count += self.counts[j] as f64;
-                if self.sums[j] > top {
-                    (top, top_count) = (self.sums[j], self.counts[j]);
-                }
-                let m = self.maxima[j];
-                if m > maxima[2] {
-                    maxima[2] = m;
-                    if maxima[2] > maxima[1] {
-                        maxima.swap(1, 2);
-                        if maxima[1] > maxima[0] {
-                            maxima.swap(0, 1);
-                        }
-                    }
+        let n = self.thresholds.len();
+        for (i, (s, m)) in self.sums.chunks_exact(CELL).zip(self.maxima.chunks_exact(CELL)).enumerate() {
+            self.cell_sums[PAD + i] = s.iter().sum();
+            self.cell_maxima[PAD + i] = m.iter().fold(0f32, |a, &b| a.max(b));
+        }
+        let (sums, maxima, counts) = (&*self.cell_sums, &*self.cell_maxima, &*self.counts);
+        let zero = f32x8::ZERO;
+        for i in (0..n).step_by(CELL) {
+            // lane l is cell i + l; its window is padded cells i + l + PAD − REACH + d
+            let (mut sum, mut count, mut top, mut top_count) = (zero, zero, f32x8::splat(-1.0), zero);
+            let mut best = [zero; 3];
+            for d in 0..=2 * REACH {
+                let at = i + PAD - REACH + d;
+                let (s, c, mut m) = (load(&sums[at..at + CELL]), load(&counts[at..at + CELL]), load(&maxima[at..at + CELL]));
+                sum += s;
+                count += c;
+                let above = s.simd_gt(top);
+                top = above.select(s, top);
+                top_count = above.select(c, top_count);
+                for b in best.iter_mut() {
+                    let hi = b.fast_max(m);
+                    m = b.fast_min(m);
+                    *b = hi;
                 }
             }
-            let rest = count - top_count as f64;
+            let rest = count - top_count;
             // no finite sample outside the brightest cell: nothing to compare with
-            let mean = if rest > 0.0 { (sum - top as f64) / rest } else { f64::INFINITY };
-            self.thresholds[i] = (k as f64 * (maxima[2] as f64).max(mean)) as f32;
+            let mean = rest.simd_gt(zero).select((sum - top) / rest, f32x8::splat(f32::INFINITY));
+            let t = f32x8::splat(k) * best[2].fast_max(mean);
+            // a cell whose brightest sample is below its threshold clamps nothing:
+            // +Inf lets `clamp_row` skip it without reading its samples
+            let own = load(&maxima[PAD + i..PAD + i + CELL]);
+            let none = own.simd_le(t) & own.simd_lt(f32x8::splat(LUMA_CAP));
+            let t = none.select(f32x8::splat(f32::INFINITY), t).to_array();
+            let end = (i + CELL).min(n);
+            self.thresholds[i..end].copy_from_slice(&t[..end - i]);
         }
         self.thresholds
     }
@@ -147,7 +216,7 @@ impl<'a> Thresholds<'a> {
 /// The thresholds [`Thresholds::finish`] left in `work` for a band of width `width`.
 pub fn finished(work: &[f32], width: usize) -> &[f32] {
     let n = cells(width);
-    &work[3 * n..4 * n]
+    &work[2 * CELL * n + 3 * (n + 2 * PAD)..work_len(width)]
 }
 
 /// Clamps one row segment whose first pixel is at column `x0`, with its band's
@@ -155,7 +224,7 @@ pub fn finished(work: &[f32], width: usize) -> &[f32] {
 pub fn clamp_row(rgb: [&mut [f32]; 3], x0: usize, thresholds: &[f32]) -> usize {
     let [r, g, b] = rgb;
     let mut clamped = 0;
-    for (i, ((r, g), b)) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()).enumerate() {
+    let mut one = |i: usize, r: &mut f32, g: &mut f32, b: &mut f32| {
         let l = LUMA[0] * *r + LUMA[1] * *g + LUMA[2] * *b;
         let t = thresholds.get((x0 + i) / CELL).copied().unwrap_or(f32::INFINITY);
         // false for NaN: non-finite samples are left to the method
@@ -166,6 +235,25 @@ pub fn clamp_row(rgb: [&mut [f32]; 3], x0: usize, thresholds: &[f32]) -> usize {
             *b *= f;
             clamped += 1;
         }
+    };
+    // whole cells eight at a time: a cell is usually below its threshold
+    let whole = if x0 % CELL == 0 { r.len().min(g.len()).min(b.len()) / CELL * CELL } else { 0 };
+    let max = f32x8::splat(f32::MAX);
+    for c in 0..whole / CELL {
+        let o = CELL * c;
+        let t = thresholds.get((x0 + o) / CELL).copied().unwrap_or(f32::INFINITY);
+        if t == f32::INFINITY {
+            continue;
+        }
+        let l = luma8(load(&r[o..o + CELL]), load(&g[o..o + CELL]), load(&b[o..o + CELL]));
+        if (l.simd_gt(f32x8::splat(t)) & l.abs().simd_le(max)).any() {
+            for i in o..o + CELL {
+                one(i, &mut r[i], &mut g[i], &mut b[i]);
+            }
+        }
+    }
+    for (i, ((r, g), b)) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()).enumerate().skip(whole) {
+        one(i, r, g, b);
     }
     clamped
 }

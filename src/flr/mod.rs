@@ -617,6 +617,7 @@ impl Flr {
     /// f32) are copied into `worker`, planar f32 guides are borrowed; whole
     /// blocks go to [`moments_rows`], a partial block at the right edge to the
     /// gathering path.
+    #[allow(clippy::too_many_arguments)]
     fn moments_in_place(
         &self,
         frame: &CheckedFrame<'_>,
@@ -632,17 +633,28 @@ impl Flr {
         let y0 = j * bin;
         let (colour, rest) = worker.split_at_mut(3 * bin * w);
         let (gathered, edge) = rest.split_at_mut(q * bin * w);
+        // the band is the clamp's band (B = 8): its thresholds from each row as it arrives
+        let k = clamp.as_deref().map_or(1.0, |c| c.k);
+        let mut thresholds = match clamp.as_deref_mut() {
+            Some(c) if bin == fireflies::CELL => Some(c.begin(j)?),
+            _ => None,
+        };
         for (r, rgb) in colour.chunks_exact_mut(3 * w).enumerate() {
             let (p0, p12) = rgb.split_at_mut(w);
             let (p1, p2) = p12.split_at_mut(w);
-            frame.noisy.read_row_n(y0 + r, 0, [p0, p1, p2]).ok_or(bad)?;
+            frame.noisy.read_row_n(y0 + r, 0, [&mut *p0, &mut *p1, &mut *p2]).ok_or(bad)?;
+            if let Some(t) = thresholds.as_mut() {
+                t.add_row([p0, p1, p2]);
+            }
+        }
+        if let Some(t) = thresholds {
+            t.finish(k);
+            if let Some(c) = clamp.as_deref_mut() {
+                c.band = Some(j);
+            }
         }
         let mut clamped = 0;
         if let Some(c) = clamp.as_deref_mut() {
-            if bin == fireflies::CELL {
-                // the band is the clamp's band: its thresholds from the rows in hand
-                c.fill_from(j, colour.chunks_exact(3 * w).map(|c| [&c[..w], &c[w..2 * w], &c[2 * w..]]))?;
-            }
             // the whole blocks; a partial block at the right edge is clamped as it is gathered
             let wp = (w / bin).min(self.cells_x) * bin;
             for (r, rgb) in colour.chunks_exact_mut(3 * w).enumerate() {
@@ -729,6 +741,7 @@ impl Flr {
 
     /// Gathers input rows of cell row `j` (blocks `c0..c0 + ncx`) into planes and
     /// accumulates their block moments.
+    #[allow(clippy::too_many_arguments)]
     fn moments_chunk(
         &self,
         frame: &CheckedFrame<'_>,
@@ -1355,16 +1368,12 @@ struct FireflyClamp<'w> {
 }
 
 impl FireflyClamp<'_> {
-    /// Computes the thresholds of `band` from its rows.
-    fn fill_from<'r>(&mut self, band: usize, rows: impl Iterator<Item = [&'r [f32]; 3]>) -> Result<(), Error> {
+    /// Empty thresholds for `band`, to be filled row by row and finished
+    /// (then `band` is set by the caller).
+    fn begin(&mut self, band: usize) -> Result<fireflies::Thresholds<'_>, Error> {
+        self.band = None;
         let work = &mut self.work[3 * self.width..];
-        let mut t = fireflies::Thresholds::new(work, self.width).ok_or(Error::InvalidTile { index: band, count: 0 })?;
-        for rgb in rows {
-            t.add_row(rgb);
-        }
-        t.finish(self.k);
-        self.band = Some(band);
-        Ok(())
+        fireflies::Thresholds::new(work, self.width).ok_or(Error::InvalidTile { index: band, count: 0 })
     }
 
     /// Clamps row `y`'s pixels `x0..` (`rgb`), computing the thresholds of
