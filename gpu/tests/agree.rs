@@ -69,7 +69,7 @@ fn gpu_difference(a: FlrConfig, b: FlrConfig, f: &Owned, set: GuideSet) -> f64 {
 
 fn check(name: &str, cfg: FlrConfig, f: &Owned, set: GuideSet) -> (Report, Report) {
     let (mean, max, rc, rg) = compare(cfg, f, set);
-    eprintln!("{name}: {}x{} mean {mean:.2e} max {max:.2e}", f.w, f.h);
+    eprintln!("{name}: {}x{} mean {mean:.2e} max {max:.2e} clamped {}", f.w, f.h, rc.clamped_fireflies);
     assert!(mean < MEAN_TOL && max < MAX_TOL, "{name} {}x{}: mean {mean:.2e} max {max:.2e}", f.w, f.h);
     assert_eq!(
         (rc.nonfinite_noisy, rc.nonfinite_guides, rc.fallback_pixels),
@@ -77,6 +77,7 @@ fn check(name: &str, cfg: FlrConfig, f: &Owned, set: GuideSet) -> (Report, Repor
         "{name}"
     );
     assert_eq!((rc.empty_blocks, rc.empty_cells), (rg.empty_blocks, rg.empty_cells), "{name}");
+    assert_eq!(rc.clamped_fireflies, rg.clamped_fireflies, "{name}: clamped fireflies");
     (rc, rg)
 }
 
@@ -384,4 +385,122 @@ fn upsampling_and_separate_fit_guides() {
         g.denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()),
         Err(GpuError::Config(Error::Unsupported(_)))
     ));
+}
+
+/// `f` with a handful of fireflies: samples at 1e4 × the frame's mean (two in
+/// one clamp cell, one near the top, one in the bottom-right corner's
+/// partial cell), at coordinates divisible by 4 so that 2× and 4×
+/// subsampling keep them; a NaN and a negative sample beside them. Returns
+/// the fireflies' count.
+fn with_fireflies(f: &mut Owned) -> usize {
+    let (w, h) = (f.w, f.h);
+    let mean = f.noisy.iter().map(|v| *v as f64).sum::<f64>() / f.noisy.len() as f64;
+    let (x0, y0) = ((w / 3) & !7, (h / 2) & !3);
+    let mut at = vec![(x0, y0), (x0 + 4, y0), (20, 4), ((w - 1) & !3, (h - 1) & !3)];
+    at.retain(|&(x, y)| x < w && y < h);
+    at.sort_unstable();
+    at.dedup();
+    for &(x, y) in &at {
+        for (c, tint) in [1.0, 0.8, 0.6].into_iter().enumerate() {
+            f.noisy[3 * (y * w + x) + c] = (1e4 * mean * tint) as f32;
+        }
+    }
+    let i = y0 * w + x0 + 1; // between the first two
+    if i < w * h && w * h > 1 {
+        f.noisy[3 * i] = f32::NAN;
+        f.noisy[3 * (i / 2) + 1] = -0.5;
+    }
+    at.len()
+}
+
+/// The firefly clamp (`fireflies`, on by default) on frames with injected
+/// fireflies: sizes odd, tiny and wider than one `reference` workgroup's 64
+/// clamp cells; every block size (1 to 16: one or 2 × 2 clamp cells per
+/// block), no guides, the adaptive window, another strength, the library's
+/// default configuration, f16 inputs and upsampling. The GPU clamps the
+/// samples the CPU clamps (same count, at least the injected ones) and agrees
+/// with it; without the clamp the fireflies move the output far beyond the
+/// tolerance.
+#[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
+fn firefly_clamp() {
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let on = |c: FlrConfig| FlrConfig { fireflies: Some(lrdenoise::fireflies::DEFAULT_STRENGTH), ..c };
+    for (w, h, seed) in [(96, 64, 3), (75, 61, 2), (530, 20, 5), (7, 3, 4), (1, 1, 5)] {
+        let mut f = Owned::synthetic(w, h, seed, 0.5);
+        let injected = with_fireflies(&mut f);
+        let configs = [
+            ("B8", on(cfg(set, 8))),
+            ("B1", on(cfg(set, 1))),
+            ("B4", on(cfg(set, 4))),
+            ("B16", on(cfg(set, 16))),
+            ("no guides", on(cfg(GuideSet::NONE, 8))),
+            ("adaptive", on(adaptive(cfg(set, 8)))),
+            ("k = 4", FlrConfig { fireflies: Some(4.0), ..cfg(set, 8) }),
+            ("default", FlrConfig::default()),
+        ];
+        for (name, c) in configs {
+            let (rc, _) = check(&format!("fireflies {name}"), c, &f, c.guides);
+            if w * h > 1000 {
+                assert!(rc.clamped_fireflies >= injected as u64, "{name} {w}x{h}: {} clamped of {injected}", rc.clamped_fireflies);
+                let m = gpu_difference(FlrConfig { fireflies: None, ..c }, c, &f, c.guides);
+                assert!(m > 10.0 * MEAN_TOL, "{name} {w}x{h}: the clamp moves the output by only {m:.2e}");
+            }
+        }
+        // the count survives a clamp that finds nothing else to do: a frame without fireflies
+        let clean = Owned::synthetic(w, h, seed, 0.5);
+        let (rc, _) = check("fireflies, none injected", on(cfg(set, 8)), &clean, set);
+        assert!(rc.clamped_fireflies < (w * h / 100 + 1) as u64, "{} clamped on a clean frame", rc.clamped_fireflies);
+    }
+    // dense: one sample in 150 at 1e4 × its value (many neighbourhoods hold
+    // three or more, which the rule leaves alone), an Inf and a 65504; a band
+    // of zeros but for one sample (threshold 0: clamped to 0), and a band
+    // that is all zeros
+    let mut f = Owned::synthetic(120, 48, 13, 0.5);
+    for i in (0..120 * 48).step_by(150) {
+        for c in 0..3 {
+            f.noisy[3 * i + c] *= 1e4;
+        }
+    }
+    f.noisy[3 * 2000] = f32::INFINITY;
+    f.noisy[3 * 2100..3 * 2101].fill(65504.0);
+    f.noisy[3 * 120 * 16..3 * 120 * 32].fill(0.0);
+    f.noisy[3 * (120 * 20 + 50) + 1] = 0.25;
+    for (name, c) in [("B8", on(cfg(set, 8))), ("B16", on(cfg(set, 16))), ("default", FlrConfig::default())] {
+        let (rc, _) = check(&format!("fireflies dense {name}"), c, &f, c.guides);
+        assert!(rc.clamped_fireflies > 10, "{name}: {} clamped", rc.clamped_fireflies);
+    }
+    let mut f = Owned::synthetic(75, 61, 11, 0.5);
+    with_fireflies(&mut f);
+    f16_case(&f, on(cfg(set, 8)));
+    // upsampling: the clamp cells are 8×8 noisy pixels (blocks of 4 or 2 there)
+    let (w, h) = (f.w, f.h);
+    for u in [2, 4] {
+        let (lw, lh) = (w.div_ceil(u), h.div_ceil(u));
+        let every = |v: &[f32], c: usize| -> Vec<f32> {
+            (0..lw * lh * c).map(|i| v[((i / c / lw * u) * w + (i / c % lw) * u) * c + i % c]).collect()
+        };
+        let (noisy, normal, depth, ao) = (every(&f.noisy, 3), every(&f.normal, 3), every(&f.depth, 1), every(&f.ao, 1));
+        fn iv(d: &[f32], w: usize, h: usize, c: usize) -> ImageView<'_> {
+            ImageView::interleaved(d, w, h, c).unwrap()
+        }
+        let low = Guides {
+            normal: Some(iv(&normal, lw, lh, 3)),
+            depth: Some(iv(&depth, lw, lh, 1)),
+            ao: Some(iv(&ao, lw, lh, 1)),
+            ..Default::default()
+        };
+        let frame = Frame { noisy: iv(&noisy, lw, lh, 3), guides: f.guides(set), guides_low: Some(low) };
+        for c in [on(cfg(set, 8)), on(adaptive(cfg(set, 8)))] {
+            let c = FlrConfig { upsample: u, ..c };
+            let (cpu, rc) = run_frame(c, w, h, &frame);
+            let mut out = vec![0f32; 3 * w * h];
+            let rg = gpu(c, w, h).denoise(&frame, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+            let (mean, max) = rel_diff(&out, &cpu);
+            eprintln!("fireflies, upsample {u}, {:?}: mean {mean:.2e} max {max:.2e}", c.blur);
+            assert!(mean < MEAN_TOL && max < MAX_TOL, "fireflies, upsample {u}, {:?}: mean {mean:.2e} max {max:.2e}", c.blur);
+            assert!(rc.clamped_fireflies > 0, "upsample {u}: nothing clamped");
+            assert_eq!(rc.clamped_fireflies, rg.clamped_fireflies, "upsample {u}");
+        }
+    }
 }

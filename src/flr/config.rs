@@ -97,7 +97,7 @@ pub struct FlrConfig {
     /// sample whose luminance is above `k` times the robust mean of its
     /// 72 × 8 pixel neighbourhood is scaled down to that level before the
     /// moments are taken. `None` turns it off. Default
-    /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`.
+    /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`. CPU and GPU paths.
     pub fireflies: Option<f32>,
 }
 

@@ -16,7 +16,11 @@
 // and `models` are given by `Params::win`. With `Params::without` (the AO
 // channel), window 0's solve also fits each cell without that guide, from the
 // same Cholesky factor (the guide ordered last: the system without it is the
-// leading block), and the blend weighs that fit as a fourth candidate.
+// leading block), and the blend weighs that fit as a fourth candidate. With
+// the firefly clamp (`Params::fireflies`, src/fireflies.rs) `reference` also
+// sums the noisy input's 8×8 clamp cells into the start of `tmp`, and
+// `moments` derives the thresholds of its block's cells from them and clamps
+// the samples it reads.
 // Equation numbers are those of the FLR paper's appendix (eqs. 12–23).
 // Differences from the CPU path, all from f32 (WGSL has no f64): moments are
 // shifted to the frame reference and blurred in f32; the pivot floors are
@@ -88,9 +92,10 @@ struct Params {
     // the output multiplied by it
     demod_ao: u32,
     demod_offset: f32,
-    pad_demod0: u32,
-    pad_demod1: u32,
-    pad_demod2: u32,
+    // FlrConfig::fireflies: the firefly clamp's factor k (0: off)
+    fireflies: f32,
+    pad_fireflies0: u32,
+    pad_fireflies1: u32,
 }
 
 // One window of the fit: its grid, where its blur reads and writes, where its
@@ -124,6 +129,7 @@ struct Stats {
     empty_blocks: atomic<u32>,
     empty_cells: atomic<u32>,
     dropped_pivots: atomic<u32>,
+    clamped_fireflies: atomic<u32>,
 }
 
 @group(0) @binding(0) var<uniform> P: Params;
@@ -233,10 +239,126 @@ fn off_p() -> u32 { return off_t() + 3u; }
 fn off_e() -> u32 { return off_p() + 3u * P.q; }
 
 // ---------------------------------------------------------------------------
+// The firefly clamp (src/fireflies.rs): the noisy input is cut into bands of
+// FF_CELL rows and each band into cells of FF_CELL × FF_CELL pixels; a cell's
+// threshold comes from the cells up to FF_REACH away in its band, and a
+// finite sample whose luminance ℓ exceeds its cell's threshold T has its
+// three channels scaled by T / ℓ, ahead of everything that reads them.
+const FF_CELL: u32 = 8u;
+const FF_REACH: u32 = 6u;
+// largest luminance a sample adds to its cell's sum (fireflies::LUMA_CAP)
+const FF_LUMA_CAP: f32 = 1e30;
+
+// Clamp cells per band.
+fn ff_cells() -> u32 {
+    return (P.in_width + FF_CELL - 1u) / FF_CELL;
+}
+
+fn noisy_rgb(x: u32, y: u32) -> vec3<f32> {
+    return vec3<f32>(noisy_at(0u, x, y), noisy_at(1u, x, y), noisy_at(2u, x, y));
+}
+
+// Sum, count and maximum of the finite luminances of clamp cell `i` of band
+// `band` (negatives as 0, capped at FF_LUMA_CAP; `fireflies::Thresholds`,
+// in its own summation order) into tmp[3 · (band · cells + i) ..].
+fn firefly_cell(i: u32, band: u32) {
+    let n = ff_cells();
+    if i >= n || band * FF_CELL >= P.in_height {
+        return;
+    }
+    let x1 = min((i + 1u) * FF_CELL, P.in_width);
+    let y1 = min((band + 1u) * FF_CELL, P.in_height);
+    var sum = 0.0;
+    var count = 0.0;
+    var top = 0.0;
+    for (var y = band * FF_CELL; y < y1; y++) {
+        var row_sum = 0.0;
+        var row_count = 0.0;
+        for (var x = i * FF_CELL; x < x1; x++) {
+            let l = luma3(noisy_rgb(x, y));
+            if finite(l) {
+                let c = clamp(l, 0.0, FF_LUMA_CAP);
+                row_sum += c;
+                row_count += 1.0;
+                top = max(top, c);
+            }
+        }
+        sum += row_sum;
+        count += row_count;
+    }
+    let o = 3u * (band * n + i);
+    tmp[o] = sum;
+    tmp[o + 1u] = count;
+    tmp[o + 2u] = top;
+}
+
+// Threshold of clamp cell `i` of band `band` (`fireflies::Thresholds::finish`,
+// in f32): k · max(third largest cell maximum, mean ℓ of the cells but the
+// one with the largest sum) over cells i − FF_REACH ..= i + FF_REACH; inf()
+// where no finite sample lies outside that cell. The mean sums the other
+// cells rather than subtracting the top one from the total, so that an
+// outlier's sum does not swamp the rest in f32.
+fn firefly_threshold(i: u32, band: u32) -> f32 {
+    let n = ff_cells();
+    let lo = select(0u, i - FF_REACH, i >= FF_REACH);
+    let hi = min(i + FF_REACH + 1u, n);
+    let row = 3u * band * n;
+    var top = lo;
+    var top_sum = -1.0;
+    var m = vec3<f32>(0.0); // the three largest cell maxima, largest first
+    for (var j = lo; j < hi; j++) {
+        let s = tmp[row + 3u * j];
+        if s > top_sum {
+            top_sum = s;
+            top = j;
+        }
+        let c = tmp[row + 3u * j + 2u];
+        if c > m.z {
+            m.z = c;
+            if m.z > m.y {
+                m = m.xzy;
+                if m.y > m.x {
+                    m = m.yxz;
+                }
+            }
+        }
+    }
+    var sum = 0.0;
+    var count = 0.0;
+    for (var j = lo; j < hi; j++) {
+        if j != top {
+            sum += tmp[row + 3u * j];
+            count += tmp[row + 3u * j + 1u];
+        }
+    }
+    if !(count > 0.0) {
+        return inf();
+    }
+    return P.fireflies * max(m.z, sum / count);
+}
+
+// Whether the clamp scales a sample of luminance `l` under threshold `t`: a
+// finite `l` above a finite `t` (non-finite samples are left to the
+// validity test; a non-finite `t` clamps nothing).
+fn firefly_clamps(l: f32, t: f32) -> bool {
+    return finite(l) && finite(t) && l > t;
+}
+
+// ---------------------------------------------------------------------------
 // Stage 0: the per-guide frame reference (first finite value among 16 fixed
-// sample positions, as `Flr::prepare`), and the report counters reset.
-@compute @workgroup_size(1)
-fn reference() {
+// sample positions, as `Flr::prepare`) and the report counters reset, by
+// invocation 0; with the firefly clamp, also the clamp cells' sums, one
+// invocation per cell (x: cell, y: band; `firefly_cell`). Those sums are part
+// of the Prepare stage: they read only the noisy input, and `moments` needs
+// every cell of a band for its thresholds.
+@compute @workgroup_size(64)
+fn reference(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if P.fireflies > 0.0 {
+        firefly_cell(gid.x, gid.y);
+    }
+    if gid.x != 0u || gid.y != 0u {
+        return;
+    }
     for (var q = 0u; q < P.q; q++) {
         var r = 0.0;
         var found = false;
@@ -259,6 +381,7 @@ fn reference() {
     atomicStore(&stats.empty_blocks, 0u);
     atomicStore(&stats.empty_cells, 0u);
     atomicStore(&stats.dropped_pivots, 0u);
+    atomicStore(&stats.clamped_fireflies, 0u);
 }
 
 // ---------------------------------------------------------------------------
@@ -268,12 +391,23 @@ fn reference() {
 // as [w, e_0..e_Q, y_0..y_2] (w = 1 valid, 0 excluded; e = g − m − r); then
 // invocation j sums moment j (and j + 64) over them: no reduction tree, two
 // barriers per 64 pixels. Pixels with a non-finite sample are left out and
-// counted.
+// counted. With the firefly clamp the workgroup first computes the
+// thresholds of the clamp cells its block covers (one, or 2 × 2 at a block
+// of 16 pixels: `ff_t`, inf() without the clamp), counts the samples it
+// clamps and stages them clamped.
 const PIX: u32 = 13u; // values staged per pixel: w, e[MAX_Q], y[3], luminance
 var<workgroup> first_valid: atomic<u32>;
 var<workgroup> first_plain: u32;
 var<workgroup> pix: array<f32, 832>; // 64 pixels × PIX
 var<workgroup> sums: array<f32, 73>;
+// thresholds of the block's clamp cells (fit_block ≤ 16: at most 2 × 2)
+var<workgroup> ff_t: array<f32, 4>;
+
+// Slot in `ff_t` of the clamp cell of pixel (x, y), in the block at (x0, y0).
+fn ff_slot(x: u32, y: u32, x0: u32, y0: u32) -> u32 {
+    let nc = max(P.fit_block / FF_CELL, 1u);
+    return min((y / FF_CELL - y0 / FF_CELL) * nc + x / FF_CELL - x0 / FF_CELL, 3u);
+}
 
 fn pixel_valid(x: u32, y: u32) -> vec2<bool> {
     var ok_noisy = true;
@@ -325,11 +459,25 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
     if lid == 0u {
         atomicStore(&first_valid, NONE);
     }
+    if lid < 4u {
+        let nc = max(b / FF_CELL, 1u);
+        let i = x0 / FF_CELL + lid % nc;
+        let band = y0 / FF_CELL + lid / nc;
+        var t = inf();
+        if P.fireflies > 0.0 && lid < nc * nc && i < ff_cells() && band * FF_CELL < P.in_height {
+            t = firefly_threshold(i, band);
+        }
+        ff_t[lid] = t;
+    }
     workgroupBarrier();
     for (var i = lid; i < b * b; i += WG) {
         let x = x0 + i % b;
         let y = y0 + i / b;
         if x < P.in_width && y < P.in_height {
+            // every sample the clamp scales is counted, valid guides or not (as the CPU's)
+            if P.fireflies > 0.0 && firefly_clamps(luma3(noisy_rgb(x, y)), ff_t[ff_slot(x, y, x0, y0)]) {
+                atomicAdd(&stats.clamped_fireflies, 1u);
+            }
             let ok = pixel_valid(x, y);
             if ok.x && ok.y {
                 atomicMin(&first_valid, i);
@@ -387,8 +535,17 @@ fn moments(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
                 if P.demod_ao != NONE {
                     s = demod_scale(fit_at(P.demod_ao, x, y));
                 }
+                // the firefly clamp on the raw sample, ahead of the demodulation;
+                // `pixel_valid` tested the raw sample, which is what the
+                // clamped one is: a finite sample scaled by T / ℓ < 1 stays finite
+                var rgb = noisy_rgb(x, y);
+                let t = ff_t[ff_slot(x, y, x0, y0)];
+                let l_raw = luma3(rgb);
+                if firefly_clamps(l_raw, t) {
+                    rgb *= t / l_raw;
+                }
                 for (var c = 0u; c < 3u; c++) {
-                    pix[o + 1u + q + c] = demod_divide(noisy_at(c, x, y), s);
+                    pix[o + 1u + q + c] = demod_divide(rgb[c], s);
                 }
                 let l = 0.2126 * pix[o + 1u + q] + 0.7152 * pix[o + 2u + q] + 0.0722 * pix[o + 3u + q];
                 pix[o + 4u + q] = l;

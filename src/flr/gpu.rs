@@ -21,10 +21,16 @@
 //! match the CPU path within the tolerance `tests/` of `lrdenoise-gpu` state;
 //! accuracy drops, as for any f32 implementation, for guides whose offset
 //! from the frame's reference sample dwarfs their local variation.
+//!
+//! The firefly clamp ([`FlrConfig::fireflies`], [`crate::fireflies`]) runs in
+//! the `reference` and `moments` passes, its thresholds in f32; a sample whose
+//! luminance is within rounding of its threshold may be clamped on one path
+//! and not on the other (by a factor within rounding of 1).
 
 use super::config::FlrConfig;
 use super::schedule::Stage;
 use crate::error::Error;
+use crate::fireflies;
 use crate::flr::{Flr, Grid, Report, MAX_SCALES};
 use crate::image::Layout;
 use crate::kernels::blur::Taps;
@@ -41,7 +47,8 @@ pub const GPU_MAX_GUIDES: usize = 8;
 const TAPS: usize = 68;
 /// Largest workgroup count per dimension every WebGPU device accepts.
 const MAX_GROUPS: usize = 65535;
-/// Bytes of the stats buffer: reference, mean, scale (8 f32 each) + 6 counters.
+/// Bytes of the stats buffer: reference, mean, scale (8 f32 each) + 7 counters
+/// (the [`Report`] counts [`GpuPlan::report`] reads), padded to 16 bytes.
 pub const STATS_BYTES: u64 = 128;
 
 /// The uniform parameter block (binding 0), laid out as the WGSL `Params`.
@@ -123,8 +130,10 @@ pub struct GpuParams {
     pub demod_ao: u32,
     /// The offset `c` of the demodulation `s = √(ao + c)`.
     pub demod_offset: f32,
+    /// [`FlrConfig::fireflies`]: the firefly clamp's factor `k` (0: off).
+    pub fireflies: f32,
     /// Padding to the WGSL layout; zero.
-    pub pad_demod: [u32; 3],
+    pub pad_fireflies: [u32; 2],
 }
 
 /// One window of the fit in the parameter block, laid out as the WGSL
@@ -447,7 +456,9 @@ impl GpuPlan {
         self.flr.window_grid_taps(s).1
     }
 
-    /// Where each window's grids live. One window: blurred in place in
+    /// Where each window's grids live. With the firefly clamp, `tmp` first
+    /// holds its cells' sum, count and maximum (3 values per cell, band after
+    /// band), from `reference` to `moments`. One window: blurred in place in
     /// `cells`, models straight into the output models. Adaptive: `tmp` holds
     /// the row-blurred grid (shared, the windows run one after another),
     /// window 0's blurred grid, the pooled grid and windows 1 and 2's blurred
@@ -458,7 +469,9 @@ impl GpuPlan {
         let ml = model_len(self.guide_channels());
         let fine = self.cells_x() * self.cells_y();
         let mut r = Regions {
-            tmp_len: fine * k,
+            // the firefly clamp's cell sums live at the start of `tmp` until
+            // the moments are taken (`tmp` is first written after them)
+            tmp_len: (fine * k).max(self.firefly_cells().map_or(0, |(x, y)| 3 * x * y)),
             models_len: fine * ml,
             pooled_off: None,
             src: [(0, 0); MAX_SCALES],
@@ -500,6 +513,13 @@ impl GpuPlan {
         r
     }
 
+    /// The firefly clamp's cells (per band, bands) at the noisy resolution,
+    /// with [`FlrConfig::fireflies`].
+    fn firefly_cells(&self) -> Option<(usize, usize)> {
+        let (iw, ih) = self.input_size();
+        self.config().fireflies.map(|_| (fireflies::cells(iw), ih.div_ceil(fireflies::CELL)))
+    }
+
     /// The guide channel window 0 is also fitted without: AO, with
     /// [`FlrConfig::adaptive_without_ao`].
     fn without_guide(&self) -> Option<usize> {
@@ -537,7 +557,14 @@ impl GpuPlan {
         let solve = |s: usize| [g(self.grid(s).cells_x, 64), self.grid(s).cells_y as u32, 1];
         let none = Pass { stage: Stage::Prepare, window: 0, entry: c"", workgroups: [0; 3] };
         let mut p = Passes { list: [none; MAX_PASSES], len: 0 };
-        p.push(Stage::Prepare, 0, c"reference", [1, 1, 1]);
+        // With the firefly clamp, `reference` also sums the clamp's 8×8 cells
+        // of the noisy input (one invocation per cell, 64 per workgroup): the
+        // Prepare stage, as they only read the input and every cell of a band
+        // must be summed by the time `moments` (Moments stage) derives the
+        // thresholds of its block's cells from them and clamps. No pass of
+        // its own: the pass list keeps its length ([`MAX_PASSES`]).
+        let reference = self.firefly_cells().map_or([1, 1, 1], |(x, y)| [g(x, 64), y as u32, 1]);
+        p.push(Stage::Prepare, 0, c"reference", reference);
         p.push(Stage::Moments, 0, c"moments", [cx, cy, 1]);
         if let Some(s) = self.flr.pooled_window() {
             p.push(Stage::Moments, 0, c"pool", grid(s));
@@ -646,7 +673,8 @@ impl GpuPlan {
             without_var_off: r.without.map_or(u32::MAX, |(_, v)| v as u32),
             demod_ao: self.config().demodulation().map_or(u32::MAX, |(a, _)| a as u32),
             demod_offset: self.config().demodulation().map_or(0.0, |(_, c)| c),
-            pad_demod: [0; 3],
+            fireflies: self.config().fireflies.unwrap_or(0.0),
+            pad_fireflies: [0; 2],
         })
     }
 
@@ -693,7 +721,7 @@ impl GpuPlan {
             empty_cells: counter(4),
             dropped_pivots: counter(5),
             history_rejected: 0,
-            clamped_fireflies: 0,
+            clamped_fireflies: counter(6),
         }
     }
 }
