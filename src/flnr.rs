@@ -100,12 +100,17 @@ pub struct FlnrConfig<'w> {
     pub weights: &'w [u8],
     /// Network tile edge in pixels (at least [`MIN_TILE`]; default [`DEFAULT_TILE`]).
     pub tile: usize,
+    /// The firefly clamp of the FLR fit ([`crate::FlrConfig::fireflies`];
+    /// default `Some(fireflies::DEFAULT_STRENGTH)`). The network reads the
+    /// light unclamped: its input is `ln(1 + light / mean)`, which already
+    /// compresses outliers.
+    pub fireflies: Option<f32>,
 }
 
 impl<'w> FlnrConfig<'w> {
-    /// The weights with the default tile.
+    /// The weights with the default tile and firefly clamp.
     pub fn new(weights: &'w [u8]) -> Self {
-        FlnrConfig { weights, tile: DEFAULT_TILE }
+        FlnrConfig { weights, tile: DEFAULT_TILE, fireflies: Some(crate::fireflies::DEFAULT_STRENGTH) }
     }
 }
 
@@ -148,6 +153,7 @@ impl<'w> Flnr<'w> {
             regularization: Regularization::Normalized { eps_mul: eps_mul as f64, eps_add: eps_add as f64 },
             // the network was trained through FLR without it (train/flnr.py)
             ao_demodulation: None,
+            fireflies: config.fireflies,
             ..FlrConfig::default()
         };
         let flr = Flr::new(cfg, width, height)?;

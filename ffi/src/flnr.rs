@@ -31,7 +31,7 @@ fn flnr_plan<'w>(weights: *const u8, weights_bytes: usize, tile: u32, width: u32
     // unchanged for the duration of the call (the header's contract).
     let blob = unsafe { core::slice::from_raw_parts(weights, weights_bytes) };
     let tile = if tile == 0 { lrdenoise_core::flnr::DEFAULT_TILE } else { tile as usize };
-    Flnr::new(FlnrConfig { weights: blob, tile }, width as usize, height as usize).map_err(status_of)
+    Flnr::new(FlnrConfig { tile, ..FlnrConfig::new(blob) }, width as usize, height as usize).map_err(status_of)
 }
 
 /// Byte offsets of a threaded FLNR scratch: the header (input scales), FLR's

@@ -93,10 +93,10 @@ pub struct FlrConfig {
     /// not invariant to an affine change of the AO channel (DATA.md fixes AO
     /// to [0, 1]); every other guide stays invariant. CPU and GPU paths.
     pub ao_demodulation: Option<f32>,
-    /// The firefly clamp's strength `k` ([`crate::fireflies`]): a noisy
-    /// sample whose luminance is above `k` times the robust mean of its
-    /// 72 × 8 pixel neighbourhood is scaled down to that level before the
-    /// moments are taken. `None` turns it off. Default
+    /// The firefly clamp's threshold factor `k` ([`crate::fireflies`]): a
+    /// noisy sample whose luminance is above `k` times the third brightest
+    /// 8 × 8 cell of its 104 × 8 pixel neighbourhood is scaled down to that
+    /// level before the moments are taken. `None` turns it off. Default
     /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`. CPU and GPU paths.
     pub fireflies: Option<f32>,
 }
