@@ -103,7 +103,8 @@ fn matches_f64_oracle_without_noise() {
     let sizes = [(70, 50, 32, 0u32), (64, 64, 16, 5), (40, 33, 8, 11), (45, 31, 12, 2), (30, 29, 9, 7)];
     for ((w, h, block, index), shrinkage) in sizes.into_iter().flat_map(|s| [(s, 0.0), (s, 4.0)]) {
         let f = random_guides(w, h, w as u64);
-        let cfg = BmfrConfig { noise: 0.0, block, shrinkage, ..BmfrConfig::with_guides(set) };
+        // (the oracle fits the noisy light as given: no firefly clamp)
+        let cfg = BmfrConfig { noise: 0.0, block, shrinkage, fireflies: None, ..BmfrConfig::with_guides(set) };
         let b = Bmfr::new(cfg, w, h).unwrap();
         assert_eq!(b.feature_count(), 5);
         let (out, rep) = run(cfg, &f, index);
@@ -202,22 +203,34 @@ fn nonfinite_inputs_are_excluded_and_counted() {
     assert!(rel_err(&out, &clean_out) < 0.02, "a few bad samples must not spread");
 }
 
+/// With the firefly clamp (on by default) too: outliers on the borders, in
+/// the corners and on rows where tiles meet are clamped alike by every tile
+/// that reads them.
 #[test]
 fn tiles_in_any_order_equal_the_whole_frame() {
-    let f = Owned::synthetic(150, 97, 5, 0.5);
-    let cfg = BmfrConfig::with_guides(NP);
-    let b = Bmfr::new(cfg, f.w, f.h).unwrap();
-    for index in [0u32, 7] {
-        let (whole, _) = run(cfg, &f, index);
-        let frame = b.check_frame(&f.frame(NP)).unwrap();
-        let mut out = vec![0f32; f.w * f.h * 3];
-        let mut worker = vec![0f32; b.worker_len()];
-        for t in (0..b.tile_count(index)).rev() {
-            let (y0, y1) = b.tile_pixel_rows(index, t).unwrap();
-            let mut view = ImageViewMut::interleaved(&mut out[3 * f.w * y0..3 * f.w * y1], f.w, y1 - y0, 3).unwrap();
-            b.fit_tile(&frame, index, t, &mut worker, &mut view).unwrap();
+    let mut f = Owned::synthetic(150, 97, 5, 0.5);
+    let (w, h) = (f.w, f.h);
+    for (x, y) in [(0, 0), (w - 1, h - 1), (0, 40), (75, 0), (149, 50), (60, 96), (33, 17), (34, 18), (90, 49), (91, 64), (12, 81)] {
+        f.noisy[3 * (y * w + x)..3 * (y * w + x) + 3].fill(1e4);
+    }
+    for fireflies in [Some(lrdenoise::fireflies::DEFAULT_STRENGTH), None] {
+        let cfg = BmfrConfig { fireflies, ..BmfrConfig::with_guides(NP) };
+        let b = Bmfr::new(cfg, w, h).unwrap();
+        for index in [0u32, 7] {
+            let (whole, rep) = run(cfg, &f, index);
+            assert_eq!(rep.clamped_fireflies > 0, fireflies.is_some());
+            let frame = b.check_frame(&f.frame(NP)).unwrap();
+            let mut out = vec![0f32; w * h * 3];
+            let mut worker = vec![0f32; b.worker_len()];
+            let mut tiled = BmfrReport::default();
+            for t in (0..b.tile_count(index)).rev() {
+                let (y0, y1) = b.tile_pixel_rows(index, t).unwrap();
+                let mut view = ImageViewMut::interleaved(&mut out[3 * w * y0..3 * w * y1], w, y1 - y0, 3).unwrap();
+                tiled += b.fit_tile(&frame, index, t, &mut worker, &mut view).unwrap();
+            }
+            assert_eq!(out, whole, "{fireflies:?} frame {index}");
+            assert_eq!(tiled, rep, "{fireflies:?} frame {index}");
         }
-        assert_eq!(out, whole);
     }
 }
 

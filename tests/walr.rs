@@ -281,8 +281,15 @@ fn atrous_counts_every_sample_once() {
     for &(w, h) in &[(1, 1), (7, 3), (40, 30), (257, 5), (83, 83)] {
         for iterations in 1..=4u8 {
             let f = scene(w, h, 3, 0.5, false, false).f;
-            let cfg =
-                WalrConfig { iterations, tracing: false, replace: false, storage: Storage::F32, ..flat_weights(WalrConfig::default()) };
+            // (against the noisy light as given: no firefly clamp)
+            let cfg = WalrConfig {
+                iterations,
+                tracing: false,
+                replace: false,
+                storage: Storage::F32,
+                fireflies: None,
+                ..flat_weights(WalrConfig::default())
+            };
             let (wl, z, ls) = averages(cfg, &f);
             let kp = wl.planes();
             let r = (3i64.pow(iterations as u32) - 1) / 2;
@@ -501,16 +508,25 @@ fn adaptive_blend_matches_f64_box_oracle() {
 
 #[test]
 fn bands_are_bit_identical_to_whole_frame() {
-    // the default (adaptive blend: two passes after the iterations) and the fixed blend (one solve)
+    // the default (adaptive blend: two passes after the iterations) and the fixed blend (one solve);
+    // f16 averages (the firefly clamp's work then has half as long a z row); no clamp
     for adaptive_blend in [true, false] {
         bands_case(WalrConfig { adaptive_blend, ..Default::default() });
     }
+    bands_case(WalrConfig { storage: Storage::F16, ..Default::default() });
+    bands_case(WalrConfig { fireflies: None, ..Default::default() });
 }
 
 fn bands_case(cfg: WalrConfig) {
-    let s = scene(61, 47, 9, 0.6, true, true);
+    let mut s = scene(61, 47, 9, 0.6, true, true);
+    // outliers for the firefly clamp (on by default): on the borders, on a
+    // light-scale sample (x, y multiples of 4) and in bands the cuts split
+    for (x, y) in [(0, 0), (60, 46), (8, 12), (20, 13), (21, 29), (40, 44), (59, 1)] {
+        s.f.noisy[3 * (y * 61 + x)..3 * (y * 61 + x) + 3].fill(1e4);
+    }
     let f = &s.f;
-    let (whole, _) = run(cfg, f, 2);
+    let (whole, rep) = run(cfg, f, 2);
+    assert_eq!(rep.clamped_fireflies >= 7, cfg.fireflies.is_some(), "{rep:?}");
     let wl = Walr::new(cfg, f.w, f.h).unwrap();
     let mut scratch = vec![0f32; wl.scratch_len()];
     let mut out = vec![0f32; f.w * f.h * 3];
@@ -521,10 +537,12 @@ fn bands_case(cfg: WalrConfig) {
     let cuts = [0, 1, 13, 14, 30, 47];
     let (gl, zl, w) = (wl.geo_row_len(), wl.z_row_len(), f.w);
     // features, bands in reverse order
+    let mut clamped = 0;
     for k in (0..cuts.len() - 1).rev() {
         let (a, b) = (cuts[k], cuts[k + 1]);
-        wl.features_rows(&cf, &prep, a, &mut geo[a * gl..b * gl], &mut z0[a * zl..b * zl]).unwrap();
+        clamped += wl.features_rows(&cf, &prep, a, &mut geo[a * gl..b * gl], &mut z0[a * zl..b * zl]).unwrap().clamped_fireflies;
     }
+    assert_eq!(clamped, rep.clamped_fireflies);
     for t in 0..cfg.iterations {
         let (sin, sout, zin, zout) =
             if Walr::buffer_of(t) == 0 { (&*s0, &mut *s1, &*z0, &mut *z1) } else { (&*s1, &mut *s0, &*z1, &mut *z0) };
@@ -748,7 +766,11 @@ fn temporal_accumulation_lowers_the_error_frame_over_frame() {
     let seq = static_sequence(8);
     let (w, h) = (seq[0].w, seq[0].h);
     for set in [NDP, GuideSet { normal: true, depth: false, position: true, ao: false, user: 0 }] {
-        let cfg = WalrConfig::with_guides(set);
+        // Without the firefly clamp: this room's lit back wall is a strip two
+        // clamp cells wide beside a wall half as bright, which the clamp's rule
+        // scales down (640 pixels of the clean frame, fewer of each noisy
+        // one), so its bias, not the accumulation, would be measured.
+        let cfg = WalrConfig { fireflies: None, ..WalrConfig::with_guides(set) };
         let wl = Walr::new(cfg, w, h).unwrap();
         let mut hist = vec![0f32; wl.history_len()];
         let mut history = History::new(&mut hist);

@@ -81,7 +81,7 @@ pub struct FlrArgs {
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
-    /// Firefly clamp strength K: a noisy sample brighter than K times the robust mean luminance of its 72x8 neighbourhood is scaled down to that level (default 16), or "off"
+    /// FLR, BMFR, WALR (and their temporal pipelines): firefly clamp strength K: a noisy sample brighter than K times the third brightest 8x8 cell of its 104x8 neighbourhood is scaled down to that level (default 1.5), or "off"
     #[arg(long, value_name = "K|off")]
     pub fireflies: Option<String>,
     /// FLR: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
@@ -124,7 +124,7 @@ impl FlrArgs {
             ("--epsilon", self.epsilon.is_some(), &[Walr]),
             ("--previous-weight", self.previous_weight.is_some(), &[Walr]),
             ("--weights", self.weights.is_some(), &[Flnr]),
-            ("--fireflies", self.fireflies.is_some(), &[Flr]),
+            ("--fireflies", self.fireflies.is_some(), &[Flr, Bmfr, Walr]),
         ]
     }
 
@@ -329,6 +329,9 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
     if let Some(k) = a.shrinkage {
         c.shrinkage = k;
     }
+    if let Some(f) = &a.fireflies {
+        c.fireflies = parse_fireflies(f)?;
+    }
     c.validate().map_err(|e| format!("bmfr flags: {e}"))?;
     Ok(c)
 }
@@ -377,6 +380,9 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
             "f32" => Storage::F32,
             _ => return Err(format!("--storage: '{s}' is not f16 or f32")),
         };
+    }
+    if let Some(f) = &a.fireflies {
+        c.fireflies = parse_fireflies(f)?;
     }
     c.validate().map_err(|e| format!("walr flags: {e}"))?;
     Ok(c)

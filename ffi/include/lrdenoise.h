@@ -627,6 +627,14 @@ typedef struct LrdBmfrConfig {
    * Without positions: largest relative depth difference (0.05).
    */
   float depth_limit;
+  /**
+   * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
+   * luminance exceeds k times the third brightest 8x8 cell of its
+   * 104x8-pixel neighbourhood is scaled down to that level for the fit,
+   * and for the temporal pipeline's accumulation (see the core's
+   * `fireflies` module); 0 turns it off. Default 1.5.
+   */
+  float fireflies;
 } LrdBmfrConfig;
 
 /**
@@ -752,6 +760,14 @@ typedef struct LrdWalrConfig {
    * Without depth: largest world-position change of a history tap (0.05).
    */
   float position_limit;
+  /**
+   * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
+   * luminance exceeds k times the third brightest 8x8 cell of its
+   * 104x8-pixel neighbourhood is scaled down to that level for the filter,
+   * and for the temporal pipeline's accumulation (see the core's
+   * `fireflies` module); 0 turns it off. Default 1.5.
+   */
+  float fireflies;
 } LrdWalrConfig;
 
 /**

@@ -51,6 +51,12 @@ pub struct LrdBmfrConfig {
     pub position_limit: f32,
     /// Without positions: largest relative depth difference (0.05).
     pub depth_limit: f32,
+    /// The firefly clamp's threshold factor k (>= 1): a noisy sample whose
+    /// luminance exceeds k times the third brightest 8x8 cell of its
+    /// 104x8-pixel neighbourhood is scaled down to that level for the fit,
+    /// and for the temporal pipeline's accumulation (see the core's
+    /// `fireflies` module); 0 turns it off. Default 1.5.
+    pub fireflies: f32,
 }
 
 fn bmfr_config(c: &LrdBmfrConfig) -> Result<lrdenoise_core::BmfrConfig, LrdStatus> {
@@ -73,6 +79,7 @@ fn bmfr_config(c: &LrdBmfrConfig) -> Result<lrdenoise_core::BmfrConfig, LrdStatu
             position_limit: c.position_limit,
             depth_limit: c.depth_limit,
         },
+        fireflies: (c.fireflies != 0.0).then_some(c.fireflies),
     };
     cfg.validate().map_err(status_of)?;
     Ok(cfg)
@@ -109,6 +116,7 @@ pub extern "C" fn lrd_bmfr_config_default() -> LrdBmfrConfig {
         normal_limit: t.normal_limit,
         position_limit: t.position_limit,
         depth_limit: t.depth_limit,
+        fireflies: d.fireflies.unwrap_or(0.0),
     }
 }
 

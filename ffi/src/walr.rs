@@ -62,6 +62,12 @@ pub struct LrdWalrConfig {
     pub depth_limit: f32,
     /// Without depth: largest world-position change of a history tap (0.05).
     pub position_limit: f32,
+    /// The firefly clamp's threshold factor k (>= 1): a noisy sample whose
+    /// luminance exceeds k times the third brightest 8x8 cell of its
+    /// 104x8-pixel neighbourhood is scaled down to that level for the filter,
+    /// and for the temporal pipeline's accumulation (see the core's
+    /// `fireflies` module); 0 turns it off. Default 1.5.
+    pub fireflies: f32,
 }
 
 fn walr_config(c: &LrdWalrConfig) -> Result<lrdenoise_core::WalrConfig, LrdStatus> {
@@ -88,6 +94,7 @@ fn walr_config(c: &LrdWalrConfig) -> Result<lrdenoise_core::WalrConfig, LrdStatu
             depth_limit: c.depth_limit,
             position_limit: c.position_limit,
         },
+        fireflies: (c.fireflies != 0.0).then_some(c.fireflies),
     };
     cfg.validate().map_err(status_of)?;
     Ok(cfg)
@@ -128,6 +135,7 @@ pub extern "C" fn lrd_walr_config_default() -> LrdWalrConfig {
         clip_gamma: t.clip_gamma,
         depth_limit: t.depth_limit,
         position_limit: t.position_limit,
+        fireflies: d.fireflies.unwrap_or(0.0),
     }
 }
 

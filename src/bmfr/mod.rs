@@ -14,6 +14,12 @@
 //!   below 1 world unit, which makes the fit depend on the scene's units);
 //! * NaN/Inf samples are excluded from the fit (their row is zeroed) and
 //!   counted; a pixel whose own guides are not finite gets the block mean;
+//! * outliers of the noisy light are clamped as the fit reads them
+//!   ([`crate::fireflies`], [`BmfrConfig::fireflies`], on by default): a
+//!   firefly would otherwise pull its whole block's model. Each tile measures
+//!   the 8-row bands its rows belong to (at full width) and clamps the pixels
+//!   its chunks read, so tiles stay independent and bit-identical to the
+//!   whole frame;
 //! * the fit is shrunk in the QR's orthogonal basis
 //!   ([`crate::kernels::qr::Shrinkage`], κ = [`BmfrConfig::shrinkage`], 4 by
 //!   default, 0 for the paper's plain least squares): each component of `Qᵀz`
@@ -32,6 +38,7 @@ pub mod features;
 pub mod temporal;
 
 use crate::error::{Arg, Error};
+use crate::fireflies;
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::isa::Kernel;
@@ -93,6 +100,13 @@ pub struct BmfrConfig {
     pub kernel: Kernel,
     /// Temporal pipeline settings (ignored by the single-frame fit).
     pub temporal: temporal::TemporalConfig,
+    /// The firefly clamp's strength `k` ([`crate::fireflies`]): a noisy
+    /// sample whose luminance is above `k` times the third brightest 8 × 8
+    /// cell of its 104 × 8 pixel neighbourhood is scaled down to that level
+    /// for the fit (the temporal pipeline accumulates each frame's light
+    /// clamped). `None` turns it off. Default
+    /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`.
+    pub fireflies: Option<f32>,
 }
 
 impl Default for BmfrConfig {
@@ -108,6 +122,7 @@ impl Default for BmfrConfig {
             clamp_negative: true,
             kernel: Kernel::Simd,
             temporal: temporal::TemporalConfig::default(),
+            fireflies: Some(fireflies::DEFAULT_STRENGTH),
         }
     }
 }
@@ -134,6 +149,11 @@ impl BmfrConfig {
             return Err(Error::InvalidConfig("pivot_tol (0..1)"));
         }
         self.temporal.validate()?;
+        if let Some(k) = self.fireflies {
+            if !fireflies::valid_strength(k) {
+                return Err(Error::InvalidConfig("fireflies strength (must be finite and >= 1)"));
+            }
+        }
         if FeatureSet::new(&self.guides, self.quadratic).count() > MAX_FEATURES {
             return Err(Error::TooManyGuides { got: self.guides.channels() });
         }
@@ -229,10 +249,36 @@ impl Bmfr {
         (256 / self.cfg.block).max(1)
     }
     /// f32 values of one worker's private buffer: one block's QR and model,
-    /// and a chunk's input pixels (3 + Q planes).
+    /// a chunk's input pixels (3 + Q planes) and, with the firefly clamp, its
+    /// thresholds for the tile ([`Bmfr::clamp_len`]).
     pub fn worker_len(&self) -> usize {
+        self.band_offset() + self.band_len() + self.clamp_len()
+    }
+    /// Where a worker's chunk of input pixels starts.
+    fn band_offset(&self) -> usize {
+        features::worker_len(self.cfg.block, self.fs.count())
+    }
+    /// f32 values of a worker's chunk of input pixels.
+    fn band_len(&self) -> usize {
         let b = self.cfg.block;
-        features::worker_len(b, self.fs.count()) + Band::len(3 + self.fs.q, b, b * self.chunk_blocks())
+        Band::len(3 + self.fs.q, b, b * self.chunk_blocks())
+    }
+    /// 8-row bands of the clamp ([`fireflies::CELL`]) that a tile's rows can
+    /// touch: B rows, or fewer mirrored ones, span at most this many.
+    fn clamp_bands(&self) -> usize {
+        self.cfg.block.div_ceil(fireflies::CELL) + 1
+    }
+    /// f32 values of a worker's firefly clamp (0 when it is off): a row of
+    /// colour and the work of one band's thresholds while the tile's bands
+    /// are measured, then the thresholds of every band the tile reads.
+    pub fn clamp_len(&self) -> usize {
+        match self.cfg.fireflies {
+            Some(_) => {
+                let w = self.width;
+                3 * w + fireflies::work_len(w) + self.clamp_bands() * fireflies::cells(w)
+            }
+            None => 0,
+        }
     }
     /// Scratch length (f32) for [`Bmfr::denoise`].
     pub fn scratch_len(&self) -> usize {
@@ -268,7 +314,10 @@ impl Bmfr {
 
     /// Fits and applies every block of tile `t` (a row of blocks) of frame
     /// `index`. `out_band` holds exactly the rows `tile_pixel_rows(index, t)`,
-    /// numbered from 0. Tiles are independent: any order, any thread.
+    /// numbered from 0. Tiles are independent: any order, any thread. With
+    /// the firefly clamp, the tile measures the whole 8-row bands its rows
+    /// belong to and clamps the pixels it reads, so the tiles give the
+    /// whole frame's output bit for bit.
     pub fn fit_tile(
         &self,
         frame: &CheckedFrame<'_>,
@@ -276,6 +325,20 @@ impl Bmfr {
         t: usize,
         worker: &mut [f32],
         out_band: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        self.fit_tile_with(frame, index, t, worker, out_band, self.cfg.fireflies)
+    }
+
+    /// [`Bmfr::fit_tile`] with the firefly clamp `clamp` (the temporal
+    /// pipeline fits its accumulated colour, already clamped, without).
+    fn fit_tile_with(
+        &self,
+        frame: &CheckedFrame<'_>,
+        index: u32,
+        t: usize,
+        worker: &mut [f32],
+        out_band: &mut ImageViewMut<'_>,
+        clamp: Option<f32>,
     ) -> Result<Report, Error> {
         let rows = self.tile_pixel_rows(index, t)?;
         self.check_out(out_band, rows)?;
@@ -287,17 +350,26 @@ impl Bmfr {
         let m = self.fs.count();
         let (bx_n, _) = self.block_grid(index);
         let chunk = self.chunk_blocks();
-        let (blk, rest) = worker.split_at_mut(features::worker_len(b, m));
+        let (blk, rest) = worker.split_at_mut(self.band_offset());
+        let (band_buf, clamp_buf) = rest.split_at_mut(self.band_len());
         let mut wb = features::Worker::split(blk, b, m).ok_or(Error::ScratchTooSmall { needed: self.worker_len(), got: 0 })?;
         let ty0 = y0 + (t * b) as i64;
         features::noise_table(wb.noise, features::seed(index, u32::MAX - t as u32), self.cfg.noise);
         let mut rep = Report::default();
         let tiles = self.tile_count(index);
         let src = Sources::new(frame, self.fs.q)?;
+        let clamp = match clamp {
+            Some(k) => Some(self.tile_thresholds(frame, ty0, k, clamp_buf)?),
+            None => None,
+        };
         for c0 in (0..bx_n).step_by(chunk) {
             let blocks = chunk.min(bx_n - c0);
-            let mut band = Band { data: &mut rest[..Band::len(3 + self.fs.q, b, b * blocks)], rows: b, stride: b * blocks };
-            band.fill(&src, (x0 + (c0 * b) as i64, ty0), self.height)?;
+            let mut band = Band { data: &mut band_buf[..Band::len(3 + self.fs.q, b, b * blocks)], rows: b, stride: b * blocks };
+            let origin = (x0 + (c0 * b) as i64, ty0);
+            band.fill(&src, origin, self.height)?;
+            if let Some(c) = &clamp {
+                rep.clamped_fireflies += self.clamp_band(&mut band, c, origin)?;
+            }
             // the chunk read next (this tile's, else the next tile's first), asked for
             // a few rows per block while this chunk's blocks are fitted (asked for
             // over the first half of them only, it measured slower)
@@ -320,6 +392,76 @@ impl Bmfr {
             }
         }
         Ok(rep)
+    }
+
+    /// The firefly clamp's thresholds ([`crate::fireflies`]) of every 8-row
+    /// band that the rows `ty0..ty0 + B` of a tile (mirrored into the image)
+    /// touch, each measured over all of its rows at full width, as the rule
+    /// reads them: stored in `buf` ([`Bmfr::clamp_len`] values).
+    fn tile_thresholds<'w>(&self, frame: &CheckedFrame<'_>, ty0: i64, k: f32, buf: &'w mut [f32]) -> Result<TileClamp<'w>, Error> {
+        let (w, h) = (self.width, self.height);
+        let n = fireflies::cells(w);
+        let bad = Error::InvalidTile { index: 0, count: 0 };
+        // the mirrored rows of a tile form one run: the pieces meet at the borders
+        let (mut lo, mut hi) = (h, 0);
+        for j in 0..self.cfg.block {
+            let y = features::mirror(ty0 + j as i64, h);
+            (lo, hi) = (lo.min(y), hi.max(y + 1));
+        }
+        let band0 = lo / fireflies::CELL;
+        let bands = (hi - 1) / fireflies::CELL + 1 - band0;
+        let (row, rest) = buf.split_at_mut(3 * w);
+        let (work, store) = rest.split_at_mut(fireflies::work_len(w));
+        let store = store.get_mut(..bands * n).ok_or(bad)?;
+        let (r, gb) = row.split_at_mut(w);
+        let (g, b) = gb.split_at_mut(w);
+        for (i, dst) in store.chunks_exact_mut(n).enumerate() {
+            let band = band0 + i;
+            let mut t = fireflies::Thresholds::new(work, w).ok_or(bad)?;
+            for y in band * fireflies::CELL..((band + 1) * fireflies::CELL).min(h) {
+                frame.noisy.read_row_n(y, 0, [&mut *r, &mut *g, &mut *b]).ok_or(bad)?;
+                t.add_row([r, g, b]);
+            }
+            for (d, s) in dst.iter_mut().zip(t.finish(k)) {
+                *d = *s;
+            }
+        }
+        Ok(TileClamp { band0, cells: n, thresholds: store })
+    }
+
+    /// Clamps the noisy colour of a chunk read at `(x0, y0)` ([`Band::fill`])
+    /// with the tile's thresholds; pixels mirrored from the image are clamped
+    /// as their originals are. Returns the count clamped among the pixels
+    /// inside the image (each is read by exactly one tile and chunk).
+    fn clamp_band(&self, band: &mut Band<'_>, c: &TileClamp<'_>, (x0, y0): (i64, i64)) -> Result<u64, Error> {
+        let (w, h) = (self.width, self.height);
+        let (plane, stride) = (band.plane(), band.stride);
+        let bad = Error::InvalidTile { index: 0, count: 0 };
+        // the columns inside the image, as band offsets
+        let ia = ((x0.clamp(0, w as i64) - x0) as usize).min(stride);
+        let ib = ((x0 + stride as i64).clamp(0, w as i64) - x0).max(ia as i64) as usize;
+        let (p0, rest) = band.data.split_at_mut(plane);
+        let (p1, p2) = rest.split_at_mut(plane);
+        let mut clamped = 0u64;
+        for j in 0..band.rows {
+            let yu = y0 + j as i64;
+            let y = features::mirror(yu, h);
+            let i = (y / fireflies::CELL).checked_sub(c.band0).ok_or(bad)?;
+            let th = c.thresholds.get(i * c.cells..(i + 1) * c.cells).ok_or(bad)?;
+            let row = j * stride..(j + 1) * stride;
+            let (r, g, b) = (&mut p0[row.clone()], &mut p1[row.clone()], &mut p2[row]);
+            if ib > ia {
+                let n = fireflies::clamp_row([&mut r[ia..ib], &mut g[ia..ib], &mut b[ia..ib]], (x0 + ia as i64) as usize, th);
+                if yu >= 0 && (yu as usize) < h {
+                    clamped += n as u64;
+                }
+            }
+            for i in (0..ia).chain(ib..stride) {
+                let x = features::mirror(x0 + i as i64, w);
+                fireflies::clamp_row([&mut r[i..i + 1], &mut g[i..i + 1], &mut b[i..i + 1]], x, th);
+            }
+        }
+        Ok(clamped)
     }
 
     /// Fits block `k` of the chunk in `band` (top-left pixel `origin`) and
@@ -391,10 +533,17 @@ impl Bmfr {
         if scratch.len() < self.scratch_len() {
             return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
         }
-        self.fit_frame(&f, index, scratch, out)
+        self.fit_frame(&f, index, scratch, out, self.cfg.fireflies)
     }
 
-    fn fit_frame(&self, f: &CheckedFrame<'_>, index: u32, worker: &mut [f32], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+    fn fit_frame(
+        &self,
+        f: &CheckedFrame<'_>,
+        index: u32,
+        worker: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        clamp: Option<f32>,
+    ) -> Result<Report, Error> {
         let mut rep = Report::default();
         for t in 0..self.tile_count(index) {
             let (a, b) = self.tile_pixel_rows(index, t)?;
@@ -402,8 +551,17 @@ impl Bmfr {
                 continue;
             }
             let mut band = out.rows(a, b - a)?;
-            rep += self.fit_tile(f, index, t, worker, &mut band)?;
+            rep += self.fit_tile_with(f, index, t, worker, &mut band, clamp)?;
         }
         Ok(rep)
     }
+}
+
+/// A tile's firefly thresholds ([`Bmfr::tile_thresholds`]): `cells` per
+/// band, from band `band0` on.
+#[derive(Debug)]
+struct TileClamp<'w> {
+    band0: usize,
+    cells: usize,
+    thresholds: &'w [f32],
 }

@@ -11,10 +11,16 @@
 //! 4. **TAA**: the previous TAA output, reprojected without rejection and
 //!    clamped to the current 3×3 neighbourhood in YCoCg, blend `taa_alpha`.
 //!
+//! With the firefly clamp ([`super::BmfrConfig::fireflies`], on by default)
+//! step 1 accumulates the frame's light clamped
+//! ([`crate::fireflies::clamp_frame`]), so no outlier enters the history at
+//! full weight; the fit of step 2 reads the accumulated colour as it is.
+//!
 //! All state lives in a caller-owned [`History`]; planes are f32, full size.
 
 use super::{Bmfr, Report};
 use crate::error::{Arg, Error};
+use crate::fireflies;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut, Layout, SamplesMut};
 use crate::reproject::{bilinear_taps, clamp_box_row, floor, reproject3, rgb, ycocg};
@@ -102,9 +108,19 @@ impl Bmfr {
     pub fn history_len(&self) -> usize {
         (H_GUIDES + self.rejection().planes) * self.plane()
     }
-    /// f32 values of the scratch for [`Bmfr::denoise_temporal`].
+    /// f32 values of the scratch for [`Bmfr::denoise_temporal`]: the
+    /// pipeline's planes, 15 rows, a fit worker and, with the firefly clamp,
+    /// the work of one band's thresholds.
     pub fn temporal_scratch_len(&self) -> usize {
-        S_PLANES * self.plane() + 15 * self.width + self.worker_len()
+        S_PLANES * self.plane() + 15 * self.width + self.worker_len() + self.frame_clamp_len()
+    }
+    /// f32 values the temporal pipeline's frame clamp needs besides its planes.
+    fn frame_clamp_len(&self) -> usize {
+        if self.cfg.fireflies.is_some() {
+            fireflies::work_len(self.width)
+        } else {
+            0
+        }
     }
 
     /// One frame of the temporal pipeline. `motion` (2 channels: previous −
@@ -136,18 +152,31 @@ impl Bmfr {
         }
         let (w, h, np) = (self.width, self.height, self.plane());
         let (planes, rest) = scratch.split_at_mut(S_PLANES * np);
-        let (rows, worker) = rest.split_at_mut(15 * w);
+        let (rows, rest) = rest.split_at_mut(15 * w);
+        let (worker, clamp_work) = rest.split_at_mut(self.worker_len());
         let index = history.frames;
-        let mut rep = self.accumulate_noisy(&f, motion, history, planes, rows)?;
+        let mut rep = match self.cfg.fireflies {
+            // 0. the firefly clamp: the frame's light, clamped, into the fit planes
+            // (free until stage 2), and accumulated from there
+            Some(k) => {
+                let (head, fit) = planes.split_at_mut(S_FIT * np);
+                let light = &mut fit[..3 * np];
+                let clamped = fireflies::clamp_frame(&f.noisy, k, light, clamp_work).ok_or(Error::InvalidTile { index: 0, count: h })?;
+                let cf = super::CheckedFrame { noisy: ImageView::f32(light, w, h, 3, Layout::planar(w, h))?, guides: f.guides };
+                let r = self.accumulate_noisy(&cf, motion, history, head, rows)?;
+                Report { clamped_fireflies: clamped, ..r }
+            }
+            None => self.accumulate_noisy(&f, motion, history, planes, rows)?,
+        };
 
-        // 2. fit on the accumulated colour
+        // 2. fit on the accumulated colour (clamped already: the fit does not clamp it again)
         let (acc, fit_and_rest) = planes.split_at_mut(S_FIT * np);
         let acc_view = ImageView::f32(&acc[..3 * np], w, h, 3, Layout::planar(w, h))?;
         let mut fit_frame = f;
         fit_frame.noisy = acc_view;
         {
             let mut fit_out = ImageViewMut::new(SamplesMut::F32(&mut fit_and_rest[..3 * np]), w, h, 3, Layout::planar(w, h))?;
-            let r = self.fit_frame(&fit_frame, index, worker, &mut fit_out)?;
+            let r = self.fit_frame(&fit_frame, index, worker, &mut fit_out, None)?;
             // (non-finite noisy samples were counted, and bridged, by the accumulation)
             rep += Report { nonfinite_noisy: 0, ..r };
         }
@@ -198,7 +227,8 @@ impl Bmfr {
         Ok(())
     }
 
-    /// Stage 1: reprojection, rejection and noisy accumulation → scratch planes.
+    /// Stage 1: reprojection, rejection and noisy accumulation → scratch
+    /// planes (the planes below `S_FIT`: `planes` may end there).
     fn accumulate_noisy(
         &self,
         f: &super::CheckedFrame<'_>,

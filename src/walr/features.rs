@@ -5,6 +5,7 @@
 use super::store::Store;
 use super::{CheckedFrame, Prepared, Report, Storage, Walr, GEO_FIXED, G_INV_SCALE, G_N, G_P, G_VALID, MAX_FEATURES};
 use crate::error::Error;
+use crate::fireflies;
 use crate::kernels::LUMA;
 
 /// Octahedral map of a direction in a local frame whose third axis is the
@@ -62,6 +63,80 @@ pub fn energy(y: [f32; 3]) -> f32 {
 
 /// Subsampling step of [`Walr::prepare`] in x and y.
 const PREP_STEP: usize = 4;
+// the light scale's samples are taken cell by cell of the firefly clamp
+const _: () = assert!(fireflies::CELL.is_multiple_of(PREP_STEP));
+/// Cells of the firefly clamp that [`Walr::prepare`] and
+/// [`Walr::features_rows`] measure at a time ([`ClampWindow`], ≈ 12 KB of
+/// stack).
+const CLAMP_WINDOW: usize = 64;
+/// Their pixels per row.
+const CLAMP_SPAN: usize = CLAMP_WINDOW * fireflies::CELL;
+
+/// The planes of a geometry row (from `at`) that hold its noisy light
+/// between reading and [`Walr::features_rows`] (pixels `0..w`).
+fn light_planes(geo: &mut [f32], at: usize, ps: usize, w: usize) -> Option<[&mut [f32]; 3]> {
+    let planes = geo.get_mut(at + G_VALID * ps..at + (G_VALID + 3) * ps)?;
+    let (a, rest) = planes.split_at_mut(ps);
+    let (b, c) = rest.split_at_mut(ps);
+    Some([a.get_mut(..w)?, b.get_mut(..w)?, c.get_mut(..w)?])
+}
+
+/// The runs of cells of a band of `n` cells that a [`ClampWindow`] measures
+/// in turn: cells `c0..c1`, measured over cells `lo..hi` (their
+/// neighbourhoods: [`fireflies::REACH`] more on each side, within the band).
+fn clamp_runs(n: usize) -> impl Iterator<Item = (usize, usize, usize, usize)> {
+    use fireflies::REACH;
+    // cells whose thresholds one window gives (the rest of it is their neighbourhoods)
+    const STEP: usize = CLAMP_WINDOW - 2 * REACH;
+    (0..n).step_by(STEP).map(move |c0| {
+        let c1 = (c0 + STEP).min(n);
+        (c0, c1, c0.saturating_sub(REACH), (c1 + REACH).min(n))
+    })
+}
+
+/// The firefly clamp's thresholds of a run of cells, measured on the stack.
+/// A cell's threshold depends only on the cells of its neighbourhood, taken
+/// in order ([`crate::fireflies`]): measured over the run and its
+/// neighbourhoods alone, as a band of that width, they are the whole band's.
+struct ClampWindow {
+    work: [f32; fireflies::work_len(CLAMP_SPAN)],
+    row: [[f32; CLAMP_SPAN]; 3],
+}
+
+impl ClampWindow {
+    fn new() -> Self {
+        ClampWindow { work: [0.0; fireflies::work_len(CLAMP_SPAN)], row: [[0.0; CLAMP_SPAN]; 3] }
+    }
+
+    /// The thresholds of the cells of `rows` (one band) in pixels
+    /// `x_lo..x_hi` (at most [`CLAMP_SPAN`]), indexed from cell `x_lo / 8`.
+    /// Each row's light is `held(y)` (pixels `0..w`) where that has it, else
+    /// read from `f`.
+    fn measure<'g>(
+        &mut self,
+        f: &CheckedFrame<'_>,
+        k: f32,
+        rows: core::ops::Range<usize>,
+        (x_lo, x_hi): (usize, usize),
+        held: impl Fn(usize) -> Option<[&'g [f32]; 3]>,
+    ) -> Option<&[f32]> {
+        let ClampWindow { work, row } = self;
+        let width = x_hi.checked_sub(x_lo)?;
+        let mut t = fireflies::Thresholds::new(work, width)?;
+        let [r, g, b] = row;
+        let (r, g, b) = (r.get_mut(..width)?, g.get_mut(..width)?, b.get_mut(..width)?);
+        for y in rows {
+            match held(y) {
+                Some([hr, hg, hb]) => t.add_row([hr.get(x_lo..x_hi)?, hg.get(x_lo..x_hi)?, hb.get(x_lo..x_hi)?]),
+                None => {
+                    f.noisy.read_row_n(y, x_lo, [&mut *r, &mut *g, &mut *b])?;
+                    t.add_row([r, g, b]);
+                }
+            }
+        }
+        Some(t.finish(k))
+    }
+}
 
 impl Walr {
     /// Guide channel indices: (normal, position, depth, first extra).
@@ -74,15 +149,23 @@ impl Walr {
 
     /// Frame-wide constants: the octahedral pole, the light scale and the
     /// ranges of the extra guides, from every 4th pixel of every 4th row.
-    /// `index` seeds the replacement choices.
+    /// `index` seeds the replacement choices. With the firefly clamp
+    /// ([`WalrConfig::fireflies`](super::WalrConfig::fireflies)) the light
+    /// scale is taken from the clamped light, which costs a pass over it.
     pub fn prepare(&self, f: &CheckedFrame<'_>, index: u32) -> Prepared {
+        self.prepare_with(f, index, self.cfg.fireflies)
+    }
+
+    /// [`Walr::prepare`] with the firefly clamp `clamp` (the temporal
+    /// pipeline's accumulated light is clamped already).
+    pub(crate) fn prepare_with(&self, f: &CheckedFrame<'_>, index: u32, clamp: Option<f32>) -> Prepared {
         let (w, h) = (self.width, self.height);
         let (cn, cp, cd, ce) = self.channels();
         let extras = self.m - 3;
         // positions relative to the first finite sample (large offsets cancel)
         let (mut p0, mut psum, mut psq, mut pcount) = (None::<[f64; 3]>, [0f64; 3], 0f64, 0u64);
         let mut nsum = [0f64; 3];
-        let (mut lsum, mut lcount) = (0f64, 0u64);
+        let (lsum, lcount) = self.light_log_sum(f, clamp);
         let mut ext = [(f32::INFINITY, f32::NEG_INFINITY); MAX_FEATURES - 3];
         let mut row = [0f32; 1];
         let get = |q: usize, x: usize, y: usize, row: &mut [f32; 1]| -> Option<f32> {
@@ -107,12 +190,6 @@ impl Walr {
                         psq += (pos[c] - r[c]) * (pos[c] - r[c]);
                     }
                     pcount += 1;
-                }
-                for c in 0..3 {
-                    if let Some(v) = f.noisy.get(x, y, c).filter(|v| v.is_finite() && *v != 0.0) {
-                        lsum += libm::log(v.abs() as f64);
-                        lcount += 1;
-                    }
                 }
                 for (e, r) in ext.iter_mut().enumerate().take(extras) {
                     if let Some(v) = get(ce + e, x, y, &mut row).filter(|v| v.is_finite()) {
@@ -147,11 +224,55 @@ impl Walr {
         Prepared { basis: basis(pole), light_scale, extra, seed, distance }
     }
 
+    /// Σ ln|v| and the count of the finite, non-zero noisy values at every
+    /// 4th pixel of every 4th row (the light scale's samples), taken band by
+    /// band of the firefly clamp (8 rows) and cell by cell (8 columns), each
+    /// pixel clamped first with `clamp`. The thresholds of a run of cells come
+    /// from their band's rows over those cells and [`fireflies::REACH`] more
+    /// on each side, exactly the neighbourhoods the rule reads, so they equal
+    /// the whole band's; the run is measured on the stack.
+    fn light_log_sum(&self, f: &CheckedFrame<'_>, clamp: Option<f32>) -> (f64, u64) {
+        use fireflies::CELL;
+        let (w, h) = (self.width, self.height);
+        let (mut lsum, mut lcount) = (0f64, 0u64);
+        let mut window = clamp.map(|_| ClampWindow::new());
+        for band in 0..h.div_ceil(CELL) {
+            let rows = band * CELL..((band + 1) * CELL).min(h);
+            for (c0, c1, lo, hi) in clamp_runs(fireflies::cells(w)) {
+                let x_lo = lo * CELL;
+                let th = match (clamp, &mut window) {
+                    (Some(k), Some(win)) => win.measure(f, k, rows.clone(), (x_lo, (hi * CELL).min(w)), |_| None),
+                    _ => None,
+                };
+                for x in (c0 * CELL..(c1 * CELL).min(w)).step_by(CELL) {
+                    for y in rows.clone().step_by(PREP_STEP) {
+                        for x in (x..(x + CELL).min(w)).step_by(PREP_STEP) {
+                            let mut v = [0, 1, 2].map(|c| f.noisy.get(x, y, c).unwrap_or(f32::NAN));
+                            if let Some(th) = th {
+                                let [r, g, b] = &mut v;
+                                let one = core::slice::from_mut;
+                                fireflies::clamp_row([one(r), one(g), one(b)], x - x_lo, th);
+                            }
+                            for v in v.into_iter().filter(|v| v.is_finite() && *v != 0.0) {
+                                lsum += libm::log(v.abs() as f64);
+                                lcount += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        (lsum, lcount)
+    }
+
     /// Stage 1 on rows `y0..`: geometry planes and `Z_0` (products of the
     /// features with themselves and with the light, sample count 1; 0 for a
     /// NaN/Inf noisy sample, which is thereby excluded). `geo_rows` and
     /// `z_rows` hold the same whole rows of [`super::Parts::geo`] and
-    /// [`super::Parts::z`]`[0]`.
+    /// [`super::Parts::z`]`[0]`. With the firefly clamp the light is clamped
+    /// as it is read: the whole 8-row bands the rows belong to are measured,
+    /// rows outside `y0..` included, so any cut into bands of rows gives the
+    /// whole frame's result.
     pub fn features_rows(
         &self,
         f: &CheckedFrame<'_>,
@@ -160,14 +281,73 @@ impl Walr {
         geo_rows: &mut [f32],
         z_rows: &mut [f32],
     ) -> Result<Report, Error> {
+        self.features_rows_with(f, p, y0, geo_rows, z_rows, self.cfg.fireflies)
+    }
+
+    /// [`Walr::features_rows`] with the firefly clamp `clamp`.
+    pub(crate) fn features_rows_with(
+        &self,
+        f: &CheckedFrame<'_>,
+        p: &Prepared,
+        y0: usize,
+        geo_rows: &mut [f32],
+        z_rows: &mut [f32],
+        clamp: Option<f32>,
+    ) -> Result<Report, Error> {
         let rows = self.check_band(y0, geo_rows.len(), self.geo_row_len())?;
         if z_rows.len() != rows * self.z_row_len() {
             return Err(Error::InvalidTile { index: y0, count: self.height });
         }
-        match self.cfg.storage {
-            Storage::F32 => self.features_impl::<f32>(f, p, y0, rows, geo_rows, z_rows),
-            Storage::F16 => self.features_impl::<u16>(f, p, y0, rows, geo_rows, bytemuck::cast_slice_mut(z_rows)),
+        let clamped = match clamp {
+            Some(k) => self.clamp_rows(f, k, y0, rows, geo_rows)?,
+            None => 0,
+        };
+        let ready = clamp.is_some();
+        let rep = match self.cfg.storage {
+            Storage::F32 => self.features_impl::<f32>(f, p, y0, rows, geo_rows, z_rows, ready),
+            Storage::F16 => self.features_impl::<u16>(f, p, y0, rows, geo_rows, bytemuck::cast_slice_mut(z_rows), ready),
+        }?;
+        Ok(Report { clamped_fireflies: clamped, ..rep })
+    }
+
+    /// The noisy light of rows `y0..y0 + rows`, clamped ([`crate::fireflies`]),
+    /// into the planes of their geometry rows that [`Walr::features_rows`]
+    /// reads it from. Each band's thresholds are measured over all of its
+    /// rows, those outside the range read from the frame ([`ClampWindow`]).
+    /// Returns the count clamped.
+    fn clamp_rows(&self, f: &CheckedFrame<'_>, k: f32, y0: usize, rows: usize, geo_rows: &mut [f32]) -> Result<u64, Error> {
+        use fireflies::CELL;
+        let (w, h, ps, gl) = (self.width, self.height, self.plane_stride(), self.geo_row_len());
+        let bad = Error::InvalidTile { index: y0, count: h };
+        for r in 0..rows {
+            let [a, b, c] = light_planes(geo_rows, r * gl, ps, w).ok_or(bad)?;
+            f.noisy.read_row_n(y0 + r, 0, [a, b, c]).ok_or(bad)?;
         }
+        let mut window = ClampWindow::new();
+        let mut clamped = 0u64;
+        let mut s = 0;
+        while s < rows {
+            let band = (y0 + s) / CELL;
+            let band_rows = band * CELL..((band + 1) * CELL).min(h);
+            // rows s..e of the range are this band's
+            let e = (band_rows.end - y0).min(rows);
+            for (c0, c1, lo, hi) in clamp_runs(fireflies::cells(w)) {
+                let x_lo = lo * CELL;
+                let held = |y: usize| {
+                    let at = (y.checked_sub(y0 + s).filter(|&d| d < e - s)? + s) * gl + G_VALID * ps;
+                    let planes = geo_rows.get(at..at + 3 * ps)?;
+                    Some([planes.get(..w)?, planes.get(ps..ps + w)?, planes.get(2 * ps..2 * ps + w)?])
+                };
+                let th = window.measure(f, k, band_rows.clone(), (x_lo, (hi * CELL).min(w)), held).ok_or(bad)?;
+                let (xa, xb) = (c0 * CELL, (c1 * CELL).min(w));
+                for r in s..e {
+                    let [a, b, c] = light_planes(geo_rows, r * gl, ps, w).ok_or(bad)?;
+                    clamped += fireflies::clamp_row([&mut a[xa..xb], &mut b[xa..xb], &mut c[xa..xb]], xa - x_lo, th) as u64;
+                }
+            }
+            s = e;
+        }
+        Ok(clamped)
     }
 
     /// [`Walr::features_rows`] for pixels `x0..x0 + 8` of one row in lanes: the
@@ -265,6 +445,10 @@ impl Walr {
         (8 - finite.to_bitmask().count_ones(), 8 - ok.to_bitmask().count_ones())
     }
 
+    /// The features of rows `y0..y0 + rows`; with `light_ready` their light
+    /// is in their geometry rows already ([`Walr::clamp_rows`]), else it is
+    /// read here.
+    #[allow(clippy::too_many_arguments)]
     fn features_impl<S: Store>(
         &self,
         f: &CheckedFrame<'_>,
@@ -273,6 +457,7 @@ impl Walr {
         rows: usize,
         geo_rows: &mut [f32],
         z_rows: &mut [S],
+        light_ready: bool,
     ) -> Result<Report, Error> {
         let (w, m) = (self.width, self.m);
         let (cn, cp, cd, ce) = self.channels();
@@ -305,7 +490,7 @@ impl Walr {
                 let v = f.guides[ce + e].as_ref().ok_or(Error::GuideMismatch)?;
                 v.read_row(y, 0, 0, &mut geo[o..o + w]).ok_or(bad)?;
             }
-            {
+            if !light_ready {
                 // The noisy row goes to planes that are only written per pixel, after reading.
                 let (a, rest) = geo[G_VALID * ps..(G_VALID + 3) * ps].split_at_mut(ps);
                 let (b, c) = rest.split_at_mut(ps);

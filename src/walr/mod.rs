@@ -37,6 +37,12 @@
 //! * the octahedral map's pole is the frame's mean normal unless
 //!   [`WalrConfig::view`] gives the direction towards the camera (the paper
 //!   maps view-space normals; this keeps visible normals on the seam-free half);
+//! * outliers of the noisy light are clamped as WALR reads it
+//!   ([`crate::fireflies`], [`WalrConfig::fireflies`], on by default): the
+//!   à-trous averages would spread a firefly over its whole window.
+//!   [`Walr::features_rows`] measures the whole 8-row bands of its rows and
+//!   [`Walr::prepare`] the bands of its samples, so bands of rows stay
+//!   independent and bit-identical to the whole frame;
 //! * light is divided by the frame's log-average before it is stored (and multiplied
 //!   back), so f16 averages neither overflow nor lose HDR frames; the stored
 //!   value is clamped to ±60000 × that scale (both storages), which bounds
@@ -58,6 +64,7 @@ mod store;
 pub mod temporal;
 
 use crate::error::{Arg, Error};
+use crate::fireflies;
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::isa::Kernel;
@@ -142,6 +149,13 @@ pub struct WalrConfig {
     pub adaptive_blend: bool,
     /// Temporal pipeline settings (ignored by the single-frame filter).
     pub temporal: TemporalConfig,
+    /// The firefly clamp's strength `k` ([`crate::fireflies`]): a noisy
+    /// sample whose luminance is above `k` times the third brightest 8 × 8
+    /// cell of its 104 × 8 pixel neighbourhood is scaled down to that level
+    /// for WALR (the temporal pipeline accumulates each frame's light
+    /// clamped). `None` turns it off. Default
+    /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`.
+    pub fireflies: Option<f32>,
 }
 
 impl Default for WalrConfig {
@@ -162,6 +176,7 @@ impl Default for WalrConfig {
             previous_weight: DEFAULT_PREVIOUS_WEIGHT,
             adaptive_blend: true,
             temporal: TemporalConfig::default(),
+            fireflies: Some(fireflies::DEFAULT_STRENGTH),
         }
     }
 }
@@ -197,6 +212,11 @@ impl WalrConfig {
             let l = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
             if !(l > 1e-12 && l.is_finite()) {
                 return Err(Error::InvalidConfig("view (non-zero, finite)"));
+            }
+        }
+        if let Some(k) = self.fireflies {
+            if !fireflies::valid_strength(k) {
+                return Err(Error::InvalidConfig("fireflies strength (must be finite and >= 1)"));
             }
         }
         self.temporal.validate()
@@ -393,13 +413,21 @@ impl Walr {
         self.check_out(out, self.height)?;
         let prep = self.prepare(&f, index);
         let parts = self.parts(scratch)?;
-        self.run(&f, &prep, parts, out)
+        self.run(&f, &prep, parts, out, self.cfg.fireflies)
     }
 
-    /// The stages on one thread, on an already checked frame.
-    pub(crate) fn run(&self, f: &CheckedFrame<'_>, prep: &Prepared, parts: Parts<'_>, out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+    /// The stages on one thread, on an already checked frame, with the
+    /// firefly clamp `clamp` (`prep` from [`Walr::prepare_with`] with the same).
+    pub(crate) fn run(
+        &self,
+        f: &CheckedFrame<'_>,
+        prep: &Prepared,
+        parts: Parts<'_>,
+        out: &mut ImageViewMut<'_>,
+        clamp: Option<f32>,
+    ) -> Result<Report, Error> {
         let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = parts;
-        let mut rep = self.features_rows(f, prep, 0, geo, z0)?;
+        let mut rep = self.features_rows_with(f, prep, 0, geo, z0, clamp)?;
         let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
         for t in 0..self.cfg.iterations {
             let [sa, sb] = &mut sdf;

@@ -15,12 +15,18 @@
 //!    `max(1/n, post_alpha)` (the same cumulative-then-exponential scheme,
 //!    with the sample count of step 1).
 //!
+//! With the firefly clamp ([`super::WalrConfig::fireflies`], on by default)
+//! step 1 accumulates the frame's light clamped
+//! ([`crate::fireflies::clamp_frame`]), so no outlier enters the history at
+//! full weight; WALR in step 2 reads the accumulated light as it is.
+//!
 //! The paper resamples bicubically with dilated motion vectors; this uses
 //! bilinear taps (what BMFR's pipeline here uses too, so the two compare).
 //! All state lives in a caller-owned [`History`]; planes are f32, full size.
 
 use super::{Report, Walr};
 use crate::error::{Arg, Error};
+use crate::fireflies;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut, Layout, SamplesMut};
 use crate::reproject::{bilinear_taps, reproject3, rgb, ycocg};
@@ -94,9 +100,23 @@ impl Walr {
     pub fn history_len(&self) -> usize {
         (H_GUIDE + self.guide_planes()) * self.plane()
     }
-    /// f32 of scratch for [`Walr::denoise_temporal`].
+    /// f32 of scratch for [`Walr::denoise_temporal`]: WALR's own, the
+    /// pipeline's planes and, with the firefly clamp, the work of one band's
+    /// thresholds.
     pub fn temporal_scratch_len(&self) -> usize {
-        self.scratch_len() + (S_GUIDE + self.guide_planes()) * self.plane()
+        self.scratch_len() + self.pipeline_planes_len() + self.frame_clamp_len()
+    }
+    /// f32 of the pipeline's planes.
+    fn pipeline_planes_len(&self) -> usize {
+        (S_GUIDE + self.guide_planes()) * self.plane()
+    }
+    /// f32 the frame's firefly clamp needs besides the planes.
+    fn frame_clamp_len(&self) -> usize {
+        if self.cfg.fireflies.is_some() {
+            fireflies::work_len(self.width)
+        } else {
+            0
+        }
     }
 
     /// One frame of the WALR pipeline. `motion` (2 channels, previous −
@@ -127,18 +147,19 @@ impl Walr {
         if history.data.len() < self.history_len() {
             return Err(Error::BufferTooSmall { arg: Arg::Scratch, needed: self.history_len(), len: history.data.len() });
         }
-        let (walr_scratch, planes) = scratch.split_at_mut(self.scratch_len());
-        let mut rep = self.pre_accumulate(&f, motion, history, planes)?;
+        let (walr_scratch, rest) = scratch.split_at_mut(self.scratch_len());
+        let (planes, clamp_work) = rest.split_at_mut(self.pipeline_planes_len());
+        let mut rep = self.pre_accumulate(&f, motion, history, planes, clamp_work)?;
 
-        // 2. WALR on the accumulated light
+        // 2. WALR on the accumulated light (clamped already: WALR does not clamp it again)
         {
             let (acc, rest) = planes.split_at_mut(S_WALR * np);
             let mut frame2 = *frame;
             frame2.noisy = ImageView::f32(&acc[S_ACC * np..(S_ACC + 3) * np], w, h, 3, Layout::planar(w, h))?;
             let f2 = self.check_frame(&frame2)?;
-            let prep = self.prepare(&f2, history.frames);
+            let prep = self.prepare_with(&f2, history.frames, None);
             let mut wout = ImageViewMut::new(SamplesMut::F32(&mut rest[..3 * np]), w, h, 3, Layout::planar(w, h))?;
-            let r = self.run(&f2, &prep, self.parts(walr_scratch)?, &mut wout)?;
+            let r = self.run(&f2, &prep, self.parts(walr_scratch)?, &mut wout, None)?;
             rep.fallback_pixels += r.fallback_pixels;
         }
         self.post(history, planes);
@@ -159,20 +180,28 @@ impl Walr {
         Ok(rep)
     }
 
-    /// Step 1: reprojection, depth rejection and the moving average.
+    /// Step 1: reprojection, depth rejection and the moving average, of the
+    /// light clamped first with the firefly clamp (`clamp_work`: its work).
     fn pre_accumulate(
         &self,
         f: &super::CheckedFrame<'_>,
         motion: Option<&ImageView<'_>>,
         history: &History<'_>,
         planes: &mut [f32],
+        clamp_work: &mut [f32],
     ) -> Result<Report, Error> {
         let (w, h, np) = (self.width, self.height, self.plane());
         let tc = &self.cfg.temporal;
         let gp = self.guide_planes();
         let has_depth = self.cfg.guides.depth;
         let bad = Error::InvalidTile { index: 0, count: h };
-        // current rejection guide → S_GUIDE planes; noisy → S_ACC; motion → S_PREV
+        let mut rep = Report::default();
+        if let Some(k) = self.cfg.fireflies {
+            // the frame's light, clamped, is what is accumulated
+            let acc = &mut planes[S_ACC * np..(S_ACC + 3) * np];
+            rep.clamped_fireflies = fireflies::clamp_frame(&f.noisy, k, acc, clamp_work).ok_or(bad)?;
+        }
+        // current rejection guide → S_GUIDE planes; noisy (unless clamped above) → S_ACC; motion → S_PREV
         let guide_first = if has_depth { 3 } else { 3 + has_depth as usize };
         for y in 0..h {
             for c in 0..gp {
@@ -180,7 +209,7 @@ impl Walr {
                 let o = (S_GUIDE + c) * np + y * w;
                 v.read_row(y, 0, 0, &mut planes[o..o + w]).ok_or(bad)?;
             }
-            {
+            if self.cfg.fireflies.is_none() {
                 let o = y * w;
                 let (r, rest) = planes[S_ACC * np..(S_ACC + 3) * np].split_at_mut(np);
                 let (g, b) = rest.split_at_mut(np);
@@ -197,7 +226,6 @@ impl Walr {
             }
         }
         let hd = &*history.data;
-        let mut rep = Report::default();
         let alpha_min = 1.0 / tc.max_samples;
         for y in 0..h {
             for x in 0..w {
