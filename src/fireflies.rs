@@ -238,7 +238,7 @@ pub fn clamp_row(rgb: [&mut [f32]; 3], x0: usize, thresholds: &[f32]) -> usize {
         }
     };
     // whole cells eight at a time: a cell is usually below its threshold
-    let whole = if x0 % CELL == 0 { r.len().min(g.len()).min(b.len()) / CELL * CELL } else { 0 };
+    let whole = if x0.is_multiple_of(CELL) { r.len().min(g.len()).min(b.len()) / CELL * CELL } else { 0 };
     let max = f32x8::splat(f32::MAX);
     for c in 0..whole / CELL {
         let o = CELL * c;

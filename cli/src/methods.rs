@@ -81,7 +81,7 @@ pub struct FlrArgs {
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
-    /// FLR, BMFR, WALR (and their temporal pipelines): firefly clamp strength K: a noisy sample brighter than K times the third brightest 8x8 cell of its 104x8 neighbourhood is scaled down to that level (default 1.5), or "off"
+    /// Every method: firefly clamp factor K: a noisy sample brighter than K times the third brightest 8x8 cell of its 104x8 neighbourhood is scaled down to that level (default 1.5), or "off"
     #[arg(long, value_name = "K|off")]
     pub fireflies: Option<String>,
     /// FLR: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
@@ -124,7 +124,7 @@ impl FlrArgs {
             ("--epsilon", self.epsilon.is_some(), &[Walr]),
             ("--previous-weight", self.previous_weight.is_some(), &[Walr]),
             ("--weights", self.weights.is_some(), &[Flnr]),
-            ("--fireflies", self.fireflies.is_some(), &[Flr, Bmfr, Walr]),
+            ("--fireflies", self.fireflies.is_some(), &[Flr, Bmfr, Walr, Flnr]),
         ]
     }
 
@@ -400,8 +400,10 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
         _ => String::new(),
     };
     let pw_flag = if c.adaptive_blend { "adaptive".to_string() } else { c.previous_weight.to_string() };
-    let label = format!("{name} {} t{}{pw} {st}{}", short_guides(&c.guides), c.iterations, if c.tracing { "" } else { " notrace" });
-    let flags = format!(
+    let default = WalrConfig::default().fireflies;
+    let ff = fireflies_label(c.fireflies, default);
+    let label = format!("{name} {} t{}{pw} {st}{}{ff}", short_guides(&c.guides), c.iterations, if c.tracing { "" } else { " notrace" });
+    let mut flags = format!(
         "--method {name} --guides {} --iterations {} --near {} --far {} --sdf-step {} --epsilon {:e} --previous-weight {} --storage {st}{tr}",
         guides_string(&c.guides),
         c.iterations,
@@ -411,6 +413,9 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
         c.epsilon,
         pw_flag
     );
+    if c.fireflies != default {
+        flags += &fireflies_flag(c.fireflies);
+    }
     (label, flags)
 }
 
@@ -467,7 +472,27 @@ pub fn flag_line(c: &FlrConfig) -> String {
             None => s += " --ao-demodulation off",
         }
     }
+    if c.fireflies != FlrConfig::default().fireflies {
+        s += &fireflies_flag(c.fireflies);
+    }
     s
+}
+
+/// ` --fireflies K|off`.
+pub fn fireflies_flag(k: Option<f32>) -> String {
+    match k {
+        Some(k) => format!(" --fireflies {k}"),
+        None => " --fireflies off".into(),
+    }
+}
+
+/// A label's suffix for a firefly clamp other than the default: ` ff K` or ` -ff`.
+pub fn fireflies_label(k: Option<f32>, default: Option<f32>) -> String {
+    match k {
+        _ if k == default => String::new(),
+        Some(k) => format!(" ff{k}"),
+        None => " -ff".into(),
+    }
 }
 
 /// A short label for tables and plots.
@@ -490,7 +515,8 @@ pub fn label(c: &FlrConfig) -> String {
         v if v == FlrConfig::default().ao_demodulation => String::new(),
         Some(v) => format!(" aod{v}"),
     };
-    format!("flr {g} b{} {blur}{ao}{demod}{reg}{up}", c.block)
+    let ff = fireflies_label(c.fireflies, FlrConfig::default().fireflies);
+    format!("flr {g} b{} {blur}{ao}{demod}{reg}{up}{ff}", c.block)
 }
 
 /// A runnable method on one frame size.
@@ -570,13 +596,18 @@ impl Method {
                     Some(p) => (std::fs::read(p).map_err(|e| format!("--weights {}: {e}", p.display()))?, p.display().to_string()),
                     None => (BUNDLED_WEIGHTS.to_vec(), "train/flnr.bin".to_string()),
                 };
-                let runner = FlnrRunner::new(blob, w, h, threads).map_err(|e| format!("flnr ({name}): {e}"))?;
+                let default = lrdenoise::FlnrConfig::new(&[]).fireflies;
+                let fireflies = a.fireflies.as_deref().map(parse_fireflies).transpose()?.unwrap_or(default);
+                let runner = FlnrRunner::new(blob, fireflies, w, h, threads).map_err(|e| format!("flnr ({name}): {e}"))?;
                 let net = runner.flnr.network();
-                let label = format!("flnr {:?}", net.widths()).replace(' ', "");
-                let flags = match &a.weights {
+                let label = format!("flnr {:?}", net.widths()).replace(' ', "") + &fireflies_label(fireflies, default);
+                let mut flags = match &a.weights {
                     Some(p) => format!("--method flnr --weights {}", p.display()),
                     None => "--method flnr".to_string(),
                 };
+                if fireflies != default {
+                    flags += &fireflies_flag(fireflies);
+                }
                 let min_bytes = Some(one_pass_bytes(w, h, w * h, lrdenoise::flnr::INPUT_GUIDES.channels()));
                 Ok(Built { method: Method::Flnr(Box::new(runner)), label, flags, min_bytes })
             }
@@ -600,6 +631,10 @@ impl Method {
                 if cfg.shrinkage != BmfrConfig::default().shrinkage {
                     label += &format!(" k{}", cfg.shrinkage);
                     flags += &format!(" --shrinkage {}", cfg.shrinkage);
+                }
+                if cfg.fireflies != BmfrConfig::default().fireflies {
+                    label += &fireflies_label(cfg.fireflies, BmfrConfig::default().fireflies);
+                    flags += &fireflies_flag(cfg.fireflies);
                 }
                 let method = if temporal {
                     Method::Temporal(Box::new(TemporalRunner::new(cfg, w, h)?))

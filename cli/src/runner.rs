@@ -326,10 +326,12 @@ pub struct FlnrRunner {
 }
 
 impl FlnrRunner {
-    pub fn new(weights: Vec<u8>, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+    /// FLNR with `weights`; `fireflies`: the clamp of its FLR fit.
+    pub fn new(weights: Vec<u8>, fireflies: Option<f32>, w: usize, h: usize, threads: usize) -> Result<Self, String> {
         // leaked on purpose: a runner lives as long as the command
         let blob: &'static [u8] = Box::leak(weights.into_boxed_slice());
-        let flnr = lrdenoise::flnr::Flnr::new(lrdenoise::FlnrConfig::new(blob), w, h).map_err(|e| e.to_string())?;
+        let config = lrdenoise::FlnrConfig { fireflies, ..lrdenoise::FlnrConfig::new(blob) };
+        let flnr = lrdenoise::flnr::Flnr::new(config, w, h).map_err(|e| e.to_string())?;
         let (tx, ty) = flnr.tile_grid();
         // more threads than tiles would only hold scratch
         let threads = threads.clamp(1, tx * ty);
@@ -592,7 +594,8 @@ mod tests {
         let (w, h) = (1100, 290); // several tiles of the default size, cut off-block
         let inp = inputs(w, h);
         let run = |threads: usize| {
-            let mut r = FlnrRunner::new(crate::methods::BUNDLED_WEIGHTS.to_vec(), w, h, threads).unwrap();
+            let mut r = FlnrRunner::new(crate::methods::BUNDLED_WEIGHTS.to_vec(), lrdenoise::FlnrConfig::new(&[]).fireflies, w, h, threads)
+                .unwrap();
             let mut out = vec![f32::NAN; 3 * w * h];
             r.run(&inp, &mut out).unwrap();
             (out, r.threads)
