@@ -25,9 +25,10 @@
 //! clamped. On the training scenes a mean-relative threshold cost up to 5 dB
 //! on dim rooms at the strength that removed the injected outliers; this rule
 //! costs nothing measurable on clean frames (docs/RESULTS.md). The band is
-//! what FLR's moments hold in cache as they read the light, so the clamp costs
-//! no extra pass over memory, and a band depends on nothing outside its rows:
-//! tiled output stays bit-identical to whole-frame output.
+//! what FLR's moments hold in cache as they read the light (at block size 8,
+//! the default), so the clamp costs no extra pass over memory there, and a
+//! band depends on nothing outside its rows: tiled output stays bit-identical
+//! to whole-frame output.
 //!
 //! **Bias.** The clamp removes the energy above the threshold; nothing is
 //! redistributed, since an outlier's energy spread over the window is exactly
@@ -171,7 +172,9 @@ impl<'a> Thresholds<'a> {
 
     /// Turns the sums into thresholds for the factor `k`. Eight cells at a
     /// time, each lane over its window in the same order as one cell alone:
-    /// the padding's zeros add nothing and never are the largest sum.
+    /// the padding's zeros add nothing (where every cell of a window sums to
+    /// 0 a padding cell may be taken as the largest; the cell's threshold is
+    /// then 0 and its samples, none above 0, clamp nothing).
     pub fn finish(self, k: f32) -> &'a [f32] {
         let n = self.thresholds.len();
         for (i, (s, m)) in self.sums.chunks_exact(CELL).zip(self.maxima.chunks_exact(CELL)).enumerate() {
@@ -182,14 +185,17 @@ impl<'a> Thresholds<'a> {
         let zero = f32x8::ZERO;
         for i in (0..n).step_by(CELL) {
             // lane l is cell i + l; its window is padded cells i + l + PAD − REACH + d
-            let (mut sum, mut count, mut top, mut top_count) = (zero, zero, f32x8::splat(-1.0), zero);
+            // the sums of the cells other than the largest, kept apart so that
+            // an outlier's sum does not swamp theirs in f32
+            let (mut rest_sum, mut rest_count, mut top, mut top_count) = (zero, zero, f32x8::splat(-1.0), zero);
             let mut best = [zero; 3];
             for d in 0..=2 * REACH {
                 let at = i + PAD - REACH + d;
                 let (s, c, mut m) = (load(&sums[at..at + CELL]), load(&counts[at..at + CELL]), load(&maxima[at..at + CELL]));
-                sum += s;
-                count += c;
                 let above = s.simd_gt(top);
+                // a new largest sum sends the old one (none at first: −1) to the rest
+                rest_sum = above.select(rest_sum + top.fast_max(zero), rest_sum + s);
+                rest_count = above.select(rest_count + top_count, rest_count + c);
                 top = above.select(s, top);
                 top_count = above.select(c, top_count);
                 for b in best.iter_mut() {
@@ -198,9 +204,8 @@ impl<'a> Thresholds<'a> {
                     *b = hi;
                 }
             }
-            let rest = count - top_count;
             // no finite sample outside the brightest cell: nothing to compare with
-            let mean = rest.simd_gt(zero).select((sum - top) / rest, f32x8::splat(f32::INFINITY));
+            let mean = rest_count.simd_gt(zero).select(rest_sum / rest_count, f32x8::splat(f32::INFINITY));
             let t = f32x8::splat(k) * best[2].fast_max(mean);
             // a cell whose brightest sample is below its threshold clamps nothing:
             // +Inf lets `clamp_row` skip it without reading its samples

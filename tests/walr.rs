@@ -868,3 +868,41 @@ fn walr_equals_refwlr_without_edges_extra_guide() {
         assert!(e < 2.0 * e3 + 0.05, "{w}x{h}: rmse with AO {e}, without {e3}");
     }
 }
+
+/// The firefly clamp's thresholds over a band wider than one of WALR's
+/// measuring windows (52 cells) come from the light as rendered, so cutting
+/// the rows anywhere gives the whole frame's features: an outlier clamped in
+/// one window does not lower the next window's thresholds.
+#[test]
+fn clamp_across_measuring_windows_ignores_the_cuts() {
+    let (w, h) = (520, 16);
+    let mut s = scene(w, h, 4, 0.6, false, false);
+    for (x, y, v) in [(368, 0, 1e4), (424, 0, 1e4), (416, 5, 40.0), (410, 9, 1e4), (300, 12, 1e4)] {
+        s.f.noisy[3 * (y * w + x)..3 * (y * w + x) + 3].fill(v);
+    }
+    let f = &s.f;
+    let cfg = WalrConfig::default();
+    let wl = Walr::new(cfg, w, h).unwrap();
+    let fr = f.frame(cfg.guides);
+    let cf = wl.check_frame(&fr).unwrap();
+    let prep = wl.prepare(&cf, 1);
+    let (gl, zl) = (wl.geo_row_len(), wl.z_row_len());
+    let features = |cuts: &[usize]| {
+        let mut scratch = vec![0f32; wl.scratch_len()];
+        let Parts { geo, z: [z0, _], .. } = wl.parts(&mut scratch).unwrap();
+        let mut clamped = 0;
+        for k in (0..cuts.len() - 1).rev() {
+            let (a, b) = (cuts[k], cuts[k + 1]);
+            clamped += wl.features_rows(&cf, &prep, a, &mut geo[a * gl..b * gl], &mut z0[a * zl..b * zl]).unwrap().clamped_fireflies;
+        }
+        (geo[..h * gl].to_vec(), z0[..h * zl].to_vec(), clamped)
+    };
+    let whole = features(&[0, h]);
+    assert!(whole.2 >= 4, "{}", whole.2);
+    for cuts in [&[0, 4, h][..], &[0, 3, 5, 9, 16]] {
+        let banded = features(cuts);
+        assert_eq!(banded.2, whole.2, "{cuts:?}");
+        assert!(banded.0.iter().zip(&whole.0).all(|(a, b)| a.to_bits() == b.to_bits()), "{cuts:?}");
+        assert!(banded.1.iter().zip(&whole.1).all(|(a, b)| a.to_bits() == b.to_bits()), "{cuts:?}");
+    }
+}

@@ -64,6 +64,9 @@ impl Injection {
     /// Injects into `frame`'s `noisy` layer; returns the number of pixels changed.
     /// `salt` varies the pixels between the frames of a sequence (0 for a still).
     pub fn apply(&self, frame: &mut ExrFrame, salt: u64) -> Result<usize, String> {
+        if *self == Injection::Clean {
+            return Ok(0);
+        }
         let layer = frame.layers.get_mut("noisy").ok_or("no 'noisy' layer to inject into")?;
         if layer.planes.len() < 3 {
             return Err("'noisy' has fewer than 3 channels".into());
@@ -74,7 +77,8 @@ impl Injection {
         match *self {
             Injection::Clean => {}
             Injection::Fireflies { p, k } => {
-                let mean = (0..n).map(|i| luminance(&layer.planes, i)).filter(|v| v.is_finite()).sum::<f64>() / n.max(1) as f64;
+                let finite: Vec<f64> = (0..n).map(|i| luminance(&layer.planes, i)).filter(|v| v.is_finite()).collect();
+                let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
                 let v = (k * mean) as f32;
                 for i in 0..n {
                     if rng.unit() < p {

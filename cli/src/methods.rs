@@ -81,7 +81,7 @@ pub struct FlrArgs {
     /// FLNR: a weight blob from train/flnr.py (default: the bundled train/flnr.bin)
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
-    /// Every method: firefly clamp factor K: a noisy sample brighter than K times the third brightest 8x8 cell of its 104x8 neighbourhood is scaled down to that level (default 1.5), or "off"
+    /// Every method: firefly clamp factor K: a noisy sample brighter than K times the larger of the third brightest 8x8 cell of its 104x8 neighbourhood and that neighbourhood's mean (without its brightest cell) is scaled down to that level (default 1.5), or "off"
     #[arg(long, value_name = "K|off")]
     pub fireflies: Option<String>,
     /// FLR: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)

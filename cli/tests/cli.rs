@@ -500,7 +500,7 @@ fn report_writes_legend_plot_and_capped_strips() {
     let rob = &md[md.find("## Robustness (outliers injected into the noisy input)").expect("robustness section")..];
     let rows: Vec<&str> = rob.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| config")).collect();
     assert_eq!(rows.len(), 5, "{rob}");
-    assert!(rows[1].contains("(--fireflies off)") && rows.iter().any(|r| r.starts_with("| flnr")), "{rob}");
+    assert!(rows[1].contains(" -ff ") && rows.iter().any(|r| r.starts_with("| flnr")), "{rob}");
     assert!(rows.iter().all(|r| r.matches('|').count() == 9 && !r.contains('–')), "{rob}");
     assert!(rob.contains("tools/peers.py") && rob.contains("--inject-name"), "{rob}");
     for case in ["ff1e-4x1000", "ff1e-3x100", "nan-inf1e-3"] {

@@ -363,8 +363,9 @@ typedef struct LrdFlrConfig {
   float ao_demodulation;
   /**
    * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
-   * luminance exceeds k times the third brightest 8x8 cell of its
-   * 104x8-pixel neighbourhood is scaled down to that level before the fit
+   * luminance exceeds k times the larger of the third brightest 8x8
+   * cell of its 104x8-pixel neighbourhood and that neighbourhood's mean
+   * without its brightest cell is scaled down to that level before the fit
    * (see the core's `fireflies` module); 0 turns it off. Default 1.5.
    */
   float fireflies;
@@ -629,8 +630,9 @@ typedef struct LrdBmfrConfig {
   float depth_limit;
   /**
    * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
-   * luminance exceeds k times the third brightest 8x8 cell of its
-   * 104x8-pixel neighbourhood is scaled down to that level for the fit,
+   * luminance exceeds k times the larger of the third brightest 8x8
+   * cell of its 104x8-pixel neighbourhood and that neighbourhood's mean
+   * without its brightest cell is scaled down to that level for the fit,
    * and for the temporal pipeline's accumulation (see the core's
    * `fireflies` module); 0 turns it off. Default 1.5.
    */
@@ -762,8 +764,9 @@ typedef struct LrdWalrConfig {
   float position_limit;
   /**
    * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
-   * luminance exceeds k times the third brightest 8x8 cell of its
-   * 104x8-pixel neighbourhood is scaled down to that level for the filter,
+   * luminance exceeds k times the larger of the third brightest 8x8
+   * cell of its 104x8-pixel neighbourhood and that neighbourhood's mean
+   * without its brightest cell is scaled down to that level for the filter,
    * and for the temporal pipeline's accumulation (see the core's
    * `fireflies` module); 0 turns it off. Default 1.5.
    */

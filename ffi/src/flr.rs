@@ -76,8 +76,9 @@ pub struct LrdFlrConfig {
     /// 0 turns it off. Default 0.1 (`lrd_flr_config_default`).
     pub ao_demodulation: f32,
     /// The firefly clamp's threshold factor k (>= 1): a noisy sample whose
-    /// luminance exceeds k times the third brightest 8x8 cell of its
-    /// 104x8-pixel neighbourhood is scaled down to that level before the fit
+    /// luminance exceeds k times the larger of the third brightest 8x8
+    /// cell of its 104x8-pixel neighbourhood and that neighbourhood's mean
+    /// without its brightest cell is scaled down to that level before the fit
     /// (see the core's `fireflies` module); 0 turns it off. Default 1.5.
     pub fireflies: f32,
 }

@@ -63,8 +63,9 @@ pub struct LrdWalrConfig {
     /// Without depth: largest world-position change of a history tap (0.05).
     pub position_limit: f32,
     /// The firefly clamp's threshold factor k (>= 1): a noisy sample whose
-    /// luminance exceeds k times the third brightest 8x8 cell of its
-    /// 104x8-pixel neighbourhood is scaled down to that level for the filter,
+    /// luminance exceeds k times the larger of the third brightest 8x8
+    /// cell of its 104x8-pixel neighbourhood and that neighbourhood's mean
+    /// without its brightest cell is scaled down to that level for the filter,
     /// and for the temporal pipeline's accumulation (see the core's
     /// `fireflies` module); 0 turns it off. Default 1.5.
     pub fireflies: f32,

@@ -101,8 +101,9 @@ pub struct BmfrConfig {
     /// Temporal pipeline settings (ignored by the single-frame fit).
     pub temporal: temporal::TemporalConfig,
     /// The firefly clamp's strength `k` ([`crate::fireflies`]): a noisy
-    /// sample whose luminance is above `k` times the third brightest 8 × 8
-    /// cell of its 104 × 8 pixel neighbourhood is scaled down to that level
+    /// sample whose luminance is above `k` times the larger of the third brightest
+    /// 8 × 8 cell of its 104 × 8 pixel neighbourhood and that neighbourhood's
+    /// mean without its brightest cell is scaled down to that level
     /// for the fit (the temporal pipeline accumulates each frame's light
     /// clamped). `None` turns it off. Default
     /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`.

@@ -94,8 +94,9 @@ pub struct FlrConfig {
     /// to [0, 1]); every other guide stays invariant. CPU and GPU paths.
     pub ao_demodulation: Option<f32>,
     /// The firefly clamp's threshold factor `k` ([`crate::fireflies`]): a
-    /// noisy sample whose luminance is above `k` times the third brightest
-    /// 8 × 8 cell of its 104 × 8 pixel neighbourhood is scaled down to that
+    /// noisy sample whose luminance is above `k` times the larger of the third brightest
+    /// 8 × 8 cell of its 104 × 8 pixel neighbourhood and that neighbourhood's
+    /// mean without its brightest cell is scaled down to that
     /// level before the moments are taken. `None` turns it off. Default
     /// `Some(fireflies::DEFAULT_STRENGTH)`; `k ≥ 1`. CPU and GPU paths.
     pub fireflies: Option<f32>,

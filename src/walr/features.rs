@@ -109,30 +109,17 @@ impl ClampWindow {
     }
 
     /// The thresholds of the cells of `rows` (one band) in pixels
-    /// `x_lo..x_hi` (at most [`CLAMP_SPAN`]), indexed from cell `x_lo / 8`.
-    /// Each row's light is `held(y)` (pixels `0..w`) where that has it, else
-    /// read from `f`.
-    fn measure<'g>(
-        &mut self,
-        f: &CheckedFrame<'_>,
-        k: f32,
-        rows: core::ops::Range<usize>,
-        (x_lo, x_hi): (usize, usize),
-        held: impl Fn(usize) -> Option<[&'g [f32]; 3]>,
-    ) -> Option<&[f32]> {
+    /// `x_lo..x_hi` (at most [`CLAMP_SPAN`]), indexed from cell `x_lo / 8`,
+    /// measured on the frame's light as it is.
+    fn measure(&mut self, f: &CheckedFrame<'_>, k: f32, rows: core::ops::Range<usize>, (x_lo, x_hi): (usize, usize)) -> Option<&[f32]> {
         let ClampWindow { work, row } = self;
         let width = x_hi.checked_sub(x_lo)?;
         let mut t = fireflies::Thresholds::new(work, width)?;
         let [r, g, b] = row;
         let (r, g, b) = (r.get_mut(..width)?, g.get_mut(..width)?, b.get_mut(..width)?);
         for y in rows {
-            match held(y) {
-                Some([hr, hg, hb]) => t.add_row([hr.get(x_lo..x_hi)?, hg.get(x_lo..x_hi)?, hb.get(x_lo..x_hi)?]),
-                None => {
-                    f.noisy.read_row_n(y, x_lo, [&mut *r, &mut *g, &mut *b])?;
-                    t.add_row([r, g, b]);
-                }
-            }
+            f.noisy.read_row_n(y, x_lo, [&mut *r, &mut *g, &mut *b])?;
+            t.add_row([r, g, b]);
         }
         Some(t.finish(k))
     }
@@ -241,7 +228,7 @@ impl Walr {
             for (c0, c1, lo, hi) in clamp_runs(fireflies::cells(w)) {
                 let x_lo = lo * CELL;
                 let th = match (clamp, &mut window) {
-                    (Some(k), Some(win)) => win.measure(f, k, rows.clone(), (x_lo, (hi * CELL).min(w)), |_| None),
+                    (Some(k), Some(win)) => win.measure(f, k, rows.clone(), (x_lo, (hi * CELL).min(w))),
                     _ => None,
                 };
                 for x in (c0 * CELL..(c1 * CELL).min(w)).step_by(CELL) {
@@ -333,12 +320,8 @@ impl Walr {
             let e = (band_rows.end - y0).min(rows);
             for (c0, c1, lo, hi) in clamp_runs(fireflies::cells(w)) {
                 let x_lo = lo * CELL;
-                let held = |y: usize| {
-                    let at = (y.checked_sub(y0 + s).filter(|&d| d < e - s)? + s) * gl + G_VALID * ps;
-                    let planes = geo_rows.get(at..at + 3 * ps)?;
-                    Some([planes.get(..w)?, planes.get(ps..ps + w)?, planes.get(2 * ps..2 * ps + w)?])
-                };
-                let th = window.measure(f, k, band_rows.clone(), (x_lo, (hi * CELL).min(w)), held).ok_or(bad)?;
+                // measured from the frame: the held rows of earlier runs are clamped already
+                let th = window.measure(f, k, band_rows.clone(), (x_lo, (hi * CELL).min(w))).ok_or(bad)?;
                 let (xa, xb) = (c0 * CELL, (c1 * CELL).min(w));
                 for r in s..e {
                     let [a, b, c] = light_planes(geo_rows, r * gl, ps, w).ok_or(bad)?;
