@@ -264,6 +264,20 @@ pub fn clamp_row(rgb: [&mut [f32]; 3], x0: usize, thresholds: &[f32]) -> usize {
     clamped
 }
 
+/// The fraction of a sample the clamp kept: the clamped luminance over the
+/// raw one (1 where the clamp left the sample alone or the raw luminance is
+/// not positive and finite). The temporal pipelines weigh a sample entering
+/// their history by it.
+pub fn kept(raw: [f32; 3], clamped: [f32; 3]) -> f32 {
+    let l = |p: [f32; 3]| LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2];
+    let (lr, lc) = (l(raw), l(clamped));
+    if lr > lc && lr.abs() <= f32::MAX && lc >= 0.0 {
+        (lc / lr).clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
+}
+
 /// Reads the light `noisy` (its first three channels) into `planes` (three
 /// planes of its size, as `Layout::planar` lays them out) and clamps it with
 /// the factor `k`, band by band: each band's rows are read, measured and

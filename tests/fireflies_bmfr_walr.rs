@@ -5,13 +5,12 @@
 //! The rule has its own f64 oracle (the fireflies module's unit tests); here:
 //! `fireflies::clamp_frame` is the band-by-band reference built on the rule's
 //! kernel; each method with the clamp is the method without it on a frame clamped
-//! first, band by band, bit for bit (single frame, every frame of the
-//! temporal pipelines, awkward sizes, block sizes, grid offsets, kernels,
+//! first, band by band, bit for bit (single frame, the temporal pipelines'
+//! first frame, awkward sizes, block sizes, grid offsets, kernels,
 //! storages, read paths), with the count clamped reported; a few outliers
 //! at 1e4 times the mean barely move the output with the clamp and ruin it
-//! without; and a burst of outliers in one frame of a static sequence leaves
-//! less than an ordinary frame's noise in the temporal pipelines' output two
-//! frames later.
+//! without; and a burst of outliers in one frame of a static sequence is
+//! gone from the temporal pipelines' output two frames later.
 
 mod common;
 
@@ -304,14 +303,13 @@ fn burst_case(name: &str, runs: &[Vec<(Vec<f32>, Report)>; 3], burst: usize, on:
     let after = burst + 2;
     if on {
         assert!(hit[burst].1.clamped_fireflies >= 8, "{name}: {:?}", hit[burst].1);
-        // Two frames on, the burst leaves less than an ordinary frame's noise
-        // does, over the frame. Each clamped outlier stays in the cumulative
-        // average as a sample at its threshold (k times its neighbourhood's
-        // bright cells), like a bright sample of its own: the largest
-        // difference is of the order of the frame's mean (without the clamp,
-        // more than ten times it).
-        assert!(mean_hit[after] < mean_noise[after], "{name}: two frames after the burst, over the frame");
-        assert!(max_hit[after] < 2.0, "{name}: two frames after the burst, the largest difference");
+        // Two frames on, the burst is gone: each clamped outlier entered the
+        // history at the fraction of it the clamp kept, so what is left is a
+        // twentieth of what drawing that frame's noise again changes over
+        // the frame, and below its largest change at every pixel (without
+        // the clamp, hundreds of times both).
+        assert!(mean_hit[after] < 0.05 * mean_noise[after], "{name}: two frames after the burst, over the frame");
+        assert!(max_hit[after] < max_noise[after], "{name}: two frames after the burst, the largest difference");
     } else {
         assert!(mean_hit[after] > 30.0 * mean_noise[after], "{name}: without the clamp the burst stays in the history");
         assert!(max_hit[after] > 10.0, "{name}: without the clamp the burst stays in the history");
@@ -319,7 +317,7 @@ fn burst_case(name: &str, runs: &[Vec<(Vec<f32>, Report)>; 3], burst: usize, on:
 }
 
 #[test]
-fn a_burst_of_outliers_leaves_less_than_noise_two_frames_later() {
+fn a_burst_of_outliers_is_gone_two_frames_later() {
     let (w, h, frames, burst) = (96, 80, 6, 2);
     let set = GuideSet { depth: true, ..NP };
     for on in [true, false] {
@@ -344,9 +342,12 @@ fn view(o: &mut [f32], w: usize, h: usize) -> ImageViewMut<'_> {
     ImageViewMut::interleaved(o, w, h, 3).unwrap()
 }
 
-/// Every frame of a temporal pipeline with the clamp equals the pipeline
-/// without it on frames clamped first: the clamped light is what enters
-/// the history, and the accumulated light is not clamped again.
+/// A temporal pipeline with the clamp equals the pipeline without it on
+/// frames clamped first while it has no history (the clamped light is what
+/// enters it, and the accumulated light is not clamped again), and counts
+/// the same clamped samples in every frame. With a history the clamped
+/// samples enter at a weight scaled by what the clamp kept
+/// (`a_burst_of_outliers_is_gone_two_frames_later`).
 #[test]
 fn temporal_clamp_equals_clamping_each_frame_first() {
     let (w, h) = (83, 41);
@@ -375,11 +376,11 @@ fn temporal_clamp_equals_clamping_each_frame_first() {
         let [a, b] = &mut outs;
         let r_on = b_on.denoise_temporal(&f.frame(set), m, &mut hb_on, &mut scratch, &mut view(a, w, h)).unwrap();
         let r_off = b_off.denoise_temporal(&pre.frame(set), m, &mut hb_off, &mut scratch, &mut view(b, w, h)).unwrap();
-        assert!(same(a, b), "BMFR frame {k}");
+        assert!(k > 0 || same(a, b), "BMFR frame {k}");
         assert_eq!((r_on.clamped_fireflies, Report { clamped_fireflies: 0, ..r_on }), (clamped, r_off), "BMFR frame {k}");
         let r_on = w_on.denoise_temporal(&f.frame(set), m, &mut hw_on, &mut scratch, &mut view(a, w, h)).unwrap();
         let r_off = w_off.denoise_temporal(&pre.frame(set), m, &mut hw_off, &mut scratch, &mut view(b, w, h)).unwrap();
-        assert!(same(a, b), "WALR frame {k}");
+        assert!(k > 0 || same(a, b), "WALR frame {k}");
         assert_eq!((r_on.clamped_fireflies, Report { clamped_fireflies: 0, ..r_on }), (clamped, r_off), "WALR frame {k}");
     }
 }

@@ -13,8 +13,11 @@
 //!
 //! With the firefly clamp ([`super::BmfrConfig::fireflies`], on by default)
 //! step 1 accumulates the frame's light clamped
-//! ([`crate::fireflies::clamp_frame`]), so no outlier enters the history at
-//! full weight; the fit of step 2 reads the accumulated colour as it is.
+//! ([`crate::fireflies::clamp_frame`]), and a clamped sample enters the
+//! history with its weight scaled by the fraction of it the clamp kept
+//! ([`crate::fireflies::kept`]): an outlier clamped to a hundredth counts as
+//! a hundredth of a sample. The fit of step 2 reads the accumulated colour as
+//! it is.
 //!
 //! All state lives in a caller-owned [`History`]; planes are f32, full size.
 
@@ -163,10 +166,10 @@ impl Bmfr {
                 let light = &mut fit[..3 * np];
                 let clamped = fireflies::clamp_frame(&f.noisy, k, light, clamp_work).ok_or(Error::InvalidTile { index: 0, count: h })?;
                 let cf = super::CheckedFrame { noisy: ImageView::f32(light, w, h, 3, Layout::planar(w, h))?, guides: f.guides };
-                let r = self.accumulate_noisy(&cf, motion, history, head, rows)?;
+                let r = self.accumulate_noisy(&cf, Some(&f.noisy), motion, history, head, rows)?;
                 Report { clamped_fireflies: clamped, ..r }
             }
-            None => self.accumulate_noisy(&f, motion, history, planes, rows)?,
+            None => self.accumulate_noisy(&f, None, motion, history, planes, rows)?,
         };
 
         // 2. fit on the accumulated colour (clamped already: the fit does not clamp it again)
@@ -232,6 +235,7 @@ impl Bmfr {
     fn accumulate_noisy(
         &self,
         f: &super::CheckedFrame<'_>,
+        raw: Option<&ImageView<'_>>,
         motion: Option<&ImageView<'_>>,
         history: &History<'_>,
         planes: &mut [f32],
@@ -245,13 +249,19 @@ impl Bmfr {
         let mut rep = Report::default();
         let bad = Error::InvalidTile { index: 0, count: 0 };
         let (cur, rest) = rows.split_at_mut(7 * w);
-        let (rgb, mv) = rest.split_at_mut(3 * w);
+        let (rgb, rest) = rest.split_at_mut(3 * w);
+        let (mv, raw_rgb) = rest.split_at_mut(2 * w);
         for y in 0..h {
             self.read_rejection_row(f, y, cur)?;
             {
                 let (r, gb) = rgb.split_at_mut(w);
                 let (g, b) = gb.split_at_mut(w);
                 f.noisy.read_row_n(y, 0, [r, g, &mut b[..w]]).ok_or(bad)?;
+            }
+            if let Some(raw) = raw {
+                let (r, gb) = raw_rgb[..3 * w].split_at_mut(w);
+                let (g, b) = gb.split_at_mut(w);
+                raw.read_row_n(y, 0, [r, g, b]).ok_or(bad)?;
             }
             match motion {
                 Some(m) if has_history => {
@@ -311,8 +321,10 @@ impl Bmfr {
                     let spp = spp / tw;
                     let prev = prev.map(|v| v / tw);
                     if cur_ok {
-                        let a = (1.0 / (spp + 1.0)).max(t.noisy_alpha);
-                        ([0, 1, 2].map(|ch| a * c[ch] + (1.0 - a) * prev[ch]), spp.min(254.0) + 1.0)
+                        // a clamped sample counts as the fraction of it the clamp kept
+                        let kept = raw.map_or(1.0, |_| fireflies::kept([raw_rgb[x], raw_rgb[w + x], raw_rgb[2 * w + x]], c));
+                        let a = (1.0 / (spp + 1.0)).max(t.noisy_alpha) * kept;
+                        ([0, 1, 2].map(|ch| a * c[ch] + (1.0 - a) * prev[ch]), spp.min(254.0) + kept)
                     } else {
                         (prev, spp) // bridge a NaN/Inf sample with the history
                     }

@@ -17,8 +17,10 @@
 //!
 //! With the firefly clamp ([`super::WalrConfig::fireflies`], on by default)
 //! step 1 accumulates the frame's light clamped
-//! ([`crate::fireflies::clamp_frame`]), so no outlier enters the history at
-//! full weight; WALR in step 2 reads the accumulated light as it is.
+//! ([`crate::fireflies::clamp_frame`]), and a clamped sample enters the
+//! history with its weight scaled by the fraction of it the clamp kept
+//! ([`crate::fireflies::kept`]); WALR in step 2 reads the accumulated light
+//! as it is.
 //!
 //! The paper resamples bicubically with dilated motion vectors; this uses
 //! bilinear taps (what BMFR's pipeline here uses too, so the two compare).
@@ -268,8 +270,13 @@ impl Walr {
                     let n = n / tw;
                     let prev = prev.map(|v| v / tw);
                     if ok {
-                        let a = (1.0 / (n + 1.0)).max(alpha_min);
-                        ([0, 1, 2].map(|c| a * cur[c] + (1.0 - a) * prev[c]), (n + 1.0).min(tc.max_samples))
+                        // a clamped sample counts as the fraction of it the clamp kept
+                        let kept = match self.cfg.fireflies {
+                            Some(_) => fireflies::kept([0, 1, 2].map(|c| f.noisy.get(x, y, c).unwrap_or(cur[c])), cur),
+                            None => 1.0,
+                        };
+                        let a = (1.0 / (n + 1.0)).max(alpha_min) * kept;
+                        ([0, 1, 2].map(|c| a * cur[c] + (1.0 - a) * prev[c]), (n + kept).min(tc.max_samples))
                     } else {
                         (prev, n) // bridge a NaN/Inf sample with the history
                     }
