@@ -8,43 +8,12 @@
 
 mod common;
 
-use common::{Owned, Rng};
-use lrdenoise::fireflies::{self, Thresholds, CELL};
+use common::{pre_clamp, Owned, Rng};
+use lrdenoise::fireflies::CELL;
 use lrdenoise::image::Layout;
 use lrdenoise::isa::Kernel;
 use lrdenoise::{Blur, Flr, FlrConfig, GuideSet, ImageView, ImageViewMut, Report};
 use proptest::prelude::*;
-
-/// `noisy` (interleaved RGB) clamped by the library's kernel band by band, as a
-/// caller would before a method that does not clamp; returns the count clamped.
-fn pre_clamp(noisy: &mut [f32], w: usize, h: usize, k: f32) -> u64 {
-    let mut planes = [vec![0f32; w * h], vec![0f32; w * h], vec![0f32; w * h]];
-    for i in 0..w * h {
-        for c in 0..3 {
-            planes[c][i] = noisy[3 * i + c];
-        }
-    }
-    let mut work = vec![0f32; fireflies::work_len(w)];
-    let mut clamped = 0;
-    for band in 0..h.div_ceil(CELL) {
-        let rows = band * CELL..((band + 1) * CELL).min(h);
-        let mut t = Thresholds::new(&mut work, w).unwrap();
-        for y in rows.clone() {
-            t.add_row([&planes[0][y * w..][..w], &planes[1][y * w..][..w], &planes[2][y * w..][..w]]);
-        }
-        let th = t.finish(k);
-        for y in rows {
-            let [a, b, c] = &mut planes;
-            clamped += fireflies::clamp_row([&mut a[y * w..][..w], &mut b[y * w..][..w], &mut c[y * w..][..w]], 0, th);
-        }
-    }
-    for i in 0..w * h {
-        for c in 0..3 {
-            noisy[3 * i + c] = planes[c][i];
-        }
-    }
-    clamped as u64
-}
 
 fn denoise(cfg: FlrConfig, f: &Owned) -> (Vec<f32>, Report) {
     let flr = Flr::new(cfg, f.w, f.h).unwrap();

@@ -477,3 +477,36 @@ pub fn cfg(set: GuideSet, block: usize) -> FlrConfig {
     let blur = Blur::Gaussian { sigma: lrdenoise::flr::config::DEFAULT_SIGMA, radius: None };
     FlrConfig { guides: set, block, blur, clamp_negative: false, fireflies: None, ..FlrConfig::default() }
 }
+
+/// `noisy` (interleaved RGB) clamped band by band with the firefly clamp's
+/// kernels (`Thresholds`, `clamp_row`), as a caller would before a method
+/// that does not clamp: the reference of the methods' clamp tests (and of
+/// `fireflies::clamp_frame`). Returns the count clamped.
+pub fn pre_clamp(noisy: &mut [f32], w: usize, h: usize, k: f32) -> u64 {
+    let mut planes = [vec![0f32; w * h], vec![0f32; w * h], vec![0f32; w * h]];
+    for i in 0..w * h {
+        for c in 0..3 {
+            planes[c][i] = noisy[3 * i + c];
+        }
+    }
+    let mut work = vec![0f32; lrdenoise::fireflies::work_len(w)];
+    let mut clamped = 0;
+    for band in 0..h.div_ceil(lrdenoise::fireflies::CELL) {
+        let rows = band * lrdenoise::fireflies::CELL..((band + 1) * lrdenoise::fireflies::CELL).min(h);
+        let mut t = lrdenoise::fireflies::Thresholds::new(&mut work, w).unwrap();
+        for y in rows.clone() {
+            t.add_row([&planes[0][y * w..][..w], &planes[1][y * w..][..w], &planes[2][y * w..][..w]]);
+        }
+        let th = t.finish(k);
+        for y in rows {
+            let [a, b, c] = &mut planes;
+            clamped += lrdenoise::fireflies::clamp_row([&mut a[y * w..][..w], &mut b[y * w..][..w], &mut c[y * w..][..w]], 0, th);
+        }
+    }
+    for i in 0..w * h {
+        for c in 0..3 {
+            noisy[3 * i + c] = planes[c][i];
+        }
+    }
+    clamped as u64
+}
