@@ -1,7 +1,6 @@
 //! FLNR (FLR with guides written by a network): the whole-frame entry point
 //! and the threaded run (`lrd_flnr_run_tile`, its stages and sizes).
 
-use crate::flr::HEADER;
 use crate::images::{check_output_disjoint, check_scratch, frame_and_out, frame_views, view_mut, LrdFrame, LrdImageMut};
 use crate::status::{guard, status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
 use core::ffi::c_void;
@@ -53,6 +52,10 @@ fn flnr_layout(fl: &Flnr<'_>, workers: usize) -> Result<FlnrLayout, LrdStatus> {
     let total = worker_bytes.checked_mul(workers).and_then(|b| b.checked_add(first_worker)).ok_or(big)?;
     Ok(FlnrLayout { flr, planes, workers: first_worker, worker: worker_bytes, total })
 }
+
+/// Bytes at the start of a threaded FLNR scratch: the marker, the input
+/// scales and the count of NETWORK tiles done.
+const HEADER: usize = 256;
 
 /// Marks a header whose input scales the PREPARE stage wrote.
 const FLNR_PREPARED: u64 = 0x6c72_645f_666c_6e72;

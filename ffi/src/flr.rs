@@ -153,12 +153,9 @@ fn plan(c: *const LrdFlrConfig, width: u32, height: u32) -> Result<Flr, LrdStatu
     Flr::new(config(c)?, width as usize, height as usize).map_err(status_of)
 }
 
-/// Bytes reserved at the start of the scratch buffer for per-frame statistics.
-pub(crate) const HEADER: usize = 256;
-const _: () = assert!(core::mem::size_of::<lrdenoise_core::Stats>() <= HEADER);
-
-fn scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
-    flr.scratch_len_for(workers).checked_mul(8).and_then(|b| b.checked_add(HEADER)).ok_or(LRD_STATUS_INVALID_ARGUMENT)
+/// Bytes of a whole-frame run's scratch: the core's [`Flr::scratch_len`].
+fn scratch_bytes(flr: &Flr) -> Result<usize, LrdStatus> {
+    flr.scratch_len().checked_mul(8).ok_or(LRD_STATUS_INVALID_ARGUMENT)
 }
 
 /// Bytes of a tiled run's scratch: the core's [`Flr::tiled_scratch_len`].
@@ -205,7 +202,7 @@ pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
 pub unsafe extern "C" fn lrd_flr_scratch_size(config: *const LrdFlrConfig, width: u32, height: u32, bytes: *mut usize) -> LrdStatus {
     guard(|| {
         let flr = plan(config, width, height)?;
-        let b = scratch_bytes(&flr, 1)?;
+        let b = scratch_bytes(&flr)?;
         // SAFETY: checked for NULL; caller passes a valid pointer.
         *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = b;
         Ok(())
@@ -262,7 +259,7 @@ pub unsafe extern "C" fn lrd_flr_denoise(
         let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let flr = plan(config, out.width, out.height)?;
         check_scratch(scratch)?;
-        let needed = self::scratch_bytes(&flr, 1)?;
+        let needed = self::scratch_bytes(&flr)?;
         if scratch_bytes < needed {
             return Err(LRD_STATUS_BUFFER_TOO_SMALL);
         }
@@ -271,7 +268,7 @@ pub unsafe extern "C" fn lrd_flr_denoise(
         // scratch is aligned and at least `needed` bytes; `out` is exclusively ours.
         let r = unsafe {
             let f = frame_views(frame, true)?;
-            let s = core::slice::from_raw_parts_mut((scratch as *mut u8).add(HEADER) as *mut f64, (needed - HEADER) / 8);
+            let s = core::slice::from_raw_parts_mut(scratch as *mut f64, needed / 8);
             let mut o = view_mut(out, 0, out.height as usize)?;
             flr.denoise(&f, s, &mut o).map_err(status_of)?
         };

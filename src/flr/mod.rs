@@ -1,8 +1,7 @@
 //! The FLR frame driver: plan, scratch layout, and the stage kernels, each
 //! split into independent tiles (bands of cell rows). The stage order and the
 //! entry that runs one tile are written once, in [`schedule`];
-//! [`Flr::denoise`] runs the same tiles on one thread in a cache-friendly
-//! order, bit-identical to running them stage by stage.
+//! [`Flr::denoise`] and [`Flr::denoise_parallel`] are both drivers of it.
 //!
 //! A caller needs [`Flr::new`], [`Flr::scratch_len`] and [`Flr::denoise`],
 //! or for threads [`Flr::denoise_parallel`] / [`Flr::tiled`] and
@@ -35,7 +34,7 @@ use crate::guides::{Frame, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut};
 use crate::isa::Kernel;
 use crate::kernels::apply::{apply_row, lerp_rows, RowGuides, RowOut};
-use crate::kernels::blur::{blur_cols_band, blur_cols_band_ring, blur_row, radius_to_cells, Taps, GAUSSIAN_TRUNCATION};
+use crate::kernels::blur::{blur_cols_band, blur_row, radius_to_cells, Taps, GAUSSIAN_TRUNCATION};
 use crate::kernels::demodulation;
 use crate::kernels::moments::{moments_band, moments_rows, rows_supported, BandPlanes, BandRows, BlockScratch, MAX_ROWS};
 use crate::kernels::solve::{solve_cell, solve_cell_without, solve_cells4, solve_cells4_without, CellOutcome, SolveParams};
@@ -471,10 +470,6 @@ impl Flr {
     #[doc(hidden)]
     pub fn scratch_len_for(&self, workers: usize) -> usize {
         2 * self.grid_len() + self.models_len().div_ceil(2) + (workers.max(1) * self.worker_len()).div_ceil(2) + self.adaptive_len()
-    }
-    /// Scratch length in f64 elements for [`Flr::denoise`] (one worker).
-    pub fn scratch_len(&self) -> usize {
-        self.scratch_len_for(1)
     }
 
     /// Where each region of a `scratch_len_for(workers)` scratch lies, in f64
@@ -1218,141 +1213,6 @@ impl Flr {
                 f
             };
             rep.fallback_pixels += fallback as u64;
-        }
-        Ok(rep)
-    }
-
-    /// Denoises one frame on the calling thread. `scratch` must hold at least
-    /// [`Flr::scratch_len`] values; `out` is the output-size, ≥ 3-channel image.
-    /// Allocates nothing.
-    pub fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
-        let f = self.check_frame(frame)?;
-        if out.width() != self.width || out.height() != self.height || out.channel_count() < 3 {
-            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (self.width, self.height), got: (out.width(), out.height()) });
-        }
-        let mut parts = self.split_scratch(scratch, 1)?;
-        let mut stats = self.prepare(&f);
-        let mut rep = Report::default();
-        let tiles = self.tile_count();
-        let single = self.scale_count() == 1;
-        // Window 0 (the only one, or the adaptive window's smallest, always on
-        // the block grid): its vertical blur of tile u needs the horizontally
-        // blurred rows up to `radius` cell rows below it, i.e. tile u + lag. It
-        // runs as soon as those exist, while they are still in cache: over the
-        // band's raw moments with one window (their stats were taken first),
-        // into `first` with the adaptive window (whose other windows still
-        // read the raw moments).
-        let lag = self.taps[0].radius.div_ceil(TILE_CELL_ROWS);
-        // Rings: the vertical blur of tile u reads the horizontally blurred
-        // tiles u − lag ..= u + lag, so `tmp` need only hold 2·lag + 1 of them
-        // (rounded up to a power of two), and with the larger windows all
-        // pooled the raw moments are needed only while their own tile is
-        // processed: one tile of `cells`. Both then stay in L2 instead of
-        // leaving two frame-sized grids (10 MB each at 1080p) for memory to
-        // write back. The Gaussian only: the box blur's sliding
-        // window restarts per tile from the whole grid.
-        let row_len = self.cells_x * self.lay.k;
-        let ring = (2 * lag + 1).next_power_of_two() * TILE_CELL_ROWS;
-        let tmp_ring = !self.taps[0].is_box && ring < self.cells_y;
-        let cells_ring = tmp_ring && !single && (1..self.scale_count()).all(|s| self.window_pooled(s));
-        let mut sums = StatsSums::default();
-        for t in 0..tiles + lag {
-            if t < tiles {
-                let c = self.cells_tile_range(t)?;
-                let (r0, r1) = self.tile_rows(t)?;
-                let band = if cells_ring { 0..c.len() } else { c.clone() };
-                rep += self.moments_tile(&f, &stats, t, &mut parts.cells[band.clone()], parts.workers)?;
-                self.stats_tile(t, &parts.cells[band.clone()], &mut sums)?;
-                if let Some(s) = self.pooled_window() {
-                    // Pool while the band is in cache.
-                    self.pool_tile(t, &parts.cells[band.clone()], &mut parts.pooled[self.window_cells_tile_range(s, t)?])?;
-                }
-                // The horizontal blur reads only its own band.
-                let at = if tmp_ring { (r0 % ring) * row_len..(r0 % ring + r1 - r0) * row_len } else { c };
-                self.blur_rows_band_at(0, t, &parts.cells[band], &mut parts.tmp[at])?;
-            }
-            if t >= lag {
-                let u = t - lag;
-                let c = self.cells_tile_range(u)?;
-                let dst = if single { &mut parts.cells[c] } else { &mut parts.first[c] };
-                if tmp_ring {
-                    let (taps, r0) = (&self.taps[0], self.tile_rows(u)?.0);
-                    let bad = Error::InvalidTile { index: u, count: tiles };
-                    blur_cols_band_ring(taps, row_len, self.cells_y, r0, &parts.tmp[..ring * row_len], ring, dst).ok_or(bad)?;
-                } else {
-                    self.blur_cols_tiles(u..u + 1, parts.tmp, dst)?;
-                }
-            }
-        }
-        self.finish_stats_sums(&sums, &mut stats);
-        if !single {
-            // The larger windows first (mostly on the pooled grid: small);
-            // then, as with one window, bottom to top: window 0's solve and
-            // variances, the blend and the apply of each band while its
-            // blurred moments and guide rows are still in cache.
-            rep += self.fit_windows(&stats, &mut parts)?;
-            for t in (0..tiles).rev() {
-                let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
-                let (m0, v0) = (self.scale_models_tile_range(0, t)?, self.scale_variances_tile_range(0, t)?);
-                rep += self.solve_tile_at(0, &stats, t, &parts.first[c.clone()], &mut parts.scale_models[m0], &mut parts.variances[v0])?;
-                self.blend_tile(t, &parts.first[c], parts.scale_models, parts.variances, &mut parts.models[m])?;
-                if t + 1 < tiles {
-                    rep += self.apply_band(&f, &stats, t + 1, parts.models, parts.workers, out)?;
-                }
-            }
-            rep += self.apply_band(&f, &stats, 0, parts.models, parts.workers, out)?;
-        } else {
-            // Bottom to top: the frame rows the moments stage read last are
-            // the likeliest still in cache. Tile u's rows interpolate the
-            // models of tiles u − 1 ..= u + 1, so it is applied once tile
-            // u − 1 is solved.
-            for t in (0..tiles).rev() {
-                let (c, m) = (self.cells_tile_range(t)?, self.models_tile_range(t)?);
-                rep += self.solve_tile(&stats, t, &parts.cells[c], &mut parts.models[m])?;
-                if t + 1 < tiles {
-                    rep += self.apply_band(&f, &stats, t + 1, parts.models, parts.workers, out)?;
-                }
-            }
-            rep += self.apply_band(&f, &stats, 0, parts.models, parts.workers, out)?;
-        }
-        Ok(rep)
-    }
-
-    /// [`Flr::apply_tile`] on tile `t`'s rows of the whole output `out`.
-    fn apply_band(
-        &self,
-        f: &CheckedFrame<'_>,
-        stats: &Stats,
-        t: usize,
-        models: &[f32],
-        worker: &mut [f32],
-        out: &mut ImageViewMut<'_>,
-    ) -> Result<Report, Error> {
-        let (y0, y1) = self.tile_pixel_rows(t)?;
-        self.apply_tile(f, stats, t, models, worker, &mut out.rows(y0, y1 - y0)?)
-    }
-
-    /// Adaptive window, on the calling thread: blur and solve every window
-    /// (window 0 arrives blurred in `first`, see [`Flr::denoise`]).
-    /// Blur and solve of windows 1 and 2 (window 0 is blurred in the moments
-    /// loop and solved band by band before its blend).
-    fn fit_windows(&self, stats: &Stats, parts: &mut Parts<'_>) -> Result<Report, Error> {
-        let tiles = self.tile_count();
-        let mut rep = Report::default();
-        for s in 1..self.scale_count() {
-            let n = self.window_grid_len(s);
-            let src: &[f64] = if self.window_pooled(s) { parts.pooled } else { parts.cells };
-            let tmp = &mut parts.tmp[..n];
-            for t in 0..tiles {
-                self.blur_rows_tile_at(s, t, src, &mut tmp[self.window_cells_tile_range(s, t)?])?;
-            }
-            let dst = &mut parts.blurred[..n];
-            self.blur_cols_tiles_at(s, 0..tiles, tmp, dst)?;
-            for t in 0..tiles {
-                let c = self.window_cells_tile_range(s, t)?;
-                let (m, v) = (self.scale_models_tile_range(s, t)?, self.scale_variances_tile_range(s, t)?);
-                rep += self.solve_tile_at(s, stats, t, &dst[c], &mut parts.scale_models[m], &mut parts.variances[v])?;
-            }
         }
         Ok(rep)
     }

@@ -100,7 +100,7 @@ impl ColLanes for Lanes {
 /// The vertical pass's chunks `c..` in steps of `LANES` while `c + LANES ≤
 /// end`, of output row `j` into `out` and, unless `next` is empty, of row
 /// `j + 1` into `next` ([`tap_chunk`]); `src` holds the grid's `cells_y`
-/// rows, row `j` at `j & wrap`. Returns the first value not done.
+/// rows. Returns the first value not done.
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.
@@ -111,7 +111,6 @@ pub(super) unsafe fn cols_strip(
     r: usize,
     src: &[f64],
     row_len: usize,
-    wrap: usize,
     cells_y: usize,
     j: isize,
     out: &mut [f64],
@@ -120,7 +119,7 @@ pub(super) unsafe fn cols_strip(
     end: usize,
 ) -> usize {
     // SAFETY (every `load`/`store`): AVX2 and FMA are enabled in this function.
-    let row = |jj: isize, c: usize| unsafe { load(&src[(jj as usize & wrap) * row_len + c..]) }.map(Lanes);
+    let row = |jj: isize, c: usize| unsafe { load(&src[jj as usize * row_len + c..]) }.map(Lanes);
     while c + LANES <= end {
         let acc = tap_chunk::<Lanes>(w, r, 0..cells_y as isize, j, |jj| row(jj, c));
         unsafe { store(&acc.map(|v| v.0), &mut out[c..]) };

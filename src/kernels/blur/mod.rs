@@ -170,40 +170,16 @@ fn store<const V: usize>(a: &[f64x4; V], d: &mut [f64]) {
 /// Vertical pass for output rows `row0..row0 + dst.len() / row_len` of a grid
 /// with `cells_y` rows: `src` is the whole grid, `dst` the band.
 pub fn blur_cols_band(taps: &Taps, row_len: usize, cells_y: usize, row0: usize, src: &[f64], dst: &mut [f64]) {
-    blur_cols_band_on(Isa::detect(), taps, row_len, cells_y, row0, src, usize::MAX, dst)
-}
-
-/// [`blur_cols_band`] reading a ring of the grid's rows: row `j` is
-/// `src[(j % ring)·row_len..]`, `ring` a power of two (`None` otherwise). The
-/// caller keeps every row within the radius of the band there.
-pub fn blur_cols_band_ring(
-    taps: &Taps,
-    row_len: usize,
-    cells_y: usize,
-    row0: usize,
-    src: &[f64],
-    ring: usize,
-    dst: &mut [f64],
-) -> Option<()> {
-    if !ring.is_power_of_two() || src.len() < ring * row_len {
-        return None;
-    }
-    blur_cols_band_on(Isa::detect(), taps, row_len, cells_y, row0, src, ring - 1, dst);
-    Some(())
+    blur_cols_band_on(Isa::detect(), taps, row_len, cells_y, row0, src, dst)
 }
 
 /// [`blur_cols_band`] on the given instruction set (its Gaussian chunks in
-/// [`avx2`] where [`Isa::intrinsics`]), row `j` of the grid being row `j & wrap`
-/// of `src` (`usize::MAX`: the whole grid).
-#[allow(clippy::too_many_arguments)]
-fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0: usize, src: &[f64], wrap: usize, dst: &mut [f64]) {
+/// [`avx2`] where [`Isa::intrinsics`]).
+fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0: usize, src: &[f64], dst: &mut [f64]) {
     let _ = isa;
     let rows = dst.len() / row_len;
     let r = taps.radius as isize;
-    let row = |j: isize| {
-        let j = j as usize & wrap;
-        &src[j * row_len..(j + 1) * row_len]
-    };
+    let row = |j: isize| &src[j as usize * row_len..(j as usize + 1) * row_len];
     if taps.is_box {
         // Sliding window down the band, initialised at the band start.
         let (first, rest) = dst.split_at_mut(row_len.min(dst.len()));
@@ -246,7 +222,7 @@ fn blur_cols_band_on(isa: Isa, taps: &Taps, row_len: usize, cells_y: usize, row0
             #[cfg(target_arch = "x86_64")]
             if isa.intrinsics() {
                 // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`); slices are bounds-checked.
-                c = unsafe { avx2::cols_strip(&taps.w, r, src, row_len, wrap, cells_y, j, out, next, c, s1) };
+                c = unsafe { avx2::cols_strip(&taps.w, r, src, row_len, cells_y, j, out, next, c, s1) };
             }
             while c + LANES <= s1 {
                 let acc = tap_chunk::<f64x4>(&taps.w, r, 0..cells_y as isize, j, |jj| load::<VECS>(&row(jj)[c..]));
@@ -475,8 +451,8 @@ mod tests {
             for (row_len, cells_y, row0, rows) in [(16usize, 5usize, 0usize, 5usize), (40, 9, 2, 4), (300, 12, 3, 6), (517, 7, 0, 7)] {
                 let (mut p, mut a) = ([0f64; 4096], [0f64; 4096]);
                 let n = rows * row_len;
-                blur_cols_band_on(Isa::Portable, &taps, row_len, cells_y, row0, &src[..row_len * cells_y], usize::MAX, &mut p[..n]);
-                blur_cols_band_on(Isa::Avx2Fma, &taps, row_len, cells_y, row0, &src[..row_len * cells_y], usize::MAX, &mut a[..n]);
+                blur_cols_band_on(Isa::Portable, &taps, row_len, cells_y, row0, &src[..row_len * cells_y], &mut p[..n]);
+                blur_cols_band_on(Isa::Avx2Fma, &taps, row_len, cells_y, row0, &src[..row_len * cells_y], &mut a[..n]);
                 same(&p[..n], &a[..n], ("cols: radius, row_len, rows", radius, row_len, cells_y));
             }
         }
