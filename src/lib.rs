@@ -75,7 +75,7 @@ pub use flr::config::{Blur, FlrConfig};
 pub use flr::{CheckedFrame, Flr, Stage, Tiled};
 #[cfg(feature = "flr")]
 #[doc(hidden)]
-pub use flr::{Parts, ScratchLayout, Stats, StatsSums};
+pub use flr::{Parts, ScratchLayout, Stats};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 pub use history::History;

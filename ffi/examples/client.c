@@ -361,12 +361,13 @@ int main(int argc, char **argv) {
             views[v]->width = FW;
             views[v]->height = FH;
         }
-        const uint32_t tile = 64; /* 2 x 1 tiles here; 0 = the default (512) */
+        LrdFlnrConfig fcfg = lrd_flnr_config_default(wts, (size_t)wlen);
+        fcfg.tile = 64; /* 2 x 1 tiles here; 0 = the default (512) */
         size_t fbytes = 0, tbytes = 0;
         uint32_t ftiles = 0;
-        CHECK(lrd_flnr_scratch_size(wts, (size_t)wlen, tile, FW, FH, &fbytes));
-        CHECK(lrd_flnr_tile_count(wts, (size_t)wlen, tile, FW, FH, &ftiles));
-        CHECK(lrd_flnr_tiled_scratch_size(wts, (size_t)wlen, tile, FW, FH, 2, &tbytes));
+        CHECK(lrd_flnr_scratch_size(&fcfg, FW, FH, &fbytes));
+        CHECK(lrd_flnr_tile_count(&fcfg, FW, FH, &ftiles));
+        CHECK(lrd_flnr_tiled_scratch_size(&fcfg, FW, FH, 2, &tbytes));
         void *fscratch = malloc(fbytes), *ftscratch = malloc(tbytes);
         float *fa = malloc(sizeof(float) * 3 * FW * FH), *fb = malloc(sizeof(float) * 3 * FW * FH);
         if (!fscratch || !ftscratch || !fa || !fb) return 2;
@@ -375,17 +376,19 @@ int main(int argc, char **argv) {
         fo.height = FH;
         fo.data = fa;
         double t0 = now_ms();
-        CHECK(lrd_flnr_denoise(wts, (size_t)wlen, tile, &crop, &fo, fscratch, fbytes, NULL));
+        CHECK(lrd_flnr_denoise(&fcfg, &crop, &fo, fscratch, fbytes, NULL));
         double flnr_ms = now_ms() - t0;
         fo.data = fb;
-        CHECK(lrd_flnr_run_tile(wts, (size_t)wlen, tile, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_PREPARE, 0, 0, NULL));
+        CHECK(lrd_flnr_run_tile(&fcfg, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_PREPARE, 0, 0, NULL));
         for (uint32_t t = 0; t < ftiles; t++)
-            CHECK(lrd_flnr_run_tile(wts, (size_t)wlen, tile, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_NETWORK, t, t % 2, NULL));
-        CHECK(lrd_flnr_run_tile(wts, (size_t)wlen, tile, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_FLR, 0, 0, NULL));
+            CHECK(lrd_flnr_run_tile(&fcfg, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_NETWORK, t, t % 2, NULL));
+        CHECK(lrd_flnr_run_tile(&fcfg, &crop, &fo, ftscratch, tbytes, 2, LRD_FLNR_STAGE_FLR, 0, 0, NULL));
         if (memcmp(fa, fb, sizeof(float) * 3 * FW * FH) != 0) return 8;
         for (size_t i = 0; i < 3 * (size_t)FW * FH; i++)
             if (!(fa[i] >= 0.0f && fa[i] < 1e30f)) return 8;
-        if (lrd_flnr_denoise(wts, (size_t)wlen - 1, tile, &crop, &fo, fscratch, fbytes, NULL) != LRD_STATUS_INVALID_CONFIG) return 3;
+        LrdFlnrConfig fbad = fcfg;
+        fbad.weights_bytes -= 1;
+        if (lrd_flnr_denoise(&fbad, &crop, &fo, fscratch, fbytes, NULL) != LRD_STATUS_INVALID_CONFIG) return 3;
         printf("FLNR %dx%d crop: %zu bytes of weights, %zu bytes of scratch, whole %.1f ms; %u tiles in stages: identical\n",
                FW, FH, (size_t)wlen, fbytes, flnr_ms, ftiles);
         free(wts); free(fscratch); free(ftscratch); free(fa); free(fb);

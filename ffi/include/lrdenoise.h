@@ -774,6 +774,33 @@ typedef struct LrdWalrConfig {
 } LrdWalrConfig;
 
 /**
+ * FLNR configuration: the network and how it runs. Start from
+ * `lrd_flnr_config_default(weights, weights_bytes)`.
+ */
+typedef struct LrdFlnrConfig {
+  /**
+   * The weight blob (e.g. the contents of `train/flnr.bin`): read during
+   * each call, not kept after it.
+   */
+  const uint8_t *weights;
+  /**
+   * Bytes at `weights`.
+   */
+  size_t weights_bytes;
+  /**
+   * Network tile edge in pixels (at least 64; 0: the default, 512).
+   */
+  uint32_t tile;
+  /**
+   * Firefly clamp factor k of the FLR fit with the learned guides (as
+   * `LrdFlrConfig::fireflies`: finite, ≥ 1); 0 turns it off. Default 1.5. The network
+   * reads the light unclamped (its input, ln(1 + light / mean), already
+   * compresses outliers).
+   */
+  float fireflies;
+} LrdFlnrConfig;
+
+/**
  * One compute dispatch of the GPU path: the WGSL entry point and its workgroup counts.
  */
 typedef struct LrdGpuPass {
@@ -1029,27 +1056,29 @@ LrdStatus lrd_walr_denoise_temporal(const struct LrdWalrConfig *config,
                                     struct LrdReport *report);
 
 /**
- * Bytes of scratch `lrd_flnr_denoise` needs for `width`×`height` frames with
- * the network `weights` (`weights_bytes` bytes, e.g. the contents of
- * `train/flnr.bin`) run in tiles of `tile` px (0: the default, 512).
+ * The default FLNR configuration for the network `weights` (`weights_bytes`
+ * bytes): the default tile and firefly clamp.
  */
-LrdStatus lrd_flnr_scratch_size(const uint8_t *weights,
-                                size_t weights_bytes,
-                                uint32_t tile,
+struct LrdFlnrConfig lrd_flnr_config_default(const uint8_t *weights, size_t weights_bytes);
+
+/**
+ * Bytes of scratch `lrd_flnr_denoise` needs for `width`×`height` frames with
+ * `config`.
+ */
+LrdStatus lrd_flnr_scratch_size(const struct LrdFlnrConfig *config,
                                 uint32_t width,
                                 uint32_t height,
                                 size_t *bytes);
 
 /**
- * FLNR (FLR with guides written by the network `weights`) on the calling
+ * FLNR (FLR with guides written by the network of `config`) on the calling
  * thread. The frame needs normal, depth and AO guides and no `guides_low`;
  * `out` (3 channels) has the frame's size. `scratch`: 8-byte aligned, at
- * least `lrd_flnr_scratch_size` bytes (same `weights`, `tile`, size). A blob
- * that does not parse gives LRD_STATUS_INVALID_CONFIG. `report` may be NULL.
+ * least `lrd_flnr_scratch_size` bytes (same config and size). A blob that
+ * does not parse, a tile below 64 or a `fireflies` that is neither 0 nor
+ * finite and ≥ 1 give LRD_STATUS_INVALID_CONFIG. `report` may be NULL.
  */
-LrdStatus lrd_flnr_denoise(const uint8_t *weights,
-                           size_t weights_bytes,
-                           uint32_t tile,
+LrdStatus lrd_flnr_denoise(const struct LrdFlnrConfig *config,
                            const struct LrdFrame *frame,
                            const struct LrdImageMut *out,
                            void *scratch,
@@ -1059,9 +1088,7 @@ LrdStatus lrd_flnr_denoise(const uint8_t *weights,
 /**
  * Number of network tiles of a threaded FLNR run (LRD_FLNR_STAGE_NETWORK).
  */
-LrdStatus lrd_flnr_tile_count(const uint8_t *weights,
-                              size_t weights_bytes,
-                              uint32_t tile,
+LrdStatus lrd_flnr_tile_count(const struct LrdFlnrConfig *config,
                               uint32_t width,
                               uint32_t height,
                               uint32_t *count);
@@ -1070,9 +1097,7 @@ LrdStatus lrd_flnr_tile_count(const uint8_t *weights,
  * Bytes of scratch a threaded FLNR run with `workers` concurrent network
  * tiles needs (`lrd_flnr_run_tile`).
  */
-LrdStatus lrd_flnr_tiled_scratch_size(const uint8_t *weights,
-                                      size_t weights_bytes,
-                                      uint32_t tile,
+LrdStatus lrd_flnr_tiled_scratch_size(const struct LrdFlnrConfig *config,
                                       uint32_t width,
                                       uint32_t height,
                                       uint32_t workers,
@@ -1082,7 +1107,7 @@ LrdStatus lrd_flnr_tiled_scratch_size(const uint8_t *weights,
  * Runs one tile of one stage of a threaded FLNR run.
  *
  * Rules (they make concurrent calls safe):
- * - every call of a frame passes the same weights, tile size, frame, out,
+ * - every call of a frame passes the same config, frame, out,
  *   scratch (8-byte aligned, at least `lrd_flnr_tiled_scratch_size(.., workers, ..)`
  *   bytes) and `workers`;
  * - stages run in order PREPARE (tile 0), NETWORK (tiles 0 .. `lrd_flnr_tile_count`),
@@ -1097,9 +1122,7 @@ LrdStatus lrd_flnr_tiled_scratch_size(const uint8_t *weights,
  * since PREPARE, return LRD_STATUS_STAGE_ORDER. `report` may be NULL (FLR
  * stage only adds to it).
  */
-LrdStatus lrd_flnr_run_tile(const uint8_t *weights,
-                            size_t weights_bytes,
-                            uint32_t tile_size,
+LrdStatus lrd_flnr_run_tile(const struct LrdFlnrConfig *config,
                             const struct LrdFrame *frame,
                             const struct LrdImageMut *out,
                             void *scratch,

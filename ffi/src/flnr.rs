@@ -20,17 +20,46 @@ pub enum LrdFlnrStage {
     LRD_FLNR_STAGE_FLR = 2,
 }
 
-/// The network blob `weights` (`weights_bytes` bytes) planned for `width`×`height`
-/// frames in tiles of `tile` px (0: the library's default).
-fn flnr_plan<'w>(weights: *const u8, weights_bytes: usize, tile: u32, width: u32, height: u32) -> Result<Flnr<'w>, LrdStatus> {
-    if weights.is_null() {
+/// FLNR configuration: the network and how it runs. Start from
+/// `lrd_flnr_config_default(weights, weights_bytes)`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdFlnrConfig {
+    /// The weight blob (e.g. the contents of `train/flnr.bin`): read during
+    /// each call, not kept after it.
+    pub weights: *const u8,
+    /// Bytes at `weights`.
+    pub weights_bytes: usize,
+    /// Network tile edge in pixels (at least 64; 0: the default, 512).
+    pub tile: u32,
+    /// Firefly clamp factor k of the FLR fit with the learned guides (as
+    /// `LrdFlrConfig::fireflies`: finite, ≥ 1); 0 turns it off. Default 1.5. The network
+    /// reads the light unclamped (its input, ln(1 + light / mean), already
+    /// compresses outliers).
+    pub fireflies: f32,
+}
+
+/// The default FLNR configuration for the network `weights` (`weights_bytes`
+/// bytes): the default tile and firefly clamp.
+#[no_mangle]
+pub extern "C" fn lrd_flnr_config_default(weights: *const u8, weights_bytes: usize) -> LrdFlnrConfig {
+    let d = FlnrConfig::new(&[]);
+    LrdFlnrConfig { weights, weights_bytes, tile: d.tile as u32, fireflies: d.fireflies.unwrap_or(0.0) }
+}
+
+/// The network of `config` planned for `width`×`height` frames.
+fn flnr_plan<'w>(config: *const LrdFlnrConfig, width: u32, height: u32) -> Result<Flnr<'w>, LrdStatus> {
+    // SAFETY: checked for NULL; the caller passes a valid config pointer.
+    let c = unsafe { config.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    if c.weights.is_null() {
         return Err(LRD_STATUS_NULL_POINTER);
     }
     // SAFETY: the caller passes `weights_bytes` readable bytes at `weights`,
     // unchanged for the duration of the call (the header's contract).
-    let blob = unsafe { core::slice::from_raw_parts(weights, weights_bytes) };
-    let tile = if tile == 0 { lrdenoise_core::flnr::DEFAULT_TILE } else { tile as usize };
-    Flnr::new(FlnrConfig { tile, ..FlnrConfig::new(blob) }, width as usize, height as usize).map_err(status_of)
+    let blob = unsafe { core::slice::from_raw_parts(c.weights, c.weights_bytes) };
+    let tile = if c.tile == 0 { lrdenoise_core::flnr::DEFAULT_TILE } else { c.tile as usize };
+    let fireflies = (c.fireflies != 0.0).then_some(c.fireflies);
+    Flnr::new(FlnrConfig { weights: blob, tile, fireflies }, width as usize, height as usize).map_err(status_of)
 }
 
 /// Byte offsets of a threaded FLNR scratch: the header (input scales), FLR's
@@ -61,19 +90,11 @@ const HEADER: usize = 256;
 const FLNR_PREPARED: u64 = 0x6c72_645f_666c_6e72;
 
 /// Bytes of scratch `lrd_flnr_denoise` needs for `width`×`height` frames with
-/// the network `weights` (`weights_bytes` bytes, e.g. the contents of
-/// `train/flnr.bin`) run in tiles of `tile` px (0: the default, 512).
+/// `config`.
 #[no_mangle]
-pub unsafe extern "C" fn lrd_flnr_scratch_size(
-    weights: *const u8,
-    weights_bytes: usize,
-    tile: u32,
-    width: u32,
-    height: u32,
-    bytes: *mut usize,
-) -> LrdStatus {
+pub unsafe extern "C" fn lrd_flnr_scratch_size(config: *const LrdFlnrConfig, width: u32, height: u32, bytes: *mut usize) -> LrdStatus {
     guard(|| {
-        let fl = flnr_plan(weights, weights_bytes, tile, width, height)?;
+        let fl = flnr_plan(config, width, height)?;
         let need = fl
             .flr_scratch_len()
             .checked_mul(8)
@@ -85,17 +106,16 @@ pub unsafe extern "C" fn lrd_flnr_scratch_size(
     })
 }
 
-/// FLNR (FLR with guides written by the network `weights`) on the calling
+/// FLNR (FLR with guides written by the network of `config`) on the calling
 /// thread. The frame needs normal, depth and AO guides and no `guides_low`;
 /// `out` (3 channels) has the frame's size. `scratch`: 8-byte aligned, at
-/// least `lrd_flnr_scratch_size` bytes (same `weights`, `tile`, size). A blob
-/// that does not parse gives LRD_STATUS_INVALID_CONFIG. `report` may be NULL.
+/// least `lrd_flnr_scratch_size` bytes (same config and size). A blob that
+/// does not parse, a tile below 64 or a `fireflies` that is neither 0 nor
+/// finite and ≥ 1 give LRD_STATUS_INVALID_CONFIG. `report` may be NULL.
 #[no_mangle]
 #[allow(clippy::too_many_arguments)]
 pub unsafe extern "C" fn lrd_flnr_denoise(
-    weights: *const u8,
-    weights_bytes: usize,
-    tile: u32,
+    config: *const LrdFlnrConfig,
     frame: *const LrdFrame,
     out: *const LrdImageMut,
     scratch: *mut c_void,
@@ -105,7 +125,7 @@ pub unsafe extern "C" fn lrd_flnr_denoise(
     guard(|| {
         // SAFETY: the caller passes valid (or NULL) pointers.
         let (frame, out) = unsafe { frame_and_out(frame, out)? };
-        let fl = flnr_plan(weights, weights_bytes, tile, out.width, out.height)?;
+        let fl = flnr_plan(config, out.width, out.height)?;
         check_scratch(scratch)?;
         let (flr_len, net_len) = (fl.flr_scratch_len(), fl.scratch_len());
         let need = flr_len.checked_mul(8).and_then(|a| net_len.checked_mul(4).and_then(|b| a.checked_add(b)));
@@ -130,16 +150,9 @@ pub unsafe extern "C" fn lrd_flnr_denoise(
 
 /// Number of network tiles of a threaded FLNR run (LRD_FLNR_STAGE_NETWORK).
 #[no_mangle]
-pub unsafe extern "C" fn lrd_flnr_tile_count(
-    weights: *const u8,
-    weights_bytes: usize,
-    tile: u32,
-    width: u32,
-    height: u32,
-    count: *mut u32,
-) -> LrdStatus {
+pub unsafe extern "C" fn lrd_flnr_tile_count(config: *const LrdFlnrConfig, width: u32, height: u32, count: *mut u32) -> LrdStatus {
     guard(|| {
-        let (nx, ny) = flnr_plan(weights, weights_bytes, tile, width, height)?.tile_grid();
+        let (nx, ny) = flnr_plan(config, width, height)?.tile_grid();
         let n = u32::try_from(nx * ny).map_err(|_| LRD_STATUS_INVALID_ARGUMENT)?;
         // SAFETY: NULL-checked; the caller passes a valid pointer.
         *unsafe { count.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = n;
@@ -152,9 +165,7 @@ pub unsafe extern "C" fn lrd_flnr_tile_count(
 #[no_mangle]
 #[allow(clippy::too_many_arguments)]
 pub unsafe extern "C" fn lrd_flnr_tiled_scratch_size(
-    weights: *const u8,
-    weights_bytes: usize,
-    tile: u32,
+    config: *const LrdFlnrConfig,
     width: u32,
     height: u32,
     workers: u32,
@@ -164,7 +175,7 @@ pub unsafe extern "C" fn lrd_flnr_tiled_scratch_size(
         if workers == 0 {
             return Err(LRD_STATUS_INVALID_ARGUMENT);
         }
-        let fl = flnr_plan(weights, weights_bytes, tile, width, height)?;
+        let fl = flnr_plan(config, width, height)?;
         let total = flnr_layout(&fl, workers as usize)?.total;
         // SAFETY: NULL-checked; the caller passes a valid pointer.
         *unsafe { bytes.as_mut() }.ok_or(LRD_STATUS_NULL_POINTER)? = total;
@@ -175,7 +186,7 @@ pub unsafe extern "C" fn lrd_flnr_tiled_scratch_size(
 /// Runs one tile of one stage of a threaded FLNR run.
 ///
 /// Rules (they make concurrent calls safe):
-/// - every call of a frame passes the same weights, tile size, frame, out,
+/// - every call of a frame passes the same config, frame, out,
 ///   scratch (8-byte aligned, at least `lrd_flnr_tiled_scratch_size(.., workers, ..)`
 ///   bytes) and `workers`;
 /// - stages run in order PREPARE (tile 0), NETWORK (tiles 0 .. `lrd_flnr_tile_count`),
@@ -192,9 +203,7 @@ pub unsafe extern "C" fn lrd_flnr_tiled_scratch_size(
 #[no_mangle]
 #[allow(clippy::too_many_arguments)]
 pub unsafe extern "C" fn lrd_flnr_run_tile(
-    weights: *const u8,
-    weights_bytes: usize,
-    tile_size: u32,
+    config: *const LrdFlnrConfig,
     frame: *const LrdFrame,
     out: *const LrdImageMut,
     scratch: *mut c_void,
@@ -208,7 +217,7 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
     guard(|| {
         // SAFETY: the caller passes valid (or NULL) pointers.
         let (frame, out) = unsafe { frame_and_out(frame, out)? };
-        let fl = flnr_plan(weights, weights_bytes, tile_size, out.width, out.height)?;
+        let fl = flnr_plan(config, out.width, out.height)?;
         check_scratch(scratch)?;
         // As in lrd_flr_run_tile: no worker index is in [0, 0); every stage checks it.
         if workers == 0 || worker >= workers {

@@ -513,105 +513,139 @@ fn flnr_matches_the_rust_api() {
     fl.denoise(&rf, &mut s32, &mut s64, &mut wv).unwrap();
     assert!(want.iter().all(|v| v.is_finite()));
 
-    let (bp, bl) = (blob.as_ptr(), blob.len());
+    let cfg = LrdFlnrConfig { tile, ..lrd_flnr_config_default(blob.as_ptr(), blob.len()) };
     unsafe {
         // whole frame
         let mut bytes = 0usize;
-        assert_eq!(lrd_flnr_scratch_size(bp, bl, tile, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_scratch_size(&cfg, w, h, &mut bytes), LrdStatus::LRD_STATUS_OK);
         let mut scratch = vec![0f64; bytes / 8 + 1];
         let sp = scratch.as_mut_ptr() as *mut _;
         let mut out = vec![0f32; 3 * n];
         let o = packed_out(&mut out, w, h);
         let mut rep = LrdReport::default();
-        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &frame, &o, sp, bytes, &mut rep), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_denoise(&cfg, &frame, &o, sp, bytes, &mut rep), LrdStatus::LRD_STATUS_OK);
         assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "C whole frame != Rust");
         assert_eq!(lrd_features() & LRD_FEATURE_FLNR, LRD_FEATURE_FLNR);
+        // the firefly clamp of the FLR fit: off, or another k, as in Rust
+        let bright: Vec<f32> = noisy.iter().enumerate().map(|(i, v)| if i % 997 == 0 { v * 1e4 } else { *v }).collect();
+        let mut bf = frame;
+        bf.noisy = img(bright.as_ptr(), w, h, 3);
+        let rb = lrdenoise_core::Frame::new(lrdenoise_core::ImageView::interleaved(&bright, w as usize, h as usize, 3).unwrap(), rf.guides);
+        for k in [0.0f32, 3.0] {
+            let rc = lrdenoise_core::FlnrConfig {
+                tile: tile as usize,
+                fireflies: (k != 0.0).then_some(k),
+                ..lrdenoise_core::FlnrConfig::new(&blob)
+            };
+            let rfl = Flnr::new(rc, w as usize, h as usize).unwrap();
+            let mut rwant = vec![0f32; 3 * n];
+            let mut rv = lrdenoise_core::ImageViewMut::interleaved(&mut rwant, w as usize, h as usize, 3).unwrap();
+            let rrep = rfl.denoise(&rb, &mut s32, &mut s64, &mut rv).unwrap();
+            let mut crep = LrdReport::default();
+            let kc = LrdFlnrConfig { fireflies: k, ..cfg };
+            assert_eq!(lrd_flnr_denoise(&kc, &bf, &o, sp, bytes, &mut crep), LrdStatus::LRD_STATUS_OK);
+            assert!(out.iter().zip(&rwant).all(|(a, b)| a.to_bits() == b.to_bits()), "C fireflies {k} != Rust");
+            assert_eq!(crep.clamped_fireflies, rrep.clamped_fireflies, "k {k}");
+            assert_eq!(crep.clamped_fireflies == 0, k == 0.0, "k {k}: {}", crep.clamped_fireflies);
+        }
+        for k in [0.5f32, -1.0, f32::NAN, f32::INFINITY] {
+            let kc = LrdFlnrConfig { fireflies: k, ..cfg };
+            assert_eq!(lrd_flnr_denoise(&kc, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG, "k {k}");
+        }
+        assert_eq!(lrd_flnr_denoise(null(), &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        let d = lrd_flnr_config_default(blob.as_ptr(), blob.len());
+        assert_eq!((d.tile, d.fireflies), (512, 1.5));
 
         // errors
-        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &frame, &o, sp, bytes - 1, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
-        assert_eq!(lrd_flnr_denoise(null(), bl, tile, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
-        assert_eq!(lrd_flnr_denoise(bp, bl - 1, tile, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
-        assert_eq!(lrd_flnr_denoise(bp, bl, 8, &frame, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        assert_eq!(lrd_flnr_denoise(&cfg, &frame, &o, sp, bytes - 1, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
+        assert_eq!(
+            lrd_flnr_denoise(&LrdFlnrConfig { weights: null(), ..cfg }, &frame, &o, sp, bytes, null_mut()),
+            LrdStatus::LRD_STATUS_NULL_POINTER
+        );
+        assert_eq!(
+            lrd_flnr_denoise(&LrdFlnrConfig { weights_bytes: cfg.weights_bytes - 1, ..cfg }, &frame, &o, sp, bytes, null_mut()),
+            LrdStatus::LRD_STATUS_INVALID_CONFIG
+        );
+        assert_eq!(
+            lrd_flnr_denoise(&LrdFlnrConfig { tile: 8, ..cfg }, &frame, &o, sp, bytes, null_mut()),
+            LrdStatus::LRD_STATUS_INVALID_CONFIG
+        );
         let mut bad = blob.clone();
         bad[0] ^= 1;
-        assert_eq!(lrd_flnr_scratch_size(bad.as_ptr(), bad.len(), tile, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
-        assert_eq!(lrd_flnr_scratch_size(bp, bl, tile, w, h, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+        assert_eq!(
+            lrd_flnr_scratch_size(&LrdFlnrConfig { weights: bad.as_ptr(), ..cfg }, w, h, &mut bytes),
+            LrdStatus::LRD_STATUS_INVALID_CONFIG
+        );
+        assert_eq!(lrd_flnr_scratch_size(&cfg, w, h, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
         let mut nf = frame;
         nf.guides.ao = none();
-        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_GUIDE_MISMATCH);
+        assert_eq!(lrd_flnr_denoise(&cfg, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_GUIDE_MISMATCH);
         nf = frame;
         nf.guides_low.depth = img(depth.as_ptr(), w, h, 1);
-        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+        assert_eq!(lrd_flnr_denoise(&cfg, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_UNSUPPORTED);
         nf = frame;
         nf.guides.depth.width = w - 1;
-        assert_eq!(lrd_flnr_denoise(bp, bl, tile, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_SIZE_MISMATCH);
+        assert_eq!(lrd_flnr_denoise(&cfg, &nf, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_SIZE_MISMATCH);
 
         // threaded stages, two workers, tiles in reverse order
         let mut count = 0u32;
-        assert_eq!(lrd_flnr_tile_count(bp, bl, tile, w, h, &mut count), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_tile_count(&cfg, w, h, &mut count), LrdStatus::LRD_STATUS_OK);
         assert_eq!(count, 6);
         let mut tb = 0usize;
-        assert_eq!(lrd_flnr_tiled_scratch_size(bp, bl, tile, w, h, 0, &mut tb), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
-        assert_eq!(lrd_flnr_tiled_scratch_size(bp, bl, tile, w, h, 2, &mut tb), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_tiled_scratch_size(&cfg, w, h, 0, &mut tb), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        assert_eq!(lrd_flnr_tiled_scratch_size(&cfg, w, h, 2, &mut tb), LrdStatus::LRD_STATUS_OK);
         let mut tiled = vec![0f64; tb / 8 + 1];
         let tp = tiled.as_mut_ptr() as *mut _;
         const PREPARE: u32 = LrdFlnrStage::LRD_FLNR_STAGE_PREPARE as u32;
         const NETWORK: u32 = LrdFlnrStage::LRD_FLNR_STAGE_NETWORK as u32;
         const FLR: u32 = LrdFlnrStage::LRD_FLNR_STAGE_FLR as u32;
         // a network tile before PREPARE (fresh scratch), and bad stage / tile / worker
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
-        assert_eq!(
-            lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb - 1, 2, PREPARE, 0, 0, null_mut()),
-            LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
-        );
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, 9, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 0, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 1, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb - 1, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, 9, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 0, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, PREPARE, 1, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         out.fill(0.0);
         let o = packed_out(&mut out, w, h);
         // the worker index is checked in every stage
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 0, 2, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 7, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, PREPARE, 0, 2, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, FLR, 0, 7, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
         // FLR before every network tile has run
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
-        assert_eq!(
-            lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, count, 0, null_mut()),
-            LrdStatus::LRD_STATUS_INVALID_TILE
-        );
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, 0, 2, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, FLR, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, NETWORK, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, FLR, 0, 0, null_mut()), LrdStatus::LRD_STATUS_STAGE_ORDER);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, PREPARE, 0, 0, null_mut()), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, NETWORK, count, 0, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, NETWORK, 0, 2, null_mut()), LrdStatus::LRD_STATUS_INVALID_TILE);
         for t in (0..count).rev() {
-            assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, NETWORK, t, t % 2, null_mut()), LrdStatus::LRD_STATUS_OK);
+            assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, NETWORK, t, t % 2, null_mut()), LrdStatus::LRD_STATUS_OK);
         }
         let mut trep = LrdReport::default();
-        assert_eq!(lrd_flnr_run_tile(bp, bl, tile, &frame, &o, tp, tb, 2, FLR, 0, 0, &mut trep), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_run_tile(&cfg, &frame, &o, tp, tb, 2, FLR, 0, 0, &mut trep), LrdStatus::LRD_STATUS_OK);
         assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "C tiled != Rust");
         assert_eq!((trep.nonfinite_noisy, trep.fallback_pixels), (rep.nonfinite_noisy, rep.fallback_pixels));
 
         // the network stage on three threads at once, each with its own worker
-        assert_eq!(lrd_flnr_tiled_scratch_size(bp, bl, tile, w, h, 3, &mut tb), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(lrd_flnr_tiled_scratch_size(&cfg, w, h, 3, &mut tb), LrdStatus::LRD_STATUS_OK);
         let mut tiled = vec![0f64; tb / 8 + 1];
         out.fill(0.0);
         let o = packed_out(&mut out, w, h);
         /// The call's pointers, shared with the threads (the C API's rules make it safe).
         #[derive(Clone, Copy)]
-        struct Shared(*const u8, usize, *const LrdFrame, *const LrdImageMut, *mut core::ffi::c_void, usize);
+        struct Shared(*const LrdFlnrConfig, *const LrdFrame, *const LrdImageMut, *mut core::ffi::c_void, usize);
         // SAFETY: the pointees outlive the scope and the threads write only disjoint tiles (lrd_flnr_run_tile's rules).
         unsafe impl Send for Shared {}
         unsafe impl Sync for Shared {}
-        let sh = Shared(bp, bl, &frame, &o, tiled.as_mut_ptr() as *mut _, tb);
-        let run =
-            |stage: u32, t: u32, worker: u32| lrd_flnr_run_tile(sh.0, sh.1, tile, sh.2, sh.3, sh.4, sh.5, 3, stage, t, worker, null_mut());
+        let sh = Shared(&cfg, &frame, &o, tiled.as_mut_ptr() as *mut _, tb);
+        let run = |stage: u32, t: u32, worker: u32| lrd_flnr_run_tile(sh.0, sh.1, sh.2, sh.3, sh.4, 3, stage, t, worker, null_mut());
         assert_eq!(run(PREPARE, 0, 0), LrdStatus::LRD_STATUS_OK);
         std::thread::scope(|s| {
             for worker in 0..3u32 {
                 s.spawn(move || {
                     let sh = sh;
                     for t in (worker..count).step_by(3) {
-                        let st = lrd_flnr_run_tile(sh.0, sh.1, tile, sh.2, sh.3, sh.4, sh.5, 3, NETWORK, t, worker, null_mut());
+                        let st = lrd_flnr_run_tile(sh.0, sh.1, sh.2, sh.3, sh.4, 3, NETWORK, t, worker, null_mut());
                         assert_eq!(st, LrdStatus::LRD_STATUS_OK);
                     }
                 });

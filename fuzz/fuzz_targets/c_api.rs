@@ -166,22 +166,24 @@ fuzz_target!(|d: &[u8]| {
         }
         let len = if d[15] % 8 == 0 { blob.len() / 2 } else { blob.len() };
         let tile = [0, 64, 8, 100][d[16] as usize % 4];
+        let fireflies = [1.5, 0.0, 0.5, f32::NAN][d[16] as usize / 4 % 4];
+        let cfg = LrdFlnrConfig { tile, fireflies, ..lrd_flnr_config_default(blob.as_ptr(), len) };
         let mut fb = 0usize;
-        let st = unsafe { lrd_flnr_scratch_size(blob.as_ptr(), len, tile, w, h, &mut fb) };
+        let st = unsafe { lrd_flnr_scratch_size(&cfg, w, h, &mut fb) };
         assert_ne!(st, LrdStatus::LRD_STATUS_PANIC);
         if st == LrdStatus::LRD_STATUS_OK {
             let mut s = vec![0f64; fb / 8 + 1];
-            let r = unsafe { lrd_flnr_denoise(blob.as_ptr(), len, tile, &frame, &o, s.as_mut_ptr() as *mut _, fb, null_mut()) };
+            let r = unsafe { lrd_flnr_denoise(&cfg, &frame, &o, s.as_mut_ptr() as *mut _, fb, null_mut()) };
             assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
             if r == LrdStatus::LRD_STATUS_OK {
                 assert!(out.iter().all(|v| v.is_finite()), "flnr");
             }
             let mut tb = 0usize;
-            if unsafe { lrd_flnr_tiled_scratch_size(blob.as_ptr(), len, tile, w, h, 1, &mut tb) } == LrdStatus::LRD_STATUS_OK {
+            if unsafe { lrd_flnr_tiled_scratch_size(&cfg, w, h, 1, &mut tb) } == LrdStatus::LRD_STATUS_OK {
                 let mut ts = vec![0f64; tb / 8 + 1];
                 for (stage, t) in [(d[17] as u32 % 4, d[18] as u32 % 3), (0, 0), (1, 0), (2, 0)] {
                     let r = unsafe {
-                        lrd_flnr_run_tile(blob.as_ptr(), len, tile, &frame, &o, ts.as_mut_ptr() as *mut _, tb, 1, stage, t, 0, null_mut())
+                        lrd_flnr_run_tile(&cfg, &frame, &o, ts.as_mut_ptr() as *mut _, tb, 1, stage, t, 0, null_mut())
                     };
                     assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
                 }

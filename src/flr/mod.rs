@@ -124,14 +124,13 @@ pub struct Stats {
     pub scale: [f64; MAX_GUIDES],
 }
 
-/// Running sums of the cells' weights, guide sums and guide squares
-/// ([`Flr::stats_tile`]), turned into [`Stats`] by [`Flr::finish_stats_sums`].
-#[doc(hidden)]
+/// Sums over the cells of their weights, guide sums and guide squares,
+/// turned into [`Stats`] by `Flr::finish_stats_sums`.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct StatsSums {
-    pub n: f64,
-    pub s: [f64; MAX_GUIDES],
-    pub ss: [f64; MAX_GUIDES],
+struct StatsSums {
+    n: f64,
+    s: [f64; MAX_GUIDES],
+    ss: [f64; MAX_GUIDES],
 }
 
 impl Default for Stats {
@@ -827,8 +826,6 @@ impl Flr {
     }
 
     /// Stage 2: frame mean and standard deviation of each guide, from all cells.
-    /// (The same as [`Flr::stats_tile`] over every tile in order, then
-    /// [`Flr::finish_stats_sums`].)
     #[doc(hidden)]
     pub fn finish_stats(&self, cells: &[f64], stats: &mut Stats) -> Result<(), Error> {
         if cells.len() != self.grid_len() {
@@ -837,18 +834,6 @@ impl Flr {
         let mut sums = StatsSums::default();
         self.add_stats(cells, &mut sums);
         self.finish_stats_sums(&sums, stats);
-        Ok(())
-    }
-
-    /// Stage 2 split by tile: adds tile `t`'s cells (its `cells` band, before
-    /// the vertical blur overwrites it) to `sums`. Tiles added in order
-    /// 0, 1, … give exactly [`Flr::finish_stats`]'s sums.
-    #[doc(hidden)]
-    pub fn stats_tile(&self, t: usize, cells_tile: &[f64], sums: &mut StatsSums) -> Result<(), Error> {
-        if cells_tile.len() != self.cells_tile_len(t)? {
-            return Err(Error::InvalidTile { index: t, count: self.tile_count() });
-        }
-        self.add_stats(cells_tile, sums);
         Ok(())
     }
 
@@ -867,8 +852,7 @@ impl Flr {
 
     /// Stage 2's end: the mean and standard deviation of each guide from the
     /// sums of every cell.
-    #[doc(hidden)]
-    pub fn finish_stats_sums(&self, sums: &StatsSums, stats: &mut Stats) {
+    fn finish_stats_sums(&self, sums: &StatsSums, stats: &mut Stats) {
         let (n, s, ss) = (sums.n, &sums.s, &sums.ss);
         for a in 0..self.q {
             let (mean, var) = if n > 0.0 { (s[a] / n, ss[a] / n - (s[a] / n) * (s[a] / n)) } else { (0.0, 0.0) };
