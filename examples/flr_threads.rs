@@ -74,7 +74,7 @@ fn main() -> Result<(), Error> {
     let mut many = vec![0f32; 3 * n];
     let t_many = fastest(runs, || {
         let mut out = ImageViewMut::interleaved(&mut many, w, h, 3)?;
-        flr.denoise_parallel(&frame, &mut tiled_scratch, &mut out, workers, strided(workers))
+        flr.denoise_parallel(&frame, &mut tiled_scratch, &mut out, workers, &strided(workers))
     })?;
 
     // The same schedule, one tile at a time on this thread (worker 0 of 1).

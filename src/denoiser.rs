@@ -3,9 +3,12 @@
 //! much scratch it needs, in f64; `denoise(frame, scratch, out)` returns the
 //! shared [`Report`]. Temporal methods add a caller-owned [`History`].
 //!
+//! `denoise_parallel(frame, scratch, out, workers, for_each)` spreads the
+//! work over the caller's threads ([`Executor`]), bit-identical to `denoise`.
+//!
 //! The methods' own entry points stay (BMFR and WALR take a frame index for
 //! their per-frame grid offsets; FLNR's takes its two scratch types apart);
-//! the traits are what generic callers (the C API, benches, a renderer that
+//! the traits are what generic callers (the C API, `lrd`, a renderer that
 //! switches methods) program against.
 
 use crate::error::Error;
@@ -13,6 +16,7 @@ use crate::guides::Frame;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 use crate::image::ImageView;
 use crate::image::ImageViewMut;
+use crate::parallel::Executor;
 use crate::report::Report;
 
 /// A single-frame denoiser planned for one output size.
@@ -24,6 +28,28 @@ pub trait Denoiser {
     /// Denoises `frame` into `out` (the output size, at least 3 channels).
     /// Allocates nothing.
     fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error>;
+    /// f64 values of scratch [`Denoiser::denoise_parallel`] needs for
+    /// `workers` workers (`None` if it overflows).
+    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let _ = workers;
+        Some(self.scratch_len())
+    }
+    /// [`Denoiser::denoise`] with the work spread by the caller's executor
+    /// over `workers` workers (see [`Executor`]); bit-identical to it. `out`
+    /// must have rows that do not overlap in memory. FLR, BMFR and FLNR run
+    /// their tiles on the executor; a method without a parallel run (WALR)
+    /// runs [`Denoiser::denoise`] on the calling thread.
+    fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let _ = (workers, for_each);
+        self.denoise(frame, scratch, out)
+    }
 }
 
 /// A denoiser with a temporal pipeline over a caller-owned history.
@@ -67,12 +93,26 @@ impl Denoiser for crate::flr::Flr {
     fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
         crate::flr::Flr::denoise(self, frame, scratch, out)
     }
+    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        self.tiled_scratch_len(workers)
+    }
+    fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        crate::flr::Flr::denoise_parallel(self, frame, scratch, out, workers, for_each)
+    }
 }
 
-/// BMFR and WALR: the single frame is frame index 0 of their grid offsets.
+/// BMFR and WALR: the single frame is frame index 0 of their grid offsets;
+/// after `;`, more items of the `Denoiser` impl (BMFR's parallel run).
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 macro_rules! temporal_method {
-    ($ty:ty) => {
+    ($ty:ty $(; $($parallel:tt)*)?) => {
         impl Denoiser for $ty {
             fn size(&self) -> (usize, usize) {
                 <$ty>::size(self)
@@ -83,6 +123,7 @@ macro_rules! temporal_method {
             fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
                 <$ty>::denoise(self, frame, 0, as_f32(scratch, <$ty>::scratch_len(self))?, out)
             }
+            $($($parallel)*)?
         }
         impl TemporalDenoiser for $ty {
             fn history_len(&self) -> usize {
@@ -107,7 +148,23 @@ macro_rules! temporal_method {
 }
 
 #[cfg(feature = "bmfr")]
-temporal_method!(crate::bmfr::Bmfr);
+temporal_method!(crate::bmfr::Bmfr;
+    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        Some(crate::bmfr::Bmfr::parallel_scratch_len(self, 0, workers)?.div_ceil(2))
+    }
+    fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let overflow = Error::InvalidConfig("workers: scratch size overflows");
+        let len = crate::bmfr::Bmfr::parallel_scratch_len(self, 0, workers).ok_or(overflow)?;
+        crate::bmfr::Bmfr::denoise_parallel(self, frame, 0, as_f32(scratch, len)?, out, workers, for_each)
+    }
+);
 #[cfg(feature = "walr")]
 temporal_method!(crate::walr::Walr);
 
@@ -129,5 +186,28 @@ impl Denoiser for crate::flnr::Flnr<'_> {
         let net_len = crate::flnr::Flnr::scratch_len(self);
         let net = &mut bytemuck::cast_slice_mut::<f64, f32>(net)[..net_len];
         crate::flnr::Flnr::denoise(self, frame, net, flr, out)
+    }
+    /// FLR's tiled f64 scratch, then the network's parallel f32 scratch packed two per f64.
+    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        self.flr().tiled_scratch_len(workers)?.checked_add(crate::flnr::Flnr::parallel_scratch_len(self, workers)?.div_ceil(2))
+    }
+    fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let overflow = Error::InvalidConfig("workers: scratch size overflows");
+        let needed = Denoiser::parallel_scratch_len(self, workers).ok_or(overflow)?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let flr_len = self.flr().tiled_scratch_len(workers).ok_or(overflow)?;
+        let net_len = crate::flnr::Flnr::parallel_scratch_len(self, workers).ok_or(overflow)?;
+        let (flr, net) = scratch.split_at_mut(flr_len);
+        let net = &mut bytemuck::cast_slice_mut::<f64, f32>(net)[..net_len];
+        crate::flnr::Flnr::denoise_parallel(self, frame, net, flr, out, workers, for_each)
     }
 }

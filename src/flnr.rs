@@ -41,6 +41,7 @@ use crate::guides::{Frame, GuideSet, MAX_USER_GUIDES};
 use crate::image::{ImageView, ImageViewMut, Layout};
 use crate::kernels::solve::Regularization;
 use crate::nn::UNet;
+use crate::parallel::{Executor, ResultCell, TileRun};
 
 /// Guides the network reads.
 pub const INPUT_GUIDES: GuideSet = GuideSet::NORMAL_DEPTH_AO;
@@ -473,6 +474,76 @@ impl<'w> Flnr<'w> {
         let f = self.learned_frame(frame, g)?;
         self.flr.denoise(&f, flr_scratch, out)
     }
+
+    /// The guide planes' share of a parallel scratch (rounded up to whole
+    /// f64, so that the tile scratches after them stay 8-byte aligned).
+    fn padded_planes_len(&self) -> usize {
+        self.guide_planes_len().div_ceil(2) * 2
+    }
+
+    /// f32 values of the network scratch [`Flnr::denoise_parallel`] needs for
+    /// `workers` workers: the guide planes, then one tile scratch per worker
+    /// (`None` if it overflows). Its FLR part needs
+    /// `flr().tiled_scratch_len(workers)` f64.
+    pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let (nx, ny) = self.tile_grid();
+        TileRun::scratch_len(nx * ny, workers.max(1), self.tile_scratch_len())?.checked_add(self.padded_planes_len())
+    }
+
+    /// [`Flnr::denoise`] with the network's tiles, then FLR's, spread by the
+    /// caller's executor ([`Executor`]); bit-identical to it. `scratch`: at
+    /// least [`Flnr::parallel_scratch_len`] f32; `flr_scratch`: at least
+    /// `flr().tiled_scratch_len(workers)` f64; `out` must have rows that do
+    /// not overlap in memory. Allocates nothing.
+    pub fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f32],
+        flr_scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let views = self.views(frame)?;
+        let sc = self.scale_of(&views[3], &frame.noisy)?;
+        let np = self.padded_planes_len();
+        if scratch.len() < np {
+            return Err(Error::ScratchTooSmall { needed: np, got: scratch.len() });
+        }
+        let (planes, rest) = scratch.split_at_mut(np);
+        let (nx, ny) = self.tile_grid();
+        let run = TileRun::new(rest, nx * ny, workers, self.tile_scratch_len())?;
+        let shared = PlanesPtr(planes.as_mut_ptr());
+        let result = ResultCell::new();
+        for_each(nx * ny, &|t, worker| {
+            result.add(run.run(t, worker, |buf| {
+                let tile = self.run_tile(&views, &frame.noisy, sc, t, buf)?;
+                // SAFETY: the planes hold `guide_planes_len` f32 (checked
+                // above) and are not otherwise used until every tile has
+                // returned; each tile runs once (`TileRun`) and writes only
+                // the pixels of its own rect, disjoint from every other's.
+                unsafe { tile.scatter_to(shared.get()) }?;
+                Ok(Report::default())
+            }))
+        });
+        result.error()?;
+        if !run.all_ran() {
+            return Err(Error::Unsupported("the executor skipped tiles"));
+        }
+        let f = self.learned_frame(frame, &planes[..self.guide_planes_len()])?;
+        self.flr.denoise_parallel(&f, flr_scratch, out, workers, for_each)
+    }
+}
+
+/// The guide planes, written by concurrent tiles at disjoint pixels.
+struct PlanesPtr(*mut f32);
+// SAFETY: only `TileGuides::scatter_to` writes through it, each tile at its own pixels.
+unsafe impl Sync for PlanesPtr {}
+
+impl PlanesPtr {
+    fn get(&self) -> *mut f32 {
+        self.0
+    }
 }
 
 /// The per-frame scales of the network's input ([`Flnr::input_scale`]): every
@@ -517,6 +588,25 @@ impl TileGuides<'_> {
         }
         let s = k * reg.width() * reg.height() + (y - reg.y0) * reg.width() + (r.x0 - reg.x0);
         self.data.get(s..s + r.width())
+    }
+    /// [`TileGuides::scatter`] through a pointer to the planes (at least
+    /// [`Flnr::guide_planes_len`] f32), for tiles that write them concurrently.
+    ///
+    /// # Safety
+    /// `planes` is valid for writes of the planes, and nothing else reads or
+    /// writes this tile's pixels of them meanwhile.
+    unsafe fn scatter_to(&self, planes: *mut f32) -> Result<(), Error> {
+        let (w, h) = self.frame;
+        let r = self.rect;
+        for k in 0..self.planes {
+            for y in r.y0..r.y1 {
+                let src = self.row(k, y).ok_or(Error::InvalidTile { index: y, count: h })?;
+                // SAFETY: the pixel range lies inside plane k (the rect is inside the
+                // frame); the caller keeps it to this call.
+                unsafe { core::ptr::copy_nonoverlapping(src.as_ptr(), planes.add(k * w * h + y * w + r.x0), src.len()) };
+            }
+        }
+        Ok(())
     }
     /// Copies the tile's pixels into the frame-sized guide planes `planes`
     /// (at least [`Flnr::guide_planes_len`] f32; other tiles' pixels are left

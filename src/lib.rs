@@ -55,6 +55,7 @@ pub mod isa;
 pub mod kernels;
 #[cfg(feature = "flnr")]
 pub mod nn;
+pub mod parallel;
 pub mod report;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod reproject;
@@ -82,6 +83,7 @@ pub use history::History;
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
 pub use isa::Kernel;
 pub use kernels::solve::Regularization;
+pub use parallel::Executor;
 pub use report::Report;
 #[cfg(feature = "walr")]
 pub use walr::{Walr, WalrConfig};

@@ -99,3 +99,60 @@ fn flnr_through_the_trait() {
     }
     assert!(matches!(Flnr::new(FlnrConfig { tile: flnr::MIN_TILE - 1, ..FlnrConfig::new(&blob) }, w, h), Err(Error::InvalidConfig(_))));
 }
+
+/// A `for_each` executor on `workers` scoped std threads, worker `w` taking
+/// the indices `w, w + workers, ...`.
+fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
+    move |count, f| {
+        std::thread::scope(|s| {
+            for w in 0..workers {
+                s.spawn(move || (w..count).step_by(workers).for_each(|i| f(i, w)));
+            }
+        });
+    }
+}
+
+/// `denoise_parallel` through the trait equals `denoise` bit for bit for
+/// every method, on real threads, at awkward sizes; an executor that breaks
+/// its contract (skips a tile, runs one twice) gets an error, not a wrong or
+/// racy output.
+#[test]
+fn parallel_through_the_trait_equals_one_thread() {
+    let blob = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/train/flnr.bin")).unwrap();
+    for (w, h) in [(1, 1), (7, 3), (130, 97), (257, 71)] {
+        let f = Owned::synthetic(w, h, 3 + w as u64, 0.3);
+        let flr = Flr::new(FlrConfig::default(), w, h).unwrap();
+        let bmfr = Bmfr::new(BmfrConfig::default(), w, h).unwrap();
+        let walr = Walr::new(WalrConfig::default(), w, h).unwrap();
+        let fl = (w >= flnr::MIN_TILE).then(|| Flnr::new(FlnrConfig { tile: 64, ..FlnrConfig::new(&blob) }, w, h).unwrap());
+        let mut methods: Vec<(&dyn Denoiser, GuideSet, &str)> =
+            vec![(&flr, flr.config().guides, "flr"), (&bmfr, bmfr.config().guides, "bmfr"), (&walr, walr.config().guides, "walr")];
+        if let Some(fl) = &fl {
+            methods.push((fl, flnr::INPUT_GUIDES, "flnr"));
+        }
+        for (m, set, name) in methods {
+            let frame = f.frame(set);
+            let (want, want_rep) = through_trait(m, &frame);
+            for workers in [1, 3] {
+                let mut out = vec![f32::NAN; 3 * w * h];
+                let mut scratch = vec![f64::NAN; m.parallel_scratch_len(workers).unwrap()];
+                let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+                let rep = m.denoise_parallel(&frame, &mut scratch, &mut ov, workers, &threads(workers)).unwrap();
+                assert!(same(&out, &want), "{name} {w}x{h} workers {workers}");
+                assert_eq!(rep, want_rep, "{name} {w}x{h}");
+            }
+            if name == "walr" || h < 64 {
+                continue; // WALR runs on the calling thread; a stage of one tile runs without the executor
+            }
+            let mut scratch = vec![0f64; m.parallel_scratch_len(2).unwrap()];
+            let mut out = vec![0f32; 3 * w * h];
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            let skips = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| (1..n).for_each(|i| f(i, 0));
+            let twice = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| (0..n).chain(0..1).for_each(|i| f(i, 0));
+            for (e, what) in [(&skips as Executor<'_>, "skips"), (&twice, "twice")] {
+                let r = m.denoise_parallel(&frame, &mut scratch, &mut ov, 2, e);
+                assert!(r.is_err(), "{name} {w}x{h}: an executor that {what} was not refused");
+            }
+        }
+    }
+}

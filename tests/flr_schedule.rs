@@ -44,7 +44,7 @@ fn parallel_equals_whole_frame() {
                 let mut scratch = vec![f64::NAN; flr.tiled_scratch_len(workers).unwrap()];
                 let mut out = vec![0f32; 3 * w * h];
                 let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-                let rep = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut ov, workers, threads(workers)).unwrap();
+                let rep = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut ov, workers, &threads(workers)).unwrap();
                 assert_eq!(rep, want_rep, "{w}x{h} {cfg:?}");
                 assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()), "{w}x{h} workers {workers} {cfg:?}");
             }
@@ -63,17 +63,17 @@ fn parallel_refuses_what_it_cannot_do() {
     let mut out = vec![0f32; 3 * w * h];
     let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
     let short = scratch.len() - 1;
-    let e = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch[..short], &mut ov, 2, threads(2));
+    let e = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch[..short], &mut ov, 2, &threads(2));
     assert!(matches!(e, Err(Error::ScratchTooSmall { .. })), "{e:?}");
-    assert!(matches!(flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut ov, 0, threads(1)), Err(Error::InvalidConfig(_))));
+    assert!(matches!(flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut ov, 0, &threads(1)), Err(Error::InvalidConfig(_))));
     // an executor that forgets tiles is caught, not answered with a partial output
     let lazy = |count: usize, f: &(dyn Fn(usize, usize) + Sync)| (0..count.saturating_sub(1)).for_each(|i| f(i, 0));
-    let e = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut ov, 2, lazy);
+    let e = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut ov, 2, &lazy);
     assert!(matches!(e, Err(Error::StageOrder { .. })), "{e:?}");
     // planar output: rows interleave with the other planes' rows
     let mut planar = vec![0f32; 3 * w * h];
     let mut pv = ImageViewMut::new(SamplesMut::F32(&mut planar), w, h, 3, Layout::planar(w, h)).unwrap();
-    let e = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut pv, 2, threads(2));
+    let e = flr.denoise_parallel(&f.frame(cfg.guides), &mut scratch, &mut pv, 2, &threads(2));
     assert!(matches!(e, Err(Error::Unsupported(_))), "{e:?}");
 }
 

@@ -168,50 +168,11 @@ impl FlrRunner {
         let r = match &self.pool {
             None => self.flr.denoise(&frame, &mut self.scratch, &mut ov),
             Some(pool) => {
-                self.flr.denoise_parallel(&frame, &mut self.scratch, &mut ov, self.threads, for_each_in_groups(pool, self.threads))
+                self.flr.denoise_parallel(&frame, &mut self.scratch, &mut ov, self.threads, &for_each_in_groups(pool, self.threads))
             }
         };
         r.map_err(|e| format!("flr: {e}"))
     }
-}
-
-/// Runs `f` on every item, items split into `workers.len()` contiguous groups,
-/// one task per group with its own worker. Reports are summed.
-fn par_groups<T: Send, W: Send>(
-    pool: &rayon::ThreadPool,
-    items: Vec<T>,
-    workers: &mut [W],
-    f: &(dyn Fn(T, &mut W) -> Result<Report, Error> + Sync),
-) -> Result<Report, Error> {
-    let g = workers.len();
-    let per = items.len().div_ceil(g).max(1);
-    let mut groups: Vec<Vec<T>> = (0..g).map(|_| Vec::new()).collect();
-    for (i, it) in items.into_iter().enumerate() {
-        groups[i / per].push(it);
-    }
-    let mut results: Vec<Result<Report, Error>> = (0..g).map(|_| Ok(Report::default())).collect();
-    pool.scope(|s| {
-        for ((group, w), res) in groups.into_iter().zip(workers.iter_mut()).zip(results.iter_mut()) {
-            s.spawn(move |_| {
-                let mut acc = Report::default();
-                for it in group {
-                    match f(it, w) {
-                        Ok(r) => acc += r,
-                        Err(e) => {
-                            *res = Err(e);
-                            return;
-                        }
-                    }
-                }
-                *res = Ok(acc);
-            });
-        }
-    });
-    let mut total = Report::default();
-    for r in results {
-        total += r?;
-    }
-    Ok(total)
 }
 
 /// The rayon executor of [`Flr::denoise_parallel`]: a stage's tiles in
@@ -249,7 +210,7 @@ impl BmfrRunner {
     pub fn new(cfg: BmfrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
         let bmfr = Bmfr::new(cfg, w, h).map_err(|e| format!("bmfr: {e}"))?;
         let threads = threads.max(1);
-        Ok(BmfrRunner { workers: vec![0f32; bmfr.worker_len() * threads], bmfr, threads, pool: pool(threads)? })
+        Ok(BmfrRunner { workers: vec![0f32; bmfr.scratch_len()], bmfr, threads, pool: pool(threads)? })
     }
 
     /// Fits frame `index` (grid offset and regularisation noise) into `out`.
@@ -264,48 +225,15 @@ impl BmfrRunner {
                 let mut ov = ov;
                 b.denoise(&frame, index, &mut self.workers, &mut ov)
             }
-            Some(pool) => (|| {
-                let f = b.check_frame(&frame)?;
-                let nt = b.tile_count(index);
-                let mut bands = Vec::with_capacity(nt);
-                let mut rest = Some(ov);
-                for t in 0..nt {
-                    let (y0, y1) = b.tile_pixel_rows(index, t)?;
-                    let r = rest.take().ok_or(Error::InvalidTile { index: t, count: nt })?;
-                    let (band, r) = r.split_rows(y1 - y0)?;
-                    bands.push((t, band));
-                    rest = r;
+            Some(pool) => {
+                let mut ov = ov;
+                // the frame index moves the block grid, and with it the tile count
+                let len = b.parallel_scratch_len(index, self.threads).ok_or("bmfr: scratch size overflows")?;
+                if self.workers.len() < len {
+                    self.workers.resize(len, 0.0);
                 }
-                let per = nt.div_ceil(self.threads).max(1);
-                let mut results: Vec<Result<BmfrReport, Error>> = (0..self.threads).map(|_| Ok(BmfrReport::default())).collect();
-                let mut groups: Vec<Vec<_>> = (0..self.threads).map(|_| Vec::new()).collect();
-                for (i, it) in bands.into_iter().enumerate() {
-                    groups[i / per].push(it);
-                }
-                let f = &f;
-                pool.scope(|s| {
-                    for ((group, w), res) in groups.into_iter().zip(self.workers.chunks_exact_mut(b.worker_len())).zip(results.iter_mut()) {
-                        s.spawn(move |_| {
-                            let mut acc = BmfrReport::default();
-                            for (t, mut band) in group {
-                                match b.fit_tile(f, index, t, w, &mut band) {
-                                    Ok(r) => acc += r,
-                                    Err(e) => {
-                                        *res = Err(e);
-                                        return;
-                                    }
-                                }
-                            }
-                            *res = Ok(acc);
-                        });
-                    }
-                });
-                let mut total = BmfrReport::default();
-                for r in results {
-                    total += r?;
-                }
-                Ok(total)
-            })(),
+                b.denoise_parallel(&frame, index, &mut self.workers, &mut ov, self.threads, &for_each_in_groups(pool, self.threads))
+            }
         };
         r.map_err(|e| format!("bmfr: {e}"))
     }
@@ -337,7 +265,7 @@ impl FlnrRunner {
         let threads = threads.clamp(1, tx * ty);
         let (scratch, flr_scratch) = if threads > 1 {
             (
-                vec![0f32; flnr.guide_planes_len() + threads * flnr.tile_scratch_len()],
+                vec![0f32; flnr.parallel_scratch_len(threads).ok_or("flnr: scratch size overflows")?],
                 vec![0f64; flnr.flr().tiled_scratch_len(threads).ok_or("flnr: scratch size overflows")?],
             )
         } else {
@@ -353,39 +281,17 @@ impl FlnrRunner {
         let fl = &self.flnr;
         let r = match &self.pool {
             None => fl.denoise(&frame, &mut self.scratch, &mut self.flr_scratch, &mut ov),
-            Some(pool) => flnr_parallel(fl, pool, self.threads, &frame, &mut self.scratch, &mut self.flr_scratch, ov),
+            Some(pool) => fl.denoise_parallel(
+                &frame,
+                &mut self.scratch,
+                &mut self.flr_scratch,
+                &mut ov,
+                self.threads,
+                &for_each_in_groups(pool, self.threads),
+            ),
         };
         r.map(|_| ()).map_err(|e| format!("flnr: {e}"))
     }
-}
-
-/// [`lrdenoise::flnr::Flnr::denoise`]'s steps over `threads` threads: the
-/// network's tiles in contiguous groups, one per thread and tile scratch, each
-/// result copied into the shared guide planes under a lock (a copy of ~0.1 %
-/// of the tile's time); then FLR's tiles in parallel.
-fn flnr_parallel(
-    fl: &lrdenoise::flnr::Flnr<'_>,
-    pool: &rayon::ThreadPool,
-    threads: usize,
-    frame: &Frame<'_>,
-    scratch: &mut [f32],
-    flr_scratch: &mut [f64],
-    mut out: ImageViewMut<'_>,
-) -> Result<Report, Error> {
-    let scale = fl.input_scale(frame)?;
-    let (planes, rest) = scratch.split_at_mut(fl.guide_planes_len());
-    let (tx, ty) = fl.tile_grid();
-    let mut workers: Vec<&mut [f32]> = rest.chunks_exact_mut(fl.tile_scratch_len()).collect();
-    let shared = std::sync::Mutex::new(planes);
-    const POISONED: Error = Error::Unsupported("a thread panicked");
-    par_groups(pool, (0..tx * ty).collect(), &mut workers, &|t, ts| {
-        let tile = fl.network_tile(frame, scale, t, ts)?;
-        tile.scatter(&mut shared.lock().map_err(|_| POISONED)?)?;
-        Ok(Report::default())
-    })?;
-    let planes: &[f32] = shared.into_inner().map_err(|_| POISONED)?;
-    let f = fl.flr_frame(frame, planes)?;
-    fl.flr().denoise_parallel(&f, flr_scratch, &mut out, threads, for_each_in_groups(pool, threads))
 }
 
 /// Single-frame WALR for one size: plan, scratch, and each stage's rows

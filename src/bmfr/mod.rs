@@ -40,9 +40,10 @@ pub mod temporal;
 use crate::error::{Arg, Error};
 use crate::fireflies;
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
-use crate::image::{ImageView, ImageViewMut};
+use crate::image::{ImageView, ImageViewMut, RowBands};
 use crate::isa::Kernel;
 use crate::kernels::qr::{lstsq_shrunk_ld, Shrinkage, MAX_FEATURES};
+use crate::parallel::{Executor, ResultCell, TileRun};
 use features::{apply_block, gather_block, Band, FeatureSet, Sources};
 
 pub use temporal::History;
@@ -535,6 +536,52 @@ impl Bmfr {
             return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
         }
         self.fit_frame(&f, index, scratch, out, self.cfg.fireflies)
+    }
+
+    /// f32 values of scratch [`Bmfr::denoise_parallel`] needs for frame
+    /// `index` and `workers` workers (`None` if it overflows).
+    pub fn parallel_scratch_len(&self, index: u32, workers: usize) -> Option<usize> {
+        TileRun::scratch_len(self.tile_count(index), workers.max(1), self.worker_len())
+    }
+
+    /// [`Bmfr::denoise`] with the tiles (rows of blocks) spread by the
+    /// caller's executor ([`Executor`]), each call with its worker's buffer;
+    /// bit-identical to it. `scratch`: at least
+    /// [`Bmfr::parallel_scratch_len`] f32; `out` must have rows that do not
+    /// overlap in memory. Allocates nothing.
+    pub fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        index: u32,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, (0, self.height))?;
+        let tiles = self.tile_count(index);
+        let run = TileRun::new(scratch, tiles, workers, self.worker_len())?;
+        let bands =
+            RowBands::new(out).ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use denoise)"))?;
+        let result = ResultCell::new();
+        for_each(tiles, &|t, worker| {
+            result.add(run.run(t, worker, |buf| {
+                let (a, b) = self.tile_pixel_rows(index, t)?;
+                if a == b {
+                    return Ok(Report::default());
+                }
+                // SAFETY: each tile runs once (`TileRun`), tiles write disjoint
+                // rows (`tile_pixel_rows`) and rows do not overlap (`RowBands`).
+                let mut band = unsafe { bands.band(a, b - a)? };
+                self.fit_tile(&f, index, t, buf, &mut band)
+            }))
+        });
+        result.error()?;
+        if !run.all_ran() {
+            return Err(Error::Unsupported("the executor skipped tiles"));
+        }
+        Ok(result.report())
     }
 
     fn fit_frame(

@@ -35,6 +35,7 @@ use super::{CheckedFrame, Flr, Report, ScratchLayout, Stats, MAX_SCALES};
 use crate::error::{Arg, Error};
 use crate::guides::Frame;
 use crate::image::ImageViewMut;
+use crate::parallel::{Executor, ResultCell};
 
 /// One stage of a tiled FLR run. Numbered in run order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -528,26 +529,19 @@ impl<'s> Tiled<'s> {
 }
 
 impl Flr {
-    /// Denoises one frame with the tiles spread by the caller's executor.
-    ///
-    /// `for_each(count, f)` must call `f(i, worker)` once for every
-    /// `i < count` and return when all calls have returned; calls may run
-    /// concurrently when each passes its own `worker < workers` (e.g. the
-    /// thread's index in a pool of `workers` threads). `scratch` holds at
+    /// Denoises one frame with the tiles spread by the caller's executor
+    /// ([`Executor`]: `for_each(count, f)`). `scratch` holds at
     /// least [`Flr::tiled_scratch_len`]`(workers)` values; `out` must have
     /// rows that do not overlap in memory. Bit-identical to [`Flr::denoise`].
     /// Allocates nothing.
-    pub fn denoise_parallel<E>(
+    pub fn denoise_parallel(
         &self,
         frame: &Frame<'_>,
         scratch: &mut [f64],
         out: &mut ImageViewMut<'_>,
         workers: usize,
-        for_each: E,
-    ) -> Result<Report, Error>
-    where
-        E: Fn(usize, &(dyn Fn(usize, usize) + Sync)),
-    {
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         let tiled = self.tiled(scratch, workers)?;
         self.check_output(out)?;
@@ -597,43 +591,5 @@ impl Shared<'_, '_, '_> {
             self.tiled.run(f, stage, tile, worker, Some(&mut band))
         })();
         self.result.add(r);
-    }
-}
-
-/// The sum of the tiles' reports, or the first error: a spin lock over a
-/// plain value (no_std has no mutex; the critical sections are a few adds).
-struct ResultCell {
-    lock: core::sync::atomic::AtomicBool,
-    value: core::cell::UnsafeCell<Result<Report, Error>>,
-}
-
-// SAFETY: `value` is accessed only while `lock` is held.
-unsafe impl Sync for ResultCell {}
-
-impl ResultCell {
-    fn new() -> Self {
-        ResultCell { lock: core::sync::atomic::AtomicBool::new(false), value: core::cell::UnsafeCell::new(Ok(Report::default())) }
-    }
-    fn with<T>(&self, f: impl FnOnce(&mut Result<Report, Error>) -> T) -> T {
-        while self.lock.compare_exchange_weak(false, true, Ordering::Acquire, Ordering::Relaxed).is_err() {
-            core::hint::spin_loop();
-        }
-        // SAFETY: the lock is held.
-        let t = f(unsafe { &mut *self.value.get() });
-        self.lock.store(false, Ordering::Release);
-        t
-    }
-    fn add(&self, r: Result<Report, Error>) {
-        self.with(|v| match (v, r) {
-            (Ok(sum), Ok(r)) => *sum += r,
-            (v @ Ok(_), Err(e)) => *v = Err(e),
-            (Err(_), _) => {}
-        })
-    }
-    fn error(&self) -> Result<(), Error> {
-        self.with(|v| v.map(|_| ()))
-    }
-    fn report(&self) -> Report {
-        self.with(|v| v.unwrap_or_default())
     }
 }
