@@ -36,9 +36,10 @@ pub trait Denoiser {
     }
     /// [`Denoiser::denoise`] with the work spread by the caller's executor
     /// over `workers` workers (see [`Executor`]); bit-identical to it. `out`
-    /// must have rows that do not overlap in memory. FLR, BMFR and FLNR run
-    /// their tiles on the executor; a method without a parallel run (WALR)
-    /// runs [`Denoiser::denoise`] on the calling thread.
+    /// must have rows that do not overlap in memory. Every method here runs
+    /// its tiles (FLR, BMFR, FLNR) or bands (WALR) on the executor; the
+    /// default, for a method without a parallel run, runs
+    /// [`Denoiser::denoise`] on the calling thread.
     fn denoise_parallel(
         &self,
         frame: &Frame<'_>,
@@ -109,7 +110,7 @@ impl Denoiser for crate::flr::Flr {
 }
 
 /// BMFR and WALR: the single frame is frame index 0 of their grid offsets;
-/// after `;`, more items of the `Denoiser` impl (BMFR's parallel run).
+/// after `;`, more items of the `Denoiser` impl (their parallel runs).
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 macro_rules! temporal_method {
     ($ty:ty $(; $($parallel:tt)*)?) => {
@@ -166,7 +167,23 @@ temporal_method!(crate::bmfr::Bmfr;
     }
 );
 #[cfg(feature = "walr")]
-temporal_method!(crate::walr::Walr);
+temporal_method!(crate::walr::Walr;
+    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        Some(crate::walr::Walr::parallel_scratch_len(self, workers)?.div_ceil(2))
+    }
+    fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let overflow = Error::InvalidConfig("workers: scratch size overflows");
+        let len = crate::walr::Walr::parallel_scratch_len(self, workers).ok_or(overflow)?;
+        crate::walr::Walr::denoise_parallel(self, frame, 0, as_f32(scratch, len)?, out, workers, for_each)
+    }
+);
 
 #[cfg(feature = "flnr")]
 impl Denoiser for crate::flnr::Flnr<'_> {

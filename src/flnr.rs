@@ -41,7 +41,7 @@ use crate::guides::{Frame, GuideSet, MAX_USER_GUIDES};
 use crate::image::{ImageView, ImageViewMut, Layout};
 use crate::kernels::solve::Regularization;
 use crate::nn::UNet;
-use crate::parallel::{Executor, ResultCell, TileRun};
+use crate::parallel::{run_tiles, Executor, TileRun};
 
 /// Guides the network reads.
 pub const INPUT_GUIDES: GuideSet = GuideSet::NORMAL_DEPTH_AO;
@@ -512,24 +512,16 @@ impl<'w> Flnr<'w> {
         }
         let (planes, rest) = scratch.split_at_mut(np);
         let (nx, ny) = self.tile_grid();
-        let run = TileRun::new(rest, nx * ny, workers, self.tile_scratch_len())?;
         let shared = PlanesPtr(planes.as_mut_ptr());
-        let result = ResultCell::new();
-        for_each(nx * ny, &|t, worker| {
-            result.add(run.run(t, worker, |buf| {
-                let tile = self.run_tile(&views, &frame.noisy, sc, t, buf)?;
-                // SAFETY: the planes hold `guide_planes_len` f32 (checked
-                // above) and are not otherwise used until every tile has
-                // returned; each tile runs once (`TileRun`) and writes only
-                // the pixels of its own rect, disjoint from every other's.
-                unsafe { tile.scatter_to(shared.get()) }?;
-                Ok(Report::default())
-            }))
-        });
-        result.error()?;
-        if !run.all_ran() {
-            return Err(Error::Unsupported("the executor skipped tiles"));
-        }
+        run_tiles(rest, nx * ny, workers, self.tile_scratch_len(), for_each, &|t, buf| {
+            let tile = self.run_tile(&views, &frame.noisy, sc, t, buf)?;
+            // SAFETY: the planes hold `guide_planes_len` f32 (checked above)
+            // and are not otherwise used until every tile has returned; each
+            // tile runs once (`run_tiles`) and writes only the pixels of its
+            // own rect, disjoint from every other's.
+            unsafe { tile.scatter_to(shared.get()) }?;
+            Ok(Report::default())
+        })?;
         let f = self.learned_frame(frame, &planes[..self.guide_planes_len()])?;
         self.flr.denoise_parallel(&f, flr_scratch, out, workers, for_each)
     }

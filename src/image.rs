@@ -853,7 +853,7 @@ impl<'a> ImageViewMut<'a> {
 
 /// Row bands of one output image for concurrent writers: each band is a view
 /// of its own rows only. Made from an image whose rows do not overlap.
-#[cfg(any(feature = "flr", feature = "bmfr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 #[derive(Debug)]
 pub(crate) struct RowBands<'a, 'o> {
     f32s: Option<*mut f32>,
@@ -867,10 +867,10 @@ pub(crate) struct RowBands<'a, 'o> {
 
 // SAFETY: a band is made only through the unsafe `band`, whose callers keep
 // the bands of concurrent threads apart; the output is borrowed mutably for 'a.
-#[cfg(any(feature = "flr", feature = "bmfr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 unsafe impl Sync for RowBands<'_, '_> {}
 
-#[cfg(any(feature = "flr", feature = "bmfr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 impl<'a, 'o> RowBands<'a, 'o> {
     /// Bands of `out`; `None` unless its rows are separable.
     pub(crate) fn new(out: &'a mut ImageViewMut<'o>) -> Option<Self> {

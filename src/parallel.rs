@@ -3,14 +3,14 @@
 //! per-worker buffers handed out by worker index. No thread library: the
 //! caller brings the threads (rayon, a job system, `std::thread::scope`).
 
-#[cfg(any(feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
 use core::sync::atomic::AtomicU32;
-#[cfg(any(feature = "flr", feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 use core::sync::atomic::Ordering;
 
-#[cfg(any(feature = "flr", feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 use crate::error::Error;
-#[cfg(any(feature = "flr", feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 use crate::report::Report;
 
 /// A caller's executor: `for_each(count, f)` calls `f(i, worker)` once for
@@ -22,17 +22,17 @@ pub type Executor<'e> = &'e dyn Fn(usize, &(dyn Fn(usize, usize) + Sync));
 
 /// The sum of the tiles' reports, or the first error: a spin lock over a
 /// plain value (no_std has no mutex; the critical sections are a few adds).
-#[cfg(any(feature = "flr", feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 pub(crate) struct ResultCell {
     lock: core::sync::atomic::AtomicBool,
     value: core::cell::UnsafeCell<Result<Report, Error>>,
 }
 
 // SAFETY: `value` is accessed only while `lock` is held.
-#[cfg(any(feature = "flr", feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 unsafe impl Sync for ResultCell {}
 
-#[cfg(any(feature = "flr", feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 impl ResultCell {
     pub(crate) fn new() -> Self {
         ResultCell { lock: core::sync::atomic::AtomicBool::new(false), value: core::cell::UnsafeCell::new(Ok(Report::default())) }
@@ -65,7 +65,7 @@ impl ResultCell {
 /// tile (each runs once), a busy bit per worker, then `workers` buffers of
 /// `len` f32. A call on a tile that has run, or on a busy worker (an executor
 /// that breaks its contract), is refused instead of racing.
-#[cfg(any(feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
 pub(crate) struct TileRun {
     base: *mut u32,
     items: usize,
@@ -75,10 +75,10 @@ pub(crate) struct TileRun {
 
 // SAFETY: a buffer is handed out only to the one call that set its worker's
 // busy bit (atomically), and the bits are only ever accessed atomically.
-#[cfg(any(feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
 unsafe impl Sync for TileRun {}
 
-#[cfg(any(feature = "bmfr", feature = "flnr"))]
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
 impl TileRun {
     /// u32 words of the bits (whole f64, so the buffers stay 8-byte aligned).
     fn header_words(items: usize, workers: usize) -> usize {
@@ -142,5 +142,68 @@ impl TileRun {
     /// Whether every tile has run (an executor that skips tiles is caught).
     pub(crate) fn all_ran(&self) -> bool {
         (0..self.items).all(|i| self.word(i / 32).load(Ordering::Acquire) & (1 << (i % 32)) != 0)
+    }
+}
+
+/// One tile's work in [`run_tiles`]: `(tile, its worker's buffer)`.
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+pub(crate) type TileBody<'b> = dyn Fn(usize, &mut [f32]) -> Result<Report, Error> + Sync + 'b;
+
+/// Runs `body(i, buffer)` once for every tile `i < tiles` on the caller's
+/// executor, each call with its worker's buffer of `len` f32 (from
+/// `scratch`, at least [`TileRun::scratch_len`]); sums the reports. An
+/// executor that skips a tile, runs one twice or runs two calls on one
+/// worker at once gets an error.
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+pub(crate) fn run_tiles(
+    scratch: &mut [f32],
+    tiles: usize,
+    workers: usize,
+    len: usize,
+    for_each: Executor<'_>,
+    body: &TileBody<'_>,
+) -> Result<Report, Error> {
+    let run = TileRun::new(scratch, tiles, workers, len)?;
+    let result = ResultCell::new();
+    for_each(tiles, &|t, worker| result.add(run.run(t, worker, |buf| body(t, buf))));
+    result.error()?;
+    if !run.all_ran() {
+        return Err(Error::Unsupported("the executor skipped tiles"));
+    }
+    Ok(result.report())
+}
+
+/// A slice cut into bands of `band` elements (the last may be shorter), for
+/// concurrent writers of disjoint bands.
+#[cfg(feature = "walr")]
+pub(crate) struct Bands<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    band: usize,
+    _slice: core::marker::PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: a band is made only through the unsafe `get`, whose callers keep
+// the bands of concurrent calls apart; the slice is borrowed mutably for 'a.
+#[cfg(feature = "walr")]
+unsafe impl<T: Send> Sync for Bands<'_, T> {}
+
+#[cfg(feature = "walr")]
+impl<'a, T> Bands<'a, T> {
+    pub(crate) fn new(slice: &'a mut [T], band: usize) -> Self {
+        Bands { ptr: slice.as_mut_ptr(), len: slice.len(), band, _slice: core::marker::PhantomData }
+    }
+
+    /// Band `i` (empty past the end).
+    ///
+    /// # Safety
+    /// No other live slice made by this `Bands` is band `i`.
+    #[allow(clippy::mut_from_ref)]
+    pub(crate) unsafe fn get(&self, i: usize) -> &'a mut [T] {
+        let a = i.saturating_mul(self.band).min(self.len);
+        let b = a.saturating_add(self.band).min(self.len);
+        // SAFETY: `a..b` is inside the slice, which lives for 'a; the caller
+        // keeps this band to one user.
+        unsafe { core::slice::from_raw_parts_mut(self.ptr.add(a), b - a) }
     }
 }

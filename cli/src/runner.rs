@@ -2,7 +2,7 @@
 //! threads (each stage's tiles split into one contiguous group per thread).
 
 use lrdenoise::bmfr::Report as BmfrReport;
-use lrdenoise::walr::{Parts, Report as WalrReport};
+use lrdenoise::walr::Report as WalrReport;
 use lrdenoise::{
     Bmfr, BmfrConfig, Error, Flr, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Report, Walr, WalrConfig,
 };
@@ -303,14 +303,12 @@ pub struct WalrRunner {
     pool: Option<rayon::ThreadPool>,
 }
 
-/// Rows per band when a stage is spread over threads.
-const WALR_BAND: usize = 16;
-
 impl WalrRunner {
     pub fn new(cfg: WalrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
         let walr = Walr::new(cfg, w, h).map_err(|e| format!("walr: {e}"))?;
         let threads = threads.max(1);
-        Ok(WalrRunner { scratch: vec![0f32; walr.scratch_len()], walr, threads, pool: pool(threads)? })
+        let len = walr.parallel_scratch_len(threads).ok_or("walr: scratch size overflows")?;
+        Ok(WalrRunner { scratch: vec![0f32; len], walr, threads, pool: pool(threads)? })
     }
 
     /// Denoises frame `index` (which seeds the replacement choices) into `out`.
@@ -322,87 +320,12 @@ impl WalrRunner {
         let wl = &self.walr;
         let r = match &self.pool {
             None => wl.denoise(&frame, index, &mut self.scratch, &mut ov),
-            Some(pool) => walr_parallel(wl, pool, self.threads, &frame, index, &mut self.scratch, ov),
+            Some(pool) => {
+                wl.denoise_parallel(&frame, index, &mut self.scratch, &mut ov, self.threads, &for_each_in_groups(pool, self.threads))
+            }
         };
         r.map_err(|e| format!("walr: {e}"))
     }
-}
-
-/// Runs `f` on every item in a scope of `pool`; sums the reports.
-fn par_each<T: Send>(
-    pool: &rayon::ThreadPool,
-    items: Vec<T>,
-    f: &(dyn Fn(T) -> Result<WalrReport, Error> + Sync),
-) -> Result<WalrReport, Error> {
-    let mut results: Vec<Result<WalrReport, Error>> = (0..items.len()).map(|_| Ok(WalrReport::default())).collect();
-    pool.scope(|s| {
-        for (it, res) in items.into_iter().zip(results.iter_mut()) {
-            s.spawn(move |_| *res = f(it));
-        }
-    });
-    let mut total = WalrReport::default();
-    for r in results {
-        total += r?;
-    }
-    Ok(total)
-}
-
-fn walr_parallel(
-    wl: &Walr,
-    pool: &rayon::ThreadPool,
-    threads: usize,
-    frame: &Frame<'_>,
-    index: u32,
-    scratch: &mut [f32],
-    out: ImageViewMut<'_>,
-) -> Result<WalrReport, Error> {
-    let (w, h) = wl.size();
-    let band = WALR_BAND.max(h.div_ceil(threads * 8));
-    let f = wl.check_frame(frame)?;
-    let prep = wl.prepare(&f, index);
-    let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = wl.parts(scratch)?;
-    let (gl, zl) = (wl.geo_row_len(), wl.z_row_len());
-    let starts = || (0..h).step_by(band);
-    let mut rep = {
-        let items: Vec<_> = starts().zip(geo.chunks_mut(band * gl)).zip(z0.chunks_mut(band * zl)).map(|((y, g), z)| (y, g, z)).collect();
-        let (f, prep) = (&f, &prep);
-        par_each(pool, items, &|(y, g, z)| wl.features_rows(f, prep, y, g, z))?
-    };
-    let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
-    let geo = &*geo;
-    for t in 0..wl.config().iterations {
-        let [sa, sb] = &mut sdf;
-        let [za, zb] = &mut z;
-        let (sin, sout, zin, zout) =
-            if Walr::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
-        let items: Vec<_> = starts().zip(sout.chunks_mut(band * w)).zip(zout.chunks_mut(band * zl)).map(|((y, s), z)| (y, s, z)).collect();
-        let prep = &prep;
-        par_each(pool, items, &|(y, s, zo)| wl.iterate_rows(t, prep, y, geo, sin, zin, s, zo).map(|_| WalrReport::default()))?;
-    }
-    let mut bands = Vec::new();
-    let mut rest = Some(out);
-    for y in (0..h).step_by(band) {
-        let r = rest.take().ok_or(Error::InvalidTile { index: y, count: h })?;
-        let (b, r) = r.split_rows(band.min(h - y))?;
-        bands.push((y, b));
-        rest = r;
-    }
-    let prep = &prep;
-    if wl.blends_adaptively() {
-        // pass 1 over every band before pass 2 reads the rows around each
-        let t = wl.config().iterations;
-        let [za, zb] = &mut z;
-        let (last, prev) = if Walr::buffer_of(t) == 0 { (&mut **za, &mut **zb) } else { (&mut **zb, &mut **za) };
-        let items: Vec<_> = starts().zip(last.chunks(band * zl)).zip(prev.chunks_mut(band * zl)).map(|((y, l), p)| (y, l, p)).collect();
-        rep += par_each(pool, items, &|(y, l, p)| wl.fit_rows(y, geo, l, p))?;
-        let prev = &*prev;
-        let items: Vec<_> = bands.into_iter().zip(last.chunks_mut(band * zl)).map(|((y, b), l)| (y, b, l)).collect();
-        rep += par_each(pool, items, &|(y, mut b, l)| wl.blend_rows(prep, y, prev, l, &mut b).map(|_| WalrReport::default()))?;
-    } else {
-        let zr = [&*z[0], &*z[1]];
-        rep += par_each(pool, bands, &|(y, mut b)| wl.solve_rows(prep, y, geo, zr, &mut b))?;
-    }
-    Ok(rep)
 }
 
 /// The pipeline a [`TemporalRunner`] drives.

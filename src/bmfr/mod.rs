@@ -43,7 +43,7 @@ use crate::guides::{Frame, GuideSet, MAX_GUIDES};
 use crate::image::{ImageView, ImageViewMut, RowBands};
 use crate::isa::Kernel;
 use crate::kernels::qr::{lstsq_shrunk_ld, Shrinkage, MAX_FEATURES};
-use crate::parallel::{Executor, ResultCell, TileRun};
+use crate::parallel::{run_tiles, Executor, TileRun};
 use features::{apply_block, gather_block, Band, FeatureSet, Sources};
 
 pub use temporal::History;
@@ -560,28 +560,18 @@ impl Bmfr {
     ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, (0, self.height))?;
-        let tiles = self.tile_count(index);
-        let run = TileRun::new(scratch, tiles, workers, self.worker_len())?;
         let bands =
             RowBands::new(out).ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use denoise)"))?;
-        let result = ResultCell::new();
-        for_each(tiles, &|t, worker| {
-            result.add(run.run(t, worker, |buf| {
-                let (a, b) = self.tile_pixel_rows(index, t)?;
-                if a == b {
-                    return Ok(Report::default());
-                }
-                // SAFETY: each tile runs once (`TileRun`), tiles write disjoint
-                // rows (`tile_pixel_rows`) and rows do not overlap (`RowBands`).
-                let mut band = unsafe { bands.band(a, b - a)? };
-                self.fit_tile(&f, index, t, buf, &mut band)
-            }))
-        });
-        result.error()?;
-        if !run.all_ran() {
-            return Err(Error::Unsupported("the executor skipped tiles"));
-        }
-        Ok(result.report())
+        run_tiles(scratch, self.tile_count(index), workers, self.worker_len(), for_each, &|t, buf| {
+            let (a, b) = self.tile_pixel_rows(index, t)?;
+            if a == b {
+                return Ok(Report::default());
+            }
+            // SAFETY: each tile runs once (`run_tiles`), tiles write disjoint
+            // rows (`tile_pixel_rows`) and rows do not overlap (`RowBands`).
+            let mut band = unsafe { bands.band(a, b - a)? };
+            self.fit_tile(&f, index, t, buf, &mut band)
+        })
     }
 
     fn fit_frame(

@@ -66,8 +66,9 @@ pub mod temporal;
 use crate::error::{Arg, Error};
 use crate::fireflies;
 use crate::guides::{Frame, GuideSet, MAX_GUIDES};
-use crate::image::{ImageView, ImageViewMut};
+use crate::image::{ImageView, ImageViewMut, RowBands};
 use crate::isa::Kernel;
+use crate::parallel::{run_tiles, Bands, Executor, TileRun};
 
 pub use temporal::{History, TemporalConfig};
 
@@ -415,6 +416,88 @@ impl Walr {
         let prep = self.prepare(&f, index);
         let parts = self.parts(scratch)?;
         self.run(&f, &prep, parts, out, self.cfg.fireflies)
+    }
+
+    /// Rows per band of a parallel run over `workers` workers: at least 16,
+    /// and about eight bands per worker.
+    fn parallel_band_rows(&self, workers: usize) -> usize {
+        16usize.max(self.height.div_ceil(workers.max(1) * 8))
+    }
+
+    /// f32 values of scratch [`Walr::denoise_parallel`] needs for `workers`
+    /// workers (`None` if it overflows).
+    pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let bands = self.height.div_ceil(self.parallel_band_rows(workers));
+        self.scratch_len().checked_add(TileRun::scratch_len(bands, workers.max(1), 0)?)
+    }
+
+    /// [`Walr::denoise`] with each stage's rows spread in bands by the
+    /// caller's executor ([`Executor`]); bit-identical to it. `scratch`: at
+    /// least [`Walr::parallel_scratch_len`] f32; `out` must have rows that do
+    /// not overlap in memory. Allocates nothing.
+    pub fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        index: u32,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, self.height)?;
+        let needed = self.parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let (own, runs) = scratch.split_at_mut(self.scratch_len());
+        let rows = self.parallel_band_rows(workers);
+        let nb = self.height.div_ceil(rows);
+        let prep = self.prepare(&f, index);
+        let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = self.parts(own)?;
+        let (gl, zl, w) = (self.geo_row_len(), self.z_row_len(), self.width);
+        let y0 = |b: usize| b * rows;
+        // SAFETY (every `get` below): `run_tiles` runs each band once per
+        // stage, and a stage writes only its own band of each buffer it writes.
+        let mut rep = {
+            let (g, z) = (Bands::new(geo, rows * gl), Bands::new(&mut *z0, rows * zl));
+            run_tiles(runs, nb, workers, 0, for_each, &|b, _| unsafe { self.features_rows(&f, &prep, y0(b), g.get(b), z.get(b)) })?
+        };
+        let geo = &*geo;
+        let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
+        for t in 0..self.cfg.iterations {
+            let [sa, sb] = &mut sdf;
+            let [za, zb] = &mut z;
+            let (sin, sout, zin, zout) =
+                if Self::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
+            let (so, zo) = (Bands::new(sout, rows * w), Bands::new(zout, rows * zl));
+            run_tiles(runs, nb, workers, 0, for_each, &|b, _| {
+                unsafe { self.iterate_rows(t, &prep, y0(b), geo, sin, zin, so.get(b), zo.get(b)) }.map(|_| Report::default())
+            })?;
+        }
+        let bands =
+            RowBands::new(out).ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use denoise)"))?;
+        // SAFETY: bands of output rows are disjoint, each made once per stage.
+        let out_band = |b: usize| unsafe { bands.band(y0(b), rows.min(self.height - y0(b))) };
+        if self.blends_adaptively() {
+            // pass 1 over every band before pass 2 reads the rows around each
+            let t = self.cfg.iterations;
+            let [za, zb] = &mut z;
+            let (last, prev) = if Self::buffer_of(t) == 0 { (&mut **za, &mut **zb) } else { (&mut **zb, &mut **za) };
+            {
+                let (l, p) = (&*last, Bands::new(&mut *prev, rows * zl));
+                let lb = |b: usize| &l[(y0(b) * zl).min(l.len())..((y0(b) + rows) * zl).min(l.len())];
+                rep += run_tiles(runs, nb, workers, 0, for_each, &|b, _| unsafe { self.fit_rows(y0(b), geo, lb(b), p.get(b)) })?;
+            }
+            let (p, l) = (&*prev, Bands::new(last, rows * zl));
+            run_tiles(runs, nb, workers, 0, for_each, &|b, _| {
+                unsafe { self.blend_rows(&prep, y0(b), p, l.get(b), &mut out_band(b)?) }.map(|_| Report::default())
+            })?;
+        } else {
+            let zr = [&*z[0], &*z[1]];
+            rep += run_tiles(runs, nb, workers, 0, for_each, &|b, _| self.solve_rows(&prep, y0(b), geo, zr, &mut out_band(b)?))?;
+        }
+        Ok(rep)
     }
 
     /// The stages on one thread, on an already checked frame, with the
