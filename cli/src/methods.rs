@@ -99,7 +99,11 @@ impl FlrArgs {
         }
     }
     /// Each method flag, whether it was given, and the methods that read it:
-    /// the one list the checks and their messages come from.
+    /// the one list the checks and their messages come from. (The flags are
+    /// one clap group shared by every method rather than a subcommand per
+    /// method because `eval`, `report` and `bench` take one flag set for
+    /// several methods at once, `--methods flr,bmfr`; this table gives clap's
+    /// refusal instead, naming whose flag it is and what the method takes.)
     fn flags(&self) -> [(&'static str, bool, &'static [Family]); 21] {
         use Family::*;
         [

@@ -81,7 +81,7 @@ fuzz_target!(|d: &[u8]| {
     };
     let frame = Frame::new(ImageView::f32(&noisy, w, h, 3, l3).unwrap(), g);
     let Ok(flr) = Flr::new(cfg, w, h) else { return };
-    let mut scratch = vec![0f64; flr.scratch_len_for(1)];
+    let mut scratch = vec![0f64; flr.scratch_len()];
     let mut whole = vec![0f32; 3 * n];
     flr.denoise(&frame, &mut scratch, &mut ImageViewMut::interleaved(&mut whole, w, h, 3).unwrap()).unwrap();
     assert!(whole.iter().all(|v| v.is_finite()));
