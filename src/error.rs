@@ -20,6 +20,10 @@ pub enum Arg {
     Config,
     /// A tile, band or stage index.
     Tile,
+    /// A temporal pipeline's history buffer.
+    History,
+    /// Motion vectors.
+    Motion,
 }
 
 /// Everything that can go wrong. Small and `Copy`, carries the data needed

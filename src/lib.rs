@@ -48,7 +48,7 @@ pub mod flr;
 pub mod guides;
 #[cfg(any(feature = "bmfr", feature = "walr"))]
 mod hash;
-#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flr"))]
 mod history;
 pub mod image;
 pub mod isa;
@@ -57,8 +57,10 @@ pub mod kernels;
 pub mod nn;
 pub mod parallel;
 pub mod report;
-#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flr"))]
 mod reproject;
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flr"))]
+pub mod temporal;
 #[cfg(feature = "walr")]
 pub mod walr;
 
@@ -78,7 +80,7 @@ pub use flr::{CheckedFrame, Flr, Stage, Tiled};
 #[doc(hidden)]
 pub use flr::{Parts, ScratchLayout, Stats};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};
-#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "bmfr", feature = "walr", feature = "flr"))]
 pub use history::History;
 pub use image::{ImageView, ImageViewMut, Layout, Samples, SamplesMut};
 pub use isa::Kernel;

@@ -24,6 +24,11 @@ pub struct Report {
     pub history_rejected: u64,
     /// Noisy samples scaled down by the firefly clamp ([`crate::fireflies`]).
     pub clamped_fireflies: u64,
+    /// Temporal pipelines: pixels whose motion vector was NaN/Inf or longer
+    /// than twice the frame (they get no history).
+    pub invalid_motion: u64,
+    /// Temporal pipelines: frames taken as a camera cut (the history restarted).
+    pub history_resets: u64,
 }
 
 impl core::ops::AddAssign for Report {
@@ -36,5 +41,7 @@ impl core::ops::AddAssign for Report {
         self.dropped_pivots += o.dropped_pivots;
         self.history_rejected += o.history_rejected;
         self.clamped_fireflies += o.clamped_fireflies;
+        self.invalid_motion += o.invalid_motion;
+        self.history_resets += o.history_resets;
     }
 }

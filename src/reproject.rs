@@ -3,7 +3,7 @@
 
 /// The 4 bilinear taps `(x, y, weight)` around the continuous pixel
 /// position `(px, py)` (pixel centres at integers).
-#[inline]
+#[inline(always)]
 pub fn bilinear_taps(px: f32, py: f32) -> [(i64, i64, f32); 4] {
     let (fx, fy) = (floor(px), floor(py));
     let (ax, ay) = (px - fx, py - fy);
@@ -29,13 +29,13 @@ pub fn floor(x: f32) -> f32 {
 }
 
 /// RGB → YCoCg (unnormalised form, ×4, as in the BMFR authors' code).
-#[inline]
+#[inline(always)]
 pub fn ycocg(c: [f32; 3]) -> [f32; 3] {
     [c[0] + 2.0 * c[1] + c[2], 2.0 * c[0] - 2.0 * c[2], -c[0] + 2.0 * c[1] - c[2]]
 }
 
 /// Inverse of [`ycocg`].
-#[inline]
+#[inline(always)]
 pub fn rgb(c: [f32; 3]) -> [f32; 3] {
     [0.25 * (c[0] + c[1] - c[2]), 0.25 * (c[0] + c[2]), 0.25 * (c[0] - c[1] - c[2])]
 }

@@ -173,6 +173,40 @@ def sensor_dict(cam, w, h):
             "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}}}
 
 
+# Camera motions of a sequence; frame i of n from the scene's camera cam0 (world scale sc).
+MOTIONS = ("pan", "orbit", "dolly", "rotate", "cut", "burst")
+
+
+def camera_at(motion, i, n, cam0, sc):
+    o, t, fov = (np.array(cam0[0], float), np.array(cam0[1], float), cam0[2])
+    if motion in ("pan", "burst"):  # sideways, 0.08 world units (x sc) a frame
+        o = o + np.array([0.08 * i * sc, 0.0, 0.0])
+    elif motion == "orbit":  # around the target, 2.5 degrees a frame
+        a = math.radians(2.5 * i)
+        v = o - t
+        o = t + np.array([v[0] * math.cos(a) + v[2] * math.sin(a), v[1], -v[0] * math.sin(a) + v[2] * math.cos(a)])
+    elif motion == "dolly":  # toward the target, 3 % of the distance a frame
+        o = o + (t - o) * 0.03 * i
+    elif motion == "rotate":  # the camera turns in place, 3 degrees a frame (about 12 px at 256 wide)
+        a = math.radians(3.0 * i)
+        v = t - o
+        t = o + np.array([v[0] * math.cos(a) + v[2] * math.sin(a), v[1], -v[0] * math.sin(a) + v[2] * math.cos(a)])
+    elif motion == "cut":  # a pan that cuts, half way, to a camera mirrored across the target and lower
+        if i >= n // 2:
+            v = o - t
+            o = t + np.array([-v[0] - 0.5 * v[2], 0.7 * v[1], 0.8 * v[2]]) + np.array([0.08 * (i - n // 2) * sc, 0.0, 0.0])
+        else:
+            o = o + np.array([0.08 * i * sc, 0.0, 0.0])
+    return (o.tolist(), t.tolist(), fov)
+
+
+def inject(noisy, p, k, seed):
+    """The outlier protocol of docs/DATA.md, in place: each pixel with probability p set to k x the mean luminance."""
+    lum = float((0.2126 * noisy[..., 0] + 0.7152 * noisy[..., 1] + 0.0722 * noisy[..., 2]).mean())
+    hit = np.random.default_rng(seed).random(noisy.shape[:2]) < p
+    noisy[hit] = k * lum
+
+
 def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0):
     integ = mi.load_dict({"type": "path", "max_depth": 3, "hide_emitters": True})
     n = w * h
@@ -270,7 +304,9 @@ def main():
     ap.add_argument("--scenes", help="comma list family:seed (overrides --split)")
     ap.add_argument("--size", default="256x256")
     ap.add_argument("--ref-spp", type=int, default=2048)
-    ap.add_argument("--seq", type=int, default=0, help="also render a sequence of N frames per scene (camera pans)")
+    ap.add_argument("--seq", type=int, default=0, help="also render a sequence of N frames per scene")
+    ap.add_argument("--motion", default="pan", help=f"comma list of camera motions for --seq: {', '.join(MOTIONS)}")
+    ap.add_argument("--seq-only", action="store_true", help="render only the sequences, not the stills")
     ap.add_argument("--sample", action="store_true", help="render the committed data/ sample set")
     a = ap.parse_args()
     w, h = map(int, a.size.lower().split("x"))
@@ -284,7 +320,7 @@ def main():
         a.seq = 6
     os.makedirs(a.out, exist_ok=True)
     spps = {"noisy": 1, "noisy4": 4}
-    for fam, seed in scenes:
+    for fam, seed in ([] if a.seq_only else scenes):
         S, cam, ao, off, sc = scene_dict(fam, seed)
         S, cam = place(S, cam, off, sc)
         scene = mi.load_dict({"type": "scene", **S})
@@ -293,22 +329,27 @@ def main():
         path = os.path.join(a.out, f"{fam}_{seed}.exr")
         write_exr(path, lay)
         print("wrote", path, flush=True)
+    motions = a.motion.split(",")
+    for m in motions:
+        if m not in MOTIONS:
+            raise SystemExit(f"unknown motion {m}; one of {', '.join(MOTIONS)}")
     for fam, seed in seq_scenes or ([(f, s) for f, s in scenes] if a.seq else []):
         S, cam, ao, off, sc = scene_dict(fam, seed)
         S, cam0 = place(S, cam, off, sc)
         scene = mi.load_dict({"type": "scene", **S})
-        d = os.path.join(a.out, f"seq_{fam}_{seed}")
-        os.makedirs(d, exist_ok=True)
-        prev = None
-        for i in range(a.seq):
-            o, t, fov = cam0
-            o = (np.array(o) + np.array([0.08 * i * sc, 0.0, 0.0])).tolist()
-            sensor = mi.load_dict(sensor_dict((o, t, fov), w, h))
-            lay = render_frame(scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i)
-            write_exr(os.path.join(d, f"frame_{i:04d}.exr"), lay)
-            print("wrote", d, i, flush=True)
-            prev = sensor
-
+        for motion in motions:
+            name = f"seq_{fam}_{seed}" if a.sample else f"seq_{fam}_{seed}_{motion}"
+            d = os.path.join(a.out, name)
+            os.makedirs(d, exist_ok=True)
+            prev = None
+            for i in range(a.seq):
+                sensor = mi.load_dict(sensor_dict(camera_at(motion, i, a.seq, cam0, sc), w, h))
+                lay = render_frame(scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i)
+                if motion == "burst" and i == a.seq // 2:
+                    inject(lay["noisy"], p=1e-3, k=100.0, seed=seed * 100 + i)
+                write_exr(os.path.join(d, f"frame_{i:04d}.exr"), lay)
+                print("wrote", d, i, flush=True)
+                prev = sensor
 
 if __name__ == "__main__":
     main()

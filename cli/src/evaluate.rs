@@ -98,6 +98,9 @@ pub struct Record {
     /// or empty for the frame as rendered).
     #[serde(default)]
     pub inject: String,
+    /// The sequence (its directory's name) the frame belongs to; `None` for a still.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<String>,
     /// The index in `evaluate`'s `variants` of the variant that made this
     /// row (`lrd advise` reads the configuration from it); not in the JSON.
     #[serde(skip)]
@@ -325,6 +328,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 flags: built.flags.clone(),
                 flicker,
                 inject: opt.inject.name(),
+                sequence: seq.as_ref().and_then(|s| s.file_name()).map(|s| s.to_string_lossy().to_string()),
                 variant: Some(vi),
             });
             if let Some(sq) = &seq {
@@ -373,6 +377,7 @@ pub fn means(records: &[Record]) -> Vec<Record> {
                     (!f.is_empty()).then(|| f.iter().sum::<f64>() / f.len() as f64)
                 },
                 inject: rs[0].inject.clone(),
+                sequence: None,
                 variant: rs[0].variant,
             }
         })

@@ -53,6 +53,9 @@ enum Cmd {
         /// Directory to write the denoised frames to (created if missing)
         #[arg(short, long, value_name = "OUTDIR")]
         output: PathBuf,
+        /// Run the method's temporal pipeline (flr, bmfr and walr have one: on by default) or denoise each frame on its own
+        #[arg(long, value_enum, default_value = "on")]
+        temporal: OnOff,
         #[command(flatten)]
         run: RunArgs,
     },
@@ -191,10 +194,17 @@ fn parse_inject(s: &str) -> Result<InjectArg, String> {
     }
 }
 
+/// `--temporal on|off`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum OnOff {
+    On,
+    Off,
+}
+
 /// Flags shared by `denoise` and `denoise-seq`.
 #[derive(clap::Args)]
 struct RunArgs {
-    /// The denoiser (on a sequence, bmfr and walr run their temporal pipelines)
+    /// The denoiser (on a sequence, flr, bmfr and walr run their temporal pipelines unless --temporal off)
     #[arg(long, value_enum, default_value_t = MethodName::Flr)]
     method: MethodName,
     #[command(flatten)]
@@ -305,15 +315,19 @@ fn run(cli: Cli) -> Result<(), String> {
             };
             println!("{method} [{cfg}] {w}x{h} threads {t}: {ms:.2} ms; wrote {written}");
         }
-        Cmd::DenoiseSeq { dir, output, run: RunArgs { method, flr, input_layer, threads } } => {
+        Cmd::DenoiseSeq { dir, output, temporal, run: RunArgs { method, flr, input_layer, threads } } => {
             let t = threads_or_all(threads);
             let frames = list_frames(std::slice::from_ref(&dir))?;
             std::fs::create_dir_all(&output).map_err(|e| format!("{}: {e}", output.display()))?;
-            // On a sequence, bmfr and walr mean their temporal pipelines.
-            let method = match method {
-                MethodName::Bmfr => MethodName::BmfrTemporal,
-                MethodName::Walr => MethodName::WalrTemporal,
-                m => m,
+            // On a sequence, flr, bmfr and walr mean their temporal pipelines unless --temporal off.
+            let method = match (method, temporal) {
+                (MethodName::Flr, OnOff::On) => MethodName::FlrTemporal,
+                (MethodName::Bmfr, OnOff::On) => MethodName::BmfrTemporal,
+                (MethodName::Walr, OnOff::On) => MethodName::WalrTemporal,
+                (MethodName::FlrTemporal, OnOff::Off) => MethodName::Flr,
+                (MethodName::BmfrTemporal, OnOff::Off) => MethodName::Bmfr,
+                (MethodName::WalrTemporal, OnOff::Off) => MethodName::Walr,
+                (m, _) => m,
             }
             .as_str();
             let job = DenoiseJob { method, flr: &flr, input_layer: &input_layer, threads: t };
@@ -352,7 +366,15 @@ fn run(cli: Cli) -> Result<(), String> {
                 return Err("no frame with a 'reference' layer: nothing to evaluate".into());
             }
             match inject {
-                InjectArg::One(_) => print_table(&records),
+                InjectArg::One(_) => {
+                    print_table(&records);
+                    let seq = report::sequences::table(&records);
+                    if !seq.is_empty() {
+                        println!(
+                            "\nSequences: mean PSNR of all frames and of the last 4, flicker of the last 4, frames to converge\n\n{seq}"
+                        );
+                    }
+                }
                 InjectArg::All => {
                     println!("Robustness (docs/DATA.md): mean PSNR dB per case; drop = clean minus the case\n");
                     print!("{}", report::robustness::table(&records));

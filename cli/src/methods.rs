@@ -87,6 +87,15 @@ pub struct FlrArgs {
     /// FLR: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
     #[arg(long)]
     pub device: Option<String>,
+    /// flr-temporal: longest per-pixel history in frames (default 16)
+    #[arg(long, value_name = "FRAMES")]
+    pub history: Option<f32>,
+    /// flr-temporal: lowest blend weight of the new output frame in the output accumulation (default 0.5; 1 = off)
+    #[arg(long, value_name = "A")]
+    pub output_alpha: Option<f32>,
+    /// flr-temporal: half-width of the output history's clip box in standard deviations of the 3x3 neighbourhood (default 1.5)
+    #[arg(long, value_name = "G")]
+    pub clip_gamma: Option<f32>,
 }
 
 impl FlrArgs {
@@ -104,7 +113,7 @@ impl FlrArgs {
     /// method because `eval`, `report` and `bench` take one flag set for
     /// several methods at once, `--methods flr,bmfr`; this table gives clap's
     /// refusal instead, naming whose flag it is and what the method takes.)
-    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 21] {
+    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 24] {
         use Family::*;
         [
             ("--guides", self.guides.is_some(), &[Flr, Bmfr, Walr]),
@@ -129,7 +138,26 @@ impl FlrArgs {
             ("--previous-weight", self.previous_weight.is_some(), &[Walr]),
             ("--weights", self.weights.is_some(), &[Flnr]),
             ("--fireflies", self.fireflies.is_some(), &[Flr, Bmfr, Walr, Flnr]),
+            ("--history", self.history.is_some(), &[Flr]),
+            ("--output-alpha", self.output_alpha.is_some(), &[Flr]),
+            ("--clip-gamma", self.clip_gamma.is_some(), &[Flr]),
         ]
+    }
+
+    /// The temporal stage's settings (`--history`, `--output-alpha`; the rest default).
+    pub fn temporal_config(&self) -> Result<lrdenoise::temporal::TemporalConfig, String> {
+        let mut t = lrdenoise::temporal::TemporalConfig::default();
+        if let Some(n) = self.history {
+            t.max_history = n;
+        }
+        if let Some(a) = self.output_alpha {
+            t.output_alpha = a;
+        }
+        if let Some(g) = self.clip_gamma {
+            t.clip_gamma = g;
+        }
+        t.validate().map_err(|e| format!("--history / --output-alpha / --clip-gamma: {e}"))?;
+        Ok(t)
     }
 
     /// Refuses the flags `family` does not read, naming whose they are and what `family` takes.
@@ -591,6 +619,19 @@ impl Method {
                 Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg), min_bytes })
             }
             _ if a.gpu()? => Err(format!("--device gpu: only flr runs on the GPU, not {name}")),
+            "flr-temporal" => {
+                let cfg = a.config(inputs)?;
+                let temporal = a.temporal_config()?;
+                let mut label = format!("{} temporal", label(&cfg));
+                let mut flags = flag_line(&cfg).replacen("--method flr", "--method flr-temporal", 1);
+                if temporal != lrdenoise::temporal::TemporalConfig::default() {
+                    let t = temporal;
+                    label += &format!(" h{} o{} g{}", t.max_history, t.output_alpha, t.clip_gamma);
+                    flags += &format!(" --history {} --output-alpha {} --clip-gamma {}", t.max_history, t.output_alpha, t.clip_gamma);
+                }
+                let method = Method::Temporal(Box::new(TemporalRunner::flr(cfg, temporal, w, h, threads)?));
+                Ok(Built { method, label, flags, min_bytes: None })
+            }
             "flnr" => {
                 a.only_for(Family::Flnr)?;
                 if let Some(m) = inputs.missing(&lrdenoise::flnr::INPUT_GUIDES) {
@@ -693,7 +734,7 @@ impl Method {
 }
 
 /// Known method names for `--methods` / `--method`.
-pub const METHODS: &[&str] = &["flr", "flnr", "bmfr", "bmfr-temporal", "walr", "walr-temporal"];
+pub const METHODS: &[&str] = &["flr", "flr-temporal", "flnr", "bmfr", "bmfr-temporal", "walr", "walr-temporal"];
 
 /// `--method` / `--methods`: the values clap accepts and lists in `--help`
 /// and in the error for an unknown one.
@@ -701,6 +742,8 @@ pub const METHODS: &[&str] = &["flr", "flnr", "bmfr", "bmfr-temporal", "walr", "
 pub enum MethodName {
     /// Fast Local Regression: per-block affine fits to the guides (CPU, or --device gpu)
     Flr,
+    /// Temporal FLR: FLR on light accumulated over the valid history, output accumulated under a clip
+    FlrTemporal,
     /// FLR on guides rewritten by a small U-Net (--weights)
     Flnr,
     /// Blockwise Multi-Order Feature Regression, one frame
@@ -717,6 +760,7 @@ impl MethodName {
     pub fn as_str(self) -> &'static str {
         match self {
             MethodName::Flr => "flr",
+            MethodName::FlrTemporal => "flr-temporal",
             MethodName::Flnr => "flnr",
             MethodName::Bmfr => "bmfr",
             MethodName::BmfrTemporal => "bmfr-temporal",

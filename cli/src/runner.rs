@@ -2,6 +2,8 @@
 //! threads (each stage's tiles split into one contiguous group per thread).
 
 use lrdenoise::bmfr::Report as BmfrReport;
+use lrdenoise::flr::temporal::TemporalFlr;
+use lrdenoise::temporal::TemporalConfig;
 use lrdenoise::walr::Report as WalrReport;
 use lrdenoise::{
     Bmfr, BmfrConfig, Error, Flr, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Report, Walr, WalrConfig,
@@ -332,9 +334,16 @@ impl WalrRunner {
 pub enum Pipeline {
     Bmfr(Bmfr),
     Walr(Walr),
+    /// Temporal FLR, its FLR scratch and its threads.
+    Flr {
+        plan: Box<TemporalFlr>,
+        flr_scratch: Vec<f64>,
+        threads: usize,
+        pool: Option<rayon::ThreadPool>,
+    },
 }
 
-/// A temporal pipeline (BMFR's or WALR's) over a sequence: the plan, its scratch and the
+/// A temporal pipeline (FLR's, BMFR's or WALR's) over a sequence: the plan, its scratch and the
 /// history. [`TemporalRunner::save`] / [`TemporalRunner::restore`] let a
 /// benchmark repeat one frame without advancing the sequence.
 pub struct TemporalRunner {
@@ -354,6 +363,13 @@ impl TemporalRunner {
         let walr = Walr::new(cfg, w, h).map_err(|e| format!("walr: {e}"))?;
         Ok(Self::with(walr.temporal_scratch_len(), walr.history_len(), Pipeline::Walr(walr)))
     }
+    pub fn flr(cfg: FlrConfig, temporal: TemporalConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+        let plan = TemporalFlr::new(cfg, temporal, w, h).map_err(|e| format!("flr-temporal: {e}"))?;
+        let threads = threads.max(1);
+        let flr_scratch = vec![0f64; plan.parallel_flr_scratch_len(threads)];
+        let (scratch, history) = (plan.scratch_len(), plan.history_len());
+        Ok(Self::with(scratch, history, Pipeline::Flr { plan: Box::new(plan), flr_scratch, threads, pool: pool(threads)? }))
+    }
     fn with(scratch: usize, history: usize, pipeline: Pipeline) -> Self {
         TemporalRunner { scratch: vec![0f32; scratch], history: vec![0f32; history], pipeline, frames: 0, saved: None }
     }
@@ -371,6 +387,7 @@ impl TemporalRunner {
         let set = match &self.pipeline {
             Pipeline::Bmfr(b) => b.config().guides,
             Pipeline::Walr(w) => w.config().guides,
+            Pipeline::Flr { plan, .. } => plan.flr().config().guides,
         };
         let (w, h) = (inputs.w, inputs.h);
         let noisy = ImageView::interleaved(&inputs.noisy, w, h, 3).map_err(|e| e.to_string())?;
@@ -381,7 +398,22 @@ impl TemporalRunner {
         };
         let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
         let mut history = History::resume(&mut self.history, self.frames);
-        let r = match &self.pipeline {
+        let r = match &mut self.pipeline {
+            Pipeline::Flr { plan, flr_scratch, threads, pool } => match pool {
+                Some(pool) => plan.denoise_parallel(
+                    &frame,
+                    motion.as_ref(),
+                    &mut history,
+                    &mut self.scratch,
+                    flr_scratch,
+                    &mut ov,
+                    *threads,
+                    &for_each_in_groups(pool, *threads),
+                ),
+                None => plan.denoise(&frame, motion.as_ref(), &mut history, &mut self.scratch, flr_scratch, &mut ov),
+            }
+            .map(|_| ())
+            .map_err(|e| format!("flr-temporal: {e}")),
             Pipeline::Bmfr(b) => b
                 .denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
                 .map(|_| ())

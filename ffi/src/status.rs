@@ -63,6 +63,11 @@ pub struct LrdReport {
     pub history_rejected: u64,
     /// Noisy samples scaled down by the firefly clamp.
     pub clamped_fireflies: u64,
+    /// Temporal pipelines: pixels whose motion vector was NaN, infinite or
+    /// longer than twice the frame (they get no history).
+    pub invalid_motion: u64,
+    /// Temporal pipelines: frames taken as a camera cut (history restarted).
+    pub history_resets: u64,
 }
 
 pub(crate) fn status_of(e: Error) -> LrdStatus {
@@ -98,6 +103,8 @@ pub(crate) fn write_report(report: *mut LrdReport, r: Report) {
         out.dropped_pivots += r.dropped_pivots;
         out.history_rejected += r.history_rejected;
         out.clamped_fireflies += r.clamped_fireflies;
+        out.invalid_motion += r.invalid_motion;
+        out.history_resets += r.history_resets;
     }
 }
 

@@ -720,8 +720,8 @@ impl GpuPlan {
             empty_blocks: counter(3),
             empty_cells: counter(4),
             dropped_pivots: counter(5),
-            history_rejected: 0,
             clamped_fireflies: counter(6),
+            ..Report::default()
         }
     }
 }

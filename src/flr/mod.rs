@@ -25,6 +25,7 @@ pub mod adaptive;
 pub mod config;
 pub mod gpu;
 pub mod schedule;
+pub mod temporal;
 
 pub use schedule::{Stage, Tiled};
 

@@ -239,6 +239,7 @@ mod tests {
             flags: String::new(),
             flicker: None,
             inject: inject.into(),
+            sequence: None,
             variant: None,
         }
     }

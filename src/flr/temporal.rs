@@ -1,0 +1,187 @@
+//! Temporal FLR: FLR fitted on light accumulated over the frames where the
+//! history is valid, with its output accumulated again under a clip
+//! ([`crate::temporal`] is the stage, shared with the other pipelines).
+//!
+//! Per frame: the noisy light is firefly-clamped ([`crate::fireflies`], with
+//! [`FlrConfig::fireflies`]), accumulated ([`Reprojection::accumulate`]),
+//! denoised by FLR (the schedule of [`Flr::denoise`], on one thread or over
+//! the caller's executor) and resolved ([`Reprojection::resolve`]). FLR
+//! itself runs without its clamp: the light it reads was clamped already.
+//!
+//! ```
+//! use lrdenoise::flr::temporal::TemporalFlr;
+//! use lrdenoise::temporal::{History, TemporalConfig};
+//! use lrdenoise::{FlrConfig, Frame, Guides, GuideSet, ImageView, ImageViewMut};
+//! let (w, h) = (32, 24);
+//! let (noisy, normal, depth) = (vec![0.5f32; w * h * 3], vec![0.0f32; w * h * 3], vec![1.0f32; w * h]);
+//! let motion = vec![0.0f32; w * h * 2];
+//! let tflr = TemporalFlr::new(FlrConfig::with_guides(GuideSet::NORMAL_DEPTH), TemporalConfig::default(), w, h)?;
+//! let (mut history, mut scratch) = (vec![0f32; tflr.history_len()], vec![0f32; tflr.scratch_len()]);
+//! let mut flr_scratch = vec![0f64; tflr.flr_scratch_len()];
+//! let mut history = History::new(&mut history); // one per sequence
+//! let mut out = vec![0f32; w * h * 3];
+//! for _ in 0..3 {
+//!     let guides = Guides {
+//!         normal: Some(ImageView::interleaved(&normal, w, h, 3)?),
+//!         depth: Some(ImageView::interleaved(&depth, w, h, 1)?),
+//!         ..Default::default()
+//!     };
+//!     let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3)?, guides);
+//!     let mv = ImageView::interleaved(&motion, w, h, 2)?;
+//!     let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3)?;
+//!     tflr.denoise(&frame, Some(&mv), &mut history, &mut scratch, &mut flr_scratch, &mut ov)?;
+//! }
+//! assert_eq!(history.frames(), 3);
+//! assert!((out[0] - 0.5).abs() < 1e-3);
+//! # Ok::<(), lrdenoise::Error>(())
+//! ```
+
+use super::config::FlrConfig;
+use super::Flr;
+use crate::error::{Arg, Error};
+use crate::fireflies;
+use crate::guides::Frame;
+use crate::image::{ImageView, ImageViewMut};
+use crate::parallel::Executor;
+use crate::report::Report;
+use crate::temporal::{History, Inputs, Reprojection, TemporalConfig};
+
+/// A temporal FLR plan: FLR and the temporal stage for one frame size.
+#[derive(Clone, Debug)]
+pub struct TemporalFlr {
+    flr: Flr,
+    stage: Reprojection,
+    fireflies: Option<f32>,
+}
+
+impl TemporalFlr {
+    /// Plans temporal FLR for `width × height` frames. The stage rejects
+    /// history with the guides of `cfg.guides` it knows (normal, position,
+    /// depth); joint upsampling (`cfg.upsample > 1`) is not supported.
+    pub fn new(cfg: FlrConfig, temporal: TemporalConfig, width: usize, height: usize) -> Result<Self, Error> {
+        if cfg.upsample != 1 {
+            return Err(Error::Unsupported("temporal FLR with upsample > 1"));
+        }
+        let flr = Flr::new(FlrConfig { fireflies: None, ..cfg }, width, height)?;
+        cfg.validate()?;
+        let stage = Reprojection::new(temporal, cfg.guides, width, height)?;
+        Ok(TemporalFlr { flr, stage, fireflies: cfg.fireflies })
+    }
+    /// The FLR plan that runs on the accumulated light (its clamp is off).
+    pub fn flr(&self) -> &Flr {
+        &self.flr
+    }
+    /// The temporal stage.
+    pub fn stage(&self) -> &Reprojection {
+        &self.stage
+    }
+    fn plane(&self) -> usize {
+        let (w, h) = self.flr.size();
+        w * h
+    }
+    /// f32 values of the [`History`] buffer.
+    pub fn history_len(&self) -> usize {
+        self.stage.history_len()
+    }
+    /// f32 values of the scratch: the stage's, FLR's output (RGB) and,
+    /// with the firefly clamp, the clamped light (3 planes) and its work.
+    pub fn scratch_len(&self) -> usize {
+        let clamp = match self.fireflies {
+            Some(_) => 3 * self.plane() + fireflies::work_len(self.flr.size().0),
+            None => 0,
+        };
+        self.stage.scratch_len() + 3 * self.plane() + clamp
+    }
+    /// f64 values of FLR's scratch for [`TemporalFlr::denoise`].
+    pub fn flr_scratch_len(&self) -> usize {
+        self.flr.scratch_len()
+    }
+    /// f64 values of FLR's scratch for [`TemporalFlr::denoise_parallel`] with `workers`.
+    pub fn parallel_flr_scratch_len(&self, workers: usize) -> usize {
+        self.flr.tiled_scratch_len(workers).unwrap_or(usize::MAX)
+    }
+
+    /// One frame of the sequence, on the calling thread. `motion` (2
+    /// channels, previous − current pixel position) may be `None` for a
+    /// static camera. Allocates nothing.
+    pub fn denoise(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        flr_scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        self.run(frame, motion, history, scratch, out, |flr, f, o| flr.denoise(f, flr_scratch, o))
+    }
+
+    /// [`TemporalFlr::denoise`] with FLR's tiles over the caller's executor
+    /// (as [`Flr::denoise_parallel`]); the same bits.
+    #[allow(clippy::too_many_arguments)]
+    pub fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        flr_scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        self.run(frame, motion, history, scratch, out, |flr, f, o| flr.denoise_parallel(f, flr_scratch, o, workers, for_each))
+    }
+
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        fit: impl FnOnce(&Flr, &Frame<'_>, &mut ImageViewMut<'_>) -> Result<Report, Error>,
+    ) -> Result<Report, Error> {
+        let (w, h) = self.flr.size();
+        let np = w * h;
+        self.flr.check_output(out)?;
+        self.flr.check_frame(frame)?;
+        if frame.guides_low.is_some() {
+            return Err(Error::Unsupported("temporal FLR with a second (low-resolution) guide set"));
+        }
+        self.stage.check_history(history)?;
+        if scratch.len() < self.scratch_len() {
+            return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
+        }
+        let (stage_scratch, rest) = scratch.split_at_mut(self.stage.scratch_len());
+        let (fitted, rest) = rest.split_at_mut(3 * np);
+        let mut rep = Report::default();
+        let clamped = match self.fireflies {
+            Some(k) => {
+                let (light, work) = rest.split_at_mut(3 * np);
+                let bad = Error::BufferTooSmall { arg: Arg::Scratch, needed: self.scratch_len(), len: 0 };
+                rep.clamped_fireflies = fireflies::clamp_frame(&frame.noisy, k, light, work).ok_or(bad)?;
+                Some(&*light)
+            }
+            None => None,
+        };
+        let inputs = Inputs { noisy: frame.noisy, clamped, guides: frame.guides, motion: motion.copied() };
+        let c = self.stage.accumulate(&inputs, history, stage_scratch)?;
+        rep.history_rejected = c.rejected;
+        rep.invalid_motion = c.invalid_motion;
+        rep.history_resets = c.cut;
+        rep.nonfinite_noisy = c.nonfinite;
+        {
+            let acc = self.stage.accumulated(history)?;
+            let f = Frame { noisy: acc, guides: frame.guides, guides_low: None };
+            let mut fit_out = ImageViewMut::interleaved(fitted, w, h, 3)?;
+            let r = fit(&self.flr, &f, &mut fit_out)?;
+            // (NaN/Inf noisy samples were counted, and bridged where possible, by the stage)
+            rep += Report { nonfinite_noisy: 0, ..r };
+        }
+        self.stage.resolve(fitted, history, stage_scratch, c.cut != 0, self.flr.config().clamp_negative, |y, row| {
+            out.write_row_n(y, 0, row).ok_or(Error::InvalidTile { index: y, count: h })
+        })?;
+        Ok(rep)
+    }
+}

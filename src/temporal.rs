@@ -1,0 +1,548 @@
+//! The temporal stage: reprojection, per-tap rejection, a per-pixel history
+//! length, camera-cut detection and the clipped accumulation of an output.
+//!
+//! A pipeline runs it around a single-frame denoiser:
+//!
+//! 1. [`Reprojection::accumulate`]: each pixel's previous position is its
+//!    position plus `motion` (previous − current, in pixels). Its 4 bilinear
+//!    taps into the previous frame are tested against the current pixel's
+//!    guides (normal, world position or, without positions, depth); the
+//!    accepted taps give the previous accumulated light and sample count.
+//!    The new sample is blended in with weight `kept / n`, where `n`, the
+//!    history length, grows by `kept` per frame up to
+//!    [`TemporalConfig::max_history`] (a cumulative average that becomes an
+//!    exponential one) and `kept` is the fraction of the sample the firefly
+//!    clamp left ([`crate::fireflies::kept`]): an outlier clamped to a
+//!    hundredth counts as a hundredth of a sample. A pixel with no accepted
+//!    tap (disocclusion, motion out of the frame) starts again at `n = kept`.
+//!    When more than [`TemporalConfig::cut_fraction`] of the pixels have no
+//!    accepted tap, the frame is a camera cut and the whole history restarts.
+//! 2. The denoiser runs on the accumulated light.
+//! 3. [`Reprojection::resolve`]: the previous *output*, reprojected through
+//!    the same accepted taps, is clipped to the current output's 3×3
+//!    neighbourhood (mean ± [`TemporalConfig::clip_gamma`] standard
+//!    deviations, per YCoCg channel) and blended with weight
+//!    `max(1/n, output_alpha)` for the new frame.
+//!
+//! Everything is per pixel, or reads a 3×3 neighbourhood of a plane the step
+//! before wrote in full, so any split into row bands gives the same bits.
+//! State lives in a caller-owned [`History`] of two slots: a frame reads the
+//! slot the previous frame wrote and writes the other, so nothing is copied.
+
+use crate::error::{Arg, Error};
+use crate::fireflies;
+use crate::guides::{GuideSet, Guides};
+use crate::image::ImageView;
+use crate::reproject::{bilinear_taps, rgb, ycocg};
+
+pub use crate::history::History;
+
+/// Settings of the temporal stage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TemporalConfig {
+    /// Longest per-pixel history, in frames: the blend weight of a new sample
+    /// never drops below `1 / max_history` (default 16).
+    pub max_history: f32,
+    /// Smallest cosine between a history tap's normal and the current one (default 0.9, 26°).
+    pub normal_limit: f32,
+    /// Largest world-position distance of a history tap, as a fraction of the
+    /// camera distance when the frame has depth, in world units when it has
+    /// none (default 0.02).
+    pub position_limit: f32,
+    /// Without positions: largest relative depth difference (default 0.05).
+    pub depth_limit: f32,
+    /// Half-width of the output's clip box in standard deviations (default 1.5).
+    pub clip_gamma: f32,
+    /// Lowest blend weight of the new output frame in [`Reprojection::resolve`]
+    /// (default 0.5; 1 turns the output accumulation off).
+    pub output_alpha: f32,
+    /// A frame where more than this fraction of pixels has no usable history
+    /// is a camera cut: the history restarts (default 0.5; 1 turns it off).
+    pub cut_fraction: f32,
+}
+
+impl Default for TemporalConfig {
+    fn default() -> Self {
+        TemporalConfig {
+            max_history: 16.0,
+            normal_limit: 0.9,
+            position_limit: 0.02,
+            depth_limit: 0.05,
+            clip_gamma: 1.5,
+            output_alpha: 0.5,
+            cut_fraction: 0.5,
+        }
+    }
+}
+
+impl TemporalConfig {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), Error> {
+        if !(self.max_history >= 1.0 && self.max_history <= 1e6) {
+            return Err(Error::InvalidConfig("temporal.max_history (1..=1e6)"));
+        }
+        if !(self.normal_limit >= -1.0 && self.normal_limit <= 1.0) {
+            return Err(Error::InvalidConfig("temporal.normal_limit (a cosine, -1..=1)"));
+        }
+        let pos = |v: f32| v >= 0.0 && v.is_finite();
+        if !pos(self.position_limit) || !pos(self.depth_limit) || !pos(self.clip_gamma) {
+            return Err(Error::InvalidConfig("temporal limits (≥ 0, finite)"));
+        }
+        if !(self.output_alpha > 0.0 && self.output_alpha <= 1.0) {
+            return Err(Error::InvalidConfig("temporal.output_alpha (0, 1]"));
+        }
+        if !(self.cut_fraction > 0.0 && self.cut_fraction <= 1.0) {
+            return Err(Error::InvalidConfig("temporal.cut_fraction (0, 1]"));
+        }
+        Ok(())
+    }
+}
+
+/// Largest motion, in frame sizes, that is taken as a motion vector; longer
+/// ones (and NaN/Inf) are counted as invalid and the pixel gets no history.
+const MAX_MOTION_FRAMES: f32 = 2.0;
+
+// One pixel's record in a history slot: accumulated light (3), history
+// length (1), output (3), then the rejection guides (normal 3, position 3,
+// depth 1: those present). Records are interleaved, so the taps of a pixel
+// touch one or two cache lines per row rather than a line in every plane.
+const LIGHT: usize = 0;
+const COUNT: usize = 3;
+const OUTPUT: usize = 4;
+const GUIDES: usize = 7;
+
+/// What the stage did in one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// Pixels without usable history (the first frame and cut frames are not counted).
+    pub rejected: u64,
+    /// Pixels whose motion vector was NaN/Inf or longer than twice the frame.
+    pub invalid_motion: u64,
+    /// Pixels whose noisy light was NaN/Inf (bridged with the history where there is one).
+    pub nonfinite: u64,
+    /// 1 when this frame was taken as a camera cut (the history restarted).
+    pub cut: u64,
+}
+
+/// `e` about `arg` instead.
+fn with_arg(e: Error, arg: Arg) -> Error {
+    match e {
+        Error::SizeMismatch { expected, got, .. } => Error::SizeMismatch { arg, expected, got },
+        Error::ChannelCount { expected, got, .. } => Error::ChannelCount { arg, expected, got },
+        e => e,
+    }
+}
+
+/// The inputs of [`Reprojection::accumulate`] for one frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Inputs<'a> {
+    /// The noisy light as it arrived (3 channels).
+    pub noisy: ImageView<'a>,
+    /// The light to accumulate: 3 planes of the frame (`w × h` each), the
+    /// firefly-clamped `noisy`; `None`: `noisy` as it is.
+    pub clamped: Option<&'a [f32]>,
+    /// The frame's guides (those of the plan's [`GuideSet`] are read).
+    pub guides: Guides<'a>,
+    /// Previous − current pixel position (2 channels); `None`: a static camera.
+    pub motion: Option<ImageView<'a>>,
+}
+
+/// The temporal stage of one frame size and guide set.
+#[derive(Clone, Copy, Debug)]
+pub struct Reprojection {
+    cfg: TemporalConfig,
+    width: usize,
+    height: usize,
+    normal: bool,
+    position: bool,
+    depth: bool,
+}
+
+/// Values per pixel [`Reprojection::accumulate`] leaves for
+/// [`Reprojection::resolve`] in the caller's scratch: the previous position
+/// (2) and the accepted-tap mask (1).
+const PIXEL_VALUES: usize = 3;
+/// Rows of working space in the scratch.
+const ROWS: usize = 21;
+
+impl Reprojection {
+    /// The stage for `width × height` frames whose guides include those of
+    /// `guides` that it uses for rejection (normal, position, depth).
+    pub fn new(cfg: TemporalConfig, guides: GuideSet, width: usize, height: usize) -> Result<Self, Error> {
+        cfg.validate()?;
+        if width == 0 || height == 0 || width > crate::image::MAX_DIM || height > crate::image::MAX_DIM {
+            return Err(Error::InvalidSize { arg: Arg::Output, width, height });
+        }
+        Ok(Reprojection { cfg, width, height, normal: guides.normal, position: guides.position, depth: guides.depth })
+    }
+    /// The settings.
+    pub fn config(&self) -> &TemporalConfig {
+        &self.cfg
+    }
+    fn plane(&self) -> usize {
+        self.width * self.height
+    }
+    fn guide_planes(&self) -> usize {
+        3 * self.normal as usize + 3 * self.position as usize + self.depth as usize
+    }
+    fn record(&self) -> usize {
+        GUIDES + self.guide_planes()
+    }
+    fn slot_len(&self) -> usize {
+        self.record() * self.plane()
+    }
+    /// f32 values of the [`History`] buffer: two slots.
+    pub fn history_len(&self) -> usize {
+        2 * self.slot_len()
+    }
+    /// f32 values of the scratch [`Reprojection::accumulate`] and
+    /// [`Reprojection::resolve`] share: 3 values per pixel and 21 rows.
+    pub fn scratch_len(&self) -> usize {
+        PIXEL_VALUES * self.plane() + ROWS * self.width
+    }
+
+    /// Checks the history buffer's size; a buffer from another frame size or
+    /// guide set is refused here.
+    pub fn check_history(&self, history: &History<'_>) -> Result<(), Error> {
+        if history.data.len() != self.history_len() {
+            return Err(Error::BufferTooSmall { arg: Arg::History, needed: self.history_len(), len: history.data.len() });
+        }
+        Ok(())
+    }
+
+    /// The two slots of the history: (read, write) for the frame `history.frames`.
+    fn slots<'h>(&self, history: &'h mut History<'_>) -> (&'h [f32], &'h mut [f32]) {
+        let n = self.slot_len();
+        let (a, b) = history.data.split_at_mut(n);
+        if history.frames.is_multiple_of(2) {
+            (&b[..n], &mut a[..n])
+        } else {
+            (&a[..n], &mut b[..n])
+        }
+    }
+
+    /// The accumulated light of the frame as [`Reprojection::accumulate`]
+    /// wrote it into the history's write slot, as a view the denoiser reads
+    /// (3 channels of records of [`Reprojection::history_len`]` / 2 / (w h)`
+    /// values).
+    pub fn accumulated<'h>(&self, history: &'h mut History<'_>) -> Result<ImageView<'h>, Error> {
+        let (w, h) = (self.width, self.height);
+        let rec = self.record();
+        let (_, write) = self.slots(history);
+        let layout = crate::image::Layout { offset: LIGHT, pixel_stride: rec, row_stride: rec * w, channel_stride: 1 };
+        ImageView::f32(write, w, h, 3, layout)
+    }
+
+    /// Step 1 for the whole frame: reads the inputs, writes the accumulated
+    /// light, the history length and the guides into the history's write slot
+    /// and the per-pixel planes into `scratch` ([`Reprojection::scratch_len`]).
+    /// A camera cut is detected here (and the pass rerun without history).
+    pub fn accumulate(&self, inp: &Inputs<'_>, history: &mut History<'_>, scratch: &mut [f32]) -> Result<Counts, Error> {
+        self.check_inputs(inp)?;
+        self.check_history(history)?;
+        if scratch.len() < self.scratch_len() {
+            return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
+        }
+        let has_history = history.frames > 0;
+        let mut c = self.accumulate_rows(inp, history, has_history, scratch)?;
+        let np = self.plane() as f64;
+        if has_history && c.rejected as f64 > self.cfg.cut_fraction as f64 * np {
+            c = self.accumulate_rows(inp, history, false, scratch)?;
+            c.cut = 1;
+        }
+        Ok(c)
+    }
+
+    fn check_inputs(&self, inp: &Inputs<'_>) -> Result<(), Error> {
+        let (w, h) = (self.width, self.height);
+        let size = |v: &ImageView<'_>, ch: usize| {
+            if (v.width(), v.height()) != (w, h) {
+                return Err(Error::SizeMismatch { arg: Arg::Guide, expected: (w, h), got: (v.width(), v.height()) });
+            }
+            if v.channel_count() < ch {
+                return Err(Error::ChannelCount { arg: Arg::Guide, expected: ch, got: v.channel_count() });
+            }
+            Ok(())
+        };
+        size(&inp.noisy, 3).map_err(|e| with_arg(e, Arg::Noisy))?;
+        if let Some(m) = &inp.motion {
+            size(m, 2).map_err(|e| with_arg(e, Arg::Motion))?;
+        }
+        for (want, view, ch) in
+            [(self.normal, &inp.guides.normal, 3), (self.position, &inp.guides.position, 3), (self.depth, &inp.guides.depth, 1)]
+        {
+            match view {
+                Some(v) if want => size(v, ch)?,
+                None if want => return Err(Error::GuideMismatch),
+                _ => {}
+            }
+        }
+        if let Some(c) = inp.clamped {
+            if c.len() < 3 * self.plane() {
+                return Err(Error::BufferTooSmall { arg: Arg::Scratch, needed: 3 * self.plane(), len: c.len() });
+            }
+        }
+        Ok(())
+    }
+
+    fn accumulate_rows(
+        &self,
+        inp: &Inputs<'_>,
+        history: &mut History<'_>,
+        has_history: bool,
+        scratch: &mut [f32],
+    ) -> Result<Counts, Error> {
+        let (w, h, np) = (self.width, self.height, self.plane());
+        let cfg = &self.cfg;
+        let rec = self.record();
+        let (read, write) = self.slots(history);
+        let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * np);
+        let (raw, rest) = rows.split_at_mut(3 * w);
+        let (mv, rest) = rest.split_at_mut(2 * w);
+        let (grow, _) = rest.split_at_mut(7 * w);
+        let bad = Error::InvalidTile { index: 0, count: h };
+        let max_motion = MAX_MOTION_FRAMES * w.max(h) as f32;
+        let mut c = Counts::default();
+        // offsets of the guides inside a record
+        let n_at = GUIDES;
+        let p_at = GUIDES + 3 * self.normal as usize;
+        let d_at = p_at + 3 * self.position as usize;
+        let gp = self.guide_planes();
+        for y in 0..h {
+            {
+                let (r, gb) = raw.split_at_mut(w);
+                let (g, b) = gb.split_at_mut(w);
+                inp.noisy.read_row_n(y, 0, [r, g, b]).ok_or(bad)?;
+            }
+            match inp.motion {
+                Some(m) if has_history => {
+                    let (mx, my) = mv.split_at_mut(w);
+                    m.read_row_n(y, 0, [mx, my]).ok_or(bad)?;
+                }
+                _ => mv.fill(0.0),
+            }
+            // the current guides, a plane of the row per channel
+            let mut p = 0;
+            for (on, view, ch) in
+                [(self.normal, inp.guides.normal, 3), (self.position, inp.guides.position, 3), (self.depth, inp.guides.depth, 1)]
+            {
+                if !on {
+                    continue;
+                }
+                let v = view.ok_or(Error::GuideMismatch)?;
+                for k in 0..ch {
+                    v.read_row(y, k, 0, &mut grow[(p + k) * w..(p + k + 1) * w]).ok_or(bad)?;
+                }
+                p += ch;
+            }
+            let out_row = &mut write[y * w * rec..(y + 1) * w * rec];
+            for (x, r) in out_row.chunks_exact_mut(rec).enumerate() {
+                let i = y * w + x;
+                for g in 0..gp {
+                    r[GUIDES + g] = grow[g * w + x];
+                }
+                let rawc = [raw[x], raw[w + x], raw[2 * w + x]];
+                let cur = match inp.clamped {
+                    Some(l) => [l[i], l[np + i], l[2 * np + i]],
+                    None => rawc,
+                };
+                let cur_ok = cur.iter().all(|v| v.is_finite());
+                c.nonfinite += !cur_ok as u64;
+                let kept = if inp.clamped.is_some() { fireflies::kept(rawc, cur) } else { 1.0 };
+                let (mx, my) = (mv[x], mv[w + x]);
+                let motion_ok = mx.abs() <= max_motion && my.abs() <= max_motion; // false for NaN
+                c.invalid_motion += (has_history && !motion_ok) as u64;
+                let (px, py) = (x as f32 + mx, y as f32 + my);
+                let (mut accept, mut tw, mut n, mut prev) = (0u32, 0f32, 0f32, [0f32; 3]);
+                if has_history && motion_ok {
+                    let g = &r[GUIDES..];
+                    let depth = if self.depth { g[d_at - GUIDES].abs() } else { 1.0 };
+                    let plim = cfg.position_limit * depth;
+                    for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
+                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
+                            continue;
+                        }
+                        let j = (ty as usize * w + tx as usize) * rec;
+                        let Some(t) = read.get(j..j + rec) else { continue };
+                        let mut ok = true;
+                        if self.normal {
+                            let (a, b) = (&g[n_at - GUIDES..n_at - GUIDES + 3], &t[n_at..n_at + 3]);
+                            let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+                            let empty = |v: &[f32]| v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0;
+                            // (no geometry on both sides: sky continues sky)
+                            ok &= dot >= cfg.normal_limit || (empty(a) && empty(b));
+                        }
+                        if self.position {
+                            let q = p_at - GUIDES;
+                            let d2: f32 = (0..3).map(|c| (t[p_at + c] - g[q + c]) * (t[p_at + c] - g[q + c])).sum();
+                            ok &= d2 <= plim * plim;
+                        } else if self.depth {
+                            let d = g[d_at - GUIDES];
+                            ok &= (t[d_at] - d).abs() <= cfg.depth_limit * d.abs();
+                        }
+                        let (pl, pn) = ([t[LIGHT], t[LIGHT + 1], t[LIGHT + 2]], t[COUNT]);
+                        ok &= pl.iter().all(|v| v.is_finite()) && pn.is_finite() && pn >= 0.0;
+                        if ok {
+                            accept |= 1 << k;
+                            tw += wt;
+                            n += wt * pn;
+                            for ch in 0..3 {
+                                prev[ch] += wt * pl[ch];
+                            }
+                        }
+                    }
+                }
+                let (acc, count) = if tw > 0.0 {
+                    let n = n / tw;
+                    let inv = 1.0 / tw;
+                    let prev = [prev[0] * inv, prev[1] * inv, prev[2] * inv];
+                    if cur_ok {
+                        let count = (n + kept).min(cfg.max_history);
+                        let a = if count > 0.0 { (kept / count).max(kept / cfg.max_history) } else { 1.0 };
+                        (lerp3(prev, cur, a), count)
+                    } else {
+                        (prev, n) // a NaN/Inf sample is bridged with the history
+                    }
+                } else {
+                    c.rejected += has_history as u64;
+                    // a NaN/Inf sample without history stays: the denoiser excludes it
+                    (cur, kept.max(1e-3))
+                };
+                r[LIGHT..LIGHT + 3].copy_from_slice(&acc);
+                r[COUNT] = count;
+                pixels[PIXEL_VALUES * i..PIXEL_VALUES * i + 3].copy_from_slice(&[px, py, accept as f32]);
+            }
+        }
+        Ok(c)
+    }
+
+    /// Step 3 for the whole frame: `current`, the denoiser's output of this
+    /// frame (RGB interleaved; `cut`: as [`Counts::cut`] said; `clamp_negative`:
+    /// negative results become 0), blended with the clipped reprojection of
+    /// the previous output into the write slot; then calls `row(y, [r, g, b])`
+    /// with each output row and advances the history to the next
+    /// frame. `scratch`: as [`Reprojection::accumulate`] left it.
+    pub fn resolve(
+        &self,
+        current: &[f32],
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        cut: bool,
+        clamp_negative: bool,
+        mut row: impl FnMut(usize, [&[f32]; 3]) -> Result<(), Error>,
+    ) -> Result<(), Error> {
+        self.check_history(history)?;
+        let (w, h, np) = (self.width, self.height, self.plane());
+        if scratch.len() < self.scratch_len() || current.len() < 3 * np {
+            return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
+        }
+        let cfg = &self.cfg;
+        let rec = self.record();
+        let blend = history.frames > 0 && !cut && cfg.output_alpha < 1.0;
+        {
+            let (read, write) = self.slots(history);
+            let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * np);
+            // a ring of 3 rows of horizontal 3-sums of YCoCg and of its
+            // square (6 values per pixel), then the output row
+            let (ring, rest) = rows.split_at_mut(18 * w);
+            let out_row = &mut rest[..3 * w];
+            let hsums = |y: usize, dst: &mut [f32]| {
+                let v = |x: usize| {
+                    let i = 3 * (y * w + x);
+                    ycocg([current[i], current[i + 1], current[i + 2]])
+                };
+                let (mut a, mut b) = ([0f32; 3], v(0));
+                for x in 0..w {
+                    let c = if x + 1 < w { v(x + 1) } else { [0.0; 3] };
+                    let d = &mut dst[6 * x..6 * x + 6];
+                    for ch in 0..3 {
+                        let s = a[ch] + b[ch] + c[ch];
+                        d[ch] = s;
+                        d[3 + ch] = a[ch] * a[ch] + b[ch] * b[ch] + c[ch] * c[ch];
+                    }
+                    (a, b) = (b, c);
+                }
+            };
+            if blend {
+                hsums(0, &mut ring[..6 * w]);
+            }
+            for y in 0..h {
+                if blend && y + 1 < h {
+                    let slot = (y + 1) % 3;
+                    hsums(y + 1, &mut ring[slot * 6 * w..(slot + 1) * 6 * w]);
+                }
+                let wrow = &mut write[y * w * rec..(y + 1) * w * rec];
+                for (x, r) in wrow.chunks_exact_mut(rec).enumerate() {
+                    let i = y * w + x;
+                    let cur = [current[3 * i], current[3 * i + 1], current[3 * i + 2]];
+                    let mut res = cur;
+                    let (px, py, accept) = (pixels[3 * i], pixels[3 * i + 1], pixels[3 * i + 2] as u32);
+                    if blend && accept != 0 {
+                        if let Some(prev) = reproject_record(read, rec, OUTPUT, (w, h), (px, py), accept) {
+                            let (mut s1, mut s2) = ([0f32; 3], [0f32; 3]);
+                            let (y0, y1) = (y.saturating_sub(1), (y + 2).min(h));
+                            for sy in y0..y1 {
+                                let d = &ring[(sy % 3) * 6 * w + 6 * x..(sy % 3) * 6 * w + 6 * x + 6];
+                                for ch in 0..3 {
+                                    s1[ch] += d[ch];
+                                    s2[ch] += d[3 + ch];
+                                }
+                            }
+                            let cols = (x + 2).min(w) - x.saturating_sub(1);
+                            let cnt = ((y1 - y0) * cols) as f32;
+                            let p = ycocg(prev);
+                            let mut clipped = [0f32; 3];
+                            for ch in 0..3 {
+                                let mu = s1[ch] / cnt;
+                                let sd = libm::sqrtf((s2[ch] / cnt - mu * mu).max(0.0));
+                                clipped[ch] = p[ch].max(mu - cfg.clip_gamma * sd).min(mu + cfg.clip_gamma * sd);
+                            }
+                            let prev = rgb(clipped);
+                            let n = r[COUNT];
+                            let a = if n > 0.0 { (1.0 / n).max(cfg.output_alpha).min(1.0) } else { 1.0 };
+                            res = lerp3(prev, cur, a);
+                        }
+                    }
+                    for ch in 0..3 {
+                        let v = if clamp_negative { res[ch].max(0.0) } else { res[ch] };
+                        let v = if v.is_finite() { v } else { 0.0 };
+                        r[OUTPUT + ch] = v;
+                        out_row[ch * w + x] = v;
+                    }
+                }
+                row(y, [&out_row[..w], &out_row[w..2 * w], &out_row[2 * w..]])?;
+            }
+        }
+        // (the parity of the count picks the slots: keep it when the counter wraps)
+        history.frames = if history.frames == u32::MAX { 2 } else { history.frames + 1 };
+        Ok(())
+    }
+}
+
+/// The bilinear reprojection of 3 values at `at` of the records of `slot`
+/// (`rec` values each) at `(px, py)`: the weighted mean of the taps whose bit
+/// is set in `mask`, that lie in the image and hold finite values.
+fn reproject_record(slot: &[f32], rec: usize, at: usize, (w, h): (usize, usize), (px, py): (f32, f32), mask: u32) -> Option<[f32; 3]> {
+    let (mut tw, mut sum) = (0f32, [0f32; 3]);
+    for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
+        if mask & (1 << k) == 0 || tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
+            continue;
+        }
+        let j = (ty as usize * w + tx as usize) * rec + at;
+        let Some(v) = slot.get(j..j + 3) else { continue };
+        if v.iter().all(|v| v.is_finite()) {
+            tw += wt;
+            for c in 0..3 {
+                sum[c] += wt * v[c];
+            }
+        }
+    }
+    let inv = 1.0 / tw;
+    (tw > 0.0).then_some([sum[0] * inv, sum[1] * inv, sum[2] * inv])
+}
+
+/// `a · new + (1 − a) · old`, per channel.
+#[inline(always)]
+fn lerp3(old: [f32; 3], new: [f32; 3], a: f32) -> [f32; 3] {
+    [old[0] + a * (new[0] - old[0]), old[1] + a * (new[1] - old[1]), old[2] + a * (new[2] - old[2])]
+}

@@ -1,0 +1,269 @@
+//! The temporal stage (`lrdenoise::temporal`) and temporal FLR over sequences
+//! of synthetic frames: a static camera converges to the multi-sample result,
+//! a disoccluded pixel restarts from its own sample, a cut resets, bad motion
+//! is rejected and counted, a burst of fireflies is gone within 2 frames, a
+//! history of another size is refused, and the parallel run gives the same bits.
+
+mod common;
+use common::*;
+use lrdenoise::flr::temporal::TemporalFlr;
+use lrdenoise::temporal::{History, Inputs, Reprojection, TemporalConfig};
+use lrdenoise::*;
+
+const SET: GuideSet = GuideSet::NORMAL_DEPTH_AO;
+
+/// Frame `t` of a static sequence: the same guides and clean light, fresh
+/// zero-mean noise (uniform, ±80 %).
+fn frame_at(w: usize, h: usize, t: u64) -> Owned {
+    let mut f = Owned::synthetic(w, h, 3, 0.5);
+    let mut rng = Rng(0x9e37_79b9 ^ (t + 1).wrapping_mul(0x2545_f491_4f6c_dd1d));
+    for (n, c) in f.noisy.iter_mut().zip(&f.clean) {
+        *n = c * (1.0 + 0.8 * (2.0 * rng.f32() - 1.0));
+    }
+    f
+}
+
+struct Seq {
+    plan: TemporalFlr,
+    history: Vec<f32>,
+    frames: u32,
+    scratch: Vec<f32>,
+    flr_scratch: Vec<f64>,
+}
+
+impl Seq {
+    fn new(cfg: FlrConfig, t: TemporalConfig, w: usize, h: usize) -> Seq {
+        let plan = TemporalFlr::new(cfg, t, w, h).unwrap();
+        Seq {
+            history: vec![0.0; plan.history_len()],
+            scratch: vec![f32::NAN; plan.scratch_len()],
+            flr_scratch: vec![f64::NAN; plan.parallel_flr_scratch_len(3)],
+            plan,
+            frames: 0,
+        }
+    }
+    fn next(&mut self, f: &Owned, motion: Option<&[f32]>, threads: usize) -> (Vec<f32>, Report) {
+        let (w, h) = (f.w, f.h);
+        let mut out = vec![f32::NAN; 3 * w * h];
+        let mv = motion.map(|m| ImageView::interleaved(m, w, h, 2).unwrap());
+        let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+        let mut history = History::resume(&mut self.history, self.frames);
+        let frame = f.frame(SET);
+        let rep = if threads > 1 {
+            let exec = |n: usize, body: &(dyn Fn(usize, usize) + Sync)| {
+                std::thread::scope(|s| {
+                    for wk in 0..threads {
+                        s.spawn(move || (wk..n).step_by(threads).for_each(|i| body(i, wk)));
+                    }
+                })
+            };
+            self.plan.denoise_parallel(&frame, mv.as_ref(), &mut history, &mut self.scratch, &mut self.flr_scratch, &mut ov, threads, &exec)
+        } else {
+            self.plan.denoise(&frame, mv.as_ref(), &mut history, &mut self.scratch, &mut self.flr_scratch, &mut ov)
+        }
+        .unwrap();
+        self.frames = history.frames();
+        assert!(out.iter().all(|v| v.is_finite()));
+        (out, rep)
+    }
+}
+
+fn cfg() -> FlrConfig {
+    FlrConfig::with_guides(SET)
+}
+
+fn flr_of(noisy: &[f32], like: &Owned) -> Vec<f32> {
+    let mut f = like.clone();
+    f.noisy = noisy.to_vec();
+    run(FlrConfig { fireflies: None, ..cfg() }, &f).0
+}
+
+fn psnr(a: &[f32], b: &[f32]) -> f64 {
+    let mse = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>() / a.len() as f64;
+    -10.0 * mse.log10()
+}
+
+/// With a static camera and no output accumulation, frame n's output is FLR
+/// on the mean of the n noisy frames (up to the rounding of a running mean),
+/// and it beats per-frame FLR.
+#[test]
+fn static_camera_converges_to_the_multi_sample_result() {
+    let (w, h) = (64, 40);
+    let t = TemporalConfig { output_alpha: 1.0, ..Default::default() };
+    let mut seq = Seq::new(FlrConfig { fireflies: None, ..cfg() }, t, w, h);
+    let zero = vec![0f32; 2 * w * h];
+    let mut sum = vec![0f64; 3 * w * h];
+    let n = 8;
+    let (mut out, mut last) = (vec![], frame_at(w, h, 0));
+    for k in 0..n {
+        let f = frame_at(w, h, k);
+        (out, _) = seq.next(&f, Some(&zero), 1);
+        for (s, v) in sum.iter_mut().zip(&f.noisy) {
+            *s += *v as f64;
+        }
+        last = f;
+    }
+    let mean: Vec<f32> = sum.iter().map(|s| (s / n as f64) as f32).collect();
+    let want = flr_of(&mean, &last);
+    let worst = out.iter().zip(&want).map(|(a, b)| (a - b).abs() / b.abs().max(0.05)).fold(0f32, f32::max);
+    assert!(worst < 1e-3, "temporal FLR vs FLR on the mean of {n} frames: relative error {worst}");
+    let per_frame = flr_of(&last.noisy, &last);
+    let (gain, p) = (psnr(&out, &last.clean), psnr(&per_frame, &last.clean));
+    let pm = psnr(&mean, &last.clean);
+    let pn = psnr(&last.noisy, &last.clean);
+    assert!(gain > p + 3.0, "{n} frames: {gain:.2} dB against per-frame {p:.2} dB (mean {pm:.2}, noisy {pn:.2})");
+}
+
+/// The stage on its own: a pixel whose motion leaves the frame has no history
+/// and restarts from its own sample (count 1); the others average.
+#[test]
+fn disoccluded_pixels_restart_from_their_own_sample() {
+    let (w, h) = (23, 9);
+    let st = Reprojection::new(TemporalConfig::default(), SET, w, h).unwrap();
+    let mut hist = vec![0f32; st.history_len()];
+    let mut scratch = vec![0f32; st.scratch_len()];
+    let mut history = History::new(&mut hist);
+    let f0 = frame_at(w, h, 0);
+    let f1 = frame_at(w, h, 1);
+    // frame 1: the left 5 columns point outside the frame, the rest stay put
+    let mv: Vec<f32> = (0..w * h).flat_map(|i| if i % w < 5 { [-10.0, 0.0] } else { [0.0, 0.0] }).collect();
+    for (f, m) in [(&f0, None), (&f1, Some(&mv[..]))] {
+        let inp = Inputs {
+            noisy: ImageView::interleaved(&f.noisy, w, h, 3).unwrap(),
+            clamped: None,
+            guides: f.guides(SET),
+            motion: m.map(|m| ImageView::interleaved(m, w, h, 2).unwrap()),
+        };
+        let c = st.accumulate(&inp, &mut history, &mut scratch).unwrap();
+        if m.is_some() {
+            assert_eq!(c.rejected, 5 * h as u64);
+            assert_eq!(c.cut, 0);
+            let acc = st.accumulated(&mut history).unwrap();
+            for y in 0..h {
+                for x in 0..w {
+                    for c in 0..3 {
+                        let i = 3 * (y * w + x) + c;
+                        let want = if x < 5 { f1.noisy[i] } else { 0.5 * (f0.noisy[i] + f1.noisy[i]) };
+                        let got = acc.get(x, y, c).unwrap();
+                        assert!((got - want).abs() <= 1e-6 * want.abs().max(1.0), "({x},{y}) c{c}: {got} vs {want}");
+                    }
+                }
+            }
+        }
+        let current = vec![0.25f32; 3 * w * h];
+        st.resolve(&current, &mut history, &mut scratch, c.cut != 0, true, |_, _| Ok(())).unwrap();
+    }
+}
+
+/// A frame whose geometry matches nothing of the previous one is a cut: the
+/// history restarts, and the output equals the first frame's of a fresh history.
+#[test]
+fn a_cut_resets() {
+    let (w, h) = (48, 32);
+    let mut seq = Seq::new(cfg(), TemporalConfig::default(), w, h);
+    let zero = vec![0f32; 2 * w * h];
+    for k in 0..3 {
+        seq.next(&frame_at(w, h, k), Some(&zero), 1);
+    }
+    let mut other = frame_at(w, h, 7);
+    for d in other.depth.iter_mut() {
+        *d *= 3.0;
+    }
+    let (out, rep) = seq.next(&other, Some(&zero), 1);
+    assert_eq!(rep.history_resets, 1);
+    assert_eq!(rep.history_rejected, 0, "a cut frame counts no rejections");
+    let mut fresh = Seq::new(cfg(), TemporalConfig::default(), w, h);
+    let (want, _) = fresh.next(&other, Some(&zero), 1);
+    assert!(out.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()));
+}
+
+/// NaN, Inf and absurd motion vectors get no history and are counted; the
+/// output stays finite. NaN/Inf noisy samples are bridged with the history.
+#[test]
+fn bad_motion_and_nonfinite_light_are_rejected_and_counted() {
+    let (w, h) = (31, 17);
+    let mut seq = Seq::new(cfg(), TemporalConfig::default(), w, h);
+    let mut mv = vec![0f32; 2 * w * h];
+    let bad = [f32::NAN, f32::INFINITY, -f32::INFINITY, 1e30, 3.0 * w as f32];
+    for (k, v) in bad.iter().enumerate() {
+        mv[2 * (k * 7)] = *v;
+    }
+    seq.next(&frame_at(w, h, 0), None, 1);
+    let mut f = frame_at(w, h, 1);
+    f.noisy[3 * 100] = f32::NAN;
+    f.noisy[3 * 200 + 1] = f32::INFINITY;
+    let (_, rep) = seq.next(&f, Some(&mv), 1);
+    assert_eq!(rep.invalid_motion, bad.len() as u64);
+    assert_eq!(rep.history_rejected, bad.len() as u64);
+    assert_eq!(rep.nonfinite_noisy, 2);
+}
+
+/// One frame with 0.1 % of its pixels at 1000× the mean: with the firefly
+/// clamp (the default) the output two frames later is within a small bound of
+/// the sequence without the burst; without the clamp the burst is a large
+/// disturbance (so the bound means something).
+#[test]
+fn a_burst_of_fireflies_is_gone_within_two_frames() {
+    let (w, h) = (96, 64);
+    let zero = vec![0f32; 2 * w * h];
+    let mean = frame_at(w, h, 0).noisy.iter().sum::<f32>() / (3 * w * h) as f32;
+    let rel = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f32>() / a.iter().sum::<f32>();
+    let run = |cfg: FlrConfig| {
+        let (mut clean, mut burst) = (Seq::new(cfg, TemporalConfig::default(), w, h), Seq::new(cfg, TemporalConfig::default(), w, h));
+        let mut d = vec![];
+        for k in 0..6u64 {
+            let f = frame_at(w, h, k);
+            let mut g = f.clone();
+            if k == 3 {
+                let mut rng = Rng(99);
+                for i in 0..w * h {
+                    if rng.f32() < 1e-3 {
+                        g.noisy[3 * i..3 * i + 3].fill(1000.0 * mean);
+                    }
+                }
+            }
+            let ((a, _), (b, _)) = (clean.next(&f, Some(&zero), 1), burst.next(&g, Some(&zero), 1));
+            d.push(rel(&a, &b));
+        }
+        d
+    };
+    let on = run(cfg());
+    assert!(on[5] < 0.01 && on[3] < 0.05, "with the clamp: {on:?}");
+    let off = run(FlrConfig { fireflies: None, ..cfg() });
+    assert!(off[3] > 0.2, "without the clamp the burst must show: {off:?}");
+}
+
+/// A history sized for another frame size or guide set is refused with a typed error.
+#[test]
+fn a_history_of_another_size_is_refused() {
+    let (w, h) = (20, 10);
+    let plan = TemporalFlr::new(cfg(), TemporalConfig::default(), w, h).unwrap();
+    let other = TemporalFlr::new(cfg(), TemporalConfig::default(), w + 1, h).unwrap();
+    let f = frame_at(w, h, 0);
+    let mut hist = vec![0f32; other.history_len()];
+    let mut history = History::new(&mut hist);
+    let (mut s, mut fs, mut out) = (vec![0f32; plan.scratch_len()], vec![0f64; plan.flr_scratch_len()], vec![0f32; 3 * w * h]);
+    let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+    let r = plan.denoise(&f.frame(SET), None, &mut history, &mut s, &mut fs, &mut ov);
+    assert!(matches!(r, Err(Error::BufferTooSmall { arg: Arg::History, .. })), "{r:?}");
+    assert!(TemporalFlr::new(FlrConfig { upsample: 2, ..cfg() }, TemporalConfig::default(), w, h).is_err());
+    assert!(TemporalFlr::new(cfg(), TemporalConfig { output_alpha: 0.0, ..Default::default() }, w, h).is_err());
+}
+
+/// Over a moving sequence, the parallel run (3 threads) gives the bits of the
+/// one-thread run, at awkward sizes.
+#[test]
+fn parallel_equals_one_thread() {
+    for (w, h) in [(1, 1), (7, 3), (257, 71)] {
+        let mv: Vec<f32> = (0..w * h).flat_map(|i| [0.6 + (i % 3) as f32 * 0.2, -0.3]).collect();
+        let (mut a, mut b) = (Seq::new(cfg(), TemporalConfig::default(), w, h), Seq::new(cfg(), TemporalConfig::default(), w, h));
+        for k in 0..3 {
+            let f = frame_at(w, h, k);
+            let m = (k > 0).then_some(&mv[..]);
+            let (x, rx) = a.next(&f, m, 1);
+            let (y, ry) = b.next(&f, m, 3);
+            assert!(x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits()), "{w}x{h} frame {k}");
+            assert_eq!(rx, ry);
+        }
+    }
+}
