@@ -13,7 +13,7 @@
 
 use crate::error::Error;
 use crate::guides::Frame;
-#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 use crate::image::ImageView;
 use crate::image::ImageViewMut;
 use crate::parallel::Executor;
@@ -54,7 +54,7 @@ pub trait Denoiser {
 }
 
 /// A denoiser with a temporal pipeline over a caller-owned history.
-#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 pub trait TemporalDenoiser: Denoiser {
     /// f32 values of the [`History`] buffer.
     fn history_len(&self) -> usize;
@@ -72,7 +72,7 @@ pub trait TemporalDenoiser: Denoiser {
     ) -> Result<Report, Error>;
 }
 
-#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 use crate::history::History;
 
 /// The first `len` f32 of an f64 scratch (`len.div_ceil(2)` f64).

@@ -67,7 +67,7 @@ pub mod walr;
 #[cfg(feature = "bmfr")]
 pub use bmfr::{Bmfr, BmfrConfig};
 pub use denoiser::Denoiser;
-#[cfg(any(feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 pub use denoiser::TemporalDenoiser;
 pub use error::{Arg, Error};
 #[cfg(feature = "flnr")]

@@ -3,7 +3,7 @@
 //! per-worker buffers handed out by worker index. No thread library: the
 //! caller brings the threads (rayon, a job system, `std::thread::scope`).
 
-#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 use core::sync::atomic::AtomicU32;
 #[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 use core::sync::atomic::Ordering;
@@ -65,7 +65,7 @@ impl ResultCell {
 /// tile (each runs once), a busy bit per worker, then `workers` buffers of
 /// `len` f32. A call on a tile that has run, or on a busy worker (an executor
 /// that breaks its contract), is refused instead of racing.
-#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 pub(crate) struct TileRun {
     base: *mut u32,
     items: usize,
@@ -75,10 +75,10 @@ pub(crate) struct TileRun {
 
 // SAFETY: a buffer is handed out only to the one call that set its worker's
 // busy bit (atomically), and the bits are only ever accessed atomically.
-#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 unsafe impl Sync for TileRun {}
 
-#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 impl TileRun {
     /// u32 words of the bits (whole f64, so the buffers stay 8-byte aligned).
     fn header_words(items: usize, workers: usize) -> usize {
@@ -146,7 +146,7 @@ impl TileRun {
 }
 
 /// One tile's work in [`run_tiles`]: `(tile, its worker's buffer)`.
-#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 pub(crate) type TileBody<'b> = dyn Fn(usize, &mut [f32]) -> Result<Report, Error> + Sync + 'b;
 
 /// Runs `body(i, buffer)` once for every tile `i < tiles` on the caller's
@@ -154,7 +154,7 @@ pub(crate) type TileBody<'b> = dyn Fn(usize, &mut [f32]) -> Result<Report, Error
 /// `scratch`, at least [`TileRun::scratch_len`]); sums the reports. An
 /// executor that skips a tile, runs one twice or runs two calls on one
 /// worker at once gets an error.
-#[cfg(any(feature = "bmfr", feature = "walr", feature = "flnr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 pub(crate) fn run_tiles(
     scratch: &mut [f32],
     tiles: usize,
@@ -175,7 +175,7 @@ pub(crate) fn run_tiles(
 
 /// A slice cut into bands of `band` elements (the last may be shorter), for
 /// concurrent writers of disjoint bands.
-#[cfg(feature = "walr")]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 pub(crate) struct Bands<'a, T> {
     ptr: *mut T,
     len: usize,
@@ -185,10 +185,10 @@ pub(crate) struct Bands<'a, T> {
 
 // SAFETY: a band is made only through the unsafe `get`, whose callers keep
 // the bands of concurrent calls apart; the slice is borrowed mutably for 'a.
-#[cfg(feature = "walr")]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 unsafe impl<T: Send> Sync for Bands<'_, T> {}
 
-#[cfg(feature = "walr")]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
 impl<'a, T> Bands<'a, T> {
     pub(crate) fn new(slice: &'a mut [T], band: usize) -> Self {
         Bands { ptr: slice.as_mut_ptr(), len: slice.len(), band, _slice: core::marker::PhantomData }

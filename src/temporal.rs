@@ -19,20 +19,24 @@
 //!    accepted tap, the frame is a camera cut and the whole history restarts.
 //! 2. The denoiser runs on the accumulated light.
 //! 3. [`Reprojection::resolve`]: the previous *output*, reprojected through
-//!    the same accepted taps, is clipped to the current output's 3×3
+//!    the same accepted taps (gathered in step 1, whose taps read the same
+//!    records), is clipped to the current output's 3×3
 //!    neighbourhood (mean ± [`TemporalConfig::clip_gamma`] standard
 //!    deviations, per YCoCg channel) and blended with weight
 //!    `max(1/n, output_alpha)` for the new frame.
 //!
-//! Everything is per pixel, or reads a 3×3 neighbourhood of a plane the step
-//! before wrote in full, so any split into row bands gives the same bits.
+//! Everything is per pixel, or reads a 3×3 neighbourhood of an image the step
+//! before wrote in full, so any split into row bands gives the same bits: the
+//! `_parallel` entries run bands over the caller's [`Executor`].
 //! State lives in a caller-owned [`History`] of two slots: a frame reads the
 //! slot the previous frame wrote and writes the other, so nothing is copied.
 
 use crate::error::{Arg, Error};
 use crate::fireflies;
 use crate::guides::{GuideSet, Guides};
-use crate::image::ImageView;
+use crate::image::{ImageView, ImageViewMut, RowBands};
+use crate::parallel::{run_tiles, Bands, Executor};
+use crate::report::Report;
 use crate::reproject::{bilinear_taps, rgb, ycocg};
 
 pub use crate::history::History;
@@ -159,8 +163,8 @@ pub struct Reprojection {
 }
 
 /// Values per pixel [`Reprojection::accumulate`] leaves for
-/// [`Reprojection::resolve`] in the caller's scratch: the previous position
-/// (2) and the accepted-tap mask (1).
+/// [`Reprojection::resolve`] in the caller's scratch: the previous output
+/// reprojected through the accepted taps (NaN in the first where none was).
 const PIXEL_VALUES: usize = 3;
 /// Rows of working space in the scratch.
 const ROWS: usize = 21;
@@ -200,6 +204,19 @@ impl Reprojection {
     pub fn scratch_len(&self) -> usize {
         PIXEL_VALUES * self.plane() + ROWS * self.width
     }
+    /// f32 values of the scratch of the `_parallel` entries with `workers`:
+    /// 3 values per pixel, 21 rows per worker and the run's bookkeeping.
+    pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let runs = crate::parallel::TileRun::scratch_len(self.bands(workers), workers, ROWS * self.width)?;
+        (PIXEL_VALUES * self.plane()).checked_add(runs)
+    }
+    /// Rows per band of a parallel run.
+    fn band_rows(&self, workers: usize) -> usize {
+        (self.height / (8 * workers.max(1))).max(16)
+    }
+    fn bands(&self, workers: usize) -> usize {
+        self.height.div_ceil(self.band_rows(workers))
+    }
 
     /// Checks the history buffer's size; a buffer from another frame size or
     /// guide set is refused here.
@@ -235,8 +252,9 @@ impl Reprojection {
 
     /// Step 1 for the whole frame: reads the inputs, writes the accumulated
     /// light, the history length and the guides into the history's write slot
-    /// and the per-pixel planes into `scratch` ([`Reprojection::scratch_len`]).
-    /// A camera cut is detected here (and the pass rerun without history).
+    /// and the reprojected previous output into `scratch`
+    /// ([`Reprojection::scratch_len`]). A camera cut is detected here (and
+    /// the pass rerun without history).
     pub fn accumulate(&self, inp: &Inputs<'_>, history: &mut History<'_>, scratch: &mut [f32]) -> Result<Counts, Error> {
         self.check_inputs(inp)?;
         self.check_history(history)?;
@@ -244,13 +262,61 @@ impl Reprojection {
             return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
         }
         let has_history = history.frames > 0;
-        let mut c = self.accumulate_rows(inp, history, has_history, scratch)?;
-        let np = self.plane() as f64;
-        if has_history && c.rejected as f64 > self.cfg.cut_fraction as f64 * np {
-            c = self.accumulate_rows(inp, history, false, scratch)?;
+        let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (read, write) = self.slots(history);
+        let mut c = self.accumulate_rows(inp, read, 0, write, pixels, rows, has_history)?;
+        if self.is_cut(has_history, &c) {
+            c = self.accumulate_rows(inp, read, 0, write, pixels, rows, false)?;
             c.cut = 1;
         }
         Ok(c)
+    }
+
+    /// [`Reprojection::accumulate`] in row bands over the caller's executor
+    /// (`scratch`: [`Reprojection::parallel_scratch_len`]); the same bits.
+    pub fn accumulate_parallel(
+        &self,
+        inp: &Inputs<'_>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Counts, Error> {
+        self.check_inputs(inp)?;
+        self.check_history(history)?;
+        let needed = self.parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let has_history = history.frames > 0;
+        let (w, rec) = (self.width, self.record());
+        let (rows, nb) = (self.band_rows(workers), self.bands(workers));
+        let (pixels, runs) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (read, write) = self.slots(history);
+        let mut pass = |has_history: bool| -> Result<Counts, Error> {
+            let (wb, pb) = (Bands::new(&mut *write, rows * w * rec), Bands::new(&mut *pixels, rows * w * PIXEL_VALUES));
+            // SAFETY: `run_tiles` runs each band once, and a band writes only its own rows of each buffer.
+            let r = run_tiles(runs, nb, workers, ROWS * w, for_each, &|b, buf| {
+                let c = unsafe { self.accumulate_rows(inp, read, b * rows, wb.get(b), pb.get(b), buf, has_history)? };
+                Ok(Report {
+                    history_rejected: c.rejected,
+                    invalid_motion: c.invalid_motion,
+                    nonfinite_noisy: c.nonfinite,
+                    ..Report::default()
+                })
+            })?;
+            Ok(Counts { rejected: r.history_rejected, invalid_motion: r.invalid_motion, nonfinite: r.nonfinite_noisy, cut: 0 })
+        };
+        let mut c = pass(has_history)?;
+        if self.is_cut(has_history, &c) {
+            c = pass(false)?;
+            c.cut = 1;
+        }
+        Ok(c)
+    }
+
+    fn is_cut(&self, has_history: bool, c: &Counts) -> bool {
+        has_history && c.rejected as f64 > self.cfg.cut_fraction as f64 * self.plane() as f64
     }
 
     fn check_inputs(&self, inp: &Inputs<'_>) -> Result<(), Error> {
@@ -285,18 +351,27 @@ impl Reprojection {
         Ok(())
     }
 
+    /// Step 1 for rows `y0..` of the frame: `write` and `pixels` hold those
+    /// rows' records and per-pixel values (as many rows as `write` holds);
+    /// `rows`: [`ROWS`] rows of working space.
+    #[allow(clippy::too_many_arguments)]
     fn accumulate_rows(
         &self,
         inp: &Inputs<'_>,
-        history: &mut History<'_>,
+        read: &[f32],
+        y0: usize,
+        write: &mut [f32],
+        pixels: &mut [f32],
+        rows: &mut [f32],
         has_history: bool,
-        scratch: &mut [f32],
     ) -> Result<Counts, Error> {
         let (w, h, np) = (self.width, self.height, self.plane());
         let cfg = &self.cfg;
         let rec = self.record();
-        let (read, write) = self.slots(history);
-        let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * np);
+        let n_rows = write.len() / (w * rec);
+        if y0 + n_rows > h || pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < ROWS * w {
+            return Err(Error::InvalidTile { index: y0, count: h });
+        }
         let (raw, rest) = rows.split_at_mut(3 * w);
         let (mv, rest) = rest.split_at_mut(2 * w);
         let (grow, _) = rest.split_at_mut(7 * w);
@@ -308,7 +383,7 @@ impl Reprojection {
         let p_at = GUIDES + 3 * self.normal as usize;
         let d_at = p_at + 3 * self.position as usize;
         let gp = self.guide_planes();
-        for y in 0..h {
+        for y in y0..y0 + n_rows {
             {
                 let (r, gb) = raw.split_at_mut(w);
                 let (g, b) = gb.split_at_mut(w);
@@ -335,8 +410,9 @@ impl Reprojection {
                 }
                 p += ch;
             }
-            let out_row = &mut write[y * w * rec..(y + 1) * w * rec];
-            for (x, r) in out_row.chunks_exact_mut(rec).enumerate() {
+            let out_row = &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec];
+            let px_row = &mut pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES];
+            for (x, (r, pv)) in out_row.chunks_exact_mut(rec).zip(px_row.chunks_exact_mut(PIXEL_VALUES)).enumerate() {
                 let i = y * w + x;
                 for g in 0..gp {
                     r[GUIDES + g] = grow[g * w + x];
@@ -353,12 +429,14 @@ impl Reprojection {
                 let motion_ok = mx.abs() <= max_motion && my.abs() <= max_motion; // false for NaN
                 c.invalid_motion += (has_history && !motion_ok) as u64;
                 let (px, py) = (x as f32 + mx, y as f32 + my);
-                let (mut accept, mut tw, mut n, mut prev) = (0u32, 0f32, 0f32, [0f32; 3]);
+                let (mut tw, mut n, mut prev) = (0f32, 0f32, [0f32; 3]);
+                // the previous output through the accepted taps, for step 3
+                let (mut ow, mut out) = (0f32, [0f32; 3]);
                 if has_history && motion_ok {
                     let g = &r[GUIDES..];
                     let depth = if self.depth { g[d_at - GUIDES].abs() } else { 1.0 };
                     let plim = cfg.position_limit * depth;
-                    for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
+                    for (tx, ty, wt) in bilinear_taps(px, py) {
                         if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
                             continue;
                         }
@@ -383,11 +461,17 @@ impl Reprojection {
                         let (pl, pn) = ([t[LIGHT], t[LIGHT + 1], t[LIGHT + 2]], t[COUNT]);
                         ok &= pl.iter().all(|v| v.is_finite()) && pn.is_finite() && pn >= 0.0;
                         if ok {
-                            accept |= 1 << k;
                             tw += wt;
                             n += wt * pn;
                             for ch in 0..3 {
                                 prev[ch] += wt * pl[ch];
+                            }
+                            let po = [t[OUTPUT], t[OUTPUT + 1], t[OUTPUT + 2]];
+                            if po.iter().all(|v| v.is_finite()) {
+                                ow += wt;
+                                for ch in 0..3 {
+                                    out[ch] += wt * po[ch];
+                                }
                             }
                         }
                     }
@@ -410,18 +494,23 @@ impl Reprojection {
                 };
                 r[LIGHT..LIGHT + 3].copy_from_slice(&acc);
                 r[COUNT] = count;
-                pixels[PIXEL_VALUES * i..PIXEL_VALUES * i + 3].copy_from_slice(&[px, py, accept as f32]);
+                if ow > 0.0 {
+                    let inv = 1.0 / ow;
+                    pv.copy_from_slice(&[out[0] * inv, out[1] * inv, out[2] * inv]);
+                } else {
+                    pv[0] = f32::NAN;
+                }
             }
         }
         Ok(c)
     }
 
     /// Step 3 for the whole frame: `current`, the denoiser's output of this
-    /// frame (RGB interleaved; `cut`: as [`Counts::cut`] said; `clamp_negative`:
-    /// negative results become 0), blended with the clipped reprojection of
-    /// the previous output into the write slot; then calls `row(y, [r, g, b])`
-    /// with each output row and advances the history to the next
-    /// frame. `scratch`: as [`Reprojection::accumulate`] left it.
+    /// frame (RGB interleaved), blended with the clipped reprojection of the
+    /// previous output into the write slot and `out`; then advances the
+    /// history to the next frame. `cut`: as [`Counts::cut`] said;
+    /// `clamp_negative`: negative results become 0. `scratch`: as
+    /// [`Reprojection::accumulate`] left it.
     pub fn resolve(
         &self,
         current: &[f32],
@@ -429,116 +518,180 @@ impl Reprojection {
         scratch: &mut [f32],
         cut: bool,
         clamp_negative: bool,
-        mut row: impl FnMut(usize, [&[f32]; 3]) -> Result<(), Error>,
+        out: &mut ImageViewMut<'_>,
     ) -> Result<(), Error> {
-        self.check_history(history)?;
-        let (w, h, np) = (self.width, self.height, self.plane());
-        if scratch.len() < self.scratch_len() || current.len() < 3 * np {
+        self.check_resolve(current, history, out)?;
+        if scratch.len() < self.scratch_len() {
             return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
         }
+        let blend = self.blends(history, cut);
+        let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (_, write) = self.slots(history);
+        self.resolve_rows(current, 0, pixels, write, rows, blend, clamp_negative, out)?;
+        history.frames = next_frame(history.frames);
+        Ok(())
+    }
+
+    /// [`Reprojection::resolve`] in row bands over the caller's executor
+    /// (`scratch`: as [`Reprojection::accumulate_parallel`] left it); the same bits.
+    #[allow(clippy::too_many_arguments)]
+    pub fn resolve_parallel(
+        &self,
+        current: &[f32],
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        cut: bool,
+        clamp_negative: bool,
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<(), Error> {
+        self.check_resolve(current, history, out)?;
+        let needed = self.parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let blend = self.blends(history, cut);
+        let (w, h, rec) = (self.width, self.height, self.record());
+        let (rows, nb) = (self.band_rows(workers), self.bands(workers));
+        let (pixels, runs) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (_, write) = self.slots(history);
+        let bands = RowBands::new(out).ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap"))?;
+        let wb = Bands::new(write, rows * w * rec);
+        let pixels = &*pixels;
+        // SAFETY: `run_tiles` runs each band once; a band writes only its own
+        // records and its own output rows (disjoint `RowBands`).
+        run_tiles(runs, nb, workers, ROWS * w, for_each, &|b, buf| {
+            let y0 = b * rows;
+            let mut ob = unsafe { bands.band(y0, rows.min(h - y0))? };
+            let pb = &pixels[(y0 * w * PIXEL_VALUES).min(pixels.len())..];
+            unsafe { self.resolve_rows(current, y0, pb, wb.get(b), buf, blend, clamp_negative, &mut ob)? };
+            Ok(Report::default())
+        })?;
+        history.frames = next_frame(history.frames);
+        Ok(())
+    }
+
+    fn check_resolve(&self, current: &[f32], history: &History<'_>, out: &ImageViewMut<'_>) -> Result<(), Error> {
+        self.check_history(history)?;
+        let (w, h) = (self.width, self.height);
+        if current.len() < 3 * self.plane() {
+            return Err(Error::BufferTooSmall { arg: Arg::Scratch, needed: 3 * self.plane(), len: current.len() });
+        }
+        if (out.width(), out.height()) != (w, h) {
+            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (w, h), got: (out.width(), out.height()) });
+        }
+        if out.channel_count() < 3 {
+            return Err(Error::ChannelCount { arg: Arg::Output, expected: 3, got: out.channel_count() });
+        }
+        Ok(())
+    }
+
+    fn blends(&self, history: &History<'_>, cut: bool) -> bool {
+        history.frames > 0 && !cut && self.cfg.output_alpha < 1.0
+    }
+
+    /// Step 3 for rows `y0..` (as many as `write` holds records of): `pixels`
+    /// from those rows on, `out` a view whose row 0 is frame row `y0`.
+    #[allow(clippy::too_many_arguments)]
+    fn resolve_rows(
+        &self,
+        current: &[f32],
+        y0: usize,
+        pixels: &[f32],
+        write: &mut [f32],
+        rows: &mut [f32],
+        blend: bool,
+        clamp_negative: bool,
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<(), Error> {
+        let (w, h) = (self.width, self.height);
         let cfg = &self.cfg;
         let rec = self.record();
-        let blend = history.frames > 0 && !cut && cfg.output_alpha < 1.0;
-        {
-            let (read, write) = self.slots(history);
-            let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * np);
-            // a ring of 3 rows of horizontal 3-sums of YCoCg and of its
-            // square (6 values per pixel), then the output row
-            let (ring, rest) = rows.split_at_mut(18 * w);
-            let out_row = &mut rest[..3 * w];
-            let hsums = |y: usize, dst: &mut [f32]| {
-                let v = |x: usize| {
-                    let i = 3 * (y * w + x);
-                    ycocg([current[i], current[i + 1], current[i + 2]])
-                };
-                let (mut a, mut b) = ([0f32; 3], v(0));
-                for x in 0..w {
-                    let c = if x + 1 < w { v(x + 1) } else { [0.0; 3] };
-                    let d = &mut dst[6 * x..6 * x + 6];
-                    for ch in 0..3 {
-                        let s = a[ch] + b[ch] + c[ch];
-                        d[ch] = s;
-                        d[3 + ch] = a[ch] * a[ch] + b[ch] * b[ch] + c[ch] * c[ch];
-                    }
-                    (a, b) = (b, c);
-                }
+        let n_rows = write.len() / (w * rec);
+        if y0 + n_rows > h || pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < ROWS * w || out.height() < n_rows {
+            return Err(Error::InvalidTile { index: y0, count: h });
+        }
+        // a ring of 3 rows of horizontal 3-sums of YCoCg and of its square
+        // (6 values per pixel), then the output row (3 planes of a row)
+        let (ring, rest) = rows.split_at_mut(18 * w);
+        let out_row = &mut rest[..3 * w];
+        let hsums = |y: usize, dst: &mut [f32]| {
+            let v = |x: usize| {
+                let i = 3 * (y * w + x);
+                ycocg([current[i], current[i + 1], current[i + 2]])
             };
-            if blend {
-                hsums(0, &mut ring[..6 * w]);
+            let (mut a, mut b) = ([0f32; 3], v(0));
+            for x in 0..w {
+                let c = if x + 1 < w { v(x + 1) } else { [0.0; 3] };
+                let d = &mut dst[6 * x..6 * x + 6];
+                for ch in 0..3 {
+                    d[ch] = a[ch] + b[ch] + c[ch];
+                    d[3 + ch] = a[ch] * a[ch] + b[ch] * b[ch] + c[ch] * c[ch];
+                }
+                (a, b) = (b, c);
             }
-            for y in 0..h {
-                if blend && y + 1 < h {
-                    let slot = (y + 1) % 3;
-                    hsums(y + 1, &mut ring[slot * 6 * w..(slot + 1) * 6 * w]);
-                }
-                let wrow = &mut write[y * w * rec..(y + 1) * w * rec];
-                for (x, r) in wrow.chunks_exact_mut(rec).enumerate() {
-                    let i = y * w + x;
-                    let cur = [current[3 * i], current[3 * i + 1], current[3 * i + 2]];
-                    let mut res = cur;
-                    let (px, py, accept) = (pixels[3 * i], pixels[3 * i + 1], pixels[3 * i + 2] as u32);
-                    if blend && accept != 0 {
-                        if let Some(prev) = reproject_record(read, rec, OUTPUT, (w, h), (px, py), accept) {
-                            let (mut s1, mut s2) = ([0f32; 3], [0f32; 3]);
-                            let (y0, y1) = (y.saturating_sub(1), (y + 2).min(h));
-                            for sy in y0..y1 {
-                                let d = &ring[(sy % 3) * 6 * w + 6 * x..(sy % 3) * 6 * w + 6 * x + 6];
-                                for ch in 0..3 {
-                                    s1[ch] += d[ch];
-                                    s2[ch] += d[3 + ch];
-                                }
-                            }
-                            let cols = (x + 2).min(w) - x.saturating_sub(1);
-                            let cnt = ((y1 - y0) * cols) as f32;
-                            let p = ycocg(prev);
-                            let mut clipped = [0f32; 3];
-                            for ch in 0..3 {
-                                let mu = s1[ch] / cnt;
-                                let sd = libm::sqrtf((s2[ch] / cnt - mu * mu).max(0.0));
-                                clipped[ch] = p[ch].max(mu - cfg.clip_gamma * sd).min(mu + cfg.clip_gamma * sd);
-                            }
-                            let prev = rgb(clipped);
-                            let n = r[COUNT];
-                            let a = if n > 0.0 { (1.0 / n).max(cfg.output_alpha).min(1.0) } else { 1.0 };
-                            res = lerp3(prev, cur, a);
-                        }
-                    }
-                    for ch in 0..3 {
-                        let v = if clamp_negative { res[ch].max(0.0) } else { res[ch] };
-                        let v = if v.is_finite() { v } else { 0.0 };
-                        r[OUTPUT + ch] = v;
-                        out_row[ch * w + x] = v;
-                    }
-                }
-                row(y, [&out_row[..w], &out_row[w..2 * w], &out_row[2 * w..]])?;
+        };
+        if blend {
+            for y in y0.saturating_sub(1)..(y0 + 1).min(h) {
+                hsums(y, &mut ring[(y % 3) * 6 * w..(y % 3 + 1) * 6 * w]);
             }
         }
-        // (the parity of the count picks the slots: keep it when the counter wraps)
-        history.frames = if history.frames == u32::MAX { 2 } else { history.frames + 1 };
+        for y in y0..y0 + n_rows {
+            if blend && y + 1 < h {
+                let slot = (y + 1) % 3;
+                hsums(y + 1, &mut ring[slot * 6 * w..(slot + 1) * 6 * w]);
+            }
+            let wrow = &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec];
+            let prow = &pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES];
+            for (x, (r, pv)) in wrow.chunks_exact_mut(rec).zip(prow.chunks_exact(PIXEL_VALUES)).enumerate() {
+                let i = y * w + x;
+                let cur = [current[3 * i], current[3 * i + 1], current[3 * i + 2]];
+                let mut res = cur;
+                if blend && !pv[0].is_nan() {
+                    let (mut s1, mut s2) = ([0f32; 3], [0f32; 3]);
+                    let (ya, yb) = (y.saturating_sub(1), (y + 2).min(h));
+                    for sy in ya..yb {
+                        let d = &ring[(sy % 3) * 6 * w + 6 * x..(sy % 3) * 6 * w + 6 * x + 6];
+                        for ch in 0..3 {
+                            s1[ch] += d[ch];
+                            s2[ch] += d[3 + ch];
+                        }
+                    }
+                    let cols = (x + 2).min(w) - x.saturating_sub(1);
+                    let inv = 1.0 / ((yb - ya) * cols) as f32;
+                    let p = ycocg([pv[0], pv[1], pv[2]]);
+                    let mut clipped = [0f32; 3];
+                    for ch in 0..3 {
+                        let mu = s1[ch] * inv;
+                        let sd = libm::sqrtf((s2[ch] * inv - mu * mu).max(0.0));
+                        clipped[ch] = p[ch].max(mu - cfg.clip_gamma * sd).min(mu + cfg.clip_gamma * sd);
+                    }
+                    let n = r[COUNT];
+                    let a = if n > 0.0 { (1.0 / n).max(cfg.output_alpha).min(1.0) } else { 1.0 };
+                    res = lerp3(rgb(clipped), cur, a);
+                }
+                for ch in 0..3 {
+                    let v = if clamp_negative { res[ch].max(0.0) } else { res[ch] };
+                    let v = if v.is_finite() { v } else { 0.0 };
+                    r[OUTPUT + ch] = v;
+                    out_row[ch * w + x] = v;
+                }
+            }
+            out.write_row_n(y - y0, 0, [&out_row[..w], &out_row[w..2 * w], &out_row[2 * w..]])
+                .ok_or(Error::InvalidTile { index: y, count: h })?;
+        }
         Ok(())
     }
 }
 
-/// The bilinear reprojection of 3 values at `at` of the records of `slot`
-/// (`rec` values each) at `(px, py)`: the weighted mean of the taps whose bit
-/// is set in `mask`, that lie in the image and hold finite values.
-fn reproject_record(slot: &[f32], rec: usize, at: usize, (w, h): (usize, usize), (px, py): (f32, f32), mask: u32) -> Option<[f32; 3]> {
-    let (mut tw, mut sum) = (0f32, [0f32; 3]);
-    for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {
-        if mask & (1 << k) == 0 || tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
-            continue;
-        }
-        let j = (ty as usize * w + tx as usize) * rec + at;
-        let Some(v) = slot.get(j..j + 3) else { continue };
-        if v.iter().all(|v| v.is_finite()) {
-            tw += wt;
-            for c in 0..3 {
-                sum[c] += wt * v[c];
-            }
-        }
+/// The frame counter after a frame (its parity picks the slots: kept when it wraps).
+fn next_frame(frames: u32) -> u32 {
+    if frames == u32::MAX {
+        2
+    } else {
+        frames + 1
     }
-    let inv = 1.0 / tw;
-    (tw > 0.0).then_some([sum[0] * inv, sum[1] * inv, sum[2] * inv])
 }
 
 /// `a · new + (1 − a) · old`, per channel.

@@ -36,7 +36,7 @@ impl Seq {
         let plan = TemporalFlr::new(cfg, t, w, h).unwrap();
         Seq {
             history: vec![0.0; plan.history_len()],
-            scratch: vec![f32::NAN; plan.scratch_len()],
+            scratch: vec![f32::NAN; plan.parallel_scratch_len(3)],
             flr_scratch: vec![f64::NAN; plan.parallel_flr_scratch_len(3)],
             plan,
             frames: 0,
@@ -151,7 +151,9 @@ fn disoccluded_pixels_restart_from_their_own_sample() {
             }
         }
         let current = vec![0.25f32; 3 * w * h];
-        st.resolve(&current, &mut history, &mut scratch, c.cut != 0, true, |_, _| Ok(())).unwrap();
+        let mut out = vec![0f32; 3 * w * h];
+        st.resolve(&current, &mut history, &mut scratch, c.cut != 0, true, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap())
+            .unwrap();
     }
 }
 

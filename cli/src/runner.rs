@@ -367,7 +367,7 @@ impl TemporalRunner {
         let plan = TemporalFlr::new(cfg, temporal, w, h).map_err(|e| format!("flr-temporal: {e}"))?;
         let threads = threads.max(1);
         let flr_scratch = vec![0f64; plan.parallel_flr_scratch_len(threads)];
-        let (scratch, history) = (plan.scratch_len(), plan.history_len());
+        let (scratch, history) = (plan.parallel_scratch_len(threads).max(plan.scratch_len()), plan.history_len());
         Ok(Self::with(scratch, history, Pipeline::Flr { plan: Box::new(plan), flr_scratch, threads, pool: pool(threads)? }))
     }
     fn with(scratch: usize, history: usize, pipeline: Pipeline) -> Self {

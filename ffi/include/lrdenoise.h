@@ -550,7 +550,81 @@ typedef struct LrdReport {
    * Noisy samples scaled down by the firefly clamp.
    */
   uint64_t clamped_fireflies;
+  /**
+   * Temporal pipelines: pixels whose motion vector was NaN, infinite or
+   * longer than twice the frame (they get no history).
+   */
+  uint64_t invalid_motion;
+  /**
+   * Temporal pipelines: frames taken as a camera cut (history restarted).
+   */
+  uint64_t history_resets;
 } LrdReport;
+
+/**
+ * Settings of the temporal stage temporal FLR runs (`lrd_temporal_config_default`
+ * gives the defaults; see the core's `temporal::TemporalConfig`).
+ */
+typedef struct LrdTemporalConfig {
+  /**
+   * Longest per-pixel history in frames (1..=1e6; default 16).
+   */
+  float max_history;
+  /**
+   * Smallest cosine between a history tap's normal and the current one (default 0.9).
+   */
+  float normal_limit;
+  /**
+   * Largest world-position distance of a history tap, as a fraction of the
+   * camera distance with depth, in world units without (default 0.02).
+   */
+  float position_limit;
+  /**
+   * Without positions: largest relative depth difference (default 0.05).
+   */
+  float depth_limit;
+  /**
+   * Half-width of the output's clip box in standard deviations (default 1.5).
+   */
+  float clip_gamma;
+  /**
+   * Lowest blend weight of the new output frame, (0, 1]; 1 turns the output
+   * accumulation off (default 0.5).
+   */
+  float output_alpha;
+  /**
+   * Fraction of pixels without history above which a frame is a camera cut
+   * and the history restarts, (0, 1] (default 0.5).
+   */
+  float cut_fraction;
+} LrdTemporalConfig;
+
+/**
+ * The caller-owned state of a temporal pipeline (FLR, BMFR or WALR): `data`
+ * (4-byte aligned, at least the history size from `lrd_flr_temporal_sizes`,
+ * `lrd_bmfr_temporal_sizes` or `lrd_walr_temporal_sizes`; FLR's must be
+ * exactly that size) and the number of frames accumulated. Set
+ * `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
+ * call advances it. The contents of `data` are ignored while `frames == 0`.
+ * One history serves one method, size and configuration.
+ */
+typedef struct LrdHistory {
+  /**
+   * The history buffer: not NULL, 4-byte aligned, read and written by each
+   * temporal call. It must not overlap the scratch, the images or `out`.
+   */
+  void *data;
+  /**
+   * Size of `data` in bytes, at least the history size of the
+   * `..._temporal_sizes` call (else LRD_STATUS_BUFFER_TOO_SMALL).
+   */
+  size_t bytes;
+  /**
+   * Frames accumulated: 0 starts a new sequence; each successful temporal
+   * call increments it (past UINT32_MAX it wraps to a small number, never to 0).
+   */
+  uint32_t frames;
+} LrdHistory;
 
 /**
  * BMFR configuration (Koskela et al. 2019: blockwise multi-order feature
@@ -638,32 +712,6 @@ typedef struct LrdBmfrConfig {
    */
   float fireflies;
 } LrdBmfrConfig;
-
-/**
- * The caller-owned state of a temporal pipeline (BMFR or WALR): `data`
- * (4-byte aligned, at least the history size from `lrd_bmfr_temporal_sizes` /
- * `lrd_walr_temporal_sizes`) and the number of frames accumulated. Set
- * `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
- * call advances it. The contents of `data` are ignored while `frames == 0`.
- * One history serves one method, size and configuration.
- */
-typedef struct LrdHistory {
-  /**
-   * The history buffer: not NULL, 4-byte aligned, read and written by each
-   * temporal call. It must not overlap the scratch, the images or `out`.
-   */
-  void *data;
-  /**
-   * Size of `data` in bytes, at least the history size of the
-   * `..._temporal_sizes` call (else LRD_STATUS_BUFFER_TOO_SMALL).
-   */
-  size_t bytes;
-  /**
-   * Frames accumulated: 0 starts a new sequence; each successful temporal
-   * call increments it (wrapping past UINT32_MAX to 1, never to 0).
-   */
-  uint32_t frames;
-} LrdHistory;
 
 /**
  * WALR configuration (Meunier & Harada: edge-traced à-trous weighted
@@ -944,6 +992,45 @@ LrdStatus lrd_flr_stage_tile_count(const struct LrdFlrConfig *config,
                                    uint32_t height,
                                    uint32_t stage,
                                    uint32_t *count);
+
+/**
+ * Scratch and history bytes of temporal FLR (`lrd_flr_denoise_temporal`)
+ * for `width`x`height` frames. `config->upsample` must be 1.
+ */
+LrdStatus lrd_flr_temporal_sizes(const struct LrdFlrConfig *config,
+                                 const struct LrdTemporalConfig *temporal,
+                                 uint32_t width,
+                                 uint32_t height,
+                                 size_t *scratch_bytes,
+                                 size_t *history_bytes);
+
+/**
+ * One frame of temporal FLR on the calling thread: the noisy light is
+ * firefly-clamped, accumulated over the valid history (reprojected with
+ * `motion`, rejected by normal and position or depth), fitted by FLR, and
+ * blended with the clipped previous output. `motion` (2 channels: previous
+ * minus current pixel position) may be NULL, or have `data == NULL`, for a
+ * static camera. `history` is read and advanced; `history->bytes` must be
+ * exactly, and `scratch` (8-byte aligned) at least, the sizes from
+ * `lrd_flr_temporal_sizes` with the same configs and size. The frame's guides
+ * are those of `config->guides`; `frame.guides_low` must be absent.
+ * `report` may be NULL; otherwise the run's counts are added to it
+ * (`history_resets` counts frames taken as a camera cut).
+ */
+LrdStatus lrd_flr_denoise_temporal(const struct LrdFlrConfig *config,
+                                   const struct LrdTemporalConfig *temporal,
+                                   const struct LrdFrame *frame,
+                                   const struct LrdImage *motion,
+                                   struct LrdHistory *history,
+                                   const struct LrdImageMut *out,
+                                   void *scratch,
+                                   size_t scratch_bytes,
+                                   struct LrdReport *report);
+
+/**
+ * The temporal stage's defaults.
+ */
+struct LrdTemporalConfig lrd_temporal_config_default(void);
 
 /**
  * The default BMFR configuration: the paper's normal + position guides

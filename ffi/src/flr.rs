@@ -2,11 +2,13 @@
 //! (`lrd_flr_run_tile` and its sizes).
 
 use crate::images::{
-    check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, images, view_mut, LrdFrame, LrdImageMut, LRD_GUIDE_AO,
-    LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL,
+    check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, images, view_mut, LrdFrame, LrdImage, LrdImageMut,
+    LRD_GUIDE_AO, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL,
 };
 use crate::status::{guard, status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
+use crate::temporal::{denoise_temporal, temporal_config, temporal_sizes, LrdHistory, LrdTemporalConfig};
 use core::ffi::c_void;
+use lrdenoise_core::flr::temporal::TemporalFlr;
 use lrdenoise_core::{Blur, Flr, FlrConfig, Kernel, Regularization};
 
 /// Window shape.
@@ -398,4 +400,54 @@ fn call_key(frame: &LrdFrame, out: &LrdImageMut, scratch: *mut c_void) -> u64 {
     image(out.data as usize, out.format, out.width, out.height, [out.pixel_stride, out.row_stride, out.channel_stride]);
     image(scratch as usize, 0, 0, 0, [0; 3]);
     h
+}
+
+fn temporal_plan(c: *const LrdFlrConfig, t: *const LrdTemporalConfig, width: u32, height: u32) -> Result<TemporalFlr, LrdStatus> {
+    // SAFETY: checked for NULL; the caller passes a valid config pointer.
+    let c = unsafe { c.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    TemporalFlr::new(config(c)?, temporal_config(t)?, width as usize, height as usize).map_err(status_of)
+}
+
+/// Scratch and history bytes of temporal FLR (`lrd_flr_denoise_temporal`)
+/// for `width`x`height` frames. `config->upsample` must be 1.
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flr_temporal_sizes(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    width: u32,
+    height: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| temporal_sizes(temporal_plan(config, temporal, width, height)?, scratch_bytes, history_bytes))
+}
+
+/// One frame of temporal FLR on the calling thread: the noisy light is
+/// firefly-clamped, accumulated over the valid history (reprojected with
+/// `motion`, rejected by normal and position or depth), fitted by FLR, and
+/// blended with the clipped previous output. `motion` (2 channels: previous
+/// minus current pixel position) may be NULL, or have `data == NULL`, for a
+/// static camera. `history` is read and advanced; `history->data` and
+/// `scratch` (8-byte aligned) must hold at least the sizes from
+/// `lrd_flr_temporal_sizes` with the same configs and size. The frame's guides
+/// are those of `config->guides`; `frame.guides_low` must be absent.
+/// `report` may be NULL; otherwise the run's counts are added to it
+/// (`history_resets` counts frames taken as a camera cut).
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_flr_denoise_temporal(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    // SAFETY: forwarded contract (see `denoise_temporal`).
+    guard(|| unsafe {
+        denoise_temporal(|w, h| temporal_plan(config, temporal, w, h), frame, motion, history, out, scratch, scratch_bytes, report)
+    })
 }

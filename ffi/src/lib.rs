@@ -15,7 +15,6 @@ mod images;
 
 mod flr;
 
-#[cfg(any(feature = "bmfr", feature = "walr"))]
 mod temporal;
 
 #[cfg(feature = "bmfr")]

@@ -1,6 +1,7 @@
-//! What BMFR's and WALR's entry points share: the caller-owned
-//! [`LrdHistory`], the scratch and history buffers, and the single-frame and
-//! temporal runs over the core's [`TemporalDenoiser`].
+//! What the temporal entry points (FLR's, BMFR's, WALR's) share: the
+//! caller-owned [`LrdHistory`], the temporal stage's [`LrdTemporalConfig`],
+//! the scratch and history buffers, and the single-frame and temporal runs
+//! over the core's [`TemporalDenoiser`].
 
 use crate::images::{
     byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, view, view_mut, LrdFrame, LrdImage, LrdImageMut,
@@ -9,9 +10,10 @@ use crate::status::{status_of, write_report, LrdReport, LrdStatus, LrdStatus::*}
 use core::ffi::c_void;
 use lrdenoise_core::{Denoiser, Error, Frame, ImageViewMut, Report, TemporalDenoiser};
 
-/// The caller-owned state of a temporal pipeline (BMFR or WALR): `data`
-/// (4-byte aligned, at least the history size from `lrd_bmfr_temporal_sizes` /
-/// `lrd_walr_temporal_sizes`) and the number of frames accumulated. Set
+/// The caller-owned state of a temporal pipeline (FLR, BMFR or WALR): `data`
+/// (4-byte aligned, at least the history size from `lrd_flr_temporal_sizes`,
+/// `lrd_bmfr_temporal_sizes` or `lrd_walr_temporal_sizes`) and the number
+/// of frames accumulated. Set
 /// `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
 /// call advances it. The contents of `data` are ignored while `frames == 0`.
 /// One history serves one method, size and configuration.
@@ -25,8 +27,64 @@ pub struct LrdHistory {
     /// `..._temporal_sizes` call (else LRD_STATUS_BUFFER_TOO_SMALL).
     pub bytes: usize,
     /// Frames accumulated: 0 starts a new sequence; each successful temporal
-    /// call increments it (wrapping past UINT32_MAX to 1, never to 0).
+    /// call increments it (past UINT32_MAX it wraps to a small number, never to 0).
     pub frames: u32,
+}
+
+/// Settings of the temporal stage temporal FLR runs (`lrd_temporal_config_default`
+/// gives the defaults; see the core's `temporal::TemporalConfig`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct LrdTemporalConfig {
+    /// Longest per-pixel history in frames (1..=1e6; default 16).
+    pub max_history: f32,
+    /// Smallest cosine between a history tap's normal and the current one (default 0.9).
+    pub normal_limit: f32,
+    /// Largest world-position distance of a history tap, as a fraction of the
+    /// camera distance with depth, in world units without (default 0.02).
+    pub position_limit: f32,
+    /// Without positions: largest relative depth difference (default 0.05).
+    pub depth_limit: f32,
+    /// Half-width of the output's clip box in standard deviations (default 1.5).
+    pub clip_gamma: f32,
+    /// Lowest blend weight of the new output frame, (0, 1]; 1 turns the output
+    /// accumulation off (default 0.5).
+    pub output_alpha: f32,
+    /// Fraction of pixels without history above which a frame is a camera cut
+    /// and the history restarts, (0, 1] (default 0.5).
+    pub cut_fraction: f32,
+}
+
+/// The temporal stage's defaults.
+#[no_mangle]
+pub extern "C" fn lrd_temporal_config_default() -> LrdTemporalConfig {
+    let d = lrdenoise_core::temporal::TemporalConfig::default();
+    LrdTemporalConfig {
+        max_history: d.max_history,
+        normal_limit: d.normal_limit,
+        position_limit: d.position_limit,
+        depth_limit: d.depth_limit,
+        clip_gamma: d.clip_gamma,
+        output_alpha: d.output_alpha,
+        cut_fraction: d.cut_fraction,
+    }
+}
+
+/// The core's settings from `c` (NULL: LRD_STATUS_NULL_POINTER; out of range: LRD_STATUS_INVALID_CONFIG).
+pub(crate) fn temporal_config(c: *const LrdTemporalConfig) -> Result<lrdenoise_core::temporal::TemporalConfig, LrdStatus> {
+    // SAFETY: checked for NULL; the caller passes a valid pointer.
+    let c = unsafe { c.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    let t = lrdenoise_core::temporal::TemporalConfig {
+        max_history: c.max_history,
+        normal_limit: c.normal_limit,
+        position_limit: c.position_limit,
+        depth_limit: c.depth_limit,
+        clip_gamma: c.clip_gamma,
+        output_alpha: c.output_alpha,
+        cut_fraction: c.cut_fraction,
+    };
+    t.validate().map_err(status_of)?;
+    Ok(t)
 }
 
 fn f32_bytes(len: usize) -> Result<usize, LrdStatus> {

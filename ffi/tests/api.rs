@@ -209,6 +209,100 @@ fn gpu_dispatch_description() {
     assert_eq!(unsafe { lrd_gpu_dispatch(&many, 100, 70, 0, out.as_mut_ptr()) }, LrdStatus::LRD_STATUS_INVALID_CONFIG);
 }
 
+/// Temporal FLR through the C ABI gives exactly the Rust API's output over
+/// three frames (history advanced by the call), with the same counts, and
+/// refuses a short history, a NULL or invalid temporal config and upsampling.
+#[test]
+fn flr_temporal_matches_the_rust_api() {
+    use lrdenoise_core::flr::temporal::TemporalFlr;
+    use lrdenoise_core::temporal::{History, TemporalConfig};
+    use lrdenoise_core::{FlrConfig, Frame, Guides, ImageView, ImageViewMut};
+    let (w, h) = (67u32, 38u32);
+    let (wu, hu, n) = (w as usize, h as usize, (w * h) as usize);
+    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == (i / 3 / 500) % 3 { 1.0 } else { 0.0 }).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 2.0 + (i / wu) as f32 * 0.02).collect();
+    let ao: Vec<f32> = (0..n).map(|i| 0.5 + ((i * 31) % 50) as f32 / 100.0).collect();
+    let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { 0.4 } else { -0.3 }).collect();
+    let cfg = lrd_flr_config_default();
+    let tc = lrd_temporal_config_default();
+    let plan = TemporalFlr::new(FlrConfig::default(), TemporalConfig::default(), wu, hu).unwrap();
+    let (mut sb, mut hb) = (0usize, 0usize);
+    let mut rhd = vec![0f32; plan.history_len()];
+    let mut rh = History::new(&mut rhd);
+    let (mut rs, mut rfs) = (vec![0f32; plan.scratch_len()], vec![0f64; plan.flr_scratch_len()]);
+    unsafe {
+        assert_eq!(lrd_flr_temporal_sizes(&cfg, &tc, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(hb, 4 * plan.history_len());
+        let mut ts = vec![0f64; sb / 8];
+        let mut hd = vec![0f32; hb / 4];
+        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let (mut out, mut want) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
+        let o = LrdImageMut {
+            data: out.as_mut_ptr() as *mut _,
+            format: 0,
+            width: w,
+            height: h,
+            pixel_stride: 0,
+            row_stride: 0,
+            channel_stride: 0,
+        };
+        let (mut rep, mut rrep) = (LrdReport::default(), lrdenoise_core::Report::default());
+        for k in 0..3usize {
+            let noisy: Vec<f32> = (0..3 * n).map(|i| (((i + 977 * k) * 7919) % 1000) as f32 / 500.0).collect();
+            let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
+            frame.guides.normal = img(normal.as_ptr(), w, h, 3);
+            frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+            frame.guides.ao = img(ao.as_ptr(), w, h, 1);
+            let mv = img(motion.as_ptr(), w, h, 2);
+            let m = if k == 0 { null() } else { &mv as *const LrdImage };
+            let sp = ts.as_mut_ptr() as *mut _;
+            assert_eq!(lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb, &mut rep), LrdStatus::LRD_STATUS_OK);
+            let g = Guides {
+                normal: Some(ImageView::interleaved(&normal, wu, hu, 3).unwrap()),
+                depth: Some(ImageView::interleaved(&depth, wu, hu, 1).unwrap()),
+                ao: Some(ImageView::interleaved(&ao, wu, hu, 1).unwrap()),
+                ..Default::default()
+            };
+            let rframe = Frame::new(ImageView::interleaved(&noisy, wu, hu, 3).unwrap(), g);
+            let rmv = ImageView::interleaved(&motion, wu, hu, 2).unwrap();
+            let mut ov = ImageViewMut::interleaved(&mut want, wu, hu, 3).unwrap();
+            rrep += plan.denoise(&rframe, (k > 0).then_some(&rmv), &mut rh, &mut rs, &mut rfs, &mut ov).unwrap();
+            assert_eq!(out, want, "frame {k}");
+            assert_eq!(hist.frames as usize, k + 1);
+            // errors
+            let mut short = hist;
+            short.bytes -= 4;
+            assert_eq!(
+                lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut short, &o, sp, sb, null_mut()),
+                LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
+            );
+            assert_eq!(
+                lrd_flr_denoise_temporal(&cfg, null(), &frame, m, &mut hist, &o, sp, sb, null_mut()),
+                LrdStatus::LRD_STATUS_NULL_POINTER
+            );
+            let mut bad = tc;
+            bad.output_alpha = 0.0;
+            assert_eq!(
+                lrd_flr_denoise_temporal(&cfg, &bad, &frame, m, &mut hist, &o, sp, sb, null_mut()),
+                LrdStatus::LRD_STATUS_INVALID_CONFIG
+            );
+            assert_eq!(
+                lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb - 8, null_mut()),
+                LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
+            );
+            assert_eq!(hist.frames as usize, k + 1, "a refused call leaves the history as it was");
+        }
+        assert_eq!(
+            (rep.history_rejected, rep.clamped_fireflies, rep.history_resets),
+            (rrep.history_rejected, rrep.clamped_fireflies, rrep.history_resets)
+        );
+        let mut up = cfg;
+        up.upsample = 2;
+        up.block = 8;
+        assert_eq!(lrd_flr_temporal_sizes(&up, &tc, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_UNSUPPORTED);
+    }
+}
+
 /// BMFR through the C ABI gives exactly the Rust API's output, single frame and
 /// temporal (history advanced by the call), and validates its arguments.
 #[test]

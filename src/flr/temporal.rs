@@ -49,7 +49,10 @@ use crate::temporal::{History, Inputs, Reprojection, TemporalConfig};
 /// A temporal FLR plan: FLR and the temporal stage for one frame size.
 #[derive(Clone, Debug)]
 pub struct TemporalFlr {
+    /// FLR on the accumulated light (its clamp off: the light was clamped before).
     flr: Flr,
+    /// FLR as configured: what a single frame (`Denoiser::denoise`) runs.
+    single: Flr,
     stage: Reprojection,
     fireflies: Option<f32>,
 }
@@ -62,14 +65,18 @@ impl TemporalFlr {
         if cfg.upsample != 1 {
             return Err(Error::Unsupported("temporal FLR with upsample > 1"));
         }
+        let single = Flr::new(cfg, width, height)?;
         let flr = Flr::new(FlrConfig { fireflies: None, ..cfg }, width, height)?;
-        cfg.validate()?;
         let stage = Reprojection::new(temporal, cfg.guides, width, height)?;
-        Ok(TemporalFlr { flr, stage, fireflies: cfg.fireflies })
+        Ok(TemporalFlr { flr, single, stage, fireflies: cfg.fireflies })
     }
     /// The FLR plan that runs on the accumulated light (its clamp is off).
     pub fn flr(&self) -> &Flr {
         &self.flr
+    }
+    /// FLR as configured (clamp included): the single-frame method.
+    pub fn single_frame(&self) -> &Flr {
+        &self.single
     }
     /// The temporal stage.
     pub fn stage(&self) -> &Reprojection {
@@ -83,14 +90,22 @@ impl TemporalFlr {
     pub fn history_len(&self) -> usize {
         self.stage.history_len()
     }
-    /// f32 values of the scratch: the stage's, FLR's output (RGB) and,
-    /// with the firefly clamp, the clamped light (3 planes) and its work.
+    /// f32 values of the scratch of [`TemporalFlr::denoise`]: the stage's,
+    /// FLR's output (RGB) and, with the firefly clamp, the clamped light (3
+    /// planes) and its work.
     pub fn scratch_len(&self) -> usize {
+        self.stage.scratch_len() + self.own_len()
+    }
+    /// f32 values of the scratch of [`TemporalFlr::denoise_parallel`] with `workers`.
+    pub fn parallel_scratch_len(&self, workers: usize) -> usize {
+        self.stage.parallel_scratch_len(workers).and_then(|s| s.checked_add(self.own_len())).unwrap_or(usize::MAX)
+    }
+    fn own_len(&self) -> usize {
         let clamp = match self.fireflies {
             Some(_) => 3 * self.plane() + fireflies::work_len(self.flr.size().0),
             None => 0,
         };
-        self.stage.scratch_len() + 3 * self.plane() + clamp
+        3 * self.plane() + clamp
     }
     /// f64 values of FLR's scratch for [`TemporalFlr::denoise`].
     pub fn flr_scratch_len(&self) -> usize {
@@ -113,7 +128,7 @@ impl TemporalFlr {
         flr_scratch: &mut [f64],
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
-        self.run(frame, motion, history, scratch, out, |flr, f, o| flr.denoise(f, flr_scratch, o))
+        self.run(frame, motion, history, scratch, out, None, |flr, f, o| flr.denoise(f, flr_scratch, o))
     }
 
     /// [`TemporalFlr::denoise`] with FLR's tiles over the caller's executor
@@ -130,7 +145,9 @@ impl TemporalFlr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
-        self.run(frame, motion, history, scratch, out, |flr, f, o| flr.denoise_parallel(f, flr_scratch, o, workers, for_each))
+        self.run(frame, motion, history, scratch, out, Some((workers, for_each)), |flr, f, o| {
+            flr.denoise_parallel(f, flr_scratch, o, workers, for_each)
+        })
     }
 
     fn run(
@@ -140,6 +157,7 @@ impl TemporalFlr {
         history: &mut History<'_>,
         scratch: &mut [f32],
         out: &mut ImageViewMut<'_>,
+        parallel: Option<(usize, Executor<'_>)>,
         fit: impl FnOnce(&Flr, &Frame<'_>, &mut ImageViewMut<'_>) -> Result<Report, Error>,
     ) -> Result<Report, Error> {
         let (w, h) = self.flr.size();
@@ -150,10 +168,14 @@ impl TemporalFlr {
             return Err(Error::Unsupported("temporal FLR with a second (low-resolution) guide set"));
         }
         self.stage.check_history(history)?;
-        if scratch.len() < self.scratch_len() {
-            return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
+        let (stage_len, needed) = match parallel {
+            Some((workers, _)) => (self.stage.parallel_scratch_len(workers).unwrap_or(usize::MAX), self.parallel_scratch_len(workers)),
+            None => (self.stage.scratch_len(), self.scratch_len()),
+        };
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let (stage_scratch, rest) = scratch.split_at_mut(self.stage.scratch_len());
+        let (stage_scratch, rest) = scratch.split_at_mut(stage_len);
         let (fitted, rest) = rest.split_at_mut(3 * np);
         let mut rep = Report::default();
         let clamped = match self.fireflies {
@@ -166,7 +188,10 @@ impl TemporalFlr {
             None => None,
         };
         let inputs = Inputs { noisy: frame.noisy, clamped, guides: frame.guides, motion: motion.copied() };
-        let c = self.stage.accumulate(&inputs, history, stage_scratch)?;
+        let c = match parallel {
+            Some((workers, for_each)) => self.stage.accumulate_parallel(&inputs, history, stage_scratch, workers, for_each)?,
+            None => self.stage.accumulate(&inputs, history, stage_scratch)?,
+        };
         rep.history_rejected = c.rejected;
         rep.invalid_motion = c.invalid_motion;
         rep.history_resets = c.cut;
@@ -179,9 +204,65 @@ impl TemporalFlr {
             // (NaN/Inf noisy samples were counted, and bridged where possible, by the stage)
             rep += Report { nonfinite_noisy: 0, ..r };
         }
-        self.stage.resolve(fitted, history, stage_scratch, c.cut != 0, self.flr.config().clamp_negative, |y, row| {
-            out.write_row_n(y, 0, row).ok_or(Error::InvalidTile { index: y, count: h })
-        })?;
+        let (cut, clamp_negative) = (c.cut != 0, self.flr.config().clamp_negative);
+        match parallel {
+            Some((workers, for_each)) => {
+                self.stage.resolve_parallel(fitted, history, stage_scratch, cut, clamp_negative, out, workers, for_each)?
+            }
+            None => self.stage.resolve(fitted, history, stage_scratch, cut, clamp_negative, out)?,
+        }
         Ok(rep)
+    }
+}
+
+impl crate::Denoiser for TemporalFlr {
+    fn size(&self) -> (usize, usize) {
+        self.single.size()
+    }
+    /// A single frame is FLR's.
+    fn scratch_len(&self) -> usize {
+        self.single.scratch_len()
+    }
+    fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        self.single.denoise(frame, scratch, out)
+    }
+    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        self.single.tiled_scratch_len(workers)
+    }
+    fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        self.single.denoise_parallel(frame, scratch, out, workers, for_each)
+    }
+}
+
+impl crate::TemporalDenoiser for TemporalFlr {
+    fn history_len(&self) -> usize {
+        TemporalFlr::history_len(self)
+    }
+    /// FLR's f64 scratch, then the pipeline's f32 scratch packed two per f64.
+    fn temporal_scratch_len(&self) -> usize {
+        self.flr_scratch_len() + self.scratch_len().div_ceil(2)
+    }
+    fn denoise_temporal(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        let needed = crate::TemporalDenoiser::temporal_scratch_len(self);
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let (flr, own) = scratch.split_at_mut(self.flr_scratch_len());
+        let own = &mut bytemuck::cast_slice_mut::<f64, f32>(own)[..self.scratch_len()];
+        self.denoise(frame, motion, history, own, flr, out)
     }
 }
