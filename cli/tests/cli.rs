@@ -49,7 +49,7 @@ fn bad_inputs_give_clear_errors() {
     fails_with(&["denoise", &room, "-o", out, "--method", "magic"], &["--method", "magic"]);
     // clap lists the methods
     let (_, _, e) = lrd(&["denoise", &room, "-o", out, "--method", "magic"]);
-    assert!(e.contains("possible values: flr, flnr, bmfr, bmfr-temporal, walr, walr-temporal"), "{e}");
+    assert!(e.contains("possible values: flr, flr-temporal, flnr, bmfr, bmfr-temporal, walr, walr-temporal"), "{e}");
     fails_with(&["eval", &room, "--methods", "flr,oidn"], &["--methods", "oidn"]);
     fails_with(&["bench", "--size", "12by7"], &["--size"]);
     // a frame without the depth layer, asked to use depth
@@ -518,7 +518,8 @@ fn report_writes_legend_plot_and_capped_strips() {
     let diff = (ev[1]["psnr"].as_f64().unwrap() - in_memory["psnr"].as_f64().unwrap()).abs();
     assert!(diff < 1e-9, "{} vs {in_memory}", ev[1]);
     let strip = image::image_dimensions(dir.join("strip_room_7.png")).unwrap();
-    assert!(strip.0 <= 8 * 256 && strip.0 >= 4 * 256, "{strip:?}");
+    // noisy, the best of each of the 7 methods, the reference
+    assert!(strip.0 <= 9 * 256 && strip.0 >= 4 * 256, "{strip:?}");
     let full = tmp("report_full");
     let (ok, _, e) = lrd(&["report", &data("room_7.exr"), "-o", full.to_str().unwrap(), "--runs", "5", "--full-strips"]);
     assert!(ok, "{e}");
