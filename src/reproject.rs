@@ -1,5 +1,5 @@
-//! Helpers shared by the temporal pipelines (BMFR, WALR): bilinear
-//! reprojection taps and the YCoCg colour space used for history clamping.
+//! Helpers shared by the temporal pipelines (FLR's stage, BMFR, WALR):
+//! bilinear reprojection taps and the YCoCg colour space used for history clamping.
 
 /// The 4 bilinear taps `(x, y, weight)` around the continuous pixel
 /// position `(px, py)` (pixel centres at integers).
@@ -44,6 +44,7 @@ pub fn rgb(c: [f32; 3]) -> [f32; 3] {
 /// `w × h`, plane stride `np`) at `(px, py)`: the weighted mean of the taps
 /// whose bit is set in `mask` (bit k = tap k of [`bilinear_taps`]), that lie
 /// in the image and hold finite values; `None` if no tap qualifies.
+#[cfg(any(feature = "bmfr", feature = "walr"))]
 pub fn reproject3(planes: &[f32], np: usize, (w, h): (usize, usize), (px, py): (f32, f32), mask: u32) -> Option<[f32; 3]> {
     let (mut tw, mut sum) = (0f32, [0f32; 3]);
     for (k, (tx, ty, wt)) in bilinear_taps(px, py).into_iter().enumerate() {

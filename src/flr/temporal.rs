@@ -150,6 +150,7 @@ impl TemporalFlr {
         })
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
         frame: &Frame<'_>,
