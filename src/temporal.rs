@@ -47,11 +47,11 @@ pub struct TemporalConfig {
     /// Longest per-pixel history, in frames: the blend weight of a new sample
     /// never drops below `1 / max_history` (default 16).
     pub max_history: f32,
-    /// Smallest cosine between a history tap's normal and the current one (default 0.9, 26°).
+    /// Smallest cosine between a history tap's normal and the current one (default 0.5, 60°).
     pub normal_limit: f32,
     /// Largest world-position distance of a history tap, as a fraction of the
     /// camera distance when the frame has depth, in world units when it has
-    /// none (default 0.02).
+    /// none (default 0.05).
     pub position_limit: f32,
     /// Without positions: largest relative depth difference (default 0.05).
     pub depth_limit: f32,
@@ -69,8 +69,8 @@ impl Default for TemporalConfig {
     fn default() -> Self {
         TemporalConfig {
             max_history: 16.0,
-            normal_limit: 0.9,
-            position_limit: 0.02,
+            normal_limit: 0.5,
+            position_limit: 0.05,
             depth_limit: 0.05,
             clip_gamma: 1.5,
             output_alpha: 0.5,
@@ -120,7 +120,8 @@ const GUIDES: usize = 7;
 pub struct Counts {
     /// Pixels without usable history (the first frame and cut frames are not counted).
     pub rejected: u64,
-    /// Pixels whose motion vector was NaN/Inf or longer than twice the frame.
+    /// Pixels whose motion vector was NaN/Inf or longer than twice the frame
+    /// (counted in a cut frame too).
     pub invalid_motion: u64,
     /// Pixels whose noisy light was NaN/Inf (bridged with the history where there is one).
     pub nonfinite: u64,
@@ -264,10 +265,10 @@ impl Reprojection {
         let has_history = history.frames > 0;
         let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
         let (read, write) = self.slots(history);
-        let mut c = self.accumulate_rows(inp, read, 0, write, pixels, rows, has_history)?;
+        let c = self.accumulate_rows(inp, read, 0, write, pixels, rows, has_history)?;
         if self.is_cut(has_history, &c) {
-            c = self.accumulate_rows(inp, read, 0, write, pixels, rows, false)?;
-            c.cut = 1;
+            let again = self.accumulate_rows(inp, read, 0, write, pixels, rows, false)?;
+            return Ok(Counts { invalid_motion: c.invalid_motion, cut: 1, ..again });
         }
         Ok(c)
     }
@@ -307,10 +308,10 @@ impl Reprojection {
             })?;
             Ok(Counts { rejected: r.history_rejected, invalid_motion: r.invalid_motion, nonfinite: r.nonfinite_noisy, cut: 0 })
         };
-        let mut c = pass(has_history)?;
+        let c = pass(has_history)?;
         if self.is_cut(has_history, &c) {
-            c = pass(false)?;
-            c.cut = 1;
+            let again = pass(false)?;
+            return Ok(Counts { invalid_motion: c.invalid_motion, cut: 1, ..again });
         }
         Ok(c)
     }

@@ -275,7 +275,7 @@ fn typed_errors() {
     let f = Owned::synthetic(40, 30, 1, 0.5);
     assert!(matches!(Bmfr::new(BmfrConfig { block: 4, ..Default::default() }, 40, 30), Err(Error::InvalidConfig(_))));
     assert!(matches!(Bmfr::new(BmfrConfig { noise: f32::NAN, ..Default::default() }, 40, 30), Err(Error::InvalidConfig(_))));
-    let bad_t = TemporalConfig { noisy_alpha: 0.0, ..Default::default() };
+    let bad_t = TemporalConfig { output_alpha: 0.0, ..Default::default() };
     assert!(matches!(Bmfr::new(BmfrConfig { temporal: bad_t, ..Default::default() }, 40, 30), Err(Error::InvalidConfig(_))));
     let all = GuideSet { normal: true, depth: true, position: true, ao: true, user: 4 };
     assert_eq!(Bmfr::new(BmfrConfig::with_guides(all), 40, 30).unwrap().feature_count(), 16, "every guide + 3 squares fits");
@@ -338,9 +338,11 @@ fn temporal_accumulation_lowers_the_error_frame_over_frame() {
         }
         assert_eq!(history.frames(), 8);
         for k in 1..errs.len() {
-            assert!(errs[k] < errs[k - 1] * 1.02, "{set:?}: error rose at frame {k}: {errs:?}");
+            // (the block grid moves every frame: a frame's error may rise a little)
+            assert!(errs[k] < errs[k - 1] * 1.05, "{set:?}: error rose at frame {k}: {errs:?}");
         }
-        assert!(errs[7] < 0.6 * errs[0], "{set:?}: {errs:?}");
+        // (with normal and depth only, the fit's bias is a floor the accumulation does not lower)
+        assert!(errs[7] < 0.65 * errs[0], "{set:?}: {errs:?}");
         assert!(errs[7] < 0.6 * single[7], "{set:?}: temporal {} vs single {}", errs[7], single[7]);
     }
 }
@@ -367,11 +369,11 @@ fn temporal_rejects_disocclusions_and_survives_nan() {
     let rep = b.denoise_temporal(&f1.frame(NP), None, &mut history, &mut scratch, &mut ov).unwrap();
     assert_eq!(rep.history_rejected as usize, h * (w / 2));
     assert_eq!(rep.nonfinite_noisy, 1);
-    // motion that points outside the image rejects everything
+    // motion that points far outside the image is invalid everywhere: a cut
     let far = vec![1e4f32; 2 * w * h];
     let mv = ImageView::interleaved(&far, w, h, 2).unwrap();
     let rep = b.denoise_temporal(&seq[2].frame(NP), Some(&mv), &mut history, &mut scratch, &mut ov).unwrap();
-    assert_eq!(rep.history_rejected as usize, w * h);
+    assert_eq!((rep.invalid_motion as usize, rep.history_resets), (w * h, 1));
     assert!(out.iter().all(|v| v.is_finite()));
     history.reset();
     assert_eq!(history.frames(), 0);

@@ -817,17 +817,18 @@ fn temporal_rejects_disocclusions_and_survives_nan() {
     for i in 0..w * h {
         if i % w < w / 2 {
             f1.depth[i] *= 1.2;
+            f1.position[3 * i + 2] += 0.2 * f1.depth[i];
         }
     }
     f1.noisy[7] = f32::NAN;
     let rep = wl.denoise_temporal(&f1.frame(NDP), None, &mut history, &mut scratch, &mut ov).unwrap();
     assert_eq!(rep.history_rejected as usize, h * (w / 2));
     assert_eq!(rep.nonfinite_noisy, 1);
-    // motion that points outside the image rejects everything
+    // motion that points far outside the image is invalid everywhere: a cut
     let far = vec![1e4f32; 2 * w * h];
     let mv = ImageView::interleaved(&far, w, h, 2).unwrap();
     let rep = wl.denoise_temporal(&seq[2].frame(NDP), Some(&mv), &mut history, &mut scratch, &mut ov).unwrap();
-    assert_eq!(rep.history_rejected as usize, w * h);
+    assert_eq!((rep.invalid_motion as usize, rep.history_resets), (w * h, 1));
     // typed errors
     let mut small = vec![0f32; 3];
     assert!(matches!(
@@ -835,7 +836,7 @@ fn temporal_rejects_disocclusions_and_survives_nan() {
         Err(Error::BufferTooSmall { .. })
     ));
     assert!(matches!(wl.denoise_temporal(&seq[2].frame(NDP), None, &mut history, &mut small, &mut ov), Err(Error::ScratchTooSmall { .. })));
-    assert!(TemporalConfig { max_samples: 0.5, ..Default::default() }.validate().is_err());
+    assert!(TemporalConfig { max_history: 0.5, ..Default::default() }.validate().is_err());
     assert!(out.iter().all(|v| v.is_finite()));
     history.reset();
     assert_eq!(history.frames(), 0);

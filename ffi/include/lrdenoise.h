@@ -571,12 +571,12 @@ typedef struct LrdTemporalConfig {
    */
   float max_history;
   /**
-   * Smallest cosine between a history tap's normal and the current one (default 0.9).
+   * Smallest cosine between a history tap's normal and the current one (default 0.5).
    */
   float normal_limit;
   /**
    * Largest world-position distance of a history tap, as a fraction of the
-   * camera distance with depth, in world units without (default 0.02).
+   * camera distance with depth, in world units without (default 0.05).
    */
   float position_limit;
   /**
@@ -602,8 +602,8 @@ typedef struct LrdTemporalConfig {
 /**
  * The caller-owned state of a temporal pipeline (FLR, BMFR or WALR): `data`
  * (4-byte aligned, at least the history size from `lrd_flr_temporal_sizes`,
- * `lrd_bmfr_temporal_sizes` or `lrd_walr_temporal_sizes`; FLR's must be
- * exactly that size) and the number of frames accumulated. Set
+ * `lrd_bmfr_temporal_sizes` or `lrd_walr_temporal_sizes`) and the number
+ * of frames accumulated. Set
  * `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
  * call advances it. The contents of `data` are ignored while `frames == 0`.
  * One history serves one method, size and configuration.
@@ -678,30 +678,11 @@ typedef struct LrdBmfrConfig {
    */
   bool scalar_kernels;
   /**
-   * Temporal pipeline: lowest blend weight of a new noisy sample (0.2).
+   * The temporal pipeline's stage, shared with temporal FLR and WALR
+   * (BMFR's defaults: `output_alpha` 0.1 and `clip_gamma` 4, the rest as
+   * `lrd_temporal_config_default`).
    */
-  float noisy_alpha;
-  /**
-   * Lowest blend weight of a new filtered frame (0.1).
-   */
-  float filtered_alpha;
-  /**
-   * TAA blend weight of the new frame (0.2; 1 = TAA off).
-   */
-  float taa_alpha;
-  /**
-   * Largest squared distance of previous and current unit normals (1.0).
-   */
-  float normal_limit;
-  /**
-   * Largest world-position distance, as a fraction of the camera distance
-   * when the frame has depth, in world units otherwise (0.05).
-   */
-  float position_limit;
-  /**
-   * Without positions: largest relative depth difference (0.05).
-   */
-  float depth_limit;
+  struct LrdTemporalConfig temporal;
   /**
    * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
    * luminance exceeds k times the larger of the third brightest 8x8
@@ -791,25 +772,10 @@ typedef struct LrdWalrConfig {
    */
   bool adaptive_blend;
   /**
-   * Temporal pipeline: frames after which accumulation becomes exponential (16).
+   * The temporal pipeline's stage, shared with temporal FLR (defaults:
+   * `lrd_temporal_config_default`).
    */
-  float max_samples;
-  /**
-   * Lowest blend weight of the new frame in the post pass (0.1).
-   */
-  float post_alpha;
-  /**
-   * Half-width of the variance-clipping box in standard deviations (1.25).
-   */
-  float clip_gamma;
-  /**
-   * Largest relative camera-distance change of a history tap (0.05).
-   */
-  float depth_limit;
-  /**
-   * Without depth: largest world-position change of a history tap (0.05).
-   */
-  float position_limit;
+  struct LrdTemporalConfig temporal;
   /**
    * The firefly clamp's threshold factor k (>= 1): a noisy sample whose
    * luminance exceeds k times the larger of the third brightest 8x8
@@ -1010,8 +976,8 @@ LrdStatus lrd_flr_temporal_sizes(const struct LrdFlrConfig *config,
  * `motion`, rejected by normal and position or depth), fitted by FLR, and
  * blended with the clipped previous output. `motion` (2 channels: previous
  * minus current pixel position) may be NULL, or have `data == NULL`, for a
- * static camera. `history` is read and advanced; `history->bytes` must be
- * exactly, and `scratch` (8-byte aligned) at least, the sizes from
+ * static camera. `history` is read and advanced; `history->data` and
+ * `scratch` (8-byte aligned) must hold at least the sizes from
  * `lrd_flr_temporal_sizes` with the same configs and size. The frame's guides
  * are those of `config->guides`; `frame.guides_low` must be absent.
  * `report` may be NULL; otherwise the run's counts are added to it
@@ -1028,7 +994,8 @@ LrdStatus lrd_flr_denoise_temporal(const struct LrdFlrConfig *config,
                                    struct LrdReport *report);
 
 /**
- * The temporal stage's defaults.
+ * The temporal stage's defaults (temporal FLR's and WALR's; BMFR's differ:
+ * see `lrd_bmfr_config_default`).
  */
 struct LrdTemporalConfig lrd_temporal_config_default(void);
 

@@ -3,7 +3,7 @@
 
 use crate::images::{guide_set, LrdFrame, LrdImage, LrdImageMut, LRD_GUIDE_NORMAL, LRD_GUIDE_POSITION};
 use crate::status::{guard, status_of, LrdReport, LrdStatus, LrdStatus::*};
-use crate::temporal::{denoise_single, denoise_temporal, scratch_size, temporal_sizes, LrdHistory};
+use crate::temporal::{denoise_single, denoise_temporal, scratch_size, temporal_config, temporal_sizes, LrdHistory, LrdTemporalConfig};
 use core::ffi::c_void;
 use lrdenoise_core::Kernel;
 
@@ -38,19 +38,10 @@ pub struct LrdBmfrConfig {
     pub clamp_negative: bool,
     /// Use the scalar reference kernels (slow; for testing).
     pub scalar_kernels: bool,
-    /// Temporal pipeline: lowest blend weight of a new noisy sample (0.2).
-    pub noisy_alpha: f32,
-    /// Lowest blend weight of a new filtered frame (0.1).
-    pub filtered_alpha: f32,
-    /// TAA blend weight of the new frame (0.2; 1 = TAA off).
-    pub taa_alpha: f32,
-    /// Largest squared distance of previous and current unit normals (1.0).
-    pub normal_limit: f32,
-    /// Largest world-position distance, as a fraction of the camera distance
-    /// when the frame has depth, in world units otherwise (0.05).
-    pub position_limit: f32,
-    /// Without positions: largest relative depth difference (0.05).
-    pub depth_limit: f32,
+    /// The temporal pipeline's stage, shared with temporal FLR and WALR
+    /// (BMFR's defaults: `output_alpha` 0.1 and `clip_gamma` 4, the rest as
+    /// `lrd_temporal_config_default`).
+    pub temporal: LrdTemporalConfig,
     /// The firefly clamp's threshold factor k (>= 1): a noisy sample whose
     /// luminance exceeds k times the larger of the third brightest 8x8
     /// cell of its 104x8-pixel neighbourhood and that neighbourhood's mean
@@ -61,7 +52,6 @@ pub struct LrdBmfrConfig {
 }
 
 fn bmfr_config(c: &LrdBmfrConfig) -> Result<lrdenoise_core::BmfrConfig, LrdStatus> {
-    use lrdenoise_core::bmfr::temporal::TemporalConfig;
     let cfg = lrdenoise_core::BmfrConfig {
         guides: guide_set(c.guides, c.user_guides)?,
         block: c.block as usize,
@@ -72,14 +62,7 @@ fn bmfr_config(c: &LrdBmfrConfig) -> Result<lrdenoise_core::BmfrConfig, LrdStatu
         shift: c.shift,
         clamp_negative: c.clamp_negative,
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
-        temporal: TemporalConfig {
-            noisy_alpha: c.noisy_alpha,
-            filtered_alpha: c.filtered_alpha,
-            taa_alpha: c.taa_alpha,
-            normal_limit: c.normal_limit,
-            position_limit: c.position_limit,
-            depth_limit: c.depth_limit,
-        },
+        temporal: temporal_config(&c.temporal)?,
         fireflies: (c.fireflies != 0.0).then_some(c.fireflies),
     };
     cfg.validate().map_err(status_of)?;
@@ -111,12 +94,7 @@ pub extern "C" fn lrd_bmfr_config_default() -> LrdBmfrConfig {
         shift: d.shift,
         clamp_negative: d.clamp_negative,
         scalar_kernels: false,
-        noisy_alpha: t.noisy_alpha,
-        filtered_alpha: t.filtered_alpha,
-        taa_alpha: t.taa_alpha,
-        normal_limit: t.normal_limit,
-        position_limit: t.position_limit,
-        depth_limit: t.depth_limit,
+        temporal: crate::temporal::lrd_temporal_config(&t),
         fireflies: d.fireflies.unwrap_or(0.0),
     }
 }

@@ -38,10 +38,10 @@ pub struct LrdHistory {
 pub struct LrdTemporalConfig {
     /// Longest per-pixel history in frames (1..=1e6; default 16).
     pub max_history: f32,
-    /// Smallest cosine between a history tap's normal and the current one (default 0.9).
+    /// Smallest cosine between a history tap's normal and the current one (default 0.5).
     pub normal_limit: f32,
     /// Largest world-position distance of a history tap, as a fraction of the
-    /// camera distance with depth, in world units without (default 0.02).
+    /// camera distance with depth, in world units without (default 0.05).
     pub position_limit: f32,
     /// Without positions: largest relative depth difference (default 0.05).
     pub depth_limit: f32,
@@ -55,10 +55,15 @@ pub struct LrdTemporalConfig {
     pub cut_fraction: f32,
 }
 
-/// The temporal stage's defaults.
+/// The temporal stage's defaults (temporal FLR's and WALR's; BMFR's differ:
+/// see `lrd_bmfr_config_default`).
 #[no_mangle]
 pub extern "C" fn lrd_temporal_config_default() -> LrdTemporalConfig {
-    let d = lrdenoise_core::temporal::TemporalConfig::default();
+    lrd_temporal_config(&lrdenoise_core::temporal::TemporalConfig::default())
+}
+
+/// The C form of the core's settings.
+pub(crate) fn lrd_temporal_config(d: &lrdenoise_core::temporal::TemporalConfig) -> LrdTemporalConfig {
     LrdTemporalConfig {
         max_history: d.max_history,
         normal_limit: d.normal_limit,

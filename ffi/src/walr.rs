@@ -3,7 +3,7 @@
 
 use crate::images::{guide_set, LrdFrame, LrdImage, LrdImageMut, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL, LRD_GUIDE_POSITION};
 use crate::status::{guard, status_of, LrdReport, LrdStatus, LrdStatus::*};
-use crate::temporal::{denoise_single, denoise_temporal, scratch_size, temporal_sizes, LrdHistory};
+use crate::temporal::{denoise_single, denoise_temporal, scratch_size, temporal_config, temporal_sizes, LrdHistory, LrdTemporalConfig};
 use core::ffi::c_void;
 use lrdenoise_core::Kernel;
 
@@ -52,16 +52,9 @@ pub struct LrdWalrConfig {
     /// Blend the two windows per pixel by their estimated errors (true by
     /// default); previous_weight is then ignored.
     pub adaptive_blend: bool,
-    /// Temporal pipeline: frames after which accumulation becomes exponential (16).
-    pub max_samples: f32,
-    /// Lowest blend weight of the new frame in the post pass (0.1).
-    pub post_alpha: f32,
-    /// Half-width of the variance-clipping box in standard deviations (1.25).
-    pub clip_gamma: f32,
-    /// Largest relative camera-distance change of a history tap (0.05).
-    pub depth_limit: f32,
-    /// Without depth: largest world-position change of a history tap (0.05).
-    pub position_limit: f32,
+    /// The temporal pipeline's stage, shared with temporal FLR (defaults:
+    /// `lrd_temporal_config_default`).
+    pub temporal: LrdTemporalConfig,
     /// The firefly clamp's threshold factor k (>= 1): a noisy sample whose
     /// luminance exceeds k times the larger of the third brightest 8x8
     /// cell of its 104x8-pixel neighbourhood and that neighbourhood's mean
@@ -72,7 +65,7 @@ pub struct LrdWalrConfig {
 }
 
 fn walr_config(c: &LrdWalrConfig) -> Result<lrdenoise_core::WalrConfig, LrdStatus> {
-    use lrdenoise_core::walr::{temporal::TemporalConfig, Storage};
+    use lrdenoise_core::walr::Storage;
     let cfg = lrdenoise_core::WalrConfig {
         guides: guide_set(c.guides, c.user_guides)?,
         iterations: u8::try_from(c.iterations).map_err(|_| LRD_STATUS_INVALID_CONFIG)?,
@@ -88,13 +81,7 @@ fn walr_config(c: &LrdWalrConfig) -> Result<lrdenoise_core::WalrConfig, LrdStatu
         kernel: if c.scalar_kernels { Kernel::Scalar } else { Kernel::Simd },
         previous_weight: c.previous_weight,
         adaptive_blend: c.adaptive_blend,
-        temporal: TemporalConfig {
-            max_samples: c.max_samples,
-            post_alpha: c.post_alpha,
-            clip_gamma: c.clip_gamma,
-            depth_limit: c.depth_limit,
-            position_limit: c.position_limit,
-        },
+        temporal: temporal_config(&c.temporal)?,
         fireflies: (c.fireflies != 0.0).then_some(c.fireflies),
     };
     cfg.validate().map_err(status_of)?;
@@ -131,11 +118,7 @@ pub extern "C" fn lrd_walr_config_default() -> LrdWalrConfig {
         scalar_kernels: false,
         previous_weight: d.previous_weight,
         adaptive_blend: d.adaptive_blend,
-        max_samples: t.max_samples,
-        post_alpha: t.post_alpha,
-        clip_gamma: t.clip_gamma,
-        depth_limit: t.depth_limit,
-        position_limit: t.position_limit,
+        temporal: crate::temporal::lrd_temporal_config(&t),
         fireflies: d.fireflies.unwrap_or(0.0),
     }
 }

@@ -358,7 +358,7 @@ fn bmfr_matches_the_rust_api() {
         bad.block = 4;
         assert_eq!(lrd_bmfr_denoise(&bad, &frame, 3, &o, sp, bytes, null_mut()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
         bad = cfg;
-        bad.taa_alpha = 0.0;
+        bad.temporal.output_alpha = 0.0;
         assert_eq!(lrd_bmfr_scratch_size(&bad, w, h, &mut bytes), LrdStatus::LRD_STATUS_INVALID_CONFIG);
         let mut missing = frame;
         missing.guides.position = none();

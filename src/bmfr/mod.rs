@@ -99,7 +99,11 @@ pub struct BmfrConfig {
     pub clamp_negative: bool,
     /// Kernel implementation (SIMD or the scalar oracle).
     pub kernel: Kernel,
-    /// Temporal pipeline settings (ignored by the single-frame fit).
+    /// Temporal pipeline settings: the shared stage's ([`crate::temporal`];
+    /// ignored by the single-frame fit). BMFR's default blends the new
+    /// output with weight 0.1 (the paper's filtered accumulation) and clips
+    /// at 4 σ: its block fits flicker with the per-frame grid offset, and a
+    /// longer, looser output average scored best on the training sequences.
     pub temporal: temporal::TemporalConfig,
     /// The firefly clamp's strength `k` ([`crate::fireflies`]): a noisy
     /// sample whose luminance is above `k` times the larger of the third brightest
@@ -123,7 +127,7 @@ impl Default for BmfrConfig {
             shift: true,
             clamp_negative: true,
             kernel: Kernel::Simd,
-            temporal: temporal::TemporalConfig::default(),
+            temporal: temporal::TemporalConfig { output_alpha: 0.1, clip_gamma: 4.0, ..temporal::TemporalConfig::default() },
             fireflies: Some(fireflies::DEFAULT_STRENGTH),
         }
     }

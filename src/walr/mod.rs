@@ -148,7 +148,8 @@ pub struct WalrConfig {
     /// small window ([`blend`]). Costs one more stored plane per pixel (the
     /// light's energy) and a second pass after the solve. Ignored when T = 1.
     pub adaptive_blend: bool,
-    /// Temporal pipeline settings (ignored by the single-frame filter).
+    /// Temporal pipeline settings: the shared stage's ([`crate::temporal`];
+    /// ignored by the single-frame filter).
     pub temporal: TemporalConfig,
     /// The firefly clamp's strength `k` ([`crate::fireflies`]): a noisy
     /// sample whose luminance is above `k` times the larger of the third brightest
