@@ -49,7 +49,7 @@ use crate::temporal::{History, Inputs, Reprojection, TemporalConfig};
 /// A temporal FLR plan: FLR and the temporal stage for one frame size.
 #[derive(Clone, Debug)]
 pub struct TemporalFlr {
-    /// FLR on the accumulated light (its clamp off: the light was clamped before).
+    /// FLR on the accumulated light (its clamp off: the stage's input is clamped).
     flr: Flr,
     /// FLR as configured: what a single frame (`Denoiser::denoise`) runs.
     single: Flr,
