@@ -316,6 +316,87 @@ impl Reprojection {
         Ok(c)
     }
 
+    /// f32 values a pipeline frame ([`Reprojection::run_frame`]) needs: the
+    /// stage's scratch (for `workers`, or one thread with `None`), the fit's
+    /// RGB output and, with the firefly clamp `fireflies`, the clamped light
+    /// (3 planes) and its work. `None` if it overflows.
+    pub fn frame_scratch_len(&self, workers: Option<usize>, fireflies: Option<f32>) -> Option<usize> {
+        let stage = match workers {
+            Some(n) => self.parallel_scratch_len(n)?,
+            None => self.scratch_len(),
+        };
+        let clamp = if fireflies.is_some() { 3 * self.plane() + fireflies::work_len(self.width) } else { 0 };
+        stage.checked_add(3 * self.plane())?.checked_add(clamp)
+    }
+
+    /// One frame of a temporal pipeline around a single-frame denoiser:
+    /// clamps `noisy` with `fireflies`, accumulates it (step 1), calls
+    /// `fit(accumulated, frame_index, fitted)` (step 2: the denoiser on the
+    /// accumulated light, into an RGB image of the frame's size) and resolves
+    /// into `out` (step 3). `parallel`: the workers and executor of both
+    /// passes (the fit brings its own). The report holds the stage's counts
+    /// and the fit's, but for its NaN/Inf noisy samples (the stage counted,
+    /// and bridged, those).
+    #[allow(clippy::too_many_arguments)]
+    pub fn run_frame(
+        &self,
+        noisy: ImageView<'_>,
+        guides: Guides<'_>,
+        motion: Option<ImageView<'_>>,
+        fireflies: Option<f32>,
+        clamp_negative: bool,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        parallel: Option<(usize, Executor<'_>)>,
+        out: &mut ImageViewMut<'_>,
+        fit: impl FnOnce(ImageView<'_>, u32, &mut ImageViewMut<'_>) -> Result<Report, Error>,
+    ) -> Result<Report, Error> {
+        let (w, h, np) = (self.width, self.height, self.plane());
+        self.check_history(history)?;
+        let overflow = Error::InvalidConfig("workers: scratch size overflows");
+        let needed = self.frame_scratch_len(parallel.map(|p| p.0), fireflies).ok_or(overflow)?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let got = scratch.len();
+        let stage_len = needed - 3 * np - if fireflies.is_some() { 3 * np + fireflies::work_len(w) } else { 0 };
+        let (stage, rest) = scratch.split_at_mut(stage_len);
+        let (fitted, rest) = rest.split_at_mut(3 * np);
+        let mut rep = Report::default();
+        let clamped = match fireflies {
+            Some(k) => {
+                let (light, work) = rest.split_at_mut(3 * np);
+                let bad = Error::ScratchTooSmall { needed, got };
+                rep.clamped_fireflies = fireflies::clamp_frame(&noisy, k, light, work).ok_or(bad)?;
+                Some(&*light)
+            }
+            None => None,
+        };
+        let inputs = Inputs { noisy, clamped, guides, motion };
+        let c = match parallel {
+            Some((workers, for_each)) => self.accumulate_parallel(&inputs, history, stage, workers, for_each)?,
+            None => self.accumulate(&inputs, history, stage)?,
+        };
+        rep.history_rejected = c.rejected;
+        rep.invalid_motion = c.invalid_motion;
+        rep.history_resets = c.cut;
+        rep.nonfinite_noisy = c.nonfinite;
+        let index = history.frames;
+        {
+            let acc = self.accumulated(history)?;
+            let mut fit_out = ImageViewMut::interleaved(fitted, w, h, 3)?;
+            let r = fit(acc, index, &mut fit_out)?;
+            rep += Report { nonfinite_noisy: 0, ..r };
+        }
+        match parallel {
+            Some((workers, for_each)) => {
+                self.resolve_parallel(fitted, history, stage, c.cut != 0, clamp_negative, out, workers, for_each)?
+            }
+            None => self.resolve(fitted, history, stage, c.cut != 0, clamp_negative, out)?,
+        }
+        Ok(rep)
+    }
+
     fn is_cut(&self, has_history: bool, c: &Counts) -> bool {
         has_history && c.rejected as f64 > self.cfg.cut_fraction as f64 * self.plane() as f64
     }

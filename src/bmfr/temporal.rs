@@ -16,18 +16,14 @@
 //! a caller-owned [`History`].
 
 use super::{Bmfr, Report};
-use crate::error::{Arg, Error};
-use crate::fireflies;
+use crate::error::Error;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut};
-use crate::temporal::{Inputs, Reprojection};
+use crate::temporal::Reprojection;
 
 pub use crate::temporal::{History, TemporalConfig};
 
 impl Bmfr {
-    fn plane(&self) -> usize {
-        self.width * self.height
-    }
     /// The temporal stage of this plan (its guides: BMFR's normal, position and depth).
     fn stage(&self) -> Result<Reprojection, Error> {
         Reprojection::new(self.cfg.temporal, self.cfg.guides, self.width, self.height)
@@ -36,20 +32,11 @@ impl Bmfr {
     pub fn history_len(&self) -> usize {
         self.stage().map_or(0, |s| s.history_len())
     }
-    /// f32 values of the scratch for [`Bmfr::denoise_temporal`]: the stage's,
-    /// the fit's output (RGB), a fit worker and, with the firefly clamp, the
-    /// clamped light (3 planes) and the work of one band's thresholds.
+    /// f32 values of the scratch for [`Bmfr::denoise_temporal`]: the
+    /// pipeline frame's ([`Reprojection::frame_scratch_len`]) and a fit worker.
     pub fn temporal_scratch_len(&self) -> usize {
-        let stage = self.stage().map_or(0, |s| s.scratch_len());
-        stage + 3 * self.plane() + self.worker_len() + self.frame_clamp_len()
-    }
-    /// f32 values the frame's firefly clamp needs: the clamped light and its work.
-    fn frame_clamp_len(&self) -> usize {
-        if self.cfg.fireflies.is_some() {
-            3 * self.plane() + fireflies::work_len(self.width)
-        } else {
-            0
-        }
+        let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None, self.cfg.fireflies));
+        frame.and_then(|n| n.checked_add(self.worker_len())).unwrap_or(usize::MAX)
     }
 
     /// One frame of the temporal pipeline. `motion` (2 channels: previous −
@@ -65,42 +52,27 @@ impl Bmfr {
     ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, (0, self.height))?;
-        let (w, h, np) = (self.width, self.height, self.plane());
-        let stage = self.stage()?;
-        stage.check_history(history)?;
         if scratch.len() < self.temporal_scratch_len() {
             return Err(Error::ScratchTooSmall { needed: self.temporal_scratch_len(), got: scratch.len() });
         }
-        let (stage_scratch, rest) = scratch.split_at_mut(stage.scratch_len());
-        let (fitted, rest) = rest.split_at_mut(3 * np);
-        let (worker, rest) = rest.split_at_mut(self.worker_len());
-        let mut rep = Report::default();
-        let clamped = match self.cfg.fireflies {
-            Some(k) => {
-                let (light, work) = rest.split_at_mut(3 * np);
-                let bad = Error::BufferTooSmall { arg: Arg::Scratch, needed: self.temporal_scratch_len(), len: 0 };
-                rep.clamped_fireflies = fireflies::clamp_frame(&f.noisy, k, light, work).ok_or(bad)?;
-                Some(&*light)
-            }
-            None => None,
-        };
-        let inputs = Inputs { noisy: f.noisy, clamped, guides: frame.guides, motion: motion.copied() };
-        let c = stage.accumulate(&inputs, history, stage_scratch)?;
-        rep.history_rejected = c.rejected;
-        rep.invalid_motion = c.invalid_motion;
-        rep.history_resets = c.cut;
-        rep.nonfinite_noisy = c.nonfinite;
-        let index = history.frames;
-        {
-            // 2. the fit on the accumulated colour (clamped already: the fit does not clamp it again)
-            let mut fit_frame = f;
-            fit_frame.noisy = stage.accumulated(history)?;
-            let mut fit_out = ImageViewMut::interleaved(fitted, w, h, 3)?;
-            let r = self.fit_frame(&fit_frame, index, worker, &mut fit_out, None)?;
-            // (non-finite noisy samples were counted, and bridged, by the stage)
-            rep += Report { nonfinite_noisy: 0, ..r };
-        }
-        stage.resolve(fitted, history, stage_scratch, c.cut != 0, self.cfg.clamp_negative, out)?;
-        Ok(rep)
+        let (worker, rest) = scratch.split_at_mut(self.worker_len());
+        let (cfg, stage) = (&self.cfg, self.stage()?);
+        stage.run_frame(
+            f.noisy,
+            frame.guides,
+            motion.copied(),
+            cfg.fireflies,
+            cfg.clamp_negative,
+            history,
+            rest,
+            None,
+            out,
+            |acc, index, o| {
+                // the fit on the accumulated colour (clamped already: the fit does not clamp it again)
+                let mut fit_frame = f;
+                fit_frame.noisy = acc;
+                self.fit_frame(&fit_frame, index, worker, o, None)
+            },
+        )
     }
 }

@@ -38,13 +38,12 @@
 
 use super::config::FlrConfig;
 use super::Flr;
-use crate::error::{Arg, Error};
-use crate::fireflies;
+use crate::error::Error;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut};
 use crate::parallel::Executor;
 use crate::report::Report;
-use crate::temporal::{History, Inputs, Reprojection, TemporalConfig};
+use crate::temporal::{History, Reprojection, TemporalConfig};
 
 /// A temporal FLR plan: FLR and the temporal stage for one frame size.
 #[derive(Clone, Debug)]
@@ -82,30 +81,18 @@ impl TemporalFlr {
     pub fn stage(&self) -> &Reprojection {
         &self.stage
     }
-    fn plane(&self) -> usize {
-        let (w, h) = self.flr.size();
-        w * h
-    }
     /// f32 values of the [`History`] buffer.
     pub fn history_len(&self) -> usize {
         self.stage.history_len()
     }
-    /// f32 values of the scratch of [`TemporalFlr::denoise`]: the stage's,
-    /// FLR's output (RGB) and, with the firefly clamp, the clamped light (3
-    /// planes) and its work.
+    /// f32 values of the scratch of [`TemporalFlr::denoise`]
+    /// ([`Reprojection::frame_scratch_len`]).
     pub fn scratch_len(&self) -> usize {
-        self.stage.scratch_len() + self.own_len()
+        self.stage.frame_scratch_len(None, self.fireflies).unwrap_or(usize::MAX)
     }
     /// f32 values of the scratch of [`TemporalFlr::denoise_parallel`] with `workers`.
     pub fn parallel_scratch_len(&self, workers: usize) -> usize {
-        self.stage.parallel_scratch_len(workers).and_then(|s| s.checked_add(self.own_len())).unwrap_or(usize::MAX)
-    }
-    fn own_len(&self) -> usize {
-        let clamp = match self.fireflies {
-            Some(_) => 3 * self.plane() + fireflies::work_len(self.flr.size().0),
-            None => 0,
-        };
-        3 * self.plane() + clamp
+        self.stage.frame_scratch_len(Some(workers), self.fireflies).unwrap_or(usize::MAX)
     }
     /// f64 values of FLR's scratch for [`TemporalFlr::denoise`].
     pub fn flr_scratch_len(&self) -> usize {
@@ -161,58 +148,16 @@ impl TemporalFlr {
         parallel: Option<(usize, Executor<'_>)>,
         fit: impl FnOnce(&Flr, &Frame<'_>, &mut ImageViewMut<'_>) -> Result<Report, Error>,
     ) -> Result<Report, Error> {
-        let (w, h) = self.flr.size();
-        let np = w * h;
         self.flr.check_output(out)?;
         self.flr.check_frame(frame)?;
         if frame.guides_low.is_some() {
             return Err(Error::Unsupported("temporal FLR with a second (low-resolution) guide set"));
         }
-        self.stage.check_history(history)?;
-        let (stage_len, needed) = match parallel {
-            Some((workers, _)) => (self.stage.parallel_scratch_len(workers).unwrap_or(usize::MAX), self.parallel_scratch_len(workers)),
-            None => (self.stage.scratch_len(), self.scratch_len()),
-        };
-        if scratch.len() < needed {
-            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
-        }
-        let (stage_scratch, rest) = scratch.split_at_mut(stage_len);
-        let (fitted, rest) = rest.split_at_mut(3 * np);
-        let mut rep = Report::default();
-        let clamped = match self.fireflies {
-            Some(k) => {
-                let (light, work) = rest.split_at_mut(3 * np);
-                let bad = Error::BufferTooSmall { arg: Arg::Scratch, needed: self.scratch_len(), len: 0 };
-                rep.clamped_fireflies = fireflies::clamp_frame(&frame.noisy, k, light, work).ok_or(bad)?;
-                Some(&*light)
-            }
-            None => None,
-        };
-        let inputs = Inputs { noisy: frame.noisy, clamped, guides: frame.guides, motion: motion.copied() };
-        let c = match parallel {
-            Some((workers, for_each)) => self.stage.accumulate_parallel(&inputs, history, stage_scratch, workers, for_each)?,
-            None => self.stage.accumulate(&inputs, history, stage_scratch)?,
-        };
-        rep.history_rejected = c.rejected;
-        rep.invalid_motion = c.invalid_motion;
-        rep.history_resets = c.cut;
-        rep.nonfinite_noisy = c.nonfinite;
-        {
-            let acc = self.stage.accumulated(history)?;
-            let f = Frame { noisy: acc, guides: frame.guides, guides_low: None };
-            let mut fit_out = ImageViewMut::interleaved(fitted, w, h, 3)?;
-            let r = fit(&self.flr, &f, &mut fit_out)?;
-            // (NaN/Inf noisy samples were counted, and bridged where possible, by the stage)
-            rep += Report { nonfinite_noisy: 0, ..r };
-        }
-        let (cut, clamp_negative) = (c.cut != 0, self.flr.config().clamp_negative);
-        match parallel {
-            Some((workers, for_each)) => {
-                self.stage.resolve_parallel(fitted, history, stage_scratch, cut, clamp_negative, out, workers, for_each)?
-            }
-            None => self.stage.resolve(fitted, history, stage_scratch, cut, clamp_negative, out)?,
-        }
-        Ok(rep)
+        let clamp_negative = self.flr.config().clamp_negative;
+        let (guides, st) = (frame.guides, &self.stage);
+        st.run_frame(frame.noisy, guides, motion.copied(), self.fireflies, clamp_negative, history, scratch, parallel, out, |acc, _, o| {
+            fit(&self.flr, &Frame { noisy: acc, guides, guides_low: None }, o)
+        })
     }
 }
 

@@ -22,18 +22,14 @@
 //! All state lives in a caller-owned [`History`].
 
 use super::{Report, Walr};
-use crate::error::{Arg, Error};
-use crate::fireflies;
+use crate::error::Error;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut};
-use crate::temporal::{Inputs, Reprojection};
+use crate::temporal::Reprojection;
 
 pub use crate::temporal::{History, TemporalConfig};
 
 impl Walr {
-    fn plane(&self) -> usize {
-        self.width * self.height
-    }
     /// The temporal stage of this plan (its guides: WALR's normal, position and depth).
     fn stage(&self) -> Result<Reprojection, Error> {
         Reprojection::new(self.cfg.temporal, self.cfg.guides, self.width, self.height)
@@ -42,20 +38,11 @@ impl Walr {
     pub fn history_len(&self) -> usize {
         self.stage().map_or(0, |s| s.history_len())
     }
-    /// f32 of scratch for [`Walr::denoise_temporal`]: WALR's own, the
-    /// stage's, WALR's output (RGB) and, with the firefly clamp, the clamped
-    /// light (3 planes) and the work of one band's thresholds.
+    /// f32 of scratch for [`Walr::denoise_temporal`]: WALR's own and the
+    /// pipeline frame's ([`Reprojection::frame_scratch_len`]).
     pub fn temporal_scratch_len(&self) -> usize {
-        let stage = self.stage().map_or(0, |s| s.scratch_len());
-        self.scratch_len() + stage + 3 * self.plane() + self.frame_clamp_len()
-    }
-    /// f32 the frame's firefly clamp needs: the clamped light and its work.
-    fn frame_clamp_len(&self) -> usize {
-        if self.cfg.fireflies.is_some() {
-            3 * self.plane() + fireflies::work_len(self.width)
-        } else {
-            0
-        }
+        let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None, self.cfg.fireflies));
+        frame.and_then(|n| n.checked_add(self.scratch_len())).unwrap_or(usize::MAX)
     }
 
     /// One frame of the WALR pipeline. `motion` (2 channels, previous −
@@ -71,43 +58,27 @@ impl Walr {
     ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, self.height)?;
-        let (w, h, np) = (self.width, self.height, self.plane());
-        let stage = self.stage()?;
-        stage.check_history(history)?;
         if scratch.len() < self.temporal_scratch_len() {
             return Err(Error::ScratchTooSmall { needed: self.temporal_scratch_len(), got: scratch.len() });
         }
         let (walr_scratch, rest) = scratch.split_at_mut(self.scratch_len());
-        let (stage_scratch, rest) = rest.split_at_mut(stage.scratch_len());
-        let (fitted, rest) = rest.split_at_mut(3 * np);
-        let mut rep = Report::default();
-        let clamped = match self.cfg.fireflies {
-            Some(k) => {
-                let (light, work) = rest.split_at_mut(3 * np);
-                let bad = Error::BufferTooSmall { arg: Arg::Scratch, needed: self.temporal_scratch_len(), len: 0 };
-                rep.clamped_fireflies = fireflies::clamp_frame(&f.noisy, k, light, work).ok_or(bad)?;
-                Some(&*light)
-            }
-            None => None,
-        };
-        let inputs = Inputs { noisy: f.noisy, clamped, guides: frame.guides, motion: motion.copied() };
-        let c = stage.accumulate(&inputs, history, stage_scratch)?;
-        rep.history_rejected = c.rejected;
-        rep.invalid_motion = c.invalid_motion;
-        rep.history_resets = c.cut;
-        rep.nonfinite_noisy = c.nonfinite;
-        let index = history.frames;
-        {
-            // 2. WALR on the accumulated light (clamped already: WALR does not clamp it again)
-            let mut frame2 = *frame;
-            frame2.noisy = stage.accumulated(history)?;
-            let f2 = self.check_frame(&frame2)?;
-            let prep = self.prepare_with(&f2, index, None);
-            let mut wout = ImageViewMut::interleaved(fitted, w, h, 3)?;
-            let r = self.run(&f2, &prep, self.parts(walr_scratch)?, &mut wout, None)?;
-            rep.fallback_pixels += r.fallback_pixels;
-        }
-        stage.resolve(fitted, history, stage_scratch, c.cut != 0, self.cfg.clamp_negative, out)?;
-        Ok(rep)
+        let (cfg, stage) = (&self.cfg, self.stage()?);
+        stage.run_frame(
+            f.noisy,
+            frame.guides,
+            motion.copied(),
+            cfg.fireflies,
+            cfg.clamp_negative,
+            history,
+            rest,
+            None,
+            out,
+            |acc, index, o| {
+                // WALR on the accumulated light (clamped already: WALR does not clamp it again)
+                let f2 = self.check_frame(&Frame { noisy: acc, ..*frame })?;
+                let prep = self.prepare_with(&f2, index, None);
+                self.run(&f2, &prep, self.parts(walr_scratch)?, o, None)
+            },
+        )
     }
 }
