@@ -1,0 +1,332 @@
+//! The checks every target runs, aarch64 under qemu-user included: a plain
+//! `main` on one thread (`harness = false`: qemu-user hangs in any binary
+//! that spawns a thread, libtest's harness among them).
+//!
+//! For each method (FLR in three shapes, BMFR, WALR, FLNR, and the three
+//! temporal pipelines over three frames) on small frames of awkward sizes:
+//! - the output is finite, or the call returns a typed error;
+//! - the SIMD kernels against the scalar ones (`Kernel::Scalar`), within
+//!   [`SIMD_BOUND`] ([`TRACED_BOUND`] for WALR);
+//! - FLR against the slow f64 reference ([`ORACLE_BOUND`]);
+//! - a denoise call allocates nothing (a counting allocator);
+//! - across targets: `LRD_ARCH_WRITE=FILE` writes every output, and
+//!   `LRD_ARCH_AGAINST=FILE` compares this target's outputs with those
+//!   another target wrote (the same statuses; values within [`ARCH_BOUND`],
+//!   [`TRACED_BOUND`] for WALR).
+//!
+//! `.ci/run` writes the file on x86-64 and compares under qemu-aarch64. The
+//! targets may round differently: the x86 kernels run AVX2 + FMA intrinsics
+//! where the CPU has them (SSE2 lanes without FMA otherwise), aarch64 runs
+//! `wide`'s NEON lanes (fused multiply-adds), and f32 block sums taken in
+//! another lane order round differently. Those differences are of the size of
+//! SIMD against scalar on one target, so the bound across targets is the same.
+
+mod common;
+use common::*;
+use lrdenoise::flr::temporal::TemporalFlr;
+use lrdenoise::temporal::{History, TemporalConfig};
+use lrdenoise::*;
+use std::alloc::{GlobalAlloc, Layout as AllocLayout, System};
+use std::fmt::Write as _;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Largest difference between SIMD and scalar kernels, relative:
+/// |a − b| / (1e-3 + |b|) (FLR's own SIMD test measures ≤ 2.5e-4).
+const SIMD_BOUND: f32 = 2e-3;
+/// The same measure between two targets' outputs.
+const ARCH_BOUND: f32 = SIMD_BOUND;
+/// WALR's bound, on the RMS difference over the mean: its SIMD edge tracing
+/// steps 8 pixels by the most careful SDF step of the 8, a superset of the
+/// scalar points, and a step decision can flip with the last bit of a sum
+/// (tests/walr.rs's bound).
+const TRACED_BOUND: f32 = 0.01;
+/// Largest absolute difference from the f64 reference (light of order 1;
+/// tests/flr_oracle.rs's bound for small frames).
+const ORACLE_BOUND: f64 = 5e-4;
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged; only counts calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: AllocLayout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as our caller's.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: AllocLayout) {
+        // SAFETY: `p` came from `System.alloc` with layout `l`.
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: AllocLayout, n: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as our caller's.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+const SIZES: [(usize, usize); 6] = [(1, 1), (7, 3), (33, 17), (64, 48), (255, 9), (257, 19)];
+
+/// One output: the case, and the pixels or the error.
+struct Case {
+    name: String,
+    result: Result<Vec<f32>, String>,
+}
+
+/// Runs `d` on `frame` (one call to warm up, then one counted for allocations).
+fn run_single(d: &dyn Denoiser, frame: &Frame<'_>, failures: &mut Vec<String>, name: &str) -> Result<Vec<f32>, String> {
+    let (w, h) = d.size();
+    let mut scratch = vec![0f64; d.scratch_len()];
+    let mut out = vec![f32::NAN; 3 * w * h];
+    let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).map_err(|e| e.to_string())?;
+    d.denoise(frame, &mut scratch, &mut ov).map_err(|e| e.to_string())?;
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    d.denoise(frame, &mut scratch, &mut ov).map_err(|e| e.to_string())?;
+    if ALLOCATIONS.load(Ordering::Relaxed) != before {
+        failures.push(format!("{name}: a denoise call allocated"));
+    }
+    Ok(out)
+}
+
+/// Three frames of a sequence through `d` (a quarter-pixel pan); the last output.
+fn run_temporal(d: &dyn TemporalDenoiser, f: &Owned, set: GuideSet, failures: &mut Vec<String>, name: &str) -> Result<Vec<f32>, String> {
+    let (w, h) = d.size();
+    let mut history = vec![0f32; d.history_len()];
+    let mut scratch = vec![0f64; d.temporal_scratch_len()];
+    let mut out = vec![f32::NAN; 3 * w * h];
+    let motion: Vec<f32> = (0..w * h).flat_map(|_| [0.25f32, -0.25]).collect();
+    let mv = ImageView::interleaved(&motion, w, h, 2).map_err(|e| e.to_string())?;
+    let frame = f.frame(set);
+    for k in 0..3u32 {
+        let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).map_err(|e| e.to_string())?;
+        let mut hist = History::resume(&mut history, k);
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        d.denoise_temporal(&frame, (k > 0).then_some(&mv), &mut hist, &mut scratch, &mut ov).map_err(|e| e.to_string())?;
+        if ALLOCATIONS.load(Ordering::Relaxed) != before {
+            failures.push(format!("{name}: frame {k} allocated"));
+        }
+    }
+    Ok(out)
+}
+
+/// Largest relative difference |a − b| / (1e-3 + |b|).
+fn rel(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max)
+}
+
+/// RMS difference over the mean magnitude.
+fn rms_rel(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().max(1) as f64;
+    let rms = (a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>() / n).sqrt();
+    let mean = b.iter().map(|y| y.abs() as f64).sum::<f64>() / n;
+    (rms / mean.max(1e-6)) as f32
+}
+
+/// A case's distance from another run of it, over its bound (≤ 1 passes):
+/// WALR's (traced) by [`rms_rel`], the others by [`rel`].
+fn distance(name: &str, a: &[f32], b: &[f32], bound: f32) -> f32 {
+    if name.starts_with("walr") {
+        rms_rel(a, b) / TRACED_BOUND
+    } else {
+        rel(a, b) / bound
+    }
+}
+
+/// Every case at one size, with the SIMD and scalar runs compared.
+fn cases_at(w: usize, h: usize, blob: &[u8], failures: &mut Vec<String>) -> Vec<Case> {
+    let f = Owned::synthetic(w, h, (w * 31 + h) as u64, 0.5);
+    let mut cases = Vec::new();
+    let mut push = |name: String, simd: Result<Vec<f32>, String>, scalar: Option<Result<Vec<f32>, String>>, failures: &mut Vec<String>| {
+        match (&simd, &scalar) {
+            (Ok(a), Some(Ok(b))) if distance(&name, a, b, SIMD_BOUND) > 1.0 => {
+                failures.push(format!("{name}: SIMD against scalar at {} of the bound", distance(&name, a, b, SIMD_BOUND)))
+            }
+            (Ok(_), Some(Err(e))) | (Err(e), Some(Ok(_))) => failures.push(format!("{name}: only one kernel failed: {e}")),
+            _ => {}
+        }
+        if let Ok(a) = &simd {
+            if !a.iter().all(|v| v.is_finite()) {
+                failures.push(format!("{name}: output not finite"));
+            }
+        }
+        cases.push(Case { name, result: simd });
+    };
+
+    let flr_cfgs = [
+        ("flr defaults", FlrConfig::default()),
+        (
+            "flr gaussian b4 tikhonov",
+            FlrConfig {
+                block: 4,
+                blur: Blur::Gaussian { sigma: 6.0, radius: None },
+                regularization: Regularization::Tikhonov { eps: 1e-4 },
+                guides: GuideSet { normal: true, depth: true, position: true, ao: true, user: 0 },
+                ..FlrConfig::default()
+            },
+        ),
+        ("flr box b16", FlrConfig { block: 16, blur: Blur::Box { radius: 8.0 }, guides: GuideSet::NORMAL_DEPTH, ..FlrConfig::default() }),
+    ];
+    for (label, c) in flr_cfgs {
+        let name = format!("{label} {w}x{h}");
+        let frame = f.frame(c.guides);
+        let run = |kernel, failures: &mut Vec<String>| {
+            let flr = Flr::new(FlrConfig { kernel, ..c }, w, h).map_err(|e| e.to_string())?;
+            run_single(&flr, &frame, failures, &name)
+        };
+        let simd = run(Kernel::Simd, failures);
+        let scalar = run(Kernel::Scalar, failures);
+        push(name, simd, Some(scalar), failures);
+    }
+
+    // FLR against the f64 reference (per pixel: B = 1, one Gaussian window)
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    let c = FlrConfig { blur: Blur::Gaussian { sigma: 2.0, radius: None }, ..cfg(set, 1) };
+    match Flr::new(c, w, h).map_err(|e| e.to_string()).and_then(|flr| run_single(&flr, &f.frame(set), failures, "flr oracle")) {
+        Ok(out) => {
+            let want = reference(&c, w, h, &f.channels(set), &f.noisy);
+            let (max, _) = diff(&out, &want);
+            if max > ORACLE_BOUND {
+                failures.push(format!("flr B1 {w}x{h}: {max} from the f64 reference"));
+            }
+        }
+        Err(e) => failures.push(format!("flr oracle {w}x{h}: {e}")),
+    }
+
+    let name = format!("bmfr {w}x{h}");
+    let bmfr = |kernel, failures: &mut Vec<String>| {
+        let c = BmfrConfig { kernel, ..BmfrConfig::default() };
+        let b = Bmfr::new(c, w, h).map_err(|e| e.to_string())?;
+        run_single(&b, &f.frame(c.guides), failures, &name)
+    };
+    let (simd, scalar) = (bmfr(Kernel::Simd, failures), bmfr(Kernel::Scalar, failures));
+    push(name, simd, Some(scalar), failures);
+
+    let name = format!("walr {w}x{h}");
+    let walr = |kernel, failures: &mut Vec<String>| {
+        let c = WalrConfig { kernel, ..WalrConfig::default() };
+        let d = Walr::new(c, w, h).map_err(|e| e.to_string())?;
+        run_single(&d, &f.frame(c.guides), failures, &name)
+    };
+    let (simd, scalar) = (walr(Kernel::Simd, failures), walr(Kernel::Scalar, failures));
+    push(name, simd, Some(scalar), failures);
+
+    let name = format!("flnr {w}x{h}");
+    let flnr = Flnr::new(FlnrConfig::new(blob), w, h)
+        .map_err(|e| e.to_string())
+        .and_then(|d| run_single(&d, &f.frame(lrdenoise::flnr::INPUT_GUIDES), failures, &name));
+    push(name, flnr, None, failures);
+
+    let name = format!("flr temporal {w}x{h}");
+    let t = TemporalFlr::new(FlrConfig::default(), TemporalConfig::default(), w, h)
+        .map_err(|e| e.to_string())
+        .and_then(|d| run_temporal(&d, &f, FlrConfig::default().guides, failures, &name));
+    push(name, t, None, failures);
+    let name = format!("bmfr temporal {w}x{h}");
+    let c = BmfrConfig::default();
+    let t = Bmfr::new(c, w, h).map_err(|e| e.to_string()).and_then(|d| run_temporal(&d, &f, c.guides, failures, &name));
+    push(name, t, None, failures);
+    let name = format!("walr temporal {w}x{h}");
+    let c = WalrConfig::default();
+    let t = Walr::new(c, w, h).map_err(|e| e.to_string()).and_then(|d| run_temporal(&d, &f, c.guides, failures, &name));
+    push(name, t, None, failures);
+    cases
+}
+
+/// One line per case: name, then `ok` and the values (shortest round-trip
+/// decimal), or `err` and the message.
+fn write(cases: &[Case]) -> String {
+    let mut s = String::new();
+    for c in cases {
+        match &c.result {
+            Ok(v) => {
+                let _ = write!(s, "{}\tok", c.name);
+                for x in v {
+                    let _ = write!(s, " {x}");
+                }
+            }
+            Err(e) => {
+                let _ = write!(s, "{}\terr {e}", c.name);
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
+fn compare(cases: &[Case], other: &str, failures: &mut Vec<String>) {
+    let lines: Vec<&str> = other.lines().collect();
+    if lines.len() != cases.len() {
+        failures.push(format!("{} cases here, {} in the other target's file", cases.len(), lines.len()));
+        return;
+    }
+    let mut worst = (0f32, String::new());
+    for (c, line) in cases.iter().zip(lines) {
+        let (name, rest) = line.split_once('\t').unwrap_or((line, ""));
+        if name != c.name {
+            failures.push(format!("case {} here, {name} there", c.name));
+            continue;
+        }
+        match (&c.result, rest.strip_prefix("ok")) {
+            (Ok(v), Some(vals)) => {
+                let theirs: Vec<f32> = vals.split_whitespace().filter_map(|t| t.parse().ok()).collect();
+                if theirs.len() != v.len() {
+                    failures.push(format!("{name}: {} values here, {} there", v.len(), theirs.len()));
+                    continue;
+                }
+                let d = distance(name, v, &theirs, ARCH_BOUND);
+                if d > worst.0 {
+                    worst = (d, name.to_string());
+                }
+                if d > 1.0 {
+                    failures.push(format!("{name}: {d} of the bound from the other target"));
+                }
+            }
+            (Err(e), None) if rest == format!("err {e}") => {}
+            (r, _) => failures.push(format!("{name}: {} here, {rest} there", if r.is_ok() { "ok" } else { "an error" })),
+        }
+    }
+    println!("largest difference from the other target: {} of its bound ({})", worst.0, worst.1);
+}
+
+fn main() {
+    let blob = match std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/train/flnr.bin")) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("arch_check: train/flnr.bin: {e}");
+            std::process::exit(1);
+        }
+    };
+    println!("arch_check: {} ({}, kernels {:?})", std::env::consts::ARCH, simd_level(), isa::Isa::detect());
+    let mut failures = Vec::new();
+    let mut cases = Vec::new();
+    for (w, h) in SIZES {
+        cases.extend(cases_at(w, h, &blob, &mut failures));
+    }
+    println!(
+        "{} outputs, {} typed errors",
+        cases.iter().filter(|c| c.result.is_ok()).count(),
+        cases.iter().filter(|c| c.result.is_err()).count()
+    );
+    if let Ok(path) = std::env::var("LRD_ARCH_WRITE") {
+        if let Err(e) = std::fs::write(&path, write(&cases)) {
+            failures.push(format!("writing {path}: {e}"));
+        }
+    }
+    if let Ok(path) = std::env::var("LRD_ARCH_AGAINST") {
+        match std::fs::read_to_string(&path) {
+            Ok(other) => compare(&cases, &other, &mut failures),
+            Err(e) => failures.push(format!("reading {path}: {e}")),
+        }
+    }
+    for f in &failures {
+        println!("FAILED: {f}");
+    }
+    if !failures.is_empty() {
+        std::process::exit(1);
+    }
+    println!("arch_check: all passed");
+}
