@@ -6,13 +6,13 @@
 //! temporal pipelines over three frames) on small frames of awkward sizes:
 //! - the output is finite, or the call returns a typed error;
 //! - the SIMD kernels against the scalar ones (`Kernel::Scalar`), within
-//!   [`SIMD_BOUND`] ([`TRACED_BOUND`] for WALR);
+//!   [`SIMD_BOUND`] ([`QR_BOUND`] for BMFR, [`TRACED_BOUND`] for WALR);
 //! - FLR against the slow f64 reference ([`ORACLE_BOUND`]);
 //! - a denoise call allocates nothing (a counting allocator);
 //! - across targets: `LRD_ARCH_WRITE=FILE` writes every output, and
 //!   `LRD_ARCH_AGAINST=FILE` compares this target's outputs with those
 //!   another target wrote (the same statuses; values within [`ARCH_BOUND`],
-//!   [`TRACED_BOUND`] for WALR).
+//!   [`QR_BOUND`] for BMFR, [`TRACED_BOUND`] for WALR).
 //!
 //! `.ci/run` writes the file on x86-64 and compares under qemu-aarch64. The
 //! targets may round differently: the x86 kernels run AVX2 + FMA intrinsics
@@ -35,6 +35,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 const SIMD_BOUND: f32 = 2e-3;
 /// The same measure between two targets' outputs.
 const ARCH_BOUND: f32 = SIMD_BOUND;
+/// BMFR's bound on the same measure, SIMD against scalar and across targets:
+/// its f32 Householder QR amplifies the last bits of a block's sums where a
+/// column is nearly dependent (tests/bmfr.rs's bound).
+const QR_BOUND: f32 = 1e-2;
 /// WALR's bound, on the RMS difference over the mean: its SIMD edge tracing
 /// steps 8 pixels by the most careful SDF step of the 8, a superset of the
 /// scalar points, and a step decision can flip with the last bit of a sum
@@ -127,34 +131,57 @@ fn rms_rel(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// A case's distance from another run of it, over its bound (≤ 1 passes):
-/// WALR's (traced) by [`rms_rel`], the others by [`rel`].
+/// WALR's (traced) by [`rms_rel`] against [`TRACED_BOUND`], BMFR's by [`rel`]
+/// against [`QR_BOUND`], the others by [`rel`] against `bound`.
 fn distance(name: &str, a: &[f32], b: &[f32], bound: f32) -> f32 {
     if name.starts_with("walr") {
         rms_rel(a, b) / TRACED_BOUND
+    } else if name.starts_with("bmfr") {
+        rel(a, b) / QR_BOUND
     } else {
         rel(a, b) / bound
     }
 }
 
-/// Every case at one size, with the SIMD and scalar runs compared.
+/// Checks of one case, and its record: SIMD against scalar (when run), finite output.
+fn check(name: String, simd: Result<Vec<f32>, String>, scalar: Option<Result<Vec<f32>, String>>, failures: &mut Vec<String>) -> Case {
+    match (&simd, &scalar) {
+        (Ok(a), Some(Ok(b))) if distance(&name, a, b, SIMD_BOUND) > 1.0 => {
+            failures.push(format!("{name}: SIMD against scalar at {} of the bound", distance(&name, a, b, SIMD_BOUND)))
+        }
+        (Ok(_), Some(Err(e))) | (Err(e), Some(Ok(_))) => failures.push(format!("{name}: only one kernel failed: {e}")),
+        _ => {}
+    }
+    if let Ok(a) = &simd {
+        if !a.iter().all(|v| v.is_finite()) {
+            failures.push(format!("{name}: output not finite"));
+        }
+    }
+    Case { name, result: simd }
+}
+
+/// A single-frame case built by `make` for each kernel: SIMD and scalar run and compared.
+fn single_case<D: Denoiser>(
+    name: String,
+    make: impl Fn(Kernel) -> Result<D, Error>,
+    frame: &Frame<'_>,
+    failures: &mut Vec<String>,
+) -> Case {
+    let mut run = |kernel| make(kernel).map_err(|e| e.to_string()).and_then(|d| run_single(&d, frame, failures, &name));
+    let (simd, scalar) = (run(Kernel::Simd), run(Kernel::Scalar));
+    check(name, simd, Some(scalar), failures)
+}
+
+/// A temporal case: three frames through `made` (SIMD kernels).
+fn temporal_case<D: TemporalDenoiser>(name: String, made: Result<D, Error>, f: &Owned, set: GuideSet, failures: &mut Vec<String>) -> Case {
+    let out = made.map_err(|e| e.to_string()).and_then(|d| run_temporal(&d, f, set, failures, &name));
+    check(name, out, None, failures)
+}
+
+/// Every case at one size.
 fn cases_at(w: usize, h: usize, blob: &[u8], failures: &mut Vec<String>) -> Vec<Case> {
     let f = Owned::synthetic(w, h, (w * 31 + h) as u64, 0.5);
     let mut cases = Vec::new();
-    let mut push = |name: String, simd: Result<Vec<f32>, String>, scalar: Option<Result<Vec<f32>, String>>, failures: &mut Vec<String>| {
-        match (&simd, &scalar) {
-            (Ok(a), Some(Ok(b))) if distance(&name, a, b, SIMD_BOUND) > 1.0 => {
-                failures.push(format!("{name}: SIMD against scalar at {} of the bound", distance(&name, a, b, SIMD_BOUND)))
-            }
-            (Ok(_), Some(Err(e))) | (Err(e), Some(Ok(_))) => failures.push(format!("{name}: only one kernel failed: {e}")),
-            _ => {}
-        }
-        if let Ok(a) = &simd {
-            if !a.iter().all(|v| v.is_finite()) {
-                failures.push(format!("{name}: output not finite"));
-            }
-        }
-        cases.push(Case { name, result: simd });
-    };
 
     let flr_cfgs = [
         ("flr defaults", FlrConfig::default()),
@@ -171,15 +198,8 @@ fn cases_at(w: usize, h: usize, blob: &[u8], failures: &mut Vec<String>) -> Vec<
         ("flr box b16", FlrConfig { block: 16, blur: Blur::Box { radius: 8.0 }, guides: GuideSet::NORMAL_DEPTH, ..FlrConfig::default() }),
     ];
     for (label, c) in flr_cfgs {
-        let name = format!("{label} {w}x{h}");
-        let frame = f.frame(c.guides);
-        let run = |kernel, failures: &mut Vec<String>| {
-            let flr = Flr::new(FlrConfig { kernel, ..c }, w, h).map_err(|e| e.to_string())?;
-            run_single(&flr, &frame, failures, &name)
-        };
-        let simd = run(Kernel::Simd, failures);
-        let scalar = run(Kernel::Scalar, failures);
-        push(name, simd, Some(scalar), failures);
+        let make = |kernel| Flr::new(FlrConfig { kernel, ..c }, w, h);
+        cases.push(single_case(format!("{label} {w}x{h}"), make, &f.frame(c.guides), failures));
     }
 
     // FLR against the f64 reference (per pixel: B = 1, one Gaussian window)
@@ -196,43 +216,24 @@ fn cases_at(w: usize, h: usize, blob: &[u8], failures: &mut Vec<String>) -> Vec<
         Err(e) => failures.push(format!("flr oracle {w}x{h}: {e}")),
     }
 
-    let name = format!("bmfr {w}x{h}");
-    let bmfr = |kernel, failures: &mut Vec<String>| {
-        let c = BmfrConfig { kernel, ..BmfrConfig::default() };
-        let b = Bmfr::new(c, w, h).map_err(|e| e.to_string())?;
-        run_single(&b, &f.frame(c.guides), failures, &name)
-    };
-    let (simd, scalar) = (bmfr(Kernel::Simd, failures), bmfr(Kernel::Scalar, failures));
-    push(name, simd, Some(scalar), failures);
-
-    let name = format!("walr {w}x{h}");
-    let walr = |kernel, failures: &mut Vec<String>| {
-        let c = WalrConfig { kernel, ..WalrConfig::default() };
-        let d = Walr::new(c, w, h).map_err(|e| e.to_string())?;
-        run_single(&d, &f.frame(c.guides), failures, &name)
-    };
-    let (simd, scalar) = (walr(Kernel::Simd, failures), walr(Kernel::Scalar, failures));
-    push(name, simd, Some(scalar), failures);
+    let bmfr = BmfrConfig::default();
+    let make = |kernel| Bmfr::new(BmfrConfig { kernel, ..bmfr }, w, h);
+    cases.push(single_case(format!("bmfr {w}x{h}"), make, &f.frame(bmfr.guides), failures));
+    let walr = WalrConfig::default();
+    let make = |kernel| Walr::new(WalrConfig { kernel, ..walr }, w, h);
+    cases.push(single_case(format!("walr {w}x{h}"), make, &f.frame(walr.guides), failures));
 
     let name = format!("flnr {w}x{h}");
     let flnr = Flnr::new(FlnrConfig::new(blob), w, h)
         .map_err(|e| e.to_string())
         .and_then(|d| run_single(&d, &f.frame(lrdenoise::flnr::INPUT_GUIDES), failures, &name));
-    push(name, flnr, None, failures);
+    cases.push(check(name, flnr, None, failures));
 
-    let name = format!("flr temporal {w}x{h}");
-    let t = TemporalFlr::new(FlrConfig::default(), TemporalConfig::default(), w, h)
-        .map_err(|e| e.to_string())
-        .and_then(|d| run_temporal(&d, &f, FlrConfig::default().guides, failures, &name));
-    push(name, t, None, failures);
-    let name = format!("bmfr temporal {w}x{h}");
-    let c = BmfrConfig::default();
-    let t = Bmfr::new(c, w, h).map_err(|e| e.to_string()).and_then(|d| run_temporal(&d, &f, c.guides, failures, &name));
-    push(name, t, None, failures);
-    let name = format!("walr temporal {w}x{h}");
-    let c = WalrConfig::default();
-    let t = Walr::new(c, w, h).map_err(|e| e.to_string()).and_then(|d| run_temporal(&d, &f, c.guides, failures, &name));
-    push(name, t, None, failures);
+    let flr = FlrConfig::default();
+    let t = TemporalFlr::new(flr, TemporalConfig::default(), w, h);
+    cases.push(temporal_case(format!("flr temporal {w}x{h}"), t, &f, flr.guides, failures));
+    cases.push(temporal_case(format!("bmfr temporal {w}x{h}"), Bmfr::new(bmfr, w, h), &f, bmfr.guides, failures));
+    cases.push(temporal_case(format!("walr temporal {w}x{h}"), Walr::new(walr, w, h), &f, walr.guides, failures));
     cases
 }
 
