@@ -9,6 +9,9 @@
 //!   [`SIMD_BOUND`] ([`QR_BOUND`] for BMFR, [`TRACED_BOUND`] for WALR);
 //! - FLR against the slow f64 reference ([`ORACLE_BOUND`]);
 //! - a denoise call allocates nothing (a counting allocator);
+//! - half-float rows read and written through images (each target's bulk
+//!   conversion: F16C, NEON's `FCVTL`/`FCVTN`, or software) give `half`'s
+//!   software bits, for every f16 and a sweep of f32 values;
 //! - across targets: `LRD_ARCH_WRITE=FILE` writes every output, and
 //!   `LRD_ARCH_AGAINST=FILE` compares this target's outputs with those
 //!   another target wrote (the same statuses; values within [`ARCH_BOUND`],
@@ -23,6 +26,7 @@
 
 mod common;
 use common::*;
+use half::f16;
 use lrdenoise::flr::temporal::TemporalFlr;
 use lrdenoise::temporal::{History, TemporalConfig};
 use lrdenoise::*;
@@ -178,6 +182,53 @@ fn temporal_case<D: TemporalDenoiser>(name: String, made: Result<D, Error>, f: &
     check(name, out, None, failures)
 }
 
+/// Half-float reads and writes through images against `half`'s software
+/// conversion, bit for bit (NaN: any NaN), in runs of every length 0..=19 and
+/// at every offset mod 8 (the bulk conversions' tails), and through a
+/// 4-channel (RGBA16F) row.
+fn f16_rows(failures: &mut Vec<String>) {
+    let all: Vec<f16> = (0..=u16::MAX).map(f16::from_bits).collect();
+    let same32 = |a: f32, b: f32| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+    let same16 = |a: f16, b: f16| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+    let mut bad = 0usize;
+    let planar = ImageView::f16(&all, all.len(), 1, 1, Layout::interleaved(all.len(), 1)).unwrap();
+    let mut got = vec![0f32; all.len()];
+    planar.read_row(0, 0, 0, &mut got).unwrap();
+    bad += all.iter().zip(&got).filter(|(h, v)| !same32(**v, h.to_f32_const())).count();
+    for (x0, len) in (0..8).flat_map(|x0| (0..20).map(move |len| (1000 + x0, len))) {
+        let mut o = vec![0f32; len];
+        planar.read_row(0, 0, x0, &mut o).unwrap();
+        bad += all[x0..x0 + len].iter().zip(&o).filter(|(h, v)| !same32(**v, h.to_f32_const())).count();
+    }
+    let rgba = ImageView::f16(&all, all.len() / 4, 1, 4, Layout::interleaved(all.len() / 4, 4)).unwrap();
+    for c in 0..4 {
+        let mut o = vec![0f32; all.len() / 4];
+        rgba.read_row(0, c, 0, &mut o).unwrap();
+        bad += o.iter().enumerate().filter(|(i, v)| !same32(**v, all[4 * i + c].to_f32_const())).count();
+    }
+    // f32 → f16: every 2^-13 step across f16's range and beyond (ties to
+    // even, subnormals, overflow), both signs, and the specials
+    let mut vals: Vec<f32> = (0..1 << 20).map(|k: u32| f32::from_bits(0x3300_0000 + (k << 10) + (k % 7) * 0x100)).collect();
+    vals.extend(vals.clone().iter().map(|v| -v));
+    vals.extend([0.0, -0.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 65504.0, 65520.0, 65519.99, 6.1e-5, 5.96e-8, 2.98e-8]);
+    const W: usize = 4096;
+    vals.resize(vals.len().div_ceil(W) * W, 1.0);
+    let mut halves = vec![f16::ONE; vals.len()];
+    let mut out = ImageViewMut::new(SamplesMut::F16(&mut halves), W, vals.len() / W, 1, Layout::interleaved(W, 1)).unwrap();
+    for (y, row) in vals.chunks_exact(W).enumerate() {
+        out.write_row(y, 0, 0, row).unwrap();
+    }
+    for x0 in 0..8 {
+        for len in 0..20 {
+            out.write_row(1, 0, 1000 + x0, &vals[W + 1000 + x0..W + 1000 + x0 + len]).unwrap();
+        }
+    }
+    bad += vals.iter().zip(&halves).filter(|(v, h)| !same16(**h, f16::from_f32_const(**v))).count();
+    if bad > 0 {
+        failures.push(format!("half-float rows: {bad} values differ from half's software conversion"));
+    }
+}
+
 /// Every case at one size.
 fn cases_at(w: usize, h: usize, blob: &[u8], failures: &mut Vec<String>) -> Vec<Case> {
     let f = Owned::synthetic(w, h, (w * 31 + h) as u64, 0.5);
@@ -303,6 +354,7 @@ fn main() {
     };
     println!("arch_check: {} ({}, kernels {:?})", std::env::consts::ARCH, simd_level(), isa::Isa::detect());
     let mut failures = Vec::new();
+    f16_rows(&mut failures);
     let mut cases = Vec::new();
     for (w, h) in SIZES {
         cases.extend(cases_at(w, h, &blob, &mut failures));

@@ -1,5 +1,5 @@
 /* A C99 client of liblrdenoise: builds a synthetic frame, queries sizes,
- * mallocs scratch, runs FLR whole-frame and tiled on two pthreads, checks the
+ * mallocs scratch, runs FLR whole-frame and tiled on WORKERS threads, checks the
  * two agree bit for bit, runs it on half-float buffers (equal to the f32 run on
  * the same values, rounded), exercises error paths, prints the timing, and writes
  * the whole-frame output (raw little-endian f32 RGB) to argv[1] if given. With
@@ -7,6 +7,10 @@
  *
  *   gcc -std=c99 -Wall -Wextra -Werror -Iffi/include ffi/examples/client.c \
  *       target/release/liblrdenoise.a -lpthread -lm -ldl -o client
+ *
+ * WORKERS (default 2) is the tiled run's worker count; worker 0 runs on the
+ * main thread, so -DWORKERS=1 spawns no thread (as under qemu-user, which
+ * hangs in any binary that does).
  */
 #define _POSIX_C_SOURCE 200809L
 #include "lrdenoise.h"
@@ -15,6 +19,10 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+
+#ifndef WORKERS
+#define WORKERS 2
+#endif
 
 /* Must match synthetic() in ffi/tests/c_client.rs. */
 #define W 333
@@ -137,8 +145,8 @@ static void *run_tiles(void *arg) {
     for (int s = 0; s < (int)(sizeof stages / sizeof stages[0]); s++) {
         uint32_t st = stages[s];
         uint32_t n = (st == LRD_STAGE_PREPARE || st == LRD_STAGE_STATS) ? 1 : j->tiles;
-        for (uint32_t t = j->worker; t < n; t += 2) {
-            LrdStatus r = lrd_flr_run_tile(j->cfg, j->frame, j->out, j->scratch, j->bytes, 2, st, t,
+        for (uint32_t t = j->worker; t < n; t += WORKERS) {
+            LrdStatus r = lrd_flr_run_tile(j->cfg, j->frame, j->out, j->scratch, j->bytes, WORKERS, st, t,
                                            j->worker, &j->report);
             if (r != LRD_STATUS_OK && j->status == LRD_STATUS_OK) j->status = r;
         }
@@ -200,20 +208,20 @@ int main(int argc, char **argv) {
     if (lrd_flr_denoise(&cfg, &odd, &out, scratch, bytes, NULL) != LRD_STATUS_INVALID_ARGUMENT) return 3;
     if (lrd_status_string(9999) == NULL) return 3;
 
-    /* tiled on two pthreads */
+    /* tiled on WORKERS threads (worker 0 on this one) */
     uint32_t tiles = 0;
     size_t tbytes = 0;
     CHECK(lrd_flr_tile_count(&cfg, W, H, &tiles));
-    CHECK(lrd_flr_tiled_scratch_size(&cfg, W, H, 2, &tbytes));
+    CHECK(lrd_flr_tiled_scratch_size(&cfg, W, H, WORKERS, &tbytes));
     void *tscratch = malloc(tbytes);
     if (!tscratch) return 2;
     LrdImageMut tout = out;
     tout.data = tiled;
     pthread_barrier_t barrier;
-    pthread_barrier_init(&barrier, NULL, 2);
-    Job jobs[2];
-    pthread_t th[2];
-    for (uint32_t w = 0; w < 2; w++) {
+    pthread_barrier_init(&barrier, NULL, WORKERS);
+    Job jobs[WORKERS];
+    pthread_t th[WORKERS];
+    for (uint32_t w = 0; w < WORKERS; w++) {
         memset(&jobs[w], 0, sizeof jobs[w]);
         jobs[w].cfg = &cfg;
         jobs[w].frame = &frame;
@@ -226,11 +234,12 @@ int main(int argc, char **argv) {
         jobs[w].status = LRD_STATUS_OK;
     }
     double t0 = now_ms();
-    for (int w = 0; w < 2; w++) pthread_create(&th[w], NULL, run_tiles, &jobs[w]);
-    for (int w = 0; w < 2; w++) pthread_join(th[w], NULL);
+    for (int w = 1; w < WORKERS; w++) pthread_create(&th[w], NULL, run_tiles, &jobs[w]);
+    run_tiles(&jobs[0]);
+    for (int w = 1; w < WORKERS; w++) pthread_join(th[w], NULL);
     double tiled_ms = now_ms() - t0;
     pthread_barrier_destroy(&barrier);
-    for (int w = 0; w < 2; w++) {
+    for (int w = 0; w < WORKERS; w++) {
         if (jobs[w].status != LRD_STATUS_OK) {
             fprintf(stderr, "tile worker %d: %s\n", w, lrd_status_string(jobs[w].status));
             return 1;
@@ -240,24 +249,24 @@ int main(int argc, char **argv) {
         fprintf(stderr, "tiled output differs from whole-frame output\n");
         return 4;
     }
-    printf("FLR %dx%d: whole frame %.3f ms (best of 5, 1 thread), tiled %u tiles on 2 pthreads %.3f ms; identical\n",
-           W, H, best, tiles, tiled_ms);
+    printf("FLR %dx%d: whole frame %.3f ms (best of 5, 1 thread), tiled %u tiles on %d threads %.3f ms; identical\n",
+           W, H, best, tiles, WORKERS, tiled_ms);
 
     /* Misuse is refused with a status, never answered with wrong output: the
        scratch records the frame's progress, and outputs may not overlap. */
-    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_APPLY, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
+    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, WORKERS, LRD_STAGE_APPLY, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
         return 3; /* the frame is done: APPLY again needs a new PREPARE */
-    CHECK(lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_PREPARE, 0, 0, NULL));
-    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_APPLY, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
+    CHECK(lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, WORKERS, LRD_STAGE_PREPARE, 0, 0, NULL));
+    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, WORKERS, LRD_STAGE_APPLY, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
         return 3; /* APPLY before its models exist */
-    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, 2, LRD_STAGE_STATS, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
+    if (lrd_flr_run_tile(&cfg, &frame, &tout, tscratch, tbytes, WORKERS, LRD_STAGE_STATS, 0, 0, NULL) != LRD_STATUS_STAGE_ORDER)
         return 3; /* STATS before MOMENTS */
     LrdImageMut onto_noisy = out;
     onto_noisy.data = noisy;
     if (lrd_flr_denoise(&cfg, &frame, &onto_noisy, scratch, bytes, NULL) != LRD_STATUS_INVALID_ARGUMENT) return 3;
     LrdImageMut onto_scratch = out;
     onto_scratch.data = tscratch;
-    if (lrd_flr_run_tile(&cfg, &frame, &onto_scratch, tscratch, tbytes, 2, LRD_STAGE_PREPARE, 0, 0, NULL) !=
+    if (lrd_flr_run_tile(&cfg, &frame, &onto_scratch, tscratch, tbytes, WORKERS, LRD_STAGE_PREPARE, 0, 0, NULL) !=
         LRD_STATUS_INVALID_ARGUMENT)
         return 3;
     LrdImageMut shared_pixels = out;

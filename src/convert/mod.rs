@@ -1,4 +1,5 @@
-//! Half-precision conversion of contiguous runs, with F16C chosen at run time.
+//! Half-precision conversion of contiguous runs: F16C chosen at run time on
+//! x86-64, NEON's conversions on aarch64, `half`'s software elsewhere.
 //!
 //! `half`'s slice conversions use the F16C instructions only where the build
 //! enables them (`-C target-cpu=x86-64-v3`) or, with `half`'s `std` feature,
@@ -9,15 +10,22 @@
 //! taken whenever the CPU has it ([`crate::isa::f16c_available`]); both
 //! directions give the same bits as `half` (f16 → f32 is exact; f32 → f16
 //! rounds to nearest even and keeps NaNs quiet NaNs), which the tests check.
+//! On aarch64 `half` would convert in software too (it takes the hardware
+//! only in builds with the `fp16` feature), so the `neon` file always runs
+//! there: every AArch64 CPU converts in hardware.
 
 #[cfg(target_arch = "x86_64")]
 mod f16c;
+#[cfg(target_arch = "aarch64")]
+mod neon;
 
 use half::f16;
+#[cfg(not(target_arch = "aarch64"))]
 use half::slice::HalfFloatSliceExt;
 
 /// Whether this build must take the F16C file (it lacks F16C at compile time,
 /// where `half` would use it itself) and the CPU has it.
+#[cfg(target_arch = "x86_64")]
 #[inline]
 fn use_f16c() -> bool {
     !cfg!(target_feature = "f16c") && crate::isa::f16c_available()
@@ -34,6 +42,9 @@ pub fn f16_to_f32(src: &[f16], dst: &mut [f32]) {
         unsafe { f16c::f16_to_f32(src, dst) };
         return;
     }
+    #[cfg(target_arch = "aarch64")]
+    neon::f16_to_f32(src, dst);
+    #[cfg(not(target_arch = "aarch64"))]
     src.convert_to_f32_slice(dst);
 }
 
@@ -49,6 +60,9 @@ pub fn f32_to_f16(src: &[f32], dst: &mut [f16]) {
         unsafe { f16c::f32_to_f16(src, dst) };
         return;
     }
+    #[cfg(target_arch = "aarch64")]
+    neon::f32_to_f16(src, dst);
+    #[cfg(not(target_arch = "aarch64"))]
     dst.convert_from_f32_slice(src);
 }
 
