@@ -7,7 +7,9 @@
 //! - the output is finite, or the call returns a typed error;
 //! - the SIMD kernels against the scalar ones (`Kernel::Scalar`), within
 //!   [`SIMD_BOUND`] ([`QR_BOUND`] for BMFR, [`TRACED_BOUND`] for WALR);
-//! - FLR against the slow f64 reference ([`ORACLE_BOUND`]);
+//! - the slow f64 oracles (`tests/common`): FLR per pixel ([`ORACLE_BOUND`]),
+//!   BMFR's blockwise fit, FLNR's network on random weights and WALR's
+//!   per-pixel Cholesky (each with its own test file's bound);
 //! - a denoise call allocates nothing (a counting allocator);
 //! - half-float rows read and written through images (each target's bulk
 //!   conversion: F16C, NEON's `FCVTL`/`FCVTN`, or software) give `half`'s
@@ -25,6 +27,7 @@
 //! SIMD against scalar on one target, so the bound across targets is the same.
 
 mod common;
+use common::oracles::{blob, bmfr_oracle, cholesky_case, random_guides, reference as network_reference};
 use common::*;
 use half::f16;
 use lrdenoise::flr::temporal::TemporalFlr;
@@ -229,6 +232,78 @@ fn f16_rows(failures: &mut Vec<String>) {
     }
 }
 
+/// The kernels' oracles that do not depend on the frame size: WALR's
+/// Cholesky (its lanes bit for bit against its scalar path, both against
+/// f64 Gauss), and FLNR's network on random weights against the f64
+/// network (tests/nn.rs's bound, 1e-4), on every ISA this CPU runs.
+fn kernel_oracles(failures: &mut Vec<String>) {
+    let mut rng = Rng(99);
+    for r in [cholesky_case::<3>(&mut rng), cholesky_case::<4>(&mut rng), cholesky_case::<6>(&mut rng), cholesky_case::<8>(&mut rng)] {
+        if let Err(e) = r {
+            failures.push(format!("walr cholesky: {e}"));
+        }
+    }
+    for (k, (w, h)) in SIZES.into_iter().enumerate() {
+        for widths in [&[3][..], &[2, 4, 6]] {
+            let b = blob(5, 3, widths, k as u64 + 1);
+            let net = match lrdenoise::nn::UNet::parse(&b) {
+                Ok(n) => n,
+                Err(e) => {
+                    failures.push(format!("network {widths:?}: {e}"));
+                    continue;
+                }
+            };
+            let mut rng = Rng(9 + k as u64);
+            let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
+            let want = network_reference(&b, &input, w, h);
+            let mut scratch = vec![0f32; net.scratch_len(w, h)];
+            for isa in [isa::Isa::Portable, isa::Isa::detect()] {
+                let mut out = vec![0f32; 3 * w * h];
+                match net.forward_with(isa, &input, w, h, &mut scratch, &mut out) {
+                    Ok(()) => {
+                        let worst = out.iter().zip(&want).map(|(a, b)| (*a as f64 - b).abs()).fold(0f64, f64::max);
+                        if worst.is_nan() || worst > 1e-4 {
+                            failures.push(format!("network {widths:?} {isa:?} {w}x{h}: {worst} from the f64 network"));
+                        }
+                    }
+                    Err(e) => failures.push(format!("network {widths:?} {isa:?} {w}x{h}: {e}")),
+                }
+            }
+        }
+    }
+}
+
+/// BMFR without its stochastic term or firefly clamp against the f64
+/// blockwise fit (tests/bmfr.rs's bound, 1e-5 absolute), at two grid
+/// offsets. Frames of at least 9 rows and columns: smaller ones mirror a
+/// block onto a few pixels, whose features the oracle cannot rescale.
+fn bmfr_against_oracle(w: usize, h: usize, failures: &mut Vec<String>) {
+    if w.min(h) < 9 {
+        return;
+    }
+    let f = random_guides(w, h, w as u64);
+    let set = GuideSet { depth: true, user: 2, ..GuideSet::NONE };
+    let cfg = BmfrConfig { noise: 0.0, block: 8, fireflies: None, ..BmfrConfig::with_guides(set) };
+    let b = match Bmfr::new(cfg, w, h) {
+        Ok(b) => b,
+        Err(e) => return failures.push(format!("bmfr oracle {w}x{h}: {e}")),
+    };
+    let mut scratch = vec![0f32; b.scratch_len()];
+    for index in [0, 5] {
+        let mut out = vec![f32::NAN; 3 * w * h];
+        let run = ImageViewMut::interleaved(&mut out, w, h, 3).and_then(|mut ov| b.denoise(&f.frame(set), index, &mut scratch, &mut ov));
+        match run {
+            Ok(_) => {
+                let (max, _) = diff(&out, &bmfr_oracle(&b, &f, index));
+                if max.is_nan() || max > 1e-5 {
+                    failures.push(format!("bmfr {w}x{h} frame {index}: {max} from the f64 fit"));
+                }
+            }
+            Err(e) => failures.push(format!("bmfr oracle {w}x{h}: {e}")),
+        }
+    }
+}
+
 /// Every case at one size.
 fn cases_at(w: usize, h: usize, blob: &[u8], failures: &mut Vec<String>) -> Vec<Case> {
     let f = Owned::synthetic(w, h, (w * 31 + h) as u64, 0.5);
@@ -267,6 +342,7 @@ fn cases_at(w: usize, h: usize, blob: &[u8], failures: &mut Vec<String>) -> Vec<
         Err(e) => failures.push(format!("flr oracle {w}x{h}: {e}")),
     }
 
+    bmfr_against_oracle(w, h, failures);
     let bmfr = BmfrConfig::default();
     let make = |kernel| Bmfr::new(BmfrConfig { kernel, ..bmfr }, w, h);
     cases.push(single_case(format!("bmfr {w}x{h}"), make, &f.frame(bmfr.guides), failures));
@@ -355,6 +431,7 @@ fn main() {
     println!("arch_check: {} ({}, kernels {:?})", std::env::consts::ARCH, simd_level(), isa::Isa::detect());
     let mut failures = Vec::new();
     f16_rows(&mut failures);
+    kernel_oracles(&mut failures);
     let mut cases = Vec::new();
     for (w, h) in SIZES {
         cases.extend(cases_at(w, h, &blob, &mut failures));

@@ -3,8 +3,8 @@
 //! and the temporal pipeline on a static-camera sequence.
 
 mod common;
+use common::oracles::{bmfr_oracle, random_guides};
 use common::*;
-use lrdenoise::bmfr::features::mirror as mirror_index;
 use lrdenoise::bmfr::{temporal::TemporalConfig, Report as BmfrReport};
 use lrdenoise::*;
 use proptest::prelude::*;
@@ -24,78 +24,6 @@ fn rel_err(out: &[f32], clean: &[f32]) -> f64 {
     e / clean.iter().map(|b| b.abs() as f64).sum::<f64>()
 }
 
-/// A frame whose guides are random (well-conditioned blocks): depth and two
-/// user channels; light affine in them plus noise.
-fn random_guides(w: usize, h: usize, seed: u64) -> Owned {
-    let mut f = Owned::synthetic(w, h, seed, 0.5);
-    let mut rng = Rng(seed * 7 + 1);
-    f.user = (0..2).map(|_| (0..w * h).map(|_| rng.f32() * 3.0 - 1.0).collect()).collect();
-    for i in 0..w * h {
-        f.depth[i] = 1.0 + 4.0 * rng.f32();
-        for c in 0..3 {
-            let v = 0.5 + 0.1 * f.depth[i] + 0.2 * f.user[0][i] * (c as f32 - 1.0) + 0.05 * f.user[1][i];
-            f.clean[3 * i + c] = v;
-            f.noisy[3 * i + c] = v + 0.3 * (rng.f32() - 0.5);
-        }
-    }
-    f
-}
-
-/// The obvious f64 version of one noise-free BMFR frame: per block, features
-/// `1, d̂, û₁, û₂, d̂²` (hats: rescaled to [0,1] over the block, mirrored
-/// borders), least squares shrunk by the configuration's κ
-/// ([`shrunk_lstsq`]: Gram–Schmidt in f64; κ = 0 is plain least squares).
-fn oracle(b: &Bmfr, f: &Owned, index: u32) -> Vec<f64> {
-    let (w, h) = (f.w, f.h);
-    let bs = b.config().block;
-    let (x0, y0) = b.grid_origin(index);
-    let (nbx, nby) = b.block_grid(index);
-    let mut out = vec![0.0; 3 * w * h];
-    for by in 0..nby {
-        for bx in 0..nbx {
-            let (ox, oy) = (x0 + (bx * bs) as i64, y0 + (by * bs) as i64);
-            let mut px = vec![];
-            for j in 0..bs as i64 {
-                for i in 0..bs as i64 {
-                    px.push((mirror_index(ox + i, w), mirror_index(oy + j, h), ox + i, oy + j));
-                }
-            }
-            let raw: Vec<[f64; 3]> = px
-                .iter()
-                .map(|&(x, y, _, _)| [f.depth[y * w + x] as f64, f.user[0][y * w + x] as f64, f.user[1][y * w + x] as f64])
-                .collect();
-            let mut lo = [f64::INFINITY; 3];
-            let mut hi = [f64::NEG_INFINITY; 3];
-            for r in &raw {
-                for k in 0..3 {
-                    lo[k] = lo[k].min(r[k]);
-                    hi[k] = hi[k].max(r[k]);
-                }
-            }
-            let feats: Vec<Vec<f64>> = raw
-                .iter()
-                .map(|r| {
-                    let s: Vec<f64> = (0..3).map(|k| (r[k] - lo[k]) / (hi[k] - lo[k])).collect();
-                    vec![1.0, s[0], s[1], s[2], s[0] * s[0]]
-                })
-                .collect();
-            let m = 5;
-            let cols: Vec<Vec<f64>> = (0..m).map(|a| feats.iter().map(|r| r[a]).collect()).collect();
-            let zs: Vec<Vec<f64>> = (0..3).map(|c| px.iter().map(|&(x, y, _, _)| f.noisy[3 * (y * w + x) + c] as f64).collect()).collect();
-            let coef = shrunk_lstsq(&cols, &zs, b.config().shrinkage as f64, px.len());
-            for (r, &(x, y, ux, uy)) in feats.iter().zip(&px) {
-                if ux < 0 || uy < 0 || ux as usize >= w || uy as usize >= h {
-                    continue;
-                }
-                for c in 0..3 {
-                    out[3 * (y * w + x) + c] = (0..m).map(|a| r[a] * coef[a * 3 + c]).sum::<f64>().max(0.0);
-                }
-            }
-        }
-    }
-    out
-}
-
 /// Without the stochastic regularisation, with and without the shrinkage.
 #[test]
 fn matches_f64_oracle_without_noise() {
@@ -109,7 +37,7 @@ fn matches_f64_oracle_without_noise() {
         assert_eq!(b.feature_count(), 5);
         let (out, rep) = run(cfg, &f, index);
         assert_eq!(rep.dropped_pivots, 0);
-        let want = oracle(&b, &f, index);
+        let want = bmfr_oracle(&b, &f, index);
         let (max, mean) = diff(&out, &want);
         // measured ≤ 3.4e-7 / 7.3e-8 (f32 rounding)
         assert!(max < 1e-5 && mean < 1e-6, "{w}x{h} B={block} κ={shrinkage}: mean {mean:.2e} max {max:.2e}");

@@ -2,19 +2,14 @@
 //! (`train/unet.py --parity tests/data/nn_parity`), each layer against a slow
 //! f64 reference, and blob validation.
 
-#![allow(clippy::needless_range_loop)] // loops mirror the layer definitions
-
 mod common;
+use common::oracles::{blob, reference as network_reference, u32_at};
 use common::Rng;
 use lrdenoise::nn::{level_size, Isa, UNet};
 use lrdenoise::{Blur, Error};
 
 const BLOB: &[u8] = include_bytes!("data/nn_parity.bin");
 const VECTOR: &[u8] = include_bytes!("data/nn_parity.vec");
-
-fn u32_at(b: &[u8], i: usize) -> usize {
-    u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as usize
-}
 
 fn f32s(b: &[u8]) -> Vec<f32> {
     b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
@@ -36,123 +31,6 @@ fn matches_pytorch_on_the_exported_vector() {
     assert!(worst < 1e-5, "worst |lrdenoise − PyTorch| = {worst}");
 }
 
-/// A blob with random weights for the given shape (same layout as the exporter).
-fn blob(cin: usize, cout: usize, widths: &[usize], seed: u64) -> Vec<u8> {
-    let mut b = b"LRDN".to_vec();
-    for v in [1, cin, cout, widths.len() - 1] {
-        b.extend_from_slice(&(v as u32).to_le_bytes());
-    }
-    for &c in widths {
-        b.extend_from_slice(&(c as u32).to_le_bytes());
-    }
-    for v in [12f32, 1e-3, 1e-2] {
-        b.extend_from_slice(&v.to_le_bytes());
-    }
-    let c = widths;
-    let l = c.len() - 1;
-    let mut shapes = vec![(cin, c[0], 3), (c[0], c[0], 1)];
-    for i in 1..=l {
-        shapes.push((c[i - 1], c[i], 3));
-        shapes.push((c[i], c[i], 3));
-    }
-    for i in (1..=l).rev() {
-        shapes.push((c[i] + c[i - 1], c[i - 1], 3));
-        shapes.push((c[i - 1], c[i - 1], 3));
-    }
-    shapes.push((c[0], c[0], 3));
-    shapes.push((c[0], cout, 1));
-    let n: usize = shapes.iter().map(|&(i, o, k)| o * i * k * k + o).sum();
-    b.extend_from_slice(&(n as u32).to_le_bytes());
-    let mut rng = Rng(seed);
-    for _ in 0..n {
-        b.extend_from_slice(&half::f16::from_f32(rng.f32() - 0.5).to_le_bytes());
-    }
-    b
-}
-
-/// The whole network in f64, obviously: every layer by its definition.
-fn reference(b: &[u8], input: &[f32], w: usize, h: usize) -> Vec<f64> {
-    let cin = u32_at(b, 8);
-    let cout = u32_at(b, 12);
-    let l = u32_at(b, 16);
-    let c: Vec<usize> = (0..=l).map(|i| u32_at(b, 20 + 4 * i)).collect();
-    let mut pos = 20 + 4 * (l + 1) + 12 + 4;
-    let mut params = || {
-        let v = half::f16::from_le_bytes([b[pos], b[pos + 1]]).to_f64();
-        pos += 2;
-        v
-    };
-    struct T {
-        c: usize,
-        w: usize,
-        h: usize,
-        d: Vec<f64>,
-    }
-    let mut conv = |x: &T, cout: usize, k: usize, stride: usize, act: u8| -> T {
-        let wts: Vec<f64> = (0..cout * x.c * k * k).map(|_| params()).collect();
-        let bias: Vec<f64> = (0..cout).map(|_| params()).collect();
-        let (ow, oh) = if stride == 2 { (x.w.div_ceil(2), x.h.div_ceil(2)) } else { (x.w, x.h) };
-        let mut d = vec![0f64; cout * ow * oh];
-        let pad = (k / 2) as i64;
-        for o in 0..cout {
-            for y in 0..oh {
-                for xx in 0..ow {
-                    let mut s = bias[o];
-                    for i in 0..x.c {
-                        for ky in 0..k {
-                            for kx in 0..k {
-                                let sy = (stride * y) as i64 + ky as i64 - pad;
-                                let sx = (stride * xx) as i64 + kx as i64 - pad;
-                                if sy >= 0 && sx >= 0 && (sy as usize) < x.h && (sx as usize) < x.w {
-                                    s += wts[((o * x.c + i) * k + ky) * k + kx] * x.d[(i * x.h + sy as usize) * x.w + sx as usize];
-                                }
-                            }
-                        }
-                    }
-                    d[(o * oh + y) * ow + xx] = if act == 0 {
-                        if s < 0.0 {
-                            0.01 * s
-                        } else {
-                            s
-                        }
-                    } else {
-                        1.0 / (1.0 + (-s).exp())
-                    };
-                }
-            }
-        }
-        T { c: cout, w: ow, h: oh, d }
-    };
-    let x = T { c: cin, w, h, d: input.iter().map(|&v| v as f64).collect() };
-    let a = conv(&x, c[0], 3, 1, 0);
-    let mut cur = conv(&a, c[0], 1, 1, 0);
-    let mut skips = vec![];
-    for i in 1..=l {
-        skips.push(cur);
-        let s = skips.last().unwrap();
-        let a = conv(s, c[i], 3, 1, 0);
-        cur = conv(&a, c[i], 3, 2, 0);
-    }
-    for i in (1..=l).rev() {
-        let s = &skips[i - 1];
-        let mut d = vec![];
-        for ch in 0..cur.c {
-            for y in 0..s.h {
-                for xx in 0..s.w {
-                    d.push(cur.d[(ch * cur.h + y / 2) * cur.w + xx / 2]);
-                }
-            }
-        }
-        d.extend_from_slice(&s.d);
-        let cat = T { c: cur.c + s.c, w: s.w, h: s.h, d };
-        let a = conv(&cat, c[i - 1], 3, 1, 0);
-        cur = conv(&a, c[i - 1], 3, 1, 0);
-    }
-    let a = conv(&cur, c[0], 3, 1, 0);
-    let _ = cout;
-    conv(&a, cout, 1, 1, 1).d
-}
-
 #[test]
 fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
     for (k, &(w, h)) in [(1, 1), (7, 3), (3, 7), (16, 16), (33, 17), (257, 2), (48, 20), (19, 9)].iter().enumerate() {
@@ -162,7 +40,7 @@ fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
             let mut rng = Rng(9 + k as u64);
             let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
             let mut scratch = vec![0f32; net.scratch_len(w, h)];
-            let want = reference(&b, &input, w, h);
+            let want = network_reference(&b, &input, w, h);
             for isa in isas() {
                 let mut out = vec![0f32; 3 * w * h];
                 net.forward_with(isa, &input, w, h, &mut scratch, &mut out).unwrap();
