@@ -27,12 +27,14 @@
 //! SIMD against scalar on one target, so the bound across targets is the same.
 
 mod common;
-use common::oracles::{blob, bmfr_oracle, cholesky_case, random_guides, reference as network_reference};
+#[path = "common/oracles.rs"]
+mod oracles;
 use common::*;
 use half::f16;
 use lrdenoise::flr::temporal::TemporalFlr;
 use lrdenoise::temporal::{History, TemporalConfig};
 use lrdenoise::*;
+use oracles::{blob, bmfr_oracle, cholesky_case, random_guides, reference as network_reference};
 use std::alloc::{GlobalAlloc, Layout as AllocLayout, System};
 use std::fmt::Write as _;
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -3,10 +3,12 @@
 //! and the temporal pipeline on a static-camera sequence.
 
 mod common;
-use common::oracles::{bmfr_oracle, random_guides};
+#[path = "common/oracles.rs"]
+mod oracles;
 use common::*;
 use lrdenoise::bmfr::{temporal::TemporalConfig, Report as BmfrReport};
 use lrdenoise::*;
+use oracles::{bmfr_oracle, random_guides};
 use proptest::prelude::*;
 
 const NP: GuideSet = GuideSet { normal: true, depth: false, position: true, ao: false, user: 0 };

@@ -3,10 +3,12 @@
 //! f64 reference, and blob validation.
 
 mod common;
-use common::oracles::{blob, reference as network_reference, u32_at};
+#[path = "common/oracles.rs"]
+mod oracles;
 use common::Rng;
 use lrdenoise::nn::{level_size, Isa, UNet};
 use lrdenoise::{Blur, Error};
+use oracles::{blob, reference as network_reference, u32_at};
 
 const BLOB: &[u8] = include_bytes!("data/nn_parity.bin");
 const VECTOR: &[u8] = include_bytes!("data/nn_parity.vec");

@@ -4,12 +4,14 @@
 //! and the temporal pipeline.
 
 mod common;
-use common::oracles::cholesky_case;
+#[path = "common/oracles.rs"]
+mod oracles;
 use common::Rng;
 use common::*;
 use lrdenoise::kernels::cholesky::{factor_floor, substitute};
 use lrdenoise::walr::{temporal::TemporalConfig, History, Parts, Report as WalrReport, Storage, Walr, WalrConfig};
 use lrdenoise::*;
+use oracles::cholesky_case;
 use proptest::prelude::*;
 
 const NDP: GuideSet = GuideSet { normal: true, depth: true, position: true, ao: false, user: 0 };

@@ -1,8 +1,6 @@
 //! Test support: synthetic frames and the slow, obvious f64 reference.
 #![allow(dead_code)]
 
-pub mod oracles;
-
 use lrdenoise::{Blur, Flr, FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut, Regularization, Report};
 
 /// xorshift64*: deterministic, dependency-free.

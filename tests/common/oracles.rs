@@ -1,9 +1,12 @@
 //! The slow, obvious f64 oracles of BMFR's blockwise fit, FLNR's network and
-//! WALR's per-pixel Cholesky (FLR's is [`super::reference`]), shared by each
-//! method's tests and `tests/arch_check.rs`.
+//! WALR's per-pixel Cholesky (FLR's is `common::reference`), shared by each
+//! method's tests and `tests/arch_check.rs`. A test declares it beside
+//! `mod common;` as `#[path = "common/oracles.rs"] mod oracles;` (not inside
+//! `common`, which the GPU crate's tests include without `wide`).
 #![allow(clippy::needless_range_loop)] // loops mirror the definitions
+#![allow(dead_code)] // each test uses some of them
 
-use super::{gauss, shrunk_lstsq, Owned, Rng};
+use crate::common::{gauss, shrunk_lstsq, Owned, Rng};
 use lrdenoise::bmfr::features::mirror as mirror_index;
 use lrdenoise::kernels::cholesky::{factor_floor, substitute};
 use lrdenoise::Bmfr;
