@@ -3,6 +3,8 @@
 //! and the bundled weights on a synthetic frame.
 
 mod common;
+#[path = "common/oracles.rs"]
+mod oracles;
 use common::*;
 use lrdenoise::flnr::{Flnr, INPUT_GUIDES};
 use lrdenoise::*;
@@ -29,30 +31,7 @@ fn flr_with_the_same_fit_and_map_guides_is_plain_flr() {
 
 /// A blob with random weights: 8 inputs, 2·q outputs, the given widths.
 fn random_blob(q: usize, widths: &[usize]) -> Vec<u8> {
-    let mut b = b"LRDN".to_vec();
-    for v in [1, 8, 2 * q, widths.len() - 1] {
-        b.extend_from_slice(&(v as u32).to_le_bytes());
-    }
-    for &c in widths {
-        b.extend_from_slice(&(c as u32).to_le_bytes());
-    }
-    for v in [10f32, 1e-3, 1e-2] {
-        b.extend_from_slice(&v.to_le_bytes());
-    }
-    let c = widths;
-    let l = c.len() - 1;
-    let mut n = 8 * c[0] * 9 + c[0] + c[0] * c[0] + c[0];
-    for i in 1..=l {
-        n += c[i - 1] * c[i] * 9 + c[i] + c[i] * c[i] * 9 + c[i];
-        n += (c[i] + c[i - 1]) * c[i - 1] * 9 + c[i - 1] + c[i - 1] * c[i - 1] * 9 + c[i - 1];
-    }
-    n += c[0] * c[0] * 9 + c[0] + c[0] * 2 * q + 2 * q;
-    b.extend_from_slice(&(n as u32).to_le_bytes());
-    let mut rng = Rng(7);
-    for _ in 0..n {
-        b.extend_from_slice(&half::f16::from_f32(rng.f32() - 0.5).to_le_bytes());
-    }
-    b
+    oracles::blob(8, 2 * q, widths, 10.0, 7)
 }
 
 fn run_flnr(blob: &[u8], f: &Owned) -> Result<(Vec<f32>, Report), Error> {

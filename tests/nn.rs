@@ -37,7 +37,7 @@ fn matches_pytorch_on_the_exported_vector() {
 fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
     for (k, &(w, h)) in [(1, 1), (7, 3), (3, 7), (16, 16), (33, 17), (257, 2), (48, 20), (19, 9)].iter().enumerate() {
         for widths in [vec![3], vec![3, 5], vec![2, 4, 6], vec![4, 4, 4, 4, 4]] {
-            let b = blob(5, 3, &widths, k as u64 + 1);
+            let b = blob(5, 3, &widths, 12.0, k as u64 + 1);
             let net = UNet::parse(&b).unwrap();
             let mut rng = Rng(9 + k as u64);
             let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
@@ -70,7 +70,7 @@ fn avx2_lanes_match_the_portable_lanes() {
     // and remaining channels; the AVX2 lanes go 16 pixels at a time, and 30
     // and 46 leave more than one group after the last pair.
     for &(w, h) in &[(18, 3), (19, 9), (30, 4), (40, 7), (46, 5), (257, 5)] {
-        let b = blob(5, 3, &[4, 8, 6], w as u64);
+        let b = blob(5, 3, &[4, 8, 6], 12.0, w as u64);
         let net = UNet::parse(&b).unwrap();
         let mut rng = Rng(w as u64);
         let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
@@ -91,7 +91,7 @@ fn avx2_lanes_match_the_portable_lanes() {
 
 #[test]
 fn bad_blobs_and_buffers_are_typed_errors() {
-    let good = blob(5, 3, &[3, 5], 1);
+    let good = blob(5, 3, &[3, 5], 12.0, 1);
     assert!(UNet::parse(&good).is_ok());
     let bad = |f: &dyn Fn(&mut Vec<u8>)| {
         let mut b = good.clone();
@@ -141,7 +141,7 @@ fn as_v2(b: &[u8], levels: usize, sigmas: &[f32], eps: [f32; 2]) -> Vec<u8> {
 
 #[test]
 fn version_2_blobs_carry_the_adaptive_window() {
-    let v1 = blob(8, 8, &[3, 5], 1);
+    let v1 = blob(8, 8, &[3, 5], 12.0, 1);
     let net = UNet::parse(&v1).unwrap();
     assert_eq!((net.flr_sigmas(), net.flr_eps()), (&[12f32][..], [1e-3, 1e-2]));
     let v2 = as_v2(&v1, 1, &[6.0, 12.0, 20.0], [2e-3, 3e-2]);

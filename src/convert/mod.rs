@@ -11,16 +11,17 @@
 //! directions give the same bits as `half` (f16 → f32 is exact; f32 → f16
 //! rounds to nearest even and keeps NaNs quiet NaNs), which the tests check.
 //! On aarch64 `half` would convert in software too (it takes the hardware
-//! only in builds with the `fp16` feature), so the `neon` file always runs
-//! there: every AArch64 CPU converts in hardware.
+//! only in builds with the `fp16` feature), so the `neon` file runs on every
+//! little-endian aarch64 target with NEON (all the common ones): every
+//! AArch64 CPU converts in hardware.
 
 #[cfg(target_arch = "x86_64")]
 mod f16c;
-#[cfg(target_arch = "aarch64")]
+#[cfg(all(target_arch = "aarch64", target_feature = "neon", target_endian = "little"))]
 mod neon;
 
 use half::f16;
-#[cfg(not(target_arch = "aarch64"))]
+#[cfg(not(all(target_arch = "aarch64", target_feature = "neon", target_endian = "little")))]
 use half::slice::HalfFloatSliceExt;
 
 /// Whether this build must take the F16C file (it lacks F16C at compile time,
@@ -42,9 +43,9 @@ pub fn f16_to_f32(src: &[f16], dst: &mut [f32]) {
         unsafe { f16c::f16_to_f32(src, dst) };
         return;
     }
-    #[cfg(target_arch = "aarch64")]
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon", target_endian = "little"))]
     neon::f16_to_f32(src, dst);
-    #[cfg(not(target_arch = "aarch64"))]
+    #[cfg(not(all(target_arch = "aarch64", target_feature = "neon", target_endian = "little")))]
     src.convert_to_f32_slice(dst);
 }
 
@@ -60,9 +61,9 @@ pub fn f32_to_f16(src: &[f32], dst: &mut [f16]) {
         unsafe { f16c::f32_to_f16(src, dst) };
         return;
     }
-    #[cfg(target_arch = "aarch64")]
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon", target_endian = "little"))]
     neon::f32_to_f16(src, dst);
-    #[cfg(not(target_arch = "aarch64"))]
+    #[cfg(not(all(target_arch = "aarch64", target_feature = "neon", target_endian = "little")))]
     dst.convert_from_f32_slice(src);
 }
 

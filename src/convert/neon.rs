@@ -29,7 +29,7 @@ unsafe fn widen8(s: *const f16, d: *mut f32) {
             h = out(vreg) _,
             lo = out(vreg) _,
             hi = out(vreg) _,
-            options(nostack, preserves_flags),
+            options(nostack),
         )
     };
 }
@@ -52,45 +52,43 @@ unsafe fn narrow8(s: *const f32, d: *mut f16) {
             h = out(vreg) _,
             lo = out(vreg) _,
             hi = out(vreg) _,
-            options(nostack, preserves_flags),
+            options(nostack),
         )
     };
 }
 
-/// [`super::f16_to_f32`] over `min(src.len(), dst.len())` values.
-pub(super) fn f16_to_f32(src: &[f16], dst: &mut [f32]) {
+/// Converts `min(src.len(), dst.len())` values eight at a time with `conv8`,
+/// the tail through 8-value stack buffers.
+///
+/// # Safety
+/// `conv8(s, d)` must read at most 8 values at `s` and write at most 8 at `d`.
+#[inline]
+unsafe fn by_eights<S: Copy + Default, D: Copy + Default>(src: &[S], dst: &mut [D], conv8: unsafe fn(*const S, *mut D)) {
     let n = src.len().min(dst.len());
     let mut i = 0;
     while i + 8 <= n {
         let (s, d) = (&src[i..i + 8], &mut dst[i..i + 8]);
-        // SAFETY: `s` holds 8 halves (16 bytes) and `d` 8 floats (32 bytes), bounds-checked above.
-        unsafe { widen8(s.as_ptr(), d.as_mut_ptr()) };
+        // SAFETY: `s` and `d` hold 8 values each, bounds-checked by the slicing; the caller's contract on `conv8`.
+        unsafe { conv8(s.as_ptr(), d.as_mut_ptr()) };
         i += 8;
     }
     if i < n {
-        let (mut h, mut f) = ([f16::ZERO; 8], [0f32; 8]);
-        h[..n - i].copy_from_slice(&src[i..n]);
+        let (mut s, mut d) = ([S::default(); 8], [D::default(); 8]);
+        s[..n - i].copy_from_slice(&src[i..n]);
         // SAFETY: as above, on the two 8-value stack buffers.
-        unsafe { widen8(h.as_ptr(), f.as_mut_ptr()) };
-        dst[i..n].copy_from_slice(&f[..n - i]);
+        unsafe { conv8(s.as_ptr(), d.as_mut_ptr()) };
+        dst[i..n].copy_from_slice(&d[..n - i]);
     }
+}
+
+/// [`super::f16_to_f32`] over `min(src.len(), dst.len())` values.
+pub(super) fn f16_to_f32(src: &[f16], dst: &mut [f32]) {
+    // SAFETY: `widen8` reads 8 halves and writes 8 floats.
+    unsafe { by_eights(src, dst, widen8) }
 }
 
 /// [`super::f32_to_f16`] over `min(src.len(), dst.len())` values.
 pub(super) fn f32_to_f16(src: &[f32], dst: &mut [f16]) {
-    let n = src.len().min(dst.len());
-    let mut i = 0;
-    while i + 8 <= n {
-        let (s, d) = (&src[i..i + 8], &mut dst[i..i + 8]);
-        // SAFETY: `s` holds 8 floats (32 bytes) and `d` 8 halves (16 bytes), bounds-checked above.
-        unsafe { narrow8(s.as_ptr(), d.as_mut_ptr()) };
-        i += 8;
-    }
-    if i < n {
-        let (mut f, mut h) = ([0f32; 8], [f16::ZERO; 8]);
-        f[..n - i].copy_from_slice(&src[i..n]);
-        // SAFETY: as above, on the two 8-value stack buffers.
-        unsafe { narrow8(f.as_ptr(), h.as_mut_ptr()) };
-        dst[i..n].copy_from_slice(&h[..n - i]);
-    }
+    // SAFETY: `narrow8` reads 8 floats and writes 8 halves.
+    unsafe { by_eights(src, dst, narrow8) }
 }

@@ -359,6 +359,33 @@ impl Walr {
         (t % 2) as usize
     }
 
+    /// Iteration `t`'s buffers: the edge field and sums it reads, and those it
+    /// writes (by [`Walr::buffer_of`]).
+    #[allow(clippy::type_complexity)]
+    fn iteration_buffers<'b>(
+        t: u8,
+        sdf: &'b mut [&mut [u8]; 2],
+        z: &'b mut [&mut [f32]; 2],
+    ) -> (&'b [u8], &'b mut [u8], &'b [f32], &'b mut [f32]) {
+        let ([sa, sb], [za, zb]) = (sdf, z);
+        if Self::buffer_of(t) == 0 {
+            (&**sa, &mut **sb, &**za, &mut **zb)
+        } else {
+            (&**sb, &mut **sa, &**zb, &mut **za)
+        }
+    }
+
+    /// The sums after `t` iterations and those after `t − 1` (the adaptive
+    /// blend's last and previous), by [`Walr::buffer_of`].
+    fn last_and_previous<'b>(t: u8, z: &'b mut [&mut [f32]; 2]) -> (&'b mut [f32], &'b mut [f32]) {
+        let [za, zb] = z;
+        if Self::buffer_of(t) == 0 {
+            (&mut **za, &mut **zb)
+        } else {
+            (&mut **zb, &mut **za)
+        }
+    }
+
     /// Splits a scratch of at least [`Walr::scratch_len`] f32 into its buffers.
     pub fn parts<'s>(&self, scratch: &'s mut [f32]) -> Result<Parts<'s>, Error> {
         if scratch.len() < self.scratch_len() {
@@ -467,10 +494,7 @@ impl Walr {
         let geo = &*geo;
         let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
         for t in 0..self.cfg.iterations {
-            let [sa, sb] = &mut sdf;
-            let [za, zb] = &mut z;
-            let (sin, sout, zin, zout) =
-                if Self::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
+            let (sin, sout, zin, zout) = Self::iteration_buffers(t, &mut sdf, &mut z);
             let (so, zo) = (Bands::new(sout, rows * w), Bands::new(zout, rows * zl));
             run_tiles(runs, nb, workers, 0, for_each, &|b, _| {
                 unsafe { self.iterate_rows(t, &prep, y0(b), geo, sin, zin, so.get(b), zo.get(b)) }.map(|_| Report::default())
@@ -483,8 +507,7 @@ impl Walr {
         if self.blends_adaptively() {
             // pass 1 over every band before pass 2 reads the rows around each
             let t = self.cfg.iterations;
-            let [za, zb] = &mut z;
-            let (last, prev) = if Self::buffer_of(t) == 0 { (&mut **za, &mut **zb) } else { (&mut **zb, &mut **za) };
+            let (last, prev) = Self::last_and_previous(t, &mut z);
             {
                 let (l, p) = (&*last, Bands::new(&mut *prev, rows * zl));
                 let lb = |b: usize| &l[(y0(b) * zl).min(l.len())..((y0(b) + rows) * zl).min(l.len())];
@@ -515,16 +538,12 @@ impl Walr {
         let mut rep = self.features_rows_with(f, prep, 0, geo, z0, clamp)?;
         let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
         for t in 0..self.cfg.iterations {
-            let [sa, sb] = &mut sdf;
-            let [za, zb] = &mut z;
-            let (sin, sout, zin, zout) =
-                if Self::buffer_of(t) == 0 { (&**sa, &mut **sb, &**za, &mut **zb) } else { (&**sb, &mut **sa, &**zb, &mut **za) };
+            let (sin, sout, zin, zout) = Self::iteration_buffers(t, &mut sdf, &mut z);
             self.iterate_rows(t, prep, 0, geo, sin, zin, sout, zout)?;
         }
         if self.blends_adaptively() {
             let t = self.cfg.iterations;
-            let [za, zb] = &mut z;
-            let (last, prev) = if Self::buffer_of(t) == 0 { (&mut **za, &mut **zb) } else { (&mut **zb, &mut **za) };
+            let (last, prev) = Self::last_and_previous(t, &mut z);
             rep += self.fit_rows(0, geo, last, prev)?;
             self.blend_rows(prep, 0, prev, last, out)?;
         } else {

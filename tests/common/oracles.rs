@@ -88,8 +88,9 @@ pub fn u32_at(b: &[u8], i: usize) -> usize {
     u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as usize
 }
 
-/// A blob with random weights for the given shape (same layout as the exporter).
-pub fn blob(cin: usize, cout: usize, widths: &[usize], seed: u64) -> Vec<u8> {
+/// A version-1 blob with random weights for the given shape, trained (its header
+/// says) with one Gaussian window of `sigma` pixels: the exporter's layout.
+pub fn blob(cin: usize, cout: usize, widths: &[usize], sigma: f32, seed: u64) -> Vec<u8> {
     let mut b = b"LRDN".to_vec();
     for v in [1, cin, cout, widths.len() - 1] {
         b.extend_from_slice(&(v as u32).to_le_bytes());
@@ -97,7 +98,7 @@ pub fn blob(cin: usize, cout: usize, widths: &[usize], seed: u64) -> Vec<u8> {
     for &c in widths {
         b.extend_from_slice(&(c as u32).to_le_bytes());
     }
-    for v in [12f32, 1e-3, 1e-2] {
+    for v in [sigma, 1e-3, 1e-2] {
         b.extend_from_slice(&v.to_le_bytes());
     }
     let c = widths;
