@@ -27,24 +27,25 @@ fn bench(c: &mut Criterion) {
     };
     let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3).unwrap(), guides);
     let fl = Flnr::new(FlnrConfig::new(&blob), w, h).unwrap();
-    let mut scratch = vec![0f32; fl.scratch_len()];
-    let mut fs = vec![0f64; fl.flr_scratch_len()];
+    let d: &dyn Denoiser = &fl;
+    let mut scratch = vec![0f64; d.scratch_len()];
     let mut out = vec![0f32; 3 * n];
     let mut g = c.benchmark_group("flnr_512x512");
     g.sample_size(10).measurement_time(Duration::from_secs(8)).warm_up_time(Duration::from_millis(500));
     g.bench_function("flnr", |b| {
         b.iter(|| {
             let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-            black_box(fl.denoise(&frame, &mut scratch, &mut fs, &mut ov).unwrap())
+            black_box(d.denoise(&frame, &mut scratch, &mut ov).unwrap())
         })
     });
     // the network in 2×2 tiles of 256 px with halos (more halo recomputed than the default 512 px tile)
     let tiled = Flnr::new(FlnrConfig { tile: 256, ..FlnrConfig::new(&blob) }, w, h).unwrap();
-    let mut ws = vec![0f32; tiled.scratch_len()];
+    let dt: &dyn Denoiser = &tiled;
+    let mut ws = vec![0f64; dt.scratch_len()];
     g.bench_function("flnr_tiles_256", |b| {
         b.iter(|| {
             let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-            black_box(tiled.denoise(&frame, &mut ws, &mut fs, &mut ov).unwrap())
+            black_box(dt.denoise(&frame, &mut ws, &mut ov).unwrap())
         })
     });
     let net = fl.network();

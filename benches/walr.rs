@@ -46,11 +46,12 @@ fn bench(c: &mut Criterion) {
         ("f32_no_tracing", WalrConfig { tracing: false, ..Default::default() }),
     ] {
         let wl = Walr::new(cfg, w, h).unwrap();
-        let mut scratch = vec![0f32; wl.scratch_len()];
+        let d: &dyn Denoiser = &wl;
+        let mut scratch = vec![0f64; d.scratch_len()];
         g.bench_function(name, |b| {
             b.iter(|| {
                 let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-                black_box(wl.denoise(&frame, 1, &mut scratch, &mut ov).unwrap())
+                black_box(d.denoise(&frame, &mut scratch, &mut ov).unwrap())
             })
         });
     }
@@ -58,13 +59,14 @@ fn bench(c: &mut Criterion) {
     let mut dst = vec![0f32; bytes / 4];
     g.bench_function("memcpy_f32_bytes", |b| b.iter(|| dst.copy_from_slice(black_box(&src))));
     let wl = Walr::new(WalrConfig::default(), w, h).unwrap();
-    let mut scratch = vec![0f32; wl.temporal_scratch_len()];
-    let mut hist = vec![0f32; wl.history_len()];
+    let d: &dyn TemporalDenoiser = &wl;
+    let mut scratch = vec![0f64; d.temporal_scratch_len()];
+    let mut hist = vec![0f32; d.history_len()];
     g.bench_function("temporal", |b| {
         let mut history = History::new(&mut hist);
         b.iter(|| {
             let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-            black_box(wl.denoise_temporal(&frame, Some(&mv), &mut history, &mut scratch, &mut ov).unwrap())
+            black_box(d.denoise_temporal(&frame, Some(&mv), &mut history, &mut scratch, &mut ov).unwrap())
         })
     });
     g.finish();

@@ -76,7 +76,7 @@ pub use flnr::{Flnr, FlnrConfig};
 pub use flr::config::{Blur, FlrConfig};
 #[cfg(feature = "flr")]
 pub use flr::{CheckedFrame, Flr, Stage, Tiled};
-#[cfg(feature = "flr")]
+#[cfg(all(feature = "flr", feature = "internals"))]
 #[doc(hidden)]
 pub use flr::{Parts, ScratchLayout, Stats};
 pub use guides::{Frame, GuideSet, Guides, MAX_GUIDES, MAX_USER_GUIDES};

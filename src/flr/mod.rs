@@ -7,14 +7,15 @@
 //! or for threads [`Flr::denoise_parallel`] / [`Flr::tiled`] and
 //! [`Tiled::run`]. The stage kernels they run (`prepare`, `moments_tile`,
 //! `finish_stats`, `blur_rows_tile_at`, `blur_cols_tiles_at`, `solve_tile_at`,
-//! `blend_tile`, `apply_tile`, and their tile ranges) stay public for the
-//! benches, fuzz targets and tests, hidden from the documentation: they check
-//! their slices but not the stage order.
+//! `blend_tile`, `apply_tile`, and their tile ranges) are crate-private; the
+//! `internals` feature makes them public (hidden from the documentation) for
+//! this crate's benches, fuzz targets and tests. They check their slices but
+//! not the stage order.
 //!
 //! With an adaptive window ([`Blur::Adaptive`], three window sizes) the blur
 //! and solve stages run once per window `s` (`*_at(s, ..)`, the blurred grid of
 //! window 0 into `first`, the others into `blurred`; each window's models and
-//! variances into `scale_models` / `variances`), and [`Flr::blend_tile`] then
+//! variances into `scale_models` / `variances`), and `blend_tile` then
 //! writes `models` from them. The larger windows are fitted on the moment grid
 //! pooled 2×2 (`pool_tile`: `cells` band → `pooled` band, in the moments
 //! stage). With [`FlrConfig::adaptive_without_ao`] window 0's solve also fits
@@ -54,9 +55,10 @@ pub const TILE_CELL_ROWS: usize = 4;
 /// The cell grid one window is fitted on: the block grid, or (the larger
 /// windows of [`Blur::Adaptive`], see [`adaptive::POOL_MIN_SIGMA`]) its 2×2
 /// pooling, cells of 2B × 2B pixels.
+#[cfg_attr(feature = "internals", visibility::make(pub))]
 #[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Grid {
+pub(crate) struct Grid {
     /// Cells per row and per column.
     pub cells_x: usize,
     pub cells_y: usize,
@@ -151,6 +153,7 @@ pub struct CheckedFrame<'a> {
 }
 
 /// The scratch buffer split into its regions.
+#[cfg(feature = "internals")]
 #[doc(hidden)]
 #[derive(Debug)]
 pub struct Parts<'s> {
@@ -177,9 +180,10 @@ pub struct Parts<'s> {
 }
 
 /// [`Flr::scratch_layout`]: each region's f64 range in the scratch.
+#[cfg_attr(feature = "internals", visibility::make(pub))]
 #[doc(hidden)]
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ScratchLayout {
+pub(crate) struct ScratchLayout {
     pub cells: core::ops::Range<usize>,
     pub tmp: core::ops::Range<usize>,
     pub models: core::ops::Range<usize>,
@@ -273,8 +277,9 @@ impl Flr {
         (self.in_w, self.in_h)
     }
     /// Model grid size.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn cells(&self) -> (usize, usize) {
+    pub(crate) fn cells(&self) -> (usize, usize) {
         (self.cells_x, self.cells_y)
     }
     /// Guide channel count Q.
@@ -282,7 +287,7 @@ impl Flr {
         self.q
     }
     /// Window sizes fitted: 1, or 3 with [`Blur::Adaptive`] (then the blur and
-    /// solve stages run per window, `*_at`, and [`Flr::blend_tile`] follows).
+    /// solve stages run per window, `*_at`, and the blend stage follows).
     pub fn scale_count(&self) -> usize {
         self.cfg.blur.scale_count()
     }
@@ -311,28 +316,32 @@ impl Flr {
     }
     /// Where tile `t`'s band lies in `cells` (and `tmp`): tiles are consecutive
     /// row bands, so `&mut cells[range]` is that tile's slice.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn cells_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
+    pub(crate) fn cells_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.tile_rows(t)?;
         let row = self.cells_x * self.lay.k;
         Ok(a * row..b * row)
     }
     /// Where tile `t`'s band lies in `models`.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn models_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
+    pub(crate) fn models_tile_range(&self, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.tile_rows(t)?;
         let row = self.cells_x * self.ml;
         Ok(a * row..b * row)
     }
     /// f64 values in `cells` (and `tmp`) for tile `t`.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn cells_tile_len(&self, t: usize) -> Result<usize, Error> {
+    pub(crate) fn cells_tile_len(&self, t: usize) -> Result<usize, Error> {
         let (a, b) = self.tile_rows(t)?;
         Ok((b - a) * self.cells_x * self.lay.k)
     }
     /// f32 values in `models` for tile `t`.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn models_tile_len(&self, t: usize) -> Result<usize, Error> {
+    pub(crate) fn models_tile_len(&self, t: usize) -> Result<usize, Error> {
         let (a, b) = self.tile_rows(t)?;
         Ok((b - a) * self.cells_x * self.ml)
     }
@@ -340,8 +349,9 @@ impl Flr {
         self.cells_x * self.cells_y * self.lay.k
     }
     /// The grid window `s` is fitted on (the block grid, or its 2×2 pooling).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn window_grid(&self, s: usize) -> Result<Grid, Error> {
+    pub(crate) fn window_grid(&self, s: usize) -> Result<Grid, Error> {
         Ok(self.grids[self.scale(s)?])
     }
     /// Grid and blur taps (in cells of that grid) of window `s < MAX_SCALES`
@@ -352,14 +362,16 @@ impl Flr {
     }
     /// Whether window `s` is fitted on the pooled grid: its blur then reads
     /// `pooled` (written by [`Flr::pool_tile`]) instead of `cells`.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn window_pooled(&self, s: usize) -> bool {
+    pub(crate) fn window_pooled(&self, s: usize) -> bool {
         s < self.scale_count() && self.grids[s].factor > 1
     }
     /// The first window fitted on the pooled grid (its tile ranges are those
     /// of `pooled`), if any.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn pooled_window(&self) -> Option<usize> {
+    pub(crate) fn pooled_window(&self) -> Option<usize> {
         (1..self.scale_count()).find(|&s| self.window_pooled(s))
     }
     /// Cell rows of tile `t` on window `s`'s grid.
@@ -370,15 +382,17 @@ impl Flr {
     }
     /// Where tile `t` lies in window `s`'s moment grids (`cells` or `pooled`,
     /// `tmp`, `first` / `blurred`): [`Flr::cells_tile_range`] on the block grid.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn window_cells_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
+    pub(crate) fn window_cells_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
         let row = self.grids[s].cells_x * self.lay.k;
         Ok(a * row..b * row)
     }
     /// f64 values of window `s`'s moment grid (0 past the last window).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn window_grid_len(&self, s: usize) -> usize {
+    pub(crate) fn window_grid_len(&self, s: usize) -> usize {
         if s >= self.scale_count() {
             return 0;
         }
@@ -387,8 +401,9 @@ impl Flr {
     /// Where tile `t` of window `s` lies in `scale_models` (windows one after another).
     /// With [`FlrConfig::adaptive_without_ao`], window 0 holds two models per
     /// cell ([`Flr::fits_per_cell`]).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn scale_models_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
+    pub(crate) fn scale_models_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
         let row = self.grids[s].cells_x * self.ml * self.fits_per_cell(s);
         let o: usize = (0..s).map(|u| self.grids[u].cell_count() * self.ml * self.fits_per_cell(u)).sum();
@@ -396,8 +411,9 @@ impl Flr {
     }
     /// Where tile `t` of window `s` lies in `variances` (one f64 per cell of
     /// the window's grid, windows one after another).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn scale_variances_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
+    pub(crate) fn scale_variances_tile_range(&self, s: usize, t: usize) -> Result<core::ops::Range<usize>, Error> {
         let (a, b) = self.window_tile_rows(s, t)?;
         let row = self.grids[s].cells_x * self.fits_per_cell(s);
         let o: usize = (0..s).map(|u| self.grids[u].cell_count() * self.fits_per_cell(u)).sum();
@@ -406,15 +422,17 @@ impl Flr {
     /// Fits per cell in window `s`'s model and variance grids: 2 for window 0
     /// with [`FlrConfig::adaptive_without_ao`] (per cell its model, then its
     /// AO-free fit's; its variance, then the AO-free fit's), else 1.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn fits_per_cell(&self, s: usize) -> usize {
+    pub(crate) fn fits_per_cell(&self, s: usize) -> usize {
         1 + usize::from(s == 0 && self.without_guide().is_some())
     }
     /// The guide window 0 is also fitted without ([`FlrConfig::adaptive_without_ao`]: AO).
     /// The AO channel and offset of [`FlrConfig::ao_demodulation`], when it
     /// applies ([`FlrConfig::demodulation`]).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn demodulation(&self) -> Option<(usize, f32)> {
+    pub(crate) fn demodulation(&self) -> Option<(usize, f32)> {
         self.cfg.demodulation()
     }
 
@@ -442,8 +460,9 @@ impl Flr {
         self.cells_x * self.cells_y * self.ml
     }
     /// f32 values of one worker's private buffer.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn worker_len(&self) -> usize {
+    pub(crate) fn worker_len(&self) -> usize {
         // moments in place: colour rows, guide rows that are not planar f32,
         // the edge block gathered; or the gathered band
         let apply = self.q * self.width + 2 * self.cells_x * self.ml + 3 * self.width;
@@ -467,8 +486,9 @@ impl Flr {
         }
     }
     /// Scratch length in f64 elements for `workers` concurrent workers.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn scratch_len_for(&self, workers: usize) -> usize {
+    pub(crate) fn scratch_len_for(&self, workers: usize) -> usize {
         2 * self.grid_len() + self.models_len().div_ceil(2) + (workers.max(1) * self.worker_len()).div_ceil(2) + self.adaptive_len()
     }
 
@@ -476,8 +496,9 @@ impl Flr {
     /// elements ([`Flr::split_scratch`]'s layout; the f32 regions `models`,
     /// `workers` and `scale_models` are packed two per f64). For callers that
     /// hand regions to concurrent workers through raw pointers (the C API).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn scratch_layout(&self, workers: usize) -> ScratchLayout {
+    pub(crate) fn scratch_layout(&self, workers: usize) -> ScratchLayout {
         let mut at = 0;
         let mut next = |len: usize| {
             let r = at..at + len;
@@ -498,6 +519,7 @@ impl Flr {
     }
 
     /// Splits `scratch` (at least `scratch_len_for(workers)` long) into its regions.
+    #[cfg(feature = "internals")]
     #[doc(hidden)]
     pub fn split_scratch<'s>(&self, scratch: &'s mut [f64], workers: usize) -> Result<Parts<'s>, Error> {
         let needed = self.scratch_len_for(workers);
@@ -545,8 +567,9 @@ impl Flr {
 
     /// Stage 0: picks the per-guide reference (the first finite value among
     /// 16 fixed sample positions), so moments are accumulated near zero.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn prepare(&self, frame: &CheckedFrame<'_>) -> Stats {
+    pub(crate) fn prepare(&self, frame: &CheckedFrame<'_>) -> Stats {
         let mut st = Stats::default();
         for (q, r) in st.reference.iter_mut().enumerate().take(self.q) {
             let Some(v) = frame.fit[q] else { continue };
@@ -571,8 +594,9 @@ impl Flr {
     }
 
     /// Stage 1: moments of tile `t` into `cells_tile` (`cells_tile_len(t)`).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn moments_tile(
+    pub(crate) fn moments_tile(
         &self,
         frame: &CheckedFrame<'_>,
         stats: &Stats,
@@ -827,8 +851,9 @@ impl Flr {
     }
 
     /// Stage 2: frame mean and standard deviation of each guide, from all cells.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn finish_stats(&self, cells: &[f64], stats: &mut Stats) -> Result<(), Error> {
+    pub(crate) fn finish_stats(&self, cells: &[f64], stats: &mut Stats) -> Result<(), Error> {
         if cells.len() != self.grid_len() {
             return Err(Error::InvalidTile { index: 0, count: 1 });
         }
@@ -866,6 +891,7 @@ impl Flr {
     }
 
     /// Stage 3: horizontal blur of tile `t`: `cells` band → `tmp_tile`.
+    #[cfg(feature = "internals")]
     #[doc(hidden)]
     pub fn blur_rows_tile(&self, t: usize, cells: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
         self.blur_rows_tile_at(0, t, cells, tmp_tile)
@@ -884,8 +910,9 @@ impl Flr {
     /// (`cells_tile_range(t)`) 2×2 into its band of `pooled`
     /// (`window_cells_tile_range(s, t)` of a pooled window `s`). Moments are
     /// sums, so a pooled cell is exactly the moments of its 2B × 2B pixels.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn pool_tile(&self, t: usize, cells_tile: &[f64], pooled_tile: &mut [f64]) -> Result<(), Error> {
+    pub(crate) fn pool_tile(&self, t: usize, cells_tile: &[f64], pooled_tile: &mut [f64]) -> Result<(), Error> {
         let bad = Error::InvalidTile { index: t, count: self.tile_count() };
         let s = self.pooled_window().ok_or(bad)?;
         let (k, cx) = (self.lay.k, self.cells_x);
@@ -912,8 +939,9 @@ impl Flr {
     /// Stage 3 for window `s` (`s < scale_count()`): `src` is `cells`, or
     /// `pooled` for a pooled window ([`Flr::window_pooled`]); `tmp_tile` is
     /// `window_cells_tile_range(s, t)` of `tmp`.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn blur_rows_tile_at(&self, s: usize, t: usize, src: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
+    pub(crate) fn blur_rows_tile_at(&self, s: usize, t: usize, src: &[f64], tmp_tile: &mut [f64]) -> Result<(), Error> {
         let (r0, r1) = self.window_tile_rows(self.scale(s)?, t)?;
         let row_len = self.grids[s].cells_x * self.lay.k;
         if src.len() != self.window_grid_len(s) {
@@ -937,8 +965,9 @@ impl Flr {
     }
 
     /// Stage 4: vertical blur of tile `t`: all of `tmp` → `cells_tile`.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn blur_cols_tile(&self, t: usize, tmp: &[f64], cells_tile: &mut [f64]) -> Result<(), Error> {
+    pub(crate) fn blur_cols_tile(&self, t: usize, tmp: &[f64], cells_tile: &mut [f64]) -> Result<(), Error> {
         self.blur_cols_tiles(t..t + 1, tmp, cells_tile)
     }
 
@@ -946,16 +975,18 @@ impl Flr {
     /// bit-identical to one tile at a time, and each source row of a Gaussian
     /// is fetched from memory fewer times (a tile's 4 rows read 4 + 2r source
     /// rows). The box blur's sliding window still restarts at every tile.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn blur_cols_tiles(&self, tiles: core::ops::Range<usize>, tmp: &[f64], cells_band: &mut [f64]) -> Result<(), Error> {
+    pub(crate) fn blur_cols_tiles(&self, tiles: core::ops::Range<usize>, tmp: &[f64], cells_band: &mut [f64]) -> Result<(), Error> {
         self.blur_cols_tiles_at(0, tiles, tmp, cells_band)
     }
 
     /// [`Flr::blur_cols_tiles`] for window `s` on its grid; `tmp` is that
     /// window's whole row-blurred grid, `out_band` the band of the grid its
     /// solve reads (`cells`, or `first` / `blurred`).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn blur_cols_tiles_at(&self, s: usize, tiles: core::ops::Range<usize>, tmp: &[f64], out_band: &mut [f64]) -> Result<(), Error> {
+    pub(crate) fn blur_cols_tiles_at(&self, s: usize, tiles: core::ops::Range<usize>, tmp: &[f64], out_band: &mut [f64]) -> Result<(), Error> {
         let taps = &self.taps[self.scale(s)?];
         let cells_band = out_band;
         let bad = Error::InvalidTile { index: tiles.end, count: self.tile_count() };
@@ -1015,15 +1046,17 @@ impl Flr {
     }
 
     /// Stage 5: solve every cell of tile `t`: `cells` band → `models_tile`.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn solve_tile(&self, stats: &Stats, t: usize, cells_tile: &[f64], models_tile: &mut [f32]) -> Result<Report, Error> {
+    pub(crate) fn solve_tile(&self, stats: &Stats, t: usize, cells_tile: &[f64], models_tile: &mut [f32]) -> Result<Report, Error> {
         self.solve_tile_at(0, stats, t, cells_tile, models_tile, &mut [])
     }
 
     /// Stage 5 for window `s`: also writes each cell's variance estimate to
     /// `variances_tile` (one f64 per cell of the tile; empty to skip it).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn solve_tile_at(
+    pub(crate) fn solve_tile_at(
         &self,
         s: usize,
         stats: &Stats,
@@ -1086,8 +1119,9 @@ impl Flr {
     /// and variance are interpolated bilinearly to each block-grid cell).
     /// With [`FlrConfig::adaptive_without_ao`], window 0's AO-free fit (made
     /// by its solve, [`Flr::fits_per_cell`]) is blended as a fourth candidate.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn blend_tile(
+    pub(crate) fn blend_tile(
         &self,
         t: usize,
         first_tile: &[f64],
@@ -1122,8 +1156,9 @@ impl Flr {
 
     /// Stage 6: apply the models to the output rows of tile `t`. `out_band`
     /// holds exactly those rows (`tile_pixel_rows(t)`), numbered from 0.
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub fn apply_tile(
+    pub(crate) fn apply_tile(
         &self,
         frame: &CheckedFrame<'_>,
         stats: &Stats,
