@@ -3,7 +3,7 @@
 
 use crate::evaluate::{self, time_method};
 use crate::methods::{check_method, FlrArgs, Method};
-use crate::runner::Inputs;
+use crate::runner::{InputLayout, Inputs};
 use lrdenoise_cli::exrio::ExrFrame;
 use std::path::Path;
 
@@ -14,7 +14,15 @@ pub fn parse_size(size: &str) -> Result<(usize, usize), String> {
         .ok_or_else(|| format!("--size: '{size}' is not WIDTHxHEIGHT"))
 }
 
-pub fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArgs, frame: Option<&Path>) -> Result<(), String> {
+pub fn bench(
+    method: &str,
+    size: &str,
+    threads: usize,
+    runs: usize,
+    layout: InputLayout,
+    flr: &FlrArgs,
+    frame: Option<&Path>,
+) -> Result<(), String> {
     check_method(method)?;
     let (w, h) = parse_size(size)?;
     let inputs = match frame {
@@ -23,7 +31,8 @@ pub fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArg
             Inputs::from_exr(&exr, p, "noisy")?.resample(w, h)
         }
         None => synthetic(w, h),
-    };
+    }
+    .with_layout(layout)?;
     let mut b = Method::build(method, flr, &inputs, threads)?;
     if let Method::FlrGpu { gpu, .. } = &b.method {
         // lavapipe (a CPU rasteriser) is for correctness; its times mean nothing
@@ -37,14 +46,16 @@ pub fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArg
     let min = all.iter().copied().fold(f64::MAX, f64::min);
     let max = all.iter().copied().fold(0.0, f64::max);
     println!(
-        "{method} {w}x{h} [{}] threads {threads} simd {} (run-time kernels {:?}): median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
+        "{method} {w}x{h} [{}] layout {layout:?} threads {threads} simd {} (run-time kernels {:?}): median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
         b.label,
         lrdenoise::SIMD_LEVEL,
         lrdenoise::isa::Isa::detect(),
         all.len(),
         (w * h) as f64 / med / 1e3
     );
-    if let Some(bytes) = b.min_bytes {
+    if let Some(planar) = b.min_bytes {
+        let set = if method == "flnr" { lrdenoise::flnr::INPUT_GUIDES } else { flr.config(&inputs)?.guides };
+        let bytes = packed_bytes(&inputs, &set, planar);
         let copy = memcpy_median(bytes, all.len());
         println!(
             "baseline, same run: memcpy of the {:.1} MB one call must at least move (each input layer read once, the RGB output written once; one thread): median {copy:.3} ms; {method} takes {:.1}x that",
@@ -53,6 +64,17 @@ pub fn bench(method: &str, size: &str, threads: usize, runs: usize, flr: &FlrArg
         );
     }
     Ok(())
+}
+
+/// The baseline's bytes with the frame in its packed layout: `planar` (every
+/// layer read once, the output written once) with the light, and the normal,
+/// depth and AO that `set` reads, replaced by the RGBA buffers they sit in.
+fn packed_bytes(inputs: &Inputs, set: &lrdenoise::GuideSet, planar: usize) -> usize {
+    let n = inputs.w * inputs.h;
+    let Some(p) = &inputs.packed else { return planar };
+    let separate = 4 * n * (3 + 3 * set.normal as usize + set.depth as usize + set.ao as usize);
+    let buffer = p.bytes() / 2; // the two buffers are the same size
+    planar - separate + buffer * (1 + (set.normal || set.depth) as usize)
 }
 
 /// Median time (ms) of copying `bytes / 2` bytes (reading half and writing
@@ -97,7 +119,7 @@ fn gpu_pass_times(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize)
 }
 
 /// A synthetic frame with every guide (for benchmarks: content does not change the work).
-fn synthetic(w: usize, h: usize) -> Inputs {
+pub(crate) fn synthetic(w: usize, h: usize) -> Inputs {
     let mut s = 0x9E3779B97F4A7C15u64;
     let mut rnd = move || {
         s ^= s << 13;
@@ -138,5 +160,6 @@ fn synthetic(w: usize, h: usize) -> Inputs {
         albedo: None,
         reference: None,
         motion,
+        packed: None,
     }
 }

@@ -139,6 +139,11 @@ enum Cmd {
         /// Timed runs (after one warm-up; at least 5); the median is reported
         #[arg(long, default_value_t = 30)]
         runs: usize,
+        /// How the frame is handed over: separate buffers per layer, or the
+        /// engine G-buffer layouts (RGBA light with AO in alpha, RGBA normal
+        /// with depth in the fourth channel), f32 or RGBA16F
+        #[arg(long, value_enum, default_value_t = runner::InputLayout::Planar)]
+        layout: runner::InputLayout,
         #[command(flatten)]
         flr: FlrArgs,
         /// An EXR frame to resample to --size and time on (default: a synthetic frame with every guide)
@@ -393,8 +398,8 @@ fn run(cli: Cli) -> Result<(), String> {
         Cmd::Advise { frame, max_loss_db, budget_ms, runs, threads, methods } => {
             advise::advise(&frame, max_loss_db, budget_ms, runs, threads_or_all(threads), &methods)?
         }
-        Cmd::Bench { method, size, threads, runs, flr, frame } => {
-            bench::bench(method.as_str(), &size, threads, runs, &flr, frame.as_deref())?
+        Cmd::Bench { method, size, threads, runs, layout, flr, frame } => {
+            bench::bench(method.as_str(), &size, threads, runs, layout, &flr, frame.as_deref())?
         }
         Cmd::Shaders { out, size, f16_inputs, flr } => shaders::shaders(&out, &size, f16_inputs, &flr)?,
         Cmd::Demo { output, threads, full_strips } => {

@@ -711,7 +711,7 @@ impl Method {
                     Some(l) => (l, Some(l.guides(&set).map_err(err)?)),
                     None => (inputs, None),
                 };
-                let noisy = lrdenoise::ImageView::interleaved(&src.noisy, src.w, src.h, 3).map_err(err)?;
+                let noisy = src.noisy_view().map_err(err)?;
                 let frame = lrdenoise::Frame { noisy, guides: inputs.guides(&set).map_err(err)?, guides_low };
                 let mut ov = lrdenoise::ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(err)?;
                 gpu.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
@@ -797,6 +797,34 @@ mod tests {
             albedo: None,
             reference: None,
             motion: None,
+            packed: None,
+        }
+    }
+
+    /// Every method reads the engine layouts as it reads separate layers: the
+    /// same bits (RGBA16F: on a frame whose values are halves already).
+    #[test]
+    fn packed_layouts_give_the_planar_output() {
+        use crate::runner::InputLayout;
+        let mut planar = crate::bench::synthetic(67, 41);
+        let halves = |v: &mut Vec<f32>| v.iter_mut().for_each(|x| *x = half::f16::from_f32(*x).to_f32());
+        halves(&mut planar.noisy);
+        for v in [&mut planar.normal, &mut planar.depth, &mut planar.ao].into_iter().flatten() {
+            halves(v);
+        }
+        for method in ["flr", "flr-temporal", "bmfr", "walr", "flnr"] {
+            let run = |inputs: &Inputs| {
+                let mut b = Method::build(method, &FlrArgs::default(), inputs, 1).unwrap();
+                let mut out = vec![0f32; 3 * inputs.w * inputs.h];
+                b.method.run(inputs, &mut out).unwrap();
+                out
+            };
+            let want = run(&planar);
+            for layout in [InputLayout::Rgba32, InputLayout::Rgba16] {
+                let got = run(&planar.clone().with_layout(layout).unwrap());
+                let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(same, "{method} {layout:?}");
+            }
         }
     }
 

@@ -25,6 +25,49 @@ pub struct Inputs {
     pub reference: Option<Vec<f32>>,
     /// Sequences: previous − current pixel position (2 channels).
     pub motion: Option<Vec<f32>>,
+    /// The light and the normal, depth and AO as an engine hands them over
+    /// (`lrd bench --layout`): the denoisers read these instead of the
+    /// separate layers above.
+    pub packed: Option<Packed>,
+}
+
+/// How `lrd bench` hands a frame to the library.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum InputLayout {
+    /// One tightly packed buffer per layer: RGB light, RGB normal, depth, AO (f32).
+    Planar,
+    /// Two RGBA f32 buffers, as engine G-buffers: light with AO in alpha,
+    /// normal with depth in the fourth channel.
+    Rgba32,
+    /// The same two buffers as RGBA16F.
+    Rgba16,
+}
+
+/// Engine-style RGBA buffers: light (AO in alpha) and normal (depth in the
+/// fourth channel), f32 or f16. Other layers stay separate.
+#[derive(Clone, Debug)]
+pub enum Packed {
+    F32 { light: Vec<f32>, normal: Vec<f32> },
+    F16 { light: Vec<half::f16>, normal: Vec<half::f16> },
+}
+
+impl Packed {
+    /// Bytes of both buffers.
+    pub fn bytes(&self) -> usize {
+        match self {
+            Packed::F32 { light, normal } => 4 * (light.len() + normal.len()),
+            Packed::F16 { light, normal } => 2 * (light.len() + normal.len()),
+        }
+    }
+    /// Channels `first..first + count` of the light (`normal = false`) or
+    /// normal buffer, as a view.
+    fn view(&self, normal: bool, first: usize, count: usize, w: usize, h: usize) -> Result<ImageView<'_>, Error> {
+        let layout = lrdenoise::Layout { offset: first, pixel_stride: 4, row_stride: 4 * w, channel_stride: 1 };
+        match self {
+            Packed::F32 { light, normal: n } => ImageView::f32(if normal { n } else { light }, w, h, count, layout),
+            Packed::F16 { light, normal: n } => ImageView::f16(if normal { n } else { light }, w, h, count, layout),
+        }
+    }
 }
 
 impl Inputs {
@@ -48,6 +91,7 @@ impl Inputs {
             albedo: get("albedo", 3)?,
             reference: get("reference", 3)?,
             motion: get("motion", 2)?,
+            packed: None,
         })
     }
 
@@ -95,6 +139,42 @@ impl Inputs {
             albedo: self.albedo.as_ref().map(|v| layer(v, 3)),
             reference: None,
             motion: self.motion.as_ref().map(|v| layer(v, 2)),
+            packed: None,
+        }
+    }
+
+    /// This frame with its light, AO, normal and depth also packed in
+    /// `layout` (every layer must be present for the RGBA layouts).
+    pub fn with_layout(mut self, layout: InputLayout) -> Result<Inputs, String> {
+        let n = self.w * self.h;
+        let (Some(normal), Some(depth), Some(ao)) = (&self.normal, &self.depth, &self.ao) else {
+            return match layout {
+                InputLayout::Planar => Ok(self),
+                _ => Err("--layout rgba32|rgba16 needs a frame with normal, depth and AO".into()),
+            };
+        };
+        let mut light4 = vec![0f32; 4 * n];
+        let mut normal4 = vec![0f32; 4 * n];
+        for i in 0..n {
+            light4[4 * i..4 * i + 3].copy_from_slice(&self.noisy[3 * i..3 * i + 3]);
+            light4[4 * i + 3] = ao[i];
+            normal4[4 * i..4 * i + 3].copy_from_slice(&normal[3 * i..3 * i + 3]);
+            normal4[4 * i + 3] = depth[i];
+        }
+        let half = |v: &[f32]| v.iter().map(|&x| half::f16::from_f32(x)).collect::<Vec<_>>();
+        self.packed = match layout {
+            InputLayout::Planar => None,
+            InputLayout::Rgba32 => Some(Packed::F32 { light: light4, normal: normal4 }),
+            InputLayout::Rgba16 => Some(Packed::F16 { light: half(&light4), normal: half(&normal4) }),
+        };
+        Ok(self)
+    }
+
+    /// The noisy light as the denoisers read it (RGB).
+    pub fn noisy_view(&self) -> Result<ImageView<'_>, Error> {
+        match &self.packed {
+            Some(p) => p.view(false, 0, 3, self.w, self.h),
+            None => ImageView::interleaved(&self.noisy, self.w, self.h, 3),
         }
     }
 
@@ -126,13 +206,26 @@ impl Inputs {
                 *u = Some(alb.channels(c, 1)?);
             }
         }
-        Ok(Guides {
+        let mut g = Guides {
             user,
             normal: view(&self.normal, set.normal, 3)?,
             depth: view(&self.depth, set.depth, 1)?,
             position: view(&self.position, set.position, 3)?,
             ao: view(&self.ao, set.ao, 1)?,
-        })
+        };
+        if let Some(p) = &self.packed {
+            let packed = |want: bool, normal: bool, first: usize, count: usize| -> Result<_, Error> {
+                if want {
+                    Ok(Some(p.view(normal, first, count, w, h)?))
+                } else {
+                    Ok(None)
+                }
+            };
+            g.normal = packed(set.normal, true, 0, 3)?;
+            g.depth = packed(set.depth, true, 3, 1)?;
+            g.ao = packed(set.ao, false, 3, 1)?;
+        }
+        Ok(g)
     }
 }
 
@@ -164,7 +257,7 @@ impl FlrRunner {
             Some(l) => (l, Some(l.guides(&set).map_err(|e| e.to_string())?)),
             None => (full, None),
         };
-        let noisy = ImageView::interleaved(&noisy_src.noisy, noisy_src.w, noisy_src.h, 3).map_err(|e| e.to_string())?;
+        let noisy = noisy_src.noisy_view().map_err(|e| e.to_string())?;
         let frame = Frame { noisy, guides: full.guides(&set).map_err(|e| e.to_string())?, guides_low };
         let mut ov = ImageViewMut::interleaved(out, full.w, full.h, 3).map_err(|e| e.to_string())?;
         let r = match &self.pool {
@@ -218,7 +311,7 @@ impl BmfrRunner {
     /// Fits frame `index` (grid offset and regularisation noise) into `out`.
     pub fn run(&mut self, inputs: &Inputs, index: u32, out: &mut [f32]) -> Result<BmfrReport, String> {
         let set = self.bmfr.config().guides;
-        let noisy = ImageView::interleaved(&inputs.noisy, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;
         let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
         let ov = ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
         let b = &self.bmfr;
@@ -277,7 +370,7 @@ impl FlnrRunner {
     }
     pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<(), String> {
         let set = lrdenoise::flnr::INPUT_GUIDES;
-        let noisy = ImageView::interleaved(&inputs.noisy, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;
         let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
         let mut ov = ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
         let fl = &self.flnr;
@@ -316,7 +409,7 @@ impl WalrRunner {
     /// Denoises frame `index` (which seeds the replacement choices) into `out`.
     pub fn run(&mut self, inputs: &Inputs, index: u32, out: &mut [f32]) -> Result<WalrReport, String> {
         let set = self.walr.config().guides;
-        let noisy = ImageView::interleaved(&inputs.noisy, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
+        let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;
         let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
         let mut ov = ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(|e| e.to_string())?;
         let wl = &self.walr;
@@ -390,7 +483,7 @@ impl TemporalRunner {
             Pipeline::Flr { plan, .. } => plan.flr().config().guides,
         };
         let (w, h) = (inputs.w, inputs.h);
-        let noisy = ImageView::interleaved(&inputs.noisy, w, h, 3).map_err(|e| e.to_string())?;
+        let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;
         let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
         let motion = match &inputs.motion {
             Some(m) => Some(ImageView::interleaved(m, w, h, 2).map_err(|e| e.to_string())?),
@@ -447,6 +540,7 @@ mod tests {
             albedo: None,
             reference: None,
             motion: None,
+            packed: None,
         }
     }
 

@@ -23,6 +23,7 @@ pub fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Resul
         albedo: None,
         reference: None,
         motion: None,
+        packed: None,
     };
     let cfg = flr.config(&probe)?;
     let plan = GpuPlan::new(cfg, w, h).map_err(|e| format!("shaders: {e}"))?;

@@ -986,7 +986,13 @@ impl Flr {
     /// solve reads (`cells`, or `first` / `blurred`).
     #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
-    pub(crate) fn blur_cols_tiles_at(&self, s: usize, tiles: core::ops::Range<usize>, tmp: &[f64], out_band: &mut [f64]) -> Result<(), Error> {
+    pub(crate) fn blur_cols_tiles_at(
+        &self,
+        s: usize,
+        tiles: core::ops::Range<usize>,
+        tmp: &[f64],
+        out_band: &mut [f64],
+    ) -> Result<(), Error> {
         let taps = &self.taps[self.scale(s)?];
         let cells_band = out_band;
         let bad = Error::InvalidTile { index: tiles.end, count: self.tile_count() };
