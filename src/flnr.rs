@@ -52,6 +52,13 @@ const IN_CHANNELS: usize = 8;
 /// f32, 91 MB, for the bundled network) are a tenth of the whole frame's, and
 /// a 1080p frame still has 12 tiles to spread over threads.
 pub const DEFAULT_TILE: usize = 512;
+/// Smallest tile edge a parallel run splits the network into when the plan's
+/// tiles are fewer than the workers (256: the halo then adds about a third
+/// of the network's arithmetic, which two or more workers more than repay;
+/// its coarsest level stays wide enough for the vectorised paths at every
+/// depth a blob may have, see [`MIN_TILE`]).
+pub const PARALLEL_MIN_TILE: usize = 256;
+
 /// Smallest tile edge ([`FlnrConfig::tile`]) a plan accepts: for networks of up to 3
 /// levels (tested; the bundled one has 2) every level of a tile's input stays
 /// wide enough for the vectorised convolution paths, which is what keeps
@@ -486,8 +493,25 @@ impl<'w> Flnr<'w> {
     /// (`None` if it overflows). Its FLR part needs
     /// `flr().tiled_scratch_len(workers)` f64.
     pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
-        let (nx, ny) = self.tile_grid();
-        TileRun::scratch_len(nx * ny, workers.max(1), self.tile_scratch_len())?.checked_add(self.padded_planes_len())
+        let p = self.for_workers(workers);
+        let (nx, ny) = p.tile_grid();
+        TileRun::scratch_len(nx * ny, workers.max(1), p.tile_scratch_len())?.checked_add(p.padded_planes_len())
+    }
+
+    /// The plan a parallel run on `workers` uses: this one, or, where it has
+    /// fewer network tiles than workers, the same network in tiles of half
+    /// the edge (repeatedly, down to [`PARALLEL_MIN_TILE`]) so that the
+    /// workers share the network. Every tile size gives the same bits.
+    fn for_workers(&self, workers: usize) -> Flnr<'w> {
+        let mut p = *self;
+        let tiles = |p: &Flnr<'_>| p.tile_grid().0 * p.tile_grid().1;
+        while tiles(&p) < workers && p.tile / 2 >= PARALLEL_MIN_TILE {
+            match p.with_tile(p.tile / 2) {
+                Ok(q) => p = q,
+                Err(_) => break,
+            }
+        }
+        p
     }
 
     /// [`Flnr::denoise`] with the network's tiles, then FLR's, spread by the
@@ -496,6 +520,19 @@ impl<'w> Flnr<'w> {
     /// `flr().tiled_scratch_len(workers)` f64; `out` must have rows that do
     /// not overlap in memory. Allocates nothing.
     pub fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f32],
+        flr_scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        self.for_workers(workers).run_parallel(frame, scratch, flr_scratch, out, workers, for_each)
+    }
+
+    /// [`Flnr::denoise_parallel`] on this plan's tiles.
+    fn run_parallel(
         &self,
         frame: &Frame<'_>,
         scratch: &mut [f32],

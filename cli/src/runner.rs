@@ -355,9 +355,8 @@ impl FlnrRunner {
         let blob: &'static [u8] = Box::leak(weights.into_boxed_slice());
         let config = lrdenoise::FlnrConfig { fireflies, ..lrdenoise::FlnrConfig::new(blob) };
         let flnr = lrdenoise::flnr::Flnr::new(config, w, h).map_err(|e| e.to_string())?;
-        let (tx, ty) = flnr.tile_grid();
-        // more threads than tiles would only hold scratch
-        let threads = threads.clamp(1, tx * ty);
+        // the library splits the network into more tiles where the frame has fewer than the threads
+        let threads = threads.max(1);
         let (scratch, flr_scratch) = if threads > 1 {
             (
                 vec![0f32; flnr.parallel_scratch_len(threads).ok_or("flnr: scratch size overflows")?],
