@@ -37,7 +37,6 @@
 //! help clean frames). On clean frames only samples brighter than every cell
 //! but two of their neighbourhood, by the factor `k`, lose energy.
 
-use crate::image::ImageView;
 use crate::kernels::LUMA;
 use wide::f32x8;
 
@@ -276,36 +275,6 @@ pub fn kept(raw: [f32; 3], clamped: [f32; 3]) -> f32 {
     } else {
         1.0
     }
-}
-
-/// Reads the light `noisy` (its first three channels) into `planes` (three
-/// planes of its size, as `Layout::planar` lays them out) and clamps it with
-/// the factor `k`, band by band: each band's rows are read, measured and
-/// clamped while in cache. For a method that reads a clamped copy of the
-/// frame (the temporal pipelines of BMFR and WALR accumulate it). `work`:
-/// [`work_len`] of the width. Returns the count clamped; `None`
-/// (with `planes` partly written) if `planes` or `work` is too short or
-/// `noisy` has fewer than three channels.
-pub fn clamp_frame(noisy: &ImageView<'_>, k: f32, planes: &mut [f32], work: &mut [f32]) -> Option<u64> {
-    let (w, h) = (noisy.width(), noisy.height());
-    let np = w * h;
-    let (r, gb) = planes.get_mut(..3 * np)?.split_at_mut(np);
-    let (g, b) = gb.split_at_mut(np);
-    let mut clamped = 0u64;
-    for band in 0..h.div_ceil(CELL) {
-        let px = band * CELL * w..((band + 1) * CELL).min(h) * w;
-        let (r, g, b) = (&mut r[px.clone()], &mut g[px.clone()], &mut b[px]);
-        let mut t = Thresholds::new(work, w)?;
-        for (i, ((r, g), b)) in r.chunks_exact_mut(w).zip(g.chunks_exact_mut(w)).zip(b.chunks_exact_mut(w)).enumerate() {
-            noisy.read_row_n(band * CELL + i, 0, [&mut *r, &mut *g, &mut *b])?;
-            t.add_row([r, g, b]);
-        }
-        let th = t.finish(k);
-        for ((r, g), b) in r.chunks_exact_mut(w).zip(g.chunks_exact_mut(w)).zip(b.chunks_exact_mut(w)) {
-            clamped += clamp_row([r, g, b], 0, th) as u64;
-        }
-    }
-    Some(clamped)
 }
 
 #[cfg(test)]

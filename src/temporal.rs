@@ -106,10 +106,13 @@ impl TemporalConfig {
 /// ones (and NaN/Inf) are counted as invalid and the pixel gets no history.
 const MAX_MOTION_FRAMES: f32 = 2.0;
 
-// One pixel's record in a history slot: accumulated light (3), history
-// length (1), output (3), then the rejection guides (normal 3, position 3,
-// depth 1: those present). Records are interleaved, so the taps of a pixel
-// touch one or two cache lines per row rather than a line in every plane.
+// The fields of a history slot: accumulated light (3), history length (1),
+// output (3), then the rejection guides (normal 3, position 3, depth 1:
+// those present). A slot row holds each field's row of `w` values in turn
+// (row `y`, field `f`, pixel `x` at `(y · fields + f) · w + x`): a band of
+// rows is one contiguous range, the light reads as a planar image, and a
+// pass that writes some fields (step 3 writes only the output) touches
+// only their cache lines.
 const LIGHT: usize = 0;
 const COUNT: usize = 3;
 const OUTPUT: usize = 4;
@@ -125,6 +128,8 @@ pub struct Counts {
     pub invalid_motion: u64,
     /// Pixels whose noisy light was NaN/Inf (bridged with the history where there is one).
     pub nonfinite: u64,
+    /// Samples the firefly clamp lowered.
+    pub clamped: u64,
     /// 1 when this frame was taken as a camera cut (the history restarted).
     pub cut: u64,
 }
@@ -141,11 +146,13 @@ fn with_arg(e: Error, arg: Arg) -> Error {
 /// The inputs of [`Reprojection::accumulate`] for one frame.
 #[derive(Clone, Copy, Debug)]
 pub struct Inputs<'a> {
-    /// The noisy light as it arrived (3 channels).
+    /// The noisy light (3 channels).
     pub noisy: ImageView<'a>,
-    /// The light to accumulate: 3 planes of the frame (`w × h` each), the
-    /// firefly-clamped `noisy`; `None`: `noisy` as it is.
-    pub clamped: Option<&'a [f32]>,
+    /// The firefly clamp's factor `k` ([`crate::fireflies`]): the light is
+    /// clamped band by band as step 1 reads it, and a clamped sample enters
+    /// the history weighted by the fraction of it the clamp kept; `None`:
+    /// the light as it is.
+    pub fireflies: Option<f32>,
     /// The frame's guides (those of the plan's [`GuideSet`] are read).
     pub guides: Guides<'a>,
     /// Previous − current pixel position (2 channels); `None`: a static camera.
@@ -167,8 +174,13 @@ pub struct Reprojection {
 /// [`Reprojection::resolve`] in the caller's scratch: the previous output
 /// reprojected through the accepted taps (NaN in the first where none was).
 const PIXEL_VALUES: usize = 3;
-/// Rows of working space in the scratch.
-const ROWS: usize = 21;
+/// Rows of working space in the scratch (step 1: the raw and the clamped
+/// light of one band of [`fireflies::CELL`] rows and a row of motion; step
+/// 3 needs fewer), besides the clamp's [`fireflies::work_len`].
+const ROWS: usize = 6 * fireflies::CELL + 2;
+/// Rows of step 3's working space: a ring of 3 rows of 3-sums of YCoCg and
+/// their squares, and an output row.
+const RESOLVE_ROWS: usize = 21;
 
 impl Reprojection {
     /// The stage for `width × height` frames whose guides include those of
@@ -203,17 +215,21 @@ impl Reprojection {
     /// f32 values of the scratch [`Reprojection::accumulate`] and
     /// [`Reprojection::resolve`] share: 3 values per pixel and 21 rows.
     pub fn scratch_len(&self) -> usize {
-        PIXEL_VALUES * self.plane() + ROWS * self.width
+        PIXEL_VALUES * self.plane() + self.rows_len()
+    }
+    /// f32 of working space per worker.
+    fn rows_len(&self) -> usize {
+        ROWS * self.width + fireflies::work_len(self.width)
     }
     /// f32 values of the scratch of the `_parallel` entries with `workers`:
     /// 3 values per pixel, 21 rows per worker and the run's bookkeeping.
     pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
-        let runs = crate::parallel::TileRun::scratch_len(self.bands(workers), workers, ROWS * self.width)?;
+        let runs = crate::parallel::TileRun::scratch_len(self.bands(workers), workers, self.rows_len())?;
         (PIXEL_VALUES * self.plane()).checked_add(runs)
     }
-    /// Rows per band of a parallel run.
+    /// Rows per band of a parallel run: whole bands of the firefly clamp.
     fn band_rows(&self, workers: usize) -> usize {
-        (self.height / (8 * workers.max(1))).max(16)
+        (self.height / (8 * workers.max(1))).max(16).next_multiple_of(fireflies::CELL)
     }
     fn bands(&self, workers: usize) -> usize {
         self.height.div_ceil(self.band_rows(workers))
@@ -241,13 +257,13 @@ impl Reprojection {
 
     /// The accumulated light of the frame as [`Reprojection::accumulate`]
     /// wrote it into the history's write slot, as a view the denoiser reads
-    /// (3 channels of records of [`Reprojection::history_len`]` / 2 / (w h)`
-    /// values).
+    /// (3 planar channels, rows [`Reprojection::history_len`]` / 2 / h`
+    /// values apart).
     pub fn accumulated<'h>(&self, history: &'h mut History<'_>) -> Result<ImageView<'h>, Error> {
         let (w, h) = (self.width, self.height);
         let rec = self.record();
         let (_, write) = self.slots(history);
-        let layout = crate::image::Layout { offset: LIGHT, pixel_stride: rec, row_stride: rec * w, channel_stride: 1 };
+        let layout = crate::image::Layout { offset: LIGHT * w, pixel_stride: 1, row_stride: rec * w, channel_stride: w };
         ImageView::f32(write, w, h, 3, layout)
     }
 
@@ -297,16 +313,23 @@ impl Reprojection {
         let mut pass = |has_history: bool| -> Result<Counts, Error> {
             let (wb, pb) = (Bands::new(&mut *write, rows * w * rec), Bands::new(&mut *pixels, rows * w * PIXEL_VALUES));
             // SAFETY: `run_tiles` runs each band once, and a band writes only its own rows of each buffer.
-            let r = run_tiles(runs, nb, workers, ROWS * w, for_each, &|b, buf| {
+            let r = run_tiles(runs, nb, workers, self.rows_len(), for_each, &|b, buf| {
                 let c = unsafe { self.accumulate_rows(inp, read, b * rows, wb.get(b), pb.get(b), buf, has_history)? };
                 Ok(Report {
                     history_rejected: c.rejected,
                     invalid_motion: c.invalid_motion,
                     nonfinite_noisy: c.nonfinite,
+                    clamped_fireflies: c.clamped,
                     ..Report::default()
                 })
             })?;
-            Ok(Counts { rejected: r.history_rejected, invalid_motion: r.invalid_motion, nonfinite: r.nonfinite_noisy, cut: 0 })
+            Ok(Counts {
+                rejected: r.history_rejected,
+                invalid_motion: r.invalid_motion,
+                nonfinite: r.nonfinite_noisy,
+                clamped: r.clamped_fireflies,
+                cut: 0,
+            })
         };
         let c = pass(has_history)?;
         if self.is_cut(has_history, &c) {
@@ -317,20 +340,18 @@ impl Reprojection {
     }
 
     /// f32 values a pipeline frame ([`Reprojection::run_frame`]) needs: the
-    /// stage's scratch (for `workers`, or one thread with `None`), the fit's
-    /// RGB output and, with the firefly clamp `fireflies`, the clamped light
-    /// (3 planes) and its work. `None` if it overflows.
-    pub fn frame_scratch_len(&self, workers: Option<usize>, fireflies: Option<f32>) -> Option<usize> {
+    /// stage's scratch (for `workers`, or one thread with `None`) and the
+    /// fit's RGB output. `None` if it overflows.
+    pub fn frame_scratch_len(&self, workers: Option<usize>) -> Option<usize> {
         let stage = match workers {
             Some(n) => self.parallel_scratch_len(n)?,
             None => self.scratch_len(),
         };
-        let clamp = if fireflies.is_some() { 3 * self.plane() + fireflies::work_len(self.width) } else { 0 };
-        stage.checked_add(3 * self.plane())?.checked_add(clamp)
+        stage.checked_add(3 * self.plane())
     }
 
     /// One frame of a temporal pipeline around a single-frame denoiser:
-    /// clamps `noisy` with `fireflies`, accumulates it (step 1), calls
+    /// accumulates `noisy`, clamped with `fireflies` (step 1), calls
     /// `fit(accumulated, frame_index, fitted)` (step 2: the denoiser on the
     /// accumulated light, into an RGB image of the frame's size) and resolves
     /// into `out` (step 3). `parallel`: the workers and executor of both
@@ -354,25 +375,14 @@ impl Reprojection {
         let (w, h, np) = (self.width, self.height, self.plane());
         self.check_history(history)?;
         let overflow = Error::InvalidConfig("workers: scratch size overflows");
-        let needed = self.frame_scratch_len(parallel.map(|p| p.0), fireflies).ok_or(overflow)?;
+        let needed = self.frame_scratch_len(parallel.map(|p| p.0)).ok_or(overflow)?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let got = scratch.len();
-        let stage_len = needed - 3 * np - if fireflies.is_some() { 3 * np + fireflies::work_len(w) } else { 0 };
-        let (stage, rest) = scratch.split_at_mut(stage_len);
-        let (fitted, rest) = rest.split_at_mut(3 * np);
+        let (stage, rest) = scratch.split_at_mut(needed - 3 * np);
+        let fitted = &mut rest[..3 * np];
         let mut rep = Report::default();
-        let clamped = match fireflies {
-            Some(k) => {
-                let (light, work) = rest.split_at_mut(3 * np);
-                let bad = Error::ScratchTooSmall { needed, got };
-                rep.clamped_fireflies = fireflies::clamp_frame(&noisy, k, light, work).ok_or(bad)?;
-                Some(&*light)
-            }
-            None => None,
-        };
-        let inputs = Inputs { noisy, clamped, guides, motion };
+        let inputs = Inputs { noisy, fireflies, guides, motion };
         let c = match parallel {
             Some((workers, for_each)) => self.accumulate_parallel(&inputs, history, stage, workers, for_each)?,
             None => self.accumulate(&inputs, history, stage)?,
@@ -381,6 +391,7 @@ impl Reprojection {
         rep.invalid_motion = c.invalid_motion;
         rep.history_resets = c.cut;
         rep.nonfinite_noisy = c.nonfinite;
+        rep.clamped_fireflies = c.clamped;
         let index = history.frames;
         {
             let acc = self.accumulated(history)?;
@@ -425,17 +436,15 @@ impl Reprojection {
                 _ => {}
             }
         }
-        if let Some(c) = inp.clamped {
-            if c.len() < 3 * self.plane() {
-                return Err(Error::BufferTooSmall { arg: Arg::Scratch, needed: 3 * self.plane(), len: c.len() });
-            }
+        if inp.fireflies.is_some_and(|k| !fireflies::valid_strength(k)) {
+            return Err(Error::InvalidConfig("fireflies strength (must be finite and >= 1)"));
         }
         Ok(())
     }
 
     /// Step 1 for rows `y0..` of the frame: `write` and `pixels` hold those
     /// rows' records and per-pixel values (as many rows as `write` holds);
-    /// `rows`: [`ROWS`] rows of working space.
+    /// `rows`: the working space of one worker.
     #[allow(clippy::too_many_arguments)]
     fn accumulate_rows(
         &self,
@@ -447,140 +456,162 @@ impl Reprojection {
         rows: &mut [f32],
         has_history: bool,
     ) -> Result<Counts, Error> {
-        let (w, h, np) = (self.width, self.height, self.plane());
+        const CELL: usize = fireflies::CELL;
+        let (w, h) = (self.width, self.height);
         let cfg = &self.cfg;
         let rec = self.record();
         let n_rows = write.len() / (w * rec);
-        if y0 + n_rows > h || pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < ROWS * w {
+        let short = pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < self.rows_len();
+        // the clamp measures whole bands of CELL rows: a band of rows starts on one
+        if y0 + n_rows > h || !y0.is_multiple_of(CELL) || short {
             return Err(Error::InvalidTile { index: y0, count: h });
         }
-        let (raw, rest) = rows.split_at_mut(3 * w);
-        let (mv, rest) = rest.split_at_mut(2 * w);
-        let (grow, _) = rest.split_at_mut(7 * w);
+        // one band's light as read (`raw`) and clamped (`light`), row i channel ch at (3i + ch) w
+        let (raw, rest) = rows.split_at_mut(3 * CELL * w);
+        let (light, rest) = rest.split_at_mut(3 * CELL * w);
+        let (mv, work) = rest.split_at_mut(2 * w);
         let bad = Error::InvalidTile { index: 0, count: h };
         let max_motion = MAX_MOTION_FRAMES * w.max(h) as f32;
         let mut c = Counts::default();
-        // offsets of the guides inside a record
+        // fields of the guides in a record
         let n_at = GUIDES;
         let p_at = GUIDES + 3 * self.normal as usize;
         let d_at = p_at + 3 * self.position as usize;
-        let gp = self.guide_planes();
-        for y in y0..y0 + n_rows {
-            {
-                let (r, gb) = raw.split_at_mut(w);
+        for band in (y0..y0 + n_rows).step_by(CELL) {
+            let band_rows = CELL.min(h - band);
+            for (i, rgb) in raw.chunks_exact_mut(3 * w).take(band_rows).enumerate() {
+                let (r, gb) = rgb.split_at_mut(w);
                 let (g, b) = gb.split_at_mut(w);
-                inp.noisy.read_row_n(y, 0, [r, g, b]).ok_or(bad)?;
+                inp.noisy.read_row_n(band + i, 0, [r, g, b]).ok_or(bad)?;
             }
-            match inp.motion {
-                Some(m) if has_history => {
-                    let (mx, my) = mv.split_at_mut(w);
-                    m.read_row_n(y, 0, [mx, my]).ok_or(bad)?;
+            if let Some(k) = inp.fireflies {
+                light.copy_from_slice(raw);
+                let mut t = fireflies::Thresholds::new(work, w).ok_or(bad)?;
+                for rgb in light.chunks_exact(3 * w).take(band_rows) {
+                    t.add_row([&rgb[..w], &rgb[w..2 * w], &rgb[2 * w..]]);
                 }
-                _ => mv.fill(0.0),
+                let th = t.finish(k);
+                for rgb in light.chunks_exact_mut(3 * w).take(band_rows) {
+                    let (r, gb) = rgb.split_at_mut(w);
+                    let (g, b) = gb.split_at_mut(w);
+                    c.clamped += fireflies::clamp_row([r, g, b], 0, th) as u64;
+                }
             }
-            // the current guides, a plane of the row per channel
-            let mut p = 0;
-            for (on, view, ch) in
-                [(self.normal, inp.guides.normal, 3), (self.position, inp.guides.position, 3), (self.depth, inp.guides.depth, 1)]
-            {
-                if !on {
-                    continue;
+            // rows of the band this call writes (a band of rows may end inside the clamp's band)
+            for y in band..(band + band_rows).min(y0 + n_rows) {
+                let (out_row, px_row) = (
+                    &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec],
+                    &mut pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES],
+                );
+                let raw = &raw[3 * (y - band) * w..3 * (y - band + 1) * w];
+                let cur_row = if inp.fireflies.is_some() { &light[3 * (y - band) * w..3 * (y - band + 1) * w] } else { raw };
+                match inp.motion {
+                    Some(m) if has_history => {
+                        let (mx, my) = mv.split_at_mut(w);
+                        m.read_row_n(y, 0, [mx, my]).ok_or(bad)?;
+                    }
+                    _ => mv.fill(0.0),
                 }
-                let v = view.ok_or(Error::GuideMismatch)?;
-                for k in 0..ch {
-                    v.read_row(y, k, 0, &mut grow[(p + k) * w..(p + k + 1) * w]).ok_or(bad)?;
+                // the current guides, straight into their fields of the record row
+                let mut p = GUIDES;
+                for (on, view, ch) in
+                    [(self.normal, inp.guides.normal, 3), (self.position, inp.guides.position, 3), (self.depth, inp.guides.depth, 1)]
+                {
+                    if !on {
+                        continue;
+                    }
+                    let v = view.ok_or(Error::GuideMismatch)?;
+                    for k in 0..ch {
+                        v.read_row(y, k, 0, &mut out_row[(p + k) * w..(p + k + 1) * w]).ok_or(bad)?;
+                    }
+                    p += ch;
                 }
-                p += ch;
-            }
-            let out_row = &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec];
-            let px_row = &mut pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES];
-            for (x, (r, pv)) in out_row.chunks_exact_mut(rec).zip(px_row.chunks_exact_mut(PIXEL_VALUES)).enumerate() {
-                let i = y * w + x;
-                for g in 0..gp {
-                    r[GUIDES + g] = grow[g * w + x];
-                }
-                let rawc = [raw[x], raw[w + x], raw[2 * w + x]];
-                let cur = match inp.clamped {
-                    Some(l) => [l[i], l[np + i], l[2 * np + i]],
-                    None => rawc,
-                };
-                let cur_ok = cur.iter().all(|v| v.is_finite());
-                c.nonfinite += !cur_ok as u64;
-                let kept = if inp.clamped.is_some() { fireflies::kept(rawc, cur) } else { 1.0 };
-                let (mx, my) = (mv[x], mv[w + x]);
-                let motion_ok = mx.abs() <= max_motion && my.abs() <= max_motion; // false for NaN
-                c.invalid_motion += (has_history && !motion_ok) as u64;
-                let (px, py) = (x as f32 + mx, y as f32 + my);
-                let (mut tw, mut n, mut prev) = (0f32, 0f32, [0f32; 3]);
-                // the previous output through the accepted taps, for step 3
-                let (mut ow, mut out) = (0f32, [0f32; 3]);
-                if has_history && motion_ok {
-                    let g = &r[GUIDES..];
-                    let depth = if self.depth { g[d_at - GUIDES].abs() } else { 1.0 };
-                    let plim = cfg.position_limit * depth;
-                    for (tx, ty, wt) in bilinear_taps(px, py) {
-                        if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
-                            continue;
-                        }
-                        let j = (ty as usize * w + tx as usize) * rec;
-                        let Some(t) = read.get(j..j + rec) else { continue };
-                        let mut ok = true;
-                        if self.normal {
-                            let (a, b) = (&g[n_at - GUIDES..n_at - GUIDES + 3], &t[n_at..n_at + 3]);
-                            let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-                            let empty = |v: &[f32]| v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0;
-                            // (no geometry on both sides: sky continues sky)
-                            ok &= dot >= cfg.normal_limit || (empty(a) && empty(b));
-                        }
-                        if self.position {
-                            let q = p_at - GUIDES;
-                            let d2: f32 = (0..3).map(|c| (t[p_at + c] - g[q + c]) * (t[p_at + c] - g[q + c])).sum();
-                            ok &= d2 <= plim * plim;
-                        } else if self.depth {
-                            let d = g[d_at - GUIDES];
-                            ok &= (t[d_at] - d).abs() <= cfg.depth_limit * d.abs();
-                        }
-                        let (pl, pn) = ([t[LIGHT], t[LIGHT + 1], t[LIGHT + 2]], t[COUNT]);
-                        ok &= pl.iter().all(|v| v.is_finite()) && pn.is_finite() && pn >= 0.0;
-                        if ok {
-                            tw += wt;
-                            n += wt * pn;
-                            for ch in 0..3 {
-                                prev[ch] += wt * pl[ch];
+                for (x, pv) in px_row.chunks_exact_mut(PIXEL_VALUES).enumerate() {
+                    // field `f` of this pixel's record
+                    let at = |f: usize| f * w + x;
+                    let rawc = [raw[x], raw[w + x], raw[2 * w + x]];
+                    let cur = [cur_row[x], cur_row[w + x], cur_row[2 * w + x]];
+                    let cur_ok = cur.iter().all(|v| v.is_finite());
+                    c.nonfinite += !cur_ok as u64;
+                    let kept = if inp.fireflies.is_some() { fireflies::kept(rawc, cur) } else { 1.0 };
+                    let (mx, my) = (mv[x], mv[w + x]);
+                    let motion_ok = mx.abs() <= max_motion && my.abs() <= max_motion; // false for NaN
+                    c.invalid_motion += (has_history && !motion_ok) as u64;
+                    let (px, py) = (x as f32 + mx, y as f32 + my);
+                    let (mut tw, mut n, mut prev) = (0f32, 0f32, [0f32; 3]);
+                    // the previous output through the accepted taps, for step 3
+                    let (mut ow, mut out) = (0f32, [0f32; 3]);
+                    if has_history && motion_ok {
+                        let g = |f: usize| out_row[at(f)];
+                        let depth = if self.depth { g(d_at).abs() } else { 1.0 };
+                        let plim = cfg.position_limit * depth;
+                        for (tx, ty, wt) in bilinear_taps(px, py) {
+                            if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
+                                continue;
                             }
-                            let po = [t[OUTPUT], t[OUTPUT + 1], t[OUTPUT + 2]];
-                            if po.iter().all(|v| v.is_finite()) {
-                                ow += wt;
+                            // the tap's record row, and its field `f`
+                            let j = ty as usize * w * rec + tx as usize;
+                            let Some(trow) = read.get(j..j + (rec - 1) * w + 1) else { continue };
+                            let t = |f: usize| trow[f * w];
+                            let mut ok = true;
+                            if self.normal {
+                                let (a, b) = ([g(n_at), g(n_at + 1), g(n_at + 2)], [t(n_at), t(n_at + 1), t(n_at + 2)]);
+                                let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+                                let empty = |v: [f32; 3]| v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0;
+                                // (no geometry on both sides: sky continues sky)
+                                ok &= dot >= cfg.normal_limit || (empty(a) && empty(b));
+                            }
+                            if self.position {
+                                let d2: f32 = (0..3).map(|c| (t(p_at + c) - g(p_at + c)) * (t(p_at + c) - g(p_at + c))).sum();
+                                ok &= d2 <= plim * plim;
+                            } else if self.depth {
+                                let d = g(d_at);
+                                ok &= (t(d_at) - d).abs() <= cfg.depth_limit * d.abs();
+                            }
+                            let (pl, pn) = ([t(LIGHT), t(LIGHT + 1), t(LIGHT + 2)], t(COUNT));
+                            ok &= pl.iter().all(|v| v.is_finite()) && pn.is_finite() && pn >= 0.0;
+                            if ok {
+                                tw += wt;
+                                n += wt * pn;
                                 for ch in 0..3 {
-                                    out[ch] += wt * po[ch];
+                                    prev[ch] += wt * pl[ch];
+                                }
+                                let po = [t(OUTPUT), t(OUTPUT + 1), t(OUTPUT + 2)];
+                                if po.iter().all(|v| v.is_finite()) {
+                                    ow += wt;
+                                    for ch in 0..3 {
+                                        out[ch] += wt * po[ch];
+                                    }
                                 }
                             }
                         }
                     }
-                }
-                let (acc, count) = if tw > 0.0 {
-                    let n = n / tw;
-                    let inv = 1.0 / tw;
-                    let prev = [prev[0] * inv, prev[1] * inv, prev[2] * inv];
-                    if cur_ok {
-                        let count = (n + kept).min(cfg.max_history);
-                        let a = if count > 0.0 { (kept / count).max(kept / cfg.max_history) } else { 1.0 };
-                        (lerp3(prev, cur, a), count)
+                    let (acc, count) = if tw > 0.0 {
+                        let n = n / tw;
+                        let inv = 1.0 / tw;
+                        let prev = [prev[0] * inv, prev[1] * inv, prev[2] * inv];
+                        if cur_ok {
+                            let count = (n + kept).min(cfg.max_history);
+                            let a = if count > 0.0 { (kept / count).max(kept / cfg.max_history) } else { 1.0 };
+                            (lerp3(prev, cur, a), count)
+                        } else {
+                            (prev, n) // a NaN/Inf sample is bridged with the history
+                        }
                     } else {
-                        (prev, n) // a NaN/Inf sample is bridged with the history
+                        c.rejected += has_history as u64;
+                        // a NaN/Inf sample without history stays: the denoiser excludes it
+                        (cur, kept.max(1e-3))
+                    };
+                    for (ch, v) in acc.into_iter().enumerate() {
+                        out_row[at(LIGHT + ch)] = v;
                     }
-                } else {
-                    c.rejected += has_history as u64;
-                    // a NaN/Inf sample without history stays: the denoiser excludes it
-                    (cur, kept.max(1e-3))
-                };
-                r[LIGHT..LIGHT + 3].copy_from_slice(&acc);
-                r[COUNT] = count;
-                if ow > 0.0 {
-                    let inv = 1.0 / ow;
-                    pv.copy_from_slice(&[out[0] * inv, out[1] * inv, out[2] * inv]);
-                } else {
-                    pv[0] = f32::NAN;
+                    out_row[at(COUNT)] = count;
+                    if ow > 0.0 {
+                        let inv = 1.0 / ow;
+                        pv.copy_from_slice(&[out[0] * inv, out[1] * inv, out[2] * inv]);
+                    } else {
+                        pv[0] = f32::NAN;
+                    }
                 }
             }
         }
@@ -643,7 +674,7 @@ impl Reprojection {
         let pixels = &*pixels;
         // SAFETY: `run_tiles` runs each band once; a band writes only its own
         // records and its own output rows (disjoint `RowBands`).
-        run_tiles(runs, nb, workers, ROWS * w, for_each, &|b, buf| {
+        run_tiles(runs, nb, workers, self.rows_len(), for_each, &|b, buf| {
             let y0 = b * rows;
             let mut ob = unsafe { bands.band(y0, rows.min(h - y0))? };
             let pb = &pixels[(y0 * w * PIXEL_VALUES).min(pixels.len())..];
@@ -691,11 +722,11 @@ impl Reprojection {
         let cfg = &self.cfg;
         let rec = self.record();
         let n_rows = write.len() / (w * rec);
-        if y0 + n_rows > h || pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < ROWS * w || out.height() < n_rows {
+        if y0 + n_rows > h || pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < RESOLVE_ROWS * w || out.height() < n_rows {
             return Err(Error::InvalidTile { index: y0, count: h });
         }
-        // a ring of 3 rows of horizontal 3-sums of YCoCg and of its square
-        // (6 values per pixel), then the output row (3 planes of a row)
+        // RESOLVE_ROWS: a ring of 3 rows of horizontal 3-sums of YCoCg and of
+        // its square (6 values per pixel), then the output row (3 planes of a row)
         let (ring, rest) = rows.split_at_mut(18 * w);
         let out_row = &mut rest[..3 * w];
         let hsums = |y: usize, dst: &mut [f32]| {
@@ -726,7 +757,7 @@ impl Reprojection {
             }
             let wrow = &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec];
             let prow = &pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES];
-            for (x, (r, pv)) in wrow.chunks_exact_mut(rec).zip(prow.chunks_exact(PIXEL_VALUES)).enumerate() {
+            for (x, pv) in prow.chunks_exact(PIXEL_VALUES).enumerate() {
                 let i = y * w + x;
                 let cur = [current[3 * i], current[3 * i + 1], current[3 * i + 2]];
                 let mut res = cur;
@@ -749,14 +780,14 @@ impl Reprojection {
                         let sd = libm::sqrtf((s2[ch] * inv - mu * mu).max(0.0));
                         clipped[ch] = p[ch].max(mu - cfg.clip_gamma * sd).min(mu + cfg.clip_gamma * sd);
                     }
-                    let n = r[COUNT];
+                    let n = wrow[COUNT * w + x];
                     let a = if n > 0.0 { (1.0 / n).max(cfg.output_alpha).min(1.0) } else { 1.0 };
                     res = lerp3(rgb(clipped), cur, a);
                 }
                 for ch in 0..3 {
                     let v = if clamp_negative { res[ch].max(0.0) } else { res[ch] };
                     let v = if v.is_finite() { v } else { 0.0 };
-                    r[OUTPUT + ch] = v;
+                    wrow[(OUTPUT + ch) * w + x] = v;
                     out_row[ch * w + x] = v;
                 }
             }

@@ -130,7 +130,7 @@ fn disoccluded_pixels_restart_from_their_own_sample() {
     for (f, m) in [(&f0, None), (&f1, Some(&mv[..]))] {
         let inp = Inputs {
             noisy: ImageView::interleaved(&f.noisy, w, h, 3).unwrap(),
-            clamped: None,
+            fireflies: None,
             guides: f.guides(SET),
             motion: m.map(|m| ImageView::interleaved(m, w, h, 2).unwrap()),
         };

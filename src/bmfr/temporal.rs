@@ -35,7 +35,7 @@ impl Bmfr {
     /// f32 values of the scratch for [`Bmfr::denoise_temporal`]: the
     /// pipeline frame's ([`Reprojection::frame_scratch_len`]) and a fit worker.
     pub fn temporal_scratch_len(&self) -> usize {
-        let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None, self.cfg.fireflies));
+        let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None));
         frame.and_then(|n| n.checked_add(self.worker_len())).unwrap_or(usize::MAX)
     }
 

@@ -88,11 +88,11 @@ impl TemporalFlr {
     /// f32 values of the scratch of [`TemporalFlr::denoise`]
     /// ([`Reprojection::frame_scratch_len`]).
     pub fn scratch_len(&self) -> usize {
-        self.stage.frame_scratch_len(None, self.fireflies).unwrap_or(usize::MAX)
+        self.stage.frame_scratch_len(None).unwrap_or(usize::MAX)
     }
     /// f32 values of the scratch of [`TemporalFlr::denoise_parallel`] with `workers`.
     pub fn parallel_scratch_len(&self, workers: usize) -> usize {
-        self.stage.frame_scratch_len(Some(workers), self.fireflies).unwrap_or(usize::MAX)
+        self.stage.frame_scratch_len(Some(workers)).unwrap_or(usize::MAX)
     }
     /// f64 values of FLR's scratch for [`TemporalFlr::denoise`].
     pub fn flr_scratch_len(&self) -> usize {

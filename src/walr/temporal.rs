@@ -41,7 +41,7 @@ impl Walr {
     /// f32 of scratch for [`Walr::denoise_temporal`]: WALR's own and the
     /// pipeline frame's ([`Reprojection::frame_scratch_len`]).
     pub fn temporal_scratch_len(&self) -> usize {
-        let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None, self.cfg.fireflies));
+        let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None));
         frame.and_then(|n| n.checked_add(self.scratch_len())).unwrap_or(usize::MAX)
     }
 

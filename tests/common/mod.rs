@@ -481,7 +481,7 @@ pub fn cfg(set: GuideSet, block: usize) -> FlrConfig {
 /// `noisy` (interleaved RGB) clamped band by band with the firefly clamp's
 /// kernels (`Thresholds`, `clamp_row`), as a caller would before a method
 /// that does not clamp: the reference of the methods' clamp tests (and of
-/// `fireflies::clamp_frame`). Returns the count clamped.
+/// the temporal stage's). Returns the count clamped.
 pub fn pre_clamp(noisy: &mut [f32], w: usize, h: usize, k: f32) -> u64 {
     let mut planes = [vec![0f32; w * h], vec![0f32; w * h], vec![0f32; w * h]];
     for i in 0..w * h {
