@@ -63,6 +63,16 @@ pub struct TemporalConfig {
     /// A frame where more than this fraction of pixels has no usable history
     /// is a camera cut: the history restarts (default 0.5; 1 turns it off).
     pub cut_fraction: f32,
+    /// With the firefly clamp on: the third brightest cell of a cell's
+    /// neighbourhood, the clamp's reference, counts at most this many times
+    /// the brightest luminance the previous frame kept in the same
+    /// neighbourhood, so that outliers common enough to fill three cells of
+    /// one frame are still clamped (0 or ≥ 1; default 2; 0 turns it off).
+    /// The mean term of the reference is not capped, so light that brightens
+    /// as a whole passes; a bright detail that appears in a dark
+    /// neighbourhood is held to `2 k` times the previous frame's brightest
+    /// there, a factor that compounds each frame.
+    pub firefly_history: f32,
 }
 
 impl Default for TemporalConfig {
@@ -75,6 +85,7 @@ impl Default for TemporalConfig {
             clip_gamma: 1.5,
             output_alpha: 0.5,
             cut_fraction: 0.5,
+            firefly_history: 2.0,
         }
     }
 }
@@ -97,6 +108,9 @@ impl TemporalConfig {
         }
         if !(self.cut_fraction > 0.0 && self.cut_fraction <= 1.0) {
             return Err(Error::InvalidConfig("temporal.cut_fraction (0, 1]"));
+        }
+        if !(self.firefly_history == 0.0 || self.firefly_history >= 1.0 && self.firefly_history.is_finite()) {
+            return Err(Error::InvalidConfig("temporal.firefly_history (0 or finite >= 1)"));
         }
         Ok(())
     }
@@ -159,6 +173,14 @@ pub struct Inputs<'a> {
     pub motion: Option<ImageView<'a>>,
 }
 
+/// What step 1 reads of the previous frame: its slot's records and the
+/// largest clamped luminance of each of its clamp cells.
+#[derive(Clone, Copy)]
+struct Previous<'a> {
+    records: &'a [f32],
+    cells: &'a [f32],
+}
+
 /// The temporal stage of one frame size and guide set.
 #[derive(Clone, Copy, Debug)]
 pub struct Reprojection {
@@ -205,8 +227,14 @@ impl Reprojection {
     fn record(&self) -> usize {
         GUIDES + self.guide_planes()
     }
+    /// Values per cell of the firefly clamp's bands: each slot ends with the
+    /// largest luminance of each cell of that frame's clamped light, then
+    /// each cell's neighbourhood mean (the clamp's mean term).
+    fn cells_len(&self) -> usize {
+        2 * fireflies::cells(self.width) * self.height.div_ceil(fireflies::CELL)
+    }
     fn slot_len(&self) -> usize {
-        self.record() * self.plane()
+        self.record() * self.plane() + self.cells_len()
     }
     /// f32 values of the [`History`] buffer: two slots.
     pub fn history_len(&self) -> usize {
@@ -219,7 +247,7 @@ impl Reprojection {
     }
     /// f32 of working space per worker.
     fn rows_len(&self) -> usize {
-        ROWS * self.width + fireflies::work_len(self.width)
+        ROWS * self.width + fireflies::work_len(self.width) + fireflies::cells(self.width)
     }
     /// f32 values of the scratch of the `_parallel` entries with `workers`:
     /// 3 values per pixel, 21 rows per worker and the run's bookkeeping.
@@ -244,15 +272,22 @@ impl Reprojection {
         Ok(())
     }
 
-    /// The two slots of the history: (read, write) for the frame `history.frames`.
+    /// The records of the two slots of the history: (read, write) for the frame `history.frames`.
     fn slots<'h>(&self, history: &'h mut History<'_>) -> (&'h [f32], &'h mut [f32]) {
+        let (read, _, write, _) = self.slots_and_cells(history);
+        (read, write)
+    }
+
+    /// The two slots as (read records, read cells, write records, write cells).
+    #[allow(clippy::type_complexity)]
+    fn slots_and_cells<'h>(&self, history: &'h mut History<'_>) -> (&'h [f32], &'h [f32], &'h mut [f32], &'h mut [f32]) {
         let n = self.slot_len();
         let (a, b) = history.data.split_at_mut(n);
-        if history.frames.is_multiple_of(2) {
-            (&b[..n], &mut a[..n])
-        } else {
-            (&a[..n], &mut b[..n])
-        }
+        let (read, write) = if history.frames.is_multiple_of(2) { (&b[..n], &mut a[..n]) } else { (&a[..n], &mut b[..n]) };
+        let records = self.record() * self.plane();
+        let (rr, rc) = read.split_at(records);
+        let (wr, wc) = write.split_at_mut(records);
+        (rr, rc, wr, wc)
     }
 
     /// The accumulated light of the frame as [`Reprojection::accumulate`]
@@ -280,10 +315,11 @@ impl Reprojection {
         }
         let has_history = history.frames > 0;
         let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
-        let (read, write) = self.slots(history);
-        let c = self.accumulate_rows(inp, read, 0, write, pixels, rows, has_history)?;
+        let (read, read_cells, write, write_cells) = self.slots_and_cells(history);
+        let prev = Previous { records: read, cells: read_cells };
+        let c = self.accumulate_rows(inp, prev, 0, write, write_cells, pixels, rows, has_history)?;
         if self.is_cut(has_history, &c) {
-            let again = self.accumulate_rows(inp, read, 0, write, pixels, rows, false)?;
+            let again = self.accumulate_rows(inp, prev, 0, write, write_cells, pixels, rows, false)?;
             return Ok(Counts { invalid_motion: c.invalid_motion, cut: 1, ..again });
         }
         Ok(c)
@@ -309,12 +345,15 @@ impl Reprojection {
         let (w, rec) = (self.width, self.record());
         let (rows, nb) = (self.band_rows(workers), self.bands(workers));
         let (pixels, runs) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
-        let (read, write) = self.slots(history);
+        let (read, read_cells, write, write_cells) = self.slots_and_cells(history);
+        let prev = Previous { records: read, cells: read_cells };
+        let nc = fireflies::cells(w);
         let mut pass = |has_history: bool| -> Result<Counts, Error> {
             let (wb, pb) = (Bands::new(&mut *write, rows * w * rec), Bands::new(&mut *pixels, rows * w * PIXEL_VALUES));
+            let cb = Bands::new(&mut *write_cells, 2 * rows / fireflies::CELL * nc);
             // SAFETY: `run_tiles` runs each band once, and a band writes only its own rows of each buffer.
             let r = run_tiles(runs, nb, workers, self.rows_len(), for_each, &|b, buf| {
-                let c = unsafe { self.accumulate_rows(inp, read, b * rows, wb.get(b), pb.get(b), buf, has_history)? };
+                let c = unsafe { self.accumulate_rows(inp, prev, b * rows, wb.get(b), cb.get(b), pb.get(b), buf, has_history)? };
                 Ok(Report {
                     history_rejected: c.rejected,
                     invalid_motion: c.invalid_motion,
@@ -449,13 +488,15 @@ impl Reprojection {
     fn accumulate_rows(
         &self,
         inp: &Inputs<'_>,
-        read: &[f32],
+        prev: Previous<'_>,
         y0: usize,
         write: &mut [f32],
+        write_cells: &mut [f32],
         pixels: &mut [f32],
         rows: &mut [f32],
         has_history: bool,
     ) -> Result<Counts, Error> {
+        let read = prev.records;
         const CELL: usize = fireflies::CELL;
         let (w, h) = (self.width, self.height);
         let cfg = &self.cfg;
@@ -469,7 +510,11 @@ impl Reprojection {
         // one band's light as read (`raw`) and clamped (`light`), row i channel ch at (3i + ch) w
         let (raw, rest) = rows.split_at_mut(3 * CELL * w);
         let (light, rest) = rest.split_at_mut(3 * CELL * w);
-        let (mv, work) = rest.split_at_mut(2 * w);
+        let (mv, rest) = rest.split_at_mut(2 * w);
+        let nc = fireflies::cells(w);
+        // the clamp's caps from the previous frame
+        let (caps, work) = rest.split_at_mut(nc);
+        let capped = has_history && cfg.firefly_history > 0.0;
         let bad = Error::InvalidTile { index: 0, count: h };
         let max_motion = MAX_MOTION_FRAMES * w.max(h) as f32;
         let mut c = Counts::default();
@@ -484,18 +529,39 @@ impl Reprojection {
                 let (g, b) = gb.split_at_mut(w);
                 inp.noisy.read_row_n(band + i, 0, [r, g, b]).ok_or(bad)?;
             }
+            // this cell row's maxima and means, and the previous frame's
+            let cr = (band - y0) / CELL;
+            let (maxima_out, means_out) = write_cells.get_mut(2 * cr * nc..2 * (cr + 1) * nc).ok_or(bad)?.split_at_mut(nc);
+            let prev_cells = prev.cells.get(2 * (band / CELL) * nc..2 * (band / CELL + 1) * nc).ok_or(bad)?;
+            let (prev_maxima, prev_means) = prev_cells.split_at(nc);
             if let Some(k) = inp.fireflies {
                 light.copy_from_slice(raw);
+                if capped {
+                    for (i, cap) in caps.iter_mut().enumerate() {
+                        let near = &prev_maxima[i.saturating_sub(fireflies::REACH)..(i + fireflies::REACH + 1).min(nc)];
+                        *cap = cfg.firefly_history * near.iter().fold(0f32, |a, &b| a.max(b));
+                    }
+                }
                 let mut t = fireflies::Thresholds::new(work, w).ok_or(bad)?;
                 for rgb in light.chunks_exact(3 * w).take(band_rows) {
                     t.add_row([&rgb[..w], &rgb[w..2 * w], &rgb[2 * w..]]);
                 }
-                let th = t.finish(k);
+                let (caps, prev_means): (&[f32], &[f32]) = if capped { (caps, prev_means) } else { (&[], &[]) };
+                let th = t.finish_capped(k, caps, prev_means, means_out);
                 for rgb in light.chunks_exact_mut(3 * w).take(band_rows) {
                     let (r, gb) = rgb.split_at_mut(w);
                     let (g, b) = gb.split_at_mut(w);
                     c.clamped += fireflies::clamp_row([r, g, b], 0, th) as u64;
                 }
+                let mut band_rgb: [[&[f32]; 3]; CELL] = [[&[]; 3]; CELL];
+                for (d, rgb) in band_rgb.iter_mut().zip(light.chunks_exact(3 * w)) {
+                    *d = [&rgb[..w], &rgb[w..2 * w], &rgb[2 * w..]];
+                }
+                fireflies::cell_maxima(&band_rgb[..band_rows], w, maxima_out);
+            } else {
+                // no clamp, no cap for the next frame
+                maxima_out.fill(f32::INFINITY);
+                means_out.fill(f32::INFINITY);
             }
             // rows of the band this call writes (a band of rows may end inside the clamp's band)
             for y in band..(band + band_rows).min(y0 + n_rows) {

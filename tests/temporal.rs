@@ -1,8 +1,10 @@
 //! The temporal stage (`lrdenoise::temporal`) and temporal FLR over sequences
 //! of synthetic frames: a static camera converges to the multi-sample result,
 //! a disoccluded pixel restarts from its own sample, a cut resets, bad motion
-//! is rejected and counted, a burst of fireflies is gone within 2 frames, a
-//! history of another size is refused, and the parallel run gives the same bits.
+//! is rejected and counted, a burst of fireflies is gone within 2 frames,
+//! outliers too common for one frame's clamp are clamped with the previous
+//! frame's evidence, a history of another size is refused, and the parallel
+//! run gives the same bits.
 
 mod common;
 use common::*;
@@ -155,6 +157,73 @@ fn disoccluded_pixels_restart_from_their_own_sample() {
         st.resolve(&current, &mut history, &mut scratch, c.cut != 0, true, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap())
             .unwrap();
     }
+}
+
+/// Frame 0 then frame 1 of a static sequence through the stage alone, with
+/// the firefly clamp; returns frame 1's counts and accumulated light.
+fn two_frames(cfg: TemporalConfig, f0: &Owned, f1: &Owned) -> (temporal::Counts, Vec<f32>) {
+    let (w, h) = (f0.w, f0.h);
+    let st = Reprojection::new(cfg, SET, w, h).unwrap();
+    let mut hist = vec![0f32; st.history_len()];
+    let mut scratch = vec![0f32; st.scratch_len()];
+    let mut history = History::new(&mut hist);
+    let mut counts = temporal::Counts::default();
+    for f in [f0, f1] {
+        let inp = Inputs {
+            noisy: ImageView::interleaved(&f.noisy, w, h, 3).unwrap(),
+            fireflies: Some(fireflies::DEFAULT_STRENGTH),
+            guides: f.guides(SET),
+            motion: None,
+        };
+        counts = st.accumulate(&inp, &mut history, &mut scratch).unwrap();
+        if history.frames() == 0 {
+            let (current, mut out) = (vec![0.25f32; 3 * w * h], vec![0f32; 3 * w * h]);
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            st.resolve(&current, &mut history, &mut scratch, false, true, &mut ov).unwrap();
+        }
+    }
+    let acc = st.accumulated(&mut history).unwrap();
+    let light = (0..w * h).flat_map(|i| (0..3).map(move |c| (i, c))).map(|(i, c)| acc.get(i % w, i / w, c).unwrap()).collect();
+    (counts, light)
+}
+
+/// Outliers in three cells of one neighbourhood are the third brightest cell
+/// themselves, so the clamp of one frame lets them through; capped by what
+/// the previous frame held there (`firefly_history`), they are clamped.
+#[test]
+fn outliers_in_three_cells_are_clamped_with_the_previous_frame() {
+    let (w, h) = (64, 16);
+    let (f0, mut f1) = (frame_at(w, h, 0), frame_at(w, h, 1));
+    let at = [(3, 2), (12, 3), (21, 5), (30, 4)]; // four cells of one band
+    for &(x, y) in &at {
+        for c in 0..3 {
+            f1.noisy[3 * (y * w + x) + c] = 1e3;
+        }
+    }
+    let off = TemporalConfig { firefly_history: 0.0, ..TemporalConfig::default() };
+    let (c_off, l_off) = two_frames(off, &f0, &f1);
+    let (c_on, l_on) = two_frames(TemporalConfig::default(), &f0, &f1);
+    assert_eq!(c_off.clamped, 0, "one frame's evidence: the outliers are its brightest cells");
+    assert!(c_on.clamped >= at.len() as u64, "{} clamped", c_on.clamped);
+    for &(x, y) in &at {
+        let i = 3 * (y * w + x);
+        assert!(l_off[i] > 400.0, "unclamped, averaged with one clean frame: {}", l_off[i]);
+        assert!(l_on[i] < 4.0, "({x},{y}): {} (the clean frame's light is below 1)", l_on[i]);
+    }
+}
+
+/// The cap leaves the mean term alone: a frame ten times brighter than the
+/// previous one everywhere is clamped exactly as without history.
+#[test]
+fn light_that_brightens_as_a_whole_passes_the_cap() {
+    let (w, h) = (64, 16);
+    let (f0, mut f1) = (frame_at(w, h, 0), frame_at(w, h, 1));
+    f1.noisy.iter_mut().for_each(|v| *v *= 10.0);
+    let off = TemporalConfig { firefly_history: 0.0, ..TemporalConfig::default() };
+    let (c_off, l_off) = two_frames(off, &f0, &f1);
+    let (c_on, l_on) = two_frames(TemporalConfig::default(), &f0, &f1);
+    assert_eq!(c_on.clamped, c_off.clamped);
+    assert!(l_on.iter().zip(&l_off).all(|(a, b)| a.to_bits() == b.to_bits()));
 }
 
 /// A frame whose geometry matches nothing of the previous one is a cut: the

@@ -96,6 +96,9 @@ pub struct FlrArgs {
     /// flr-temporal: half-width of the output history's clip box in standard deviations of the 3x3 neighbourhood (default 1.5)
     #[arg(long, value_name = "G")]
     pub clip_gamma: Option<f32>,
+    /// Temporal pipelines (flr-temporal, bmfr-temporal, walr-temporal): the firefly clamp's reference is at most F times the brightest sample the previous frame kept around each cell (default 2; 0 = off)
+    #[arg(long, value_name = "F")]
+    pub firefly_history: Option<f32>,
 }
 
 impl FlrArgs {
@@ -113,7 +116,7 @@ impl FlrArgs {
     /// method because `eval`, `report` and `bench` take one flag set for
     /// several methods at once, `--methods flr,bmfr`; this table gives clap's
     /// refusal instead, naming whose flag it is and what the method takes.)
-    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 24] {
+    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 25] {
         use Family::*;
         [
             ("--guides", self.guides.is_some(), &[Flr, Bmfr, Walr]),
@@ -141,6 +144,7 @@ impl FlrArgs {
             ("--history", self.history.is_some(), &[Flr]),
             ("--output-alpha", self.output_alpha.is_some(), &[Flr]),
             ("--clip-gamma", self.clip_gamma.is_some(), &[Flr]),
+            ("--firefly-history", self.firefly_history.is_some(), &[Flr, Bmfr, Walr]),
         ]
     }
 
@@ -156,7 +160,10 @@ impl FlrArgs {
         if let Some(g) = self.clip_gamma {
             t.clip_gamma = g;
         }
-        t.validate().map_err(|e| format!("--history / --output-alpha / --clip-gamma: {e}"))?;
+        if let Some(f) = self.firefly_history {
+            t.firefly_history = f;
+        }
+        t.validate().map_err(|e| format!("--history / --output-alpha / --clip-gamma / --firefly-history: {e}"))?;
         Ok(t)
     }
 
@@ -364,6 +371,9 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
     if let Some(f) = &a.fireflies {
         c.fireflies = parse_fireflies(f)?;
     }
+    if let Some(f) = a.firefly_history {
+        c.temporal.firefly_history = f;
+    }
     c.validate().map_err(|e| format!("bmfr flags: {e}"))?;
     Ok(c)
 }
@@ -416,6 +426,9 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
     if let Some(f) = &a.fireflies {
         c.fireflies = parse_fireflies(f)?;
     }
+    if let Some(f) = a.firefly_history {
+        c.temporal.firefly_history = f;
+    }
     c.validate().map_err(|e| format!("walr flags: {e}"))?;
     Ok(c)
 }
@@ -447,6 +460,18 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
     );
     if c.fireflies != default {
         flags += &fireflies_flag(c.fireflies);
+    }
+    if name == "walr-temporal" {
+        return firefly_history_label(label, flags, c.temporal.firefly_history);
+    }
+    (label, flags)
+}
+
+/// A temporal pipeline's label and flag line with a non-default `--firefly-history`.
+fn firefly_history_label(mut label: String, mut flags: String, f: f32) -> (String, String) {
+    if f != lrdenoise::temporal::TemporalConfig::default().firefly_history {
+        label += &format!(" fh{f}");
+        flags += &format!(" --firefly-history {f}");
     }
     (label, flags)
 }
@@ -629,6 +654,7 @@ impl Method {
                     label += &format!(" h{} o{} g{}", t.max_history, t.output_alpha, t.clip_gamma);
                     flags += &format!(" --history {} --output-alpha {} --clip-gamma {}", t.max_history, t.output_alpha, t.clip_gamma);
                 }
+                (label, flags) = firefly_history_label(label, flags, temporal.firefly_history);
                 let method = Method::Temporal(Box::new(TemporalRunner::flr(cfg, temporal, w, h, threads)?));
                 Ok(Built { method, label, flags, min_bytes: None })
             }
@@ -680,6 +706,9 @@ impl Method {
                 if cfg.fireflies != BmfrConfig::default().fireflies {
                     label += &fireflies_label(cfg.fireflies, BmfrConfig::default().fireflies);
                     flags += &fireflies_flag(cfg.fireflies);
+                }
+                if temporal {
+                    (label, flags) = firefly_history_label(label, flags, cfg.temporal.firefly_history);
                 }
                 let method = if temporal {
                     Method::Temporal(Box::new(TemporalRunner::new(cfg, w, h)?))

@@ -597,6 +597,13 @@ typedef struct LrdTemporalConfig {
    * and the history restarts, (0, 1] (default 0.5).
    */
   float cut_fraction;
+  /**
+   * With the firefly clamp on: the clamp's reference (the third brightest
+   * cell of a cell's neighbourhood) counts at most this many times the
+   * brightest luminance the previous frame kept around the cell; 0 or
+   * finite ≥ 1 (default 4; 0 turns it off).
+   */
+  float firefly_history;
 } LrdTemporalConfig;
 
 /**

@@ -53,6 +53,11 @@ pub struct LrdTemporalConfig {
     /// Fraction of pixels without history above which a frame is a camera cut
     /// and the history restarts, (0, 1] (default 0.5).
     pub cut_fraction: f32,
+    /// With the firefly clamp on: the clamp's reference (the third brightest
+    /// cell of a cell's neighbourhood) counts at most this many times the
+    /// brightest luminance the previous frame kept around the cell; 0 or
+    /// finite ≥ 1 (default 4; 0 turns it off).
+    pub firefly_history: f32,
 }
 
 /// The temporal stage's defaults (temporal FLR's and WALR's; BMFR's differ:
@@ -72,6 +77,7 @@ pub(crate) fn lrd_temporal_config(d: &lrdenoise_core::temporal::TemporalConfig) 
         clip_gamma: d.clip_gamma,
         output_alpha: d.output_alpha,
         cut_fraction: d.cut_fraction,
+        firefly_history: d.firefly_history,
     }
 }
 
@@ -87,6 +93,7 @@ pub(crate) fn temporal_config(c: *const LrdTemporalConfig) -> Result<lrdenoise_c
         clip_gamma: c.clip_gamma,
         output_alpha: c.output_alpha,
         cut_fraction: c.cut_fraction,
+        firefly_history: c.firefly_history,
     };
     t.validate().map_err(status_of)?;
     Ok(t)
