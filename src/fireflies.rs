@@ -175,7 +175,7 @@ impl<'a> Thresholds<'a> {
     /// 0 a padding cell may be taken as the largest; the cell's threshold is
     /// then 0 and its samples, none above 0, clamp nothing).
     pub fn finish(self, k: f32) -> &'a [f32] {
-        self.finish_capped(k, &[], &[], &mut [])
+        self.finish_capped(k, &[], &[], &mut [], &mut [])
     }
 
     /// [`Thresholds::finish`] with the third largest cell maximum of cell
@@ -183,10 +183,11 @@ impl<'a> Thresholds<'a> {
     /// where that is smaller, `mean` being the neighbourhood's mean term (not
     /// capped itself; cells past the end of `caps` are not capped). A
     /// temporal pipeline caps it with what the previous frame's clamped light
-    /// held around the cell ([`cell_maxima`]), raised by as much as the light
-    /// around it brightened. Each cell's mean term goes to `means` (as far as
-    /// it reaches): the next frame's `prev_means`.
-    pub fn finish_capped(self, k: f32, caps: &[f32], prev_means: &[f32], means: &mut [f32]) -> &'a [f32] {
+    /// held around the cell, raised by as much as the light around it
+    /// brightened. Each cell's mean term goes to `means` and the largest
+    /// luminance the clamp leaves in it to `kept` (as far as each reaches):
+    /// the next frame's `prev_means` and, over the neighbourhood, `caps`.
+    pub fn finish_capped(self, k: f32, caps: &[f32], prev_means: &[f32], means: &mut [f32], kept: &mut [f32]) -> &'a [f32] {
         let n = self.thresholds.len();
         for (i, (s, m)) in self.sums.chunks_exact(CELL).zip(self.maxima.chunks_exact(CELL)).enumerate() {
             self.cell_sums[PAD + i] = s.iter().sum();
@@ -221,36 +222,32 @@ impl<'a> Thresholds<'a> {
             for ((c, b), (&v, &m)) in cap.iter_mut().zip(before.iter_mut()).zip(caps.iter().zip(prev_means).skip(i)) {
                 (*c, *b) = (v, m);
             }
-            // how much the light around brightened (1 where it did not or is unknown: NaN → 1)
-            let gain = (mean / f32x8::from(before)).fast_max(f32x8::ONE);
-            let t = f32x8::splat(k) * best[2].fast_min(f32x8::from(cap) * gain).fast_max(mean);
+            // the cap, raised by mean / before where the light around brightened;
+            // none where it was black and is lit now. Selects, not NaN
+            // propagation, decide every lane (`fast_min`/`fast_max` treat NaN
+            // differently on each ISA).
+            let (cap, before, inf) = (f32x8::from(cap), f32x8::from(before), f32x8::splat(f32::INFINITY));
+            let brighter = mean.simd_gt(before);
+            let limit = brighter.select(cap * (mean / before), cap);
+            let limit = (brighter & before.simd_le(zero)).select(inf, limit);
+            let limit = limit.simd_eq(limit).select(limit, inf);
+            let t = f32x8::splat(k) * best[2].fast_min(limit).fast_max(mean);
             for (d, v) in means.iter_mut().skip(i).zip(mean.to_array()) {
                 *d = v;
             }
             // a cell whose brightest sample is below its threshold clamps nothing:
             // +Inf lets `clamp_row` skip it without reading its samples
             let own = load(&maxima[PAD + i..PAD + i + CELL]);
+            // a sample above the threshold is scaled to it
+            for (d, v) in kept.iter_mut().skip(i).zip(own.fast_min(t).to_array()) {
+                *d = v;
+            }
             let none = own.simd_le(t) & own.simd_lt(f32x8::splat(LUMA_CAP));
             let t = none.select(f32x8::splat(f32::INFINITY), t).to_array();
             let end = (i + CELL).min(n);
             self.thresholds[i..end].copy_from_slice(&t[..end - i]);
         }
         self.thresholds
-    }
-}
-
-/// The largest luminance of each cell of a band of (clamped) planar rows
-/// `rgb` (`width` pixels each) into `maxima` ([`cells`] of the width), as
-/// [`Thresholds`] measures it (negative and non-finite samples count as 0).
-pub fn cell_maxima(rgb: &[[&[f32]; 3]], width: usize, maxima: &mut [f32]) {
-    maxima.fill(0.0);
-    for [r, g, b] in rgb {
-        for (x, ((r, g), b)) in r.iter().zip(g.iter()).zip(b.iter()).take(width).enumerate() {
-            let l = LUMA[0] * r + LUMA[1] * g + LUMA[2] * b;
-            if let (true, Some(m)) = (l.abs() <= f32::MAX, maxima.get_mut(x / CELL)) {
-                *m = m.max(l.min(LUMA_CAP));
-            }
-        }
     }
 }
 

@@ -25,9 +25,10 @@
 //!    deviations, per YCoCg channel) and blended with weight
 //!    `max(1/n, output_alpha)` for the new frame.
 //!
-//! Everything is per pixel, or reads a 3×3 neighbourhood of an image the step
-//! before wrote in full, so any split into row bands gives the same bits: the
-//! `_parallel` entries run bands over the caller's [`Executor`].
+//! Everything is per pixel, per band of [`fireflies::CELL`] rows (the firefly
+//! clamp), or reads a 3×3 neighbourhood of an image the step before wrote in
+//! full, so any split into bands of whole clamp bands gives the same bits: the
+//! `_parallel` entries run such bands over the caller's [`Executor`].
 //! State lives in a caller-owned [`History`] of two slots: a frame reads the
 //! slot the previous frame wrote and writes the other, so nothing is copied.
 
@@ -66,12 +67,13 @@ pub struct TemporalConfig {
     /// With the firefly clamp on: the third brightest cell of a cell's
     /// neighbourhood, the clamp's reference, counts at most this many times
     /// the brightest luminance the previous frame kept in the same
-    /// neighbourhood, so that outliers common enough to fill three cells of
-    /// one frame are still clamped (0 or ≥ 1; default 2; 0 turns it off).
-    /// The mean term of the reference is not capped, so light that brightens
-    /// as a whole passes; a bright detail that appears in a dark
-    /// neighbourhood is held to `2 k` times the previous frame's brightest
-    /// there, a factor that compounds each frame.
+    /// neighbourhood (at the same screen position), so that outliers common
+    /// enough to fill three cells of one frame are still clamped (0 or ≥ 1;
+    /// default 2; 0 turns it off). The cap rises with the neighbourhood's
+    /// mean, so light that brightens as a whole passes; a bright detail that
+    /// appears in an unchanged neighbourhood is held to `firefly_history · k`
+    /// times the previous frame's brightest there, a factor that compounds
+    /// each frame.
     pub firefly_history: f32,
 }
 
@@ -241,7 +243,7 @@ impl Reprojection {
         2 * self.slot_len()
     }
     /// f32 values of the scratch [`Reprojection::accumulate`] and
-    /// [`Reprojection::resolve`] share: 3 values per pixel and 21 rows.
+    /// [`Reprojection::resolve`] share: 3 values per pixel and a worker's rows.
     pub fn scratch_len(&self) -> usize {
         PIXEL_VALUES * self.plane() + self.rows_len()
     }
@@ -250,7 +252,7 @@ impl Reprojection {
         ROWS * self.width + fireflies::work_len(self.width) + fireflies::cells(self.width)
     }
     /// f32 values of the scratch of the `_parallel` entries with `workers`:
-    /// 3 values per pixel, 21 rows per worker and the run's bookkeeping.
+    /// 3 values per pixel, rows per worker and the run's bookkeeping.
     pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
         let runs = crate::parallel::TileRun::scratch_len(self.bands(workers), workers, self.rows_len())?;
         (PIXEL_VALUES * self.plane()).checked_add(runs)
@@ -292,8 +294,7 @@ impl Reprojection {
 
     /// The accumulated light of the frame as [`Reprojection::accumulate`]
     /// wrote it into the history's write slot, as a view the denoiser reads
-    /// (3 planar channels, rows [`Reprojection::history_len`]` / 2 / h`
-    /// values apart).
+    /// (3 channels, each channel's row `w` values after the previous one's).
     pub fn accumulated<'h>(&self, history: &'h mut History<'_>) -> Result<ImageView<'h>, Error> {
         let (w, h) = (self.width, self.height);
         let rec = self.record();
@@ -547,17 +548,12 @@ impl Reprojection {
                     t.add_row([&rgb[..w], &rgb[w..2 * w], &rgb[2 * w..]]);
                 }
                 let (caps, prev_means): (&[f32], &[f32]) = if capped { (caps, prev_means) } else { (&[], &[]) };
-                let th = t.finish_capped(k, caps, prev_means, means_out);
+                let th = t.finish_capped(k, caps, prev_means, means_out, maxima_out);
                 for rgb in light.chunks_exact_mut(3 * w).take(band_rows) {
                     let (r, gb) = rgb.split_at_mut(w);
                     let (g, b) = gb.split_at_mut(w);
                     c.clamped += fireflies::clamp_row([r, g, b], 0, th) as u64;
                 }
-                let mut band_rgb: [[&[f32]; 3]; CELL] = [[&[]; 3]; CELL];
-                for (d, rgb) in band_rgb.iter_mut().zip(light.chunks_exact(3 * w)) {
-                    *d = [&rgb[..w], &rgb[w..2 * w], &rgb[2 * w..]];
-                }
-                fireflies::cell_maxima(&band_rgb[..band_rows], w, maxima_out);
             } else {
                 // no clamp, no cap for the next frame
                 maxima_out.fill(f32::INFINITY);
