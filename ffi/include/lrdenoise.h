@@ -601,7 +601,7 @@ typedef struct LrdTemporalConfig {
    * With the firefly clamp on: the clamp's reference (the third brightest
    * cell of a cell's neighbourhood) counts at most this many times the
    * brightest luminance the previous frame kept around the cell; 0 or
-   * finite ≥ 1 (default 4; 0 turns it off).
+   * finite ≥ 1 (default 2; 0 turns it off).
    */
   float firefly_history;
 } LrdTemporalConfig;
