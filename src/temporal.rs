@@ -42,6 +42,8 @@ use crate::reproject::{bilinear_taps, rgb, ycocg};
 
 pub use crate::history::History;
 
+mod lanes;
+
 /// Settings of the temporal stage.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TemporalConfig {
@@ -183,6 +185,33 @@ struct Previous<'a> {
     cells: &'a [f32],
 }
 
+/// What step 1 reads for one row of pixels: the previous frame's records and
+/// the row's light (as read and clamped) and motion, each channel a plane of
+/// the row.
+struct Row<'a> {
+    y: usize,
+    read: &'a [f32],
+    raw: &'a [f32],
+    cur: &'a [f32],
+    mv: &'a [f32],
+    /// The firefly clamp is on (`cur` is the clamped `raw`).
+    clamped: bool,
+    has_history: bool,
+}
+
+/// What step 3 reads for one row `y`: the ring of rows `y - 1 ..= y + 1`
+/// (offsets of their slots, `rows` of them within the frame) and the
+/// reprojected previous output of the row (3 planes, NaN without history).
+struct ResolveRow<'a> {
+    ring: &'a [f32],
+    slots: [usize; 3],
+    rows: usize,
+    cur: usize,
+    prev: &'a [f32],
+    blend: bool,
+    clamp_negative: bool,
+}
+
 /// The temporal stage of one frame size and guide set.
 #[derive(Clone, Copy, Debug)]
 pub struct Reprojection {
@@ -192,19 +221,25 @@ pub struct Reprojection {
     normal: bool,
     position: bool,
     depth: bool,
+    /// Steps 1 and 3 on groups of 8 pixels where they qualify ([`lanes`]);
+    /// false: every pixel on its own (the reference the groups are tested against).
+    lanes: bool,
 }
 
 /// Values per pixel [`Reprojection::accumulate`] leaves for
 /// [`Reprojection::resolve`] in the caller's scratch: the previous output
-/// reprojected through the accepted taps (NaN in the first where none was).
+/// reprojected through the accepted taps (NaN where none was), row `y`,
+/// channel `c`, pixel `x` at `(3y + c) · w + x`.
 const PIXEL_VALUES: usize = 3;
 /// Rows of working space in the scratch (step 1: the raw and the clamped
 /// light of one band of [`fireflies::CELL`] rows and a row of motion; step
 /// 3 needs fewer), besides the clamp's [`fireflies::work_len`].
 const ROWS: usize = 6 * fireflies::CELL + 2;
-/// Rows of step 3's working space: a ring of 3 rows of 3-sums of YCoCg and
-/// their squares, and an output row.
-const RESOLVE_ROWS: usize = 21;
+/// Planes of a row in step 3's ring: the row's RGB, the horizontal 3-sums
+/// of its YCoCg and those of their squares.
+const RING_PLANES: usize = 9;
+/// Rows of step 3's working space: a ring of 3 rows, and an output row (3 planes).
+const RESOLVE_ROWS: usize = 3 * RING_PLANES + 3;
 
 impl Reprojection {
     /// The stage for `width × height` frames whose guides include those of
@@ -214,7 +249,14 @@ impl Reprojection {
         if width == 0 || height == 0 || width > crate::image::MAX_DIM || height > crate::image::MAX_DIM {
             return Err(Error::InvalidSize { arg: Arg::Output, width, height });
         }
-        Ok(Reprojection { cfg, width, height, normal: guides.normal, position: guides.position, depth: guides.depth })
+        Ok(Reprojection { cfg, width, height, normal: guides.normal, position: guides.position, depth: guides.depth, lanes: true })
+    }
+    /// The same stage with steps 1 and 3 run pixel by pixel: the reference
+    /// its 8-pixel groups are tested against (the same bits).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
+    #[allow(dead_code)]
+    fn per_pixel(self) -> Self {
+        Reprojection { lanes: false, ..self }
     }
     /// The settings.
     pub fn config(&self) -> &TemporalConfig {
@@ -517,12 +559,7 @@ impl Reprojection {
         let (caps, work) = rest.split_at_mut(nc);
         let capped = has_history && cfg.firefly_history > 0.0;
         let bad = Error::InvalidTile { index: 0, count: h };
-        let max_motion = MAX_MOTION_FRAMES * w.max(h) as f32;
         let mut c = Counts::default();
-        // fields of the guides in a record
-        let n_at = GUIDES;
-        let p_at = GUIDES + 3 * self.normal as usize;
-        let d_at = p_at + 3 * self.position as usize;
         for band in (y0..y0 + n_rows).step_by(CELL) {
             let band_rows = CELL.min(h - band);
             for (i, rgb) in raw.chunks_exact_mut(3 * w).take(band_rows).enumerate() {
@@ -588,96 +625,132 @@ impl Reprojection {
                     }
                     p += ch;
                 }
-                for (x, pv) in px_row.chunks_exact_mut(PIXEL_VALUES).enumerate() {
-                    // field `f` of this pixel's record
-                    let at = |f: usize| f * w + x;
-                    let rawc = [raw[x], raw[w + x], raw[2 * w + x]];
-                    let cur = [cur_row[x], cur_row[w + x], cur_row[2 * w + x]];
-                    let cur_ok = cur.iter().all(|v| v.is_finite());
-                    c.nonfinite += !cur_ok as u64;
-                    let kept = if inp.fireflies.is_some() { fireflies::kept(rawc, cur) } else { 1.0 };
-                    let (mx, my) = (mv[x], mv[w + x]);
-                    let motion_ok = mx.abs() <= max_motion && my.abs() <= max_motion; // false for NaN
-                    c.invalid_motion += (has_history && !motion_ok) as u64;
-                    let (px, py) = (x as f32 + mx, y as f32 + my);
-                    let (mut tw, mut n, mut prev) = (0f32, 0f32, [0f32; 3]);
-                    // the previous output through the accepted taps, for step 3
-                    let (mut ow, mut out) = (0f32, [0f32; 3]);
-                    if has_history && motion_ok {
-                        let g = |f: usize| out_row[at(f)];
-                        let depth = if self.depth { g(d_at).abs() } else { 1.0 };
-                        let plim = cfg.position_limit * depth;
-                        for (tx, ty, wt) in bilinear_taps(px, py) {
-                            if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
-                                continue;
-                            }
-                            // the tap's record row, and its field `f`
-                            let j = ty as usize * w * rec + tx as usize;
-                            let Some(trow) = read.get(j..j + (rec - 1) * w + 1) else { continue };
-                            let t = |f: usize| trow[f * w];
-                            let mut ok = true;
-                            if self.normal {
-                                let (a, b) = ([g(n_at), g(n_at + 1), g(n_at + 2)], [t(n_at), t(n_at + 1), t(n_at + 2)]);
-                                let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-                                let empty = |v: [f32; 3]| v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0;
-                                // (no geometry on both sides: sky continues sky)
-                                ok &= dot >= cfg.normal_limit || (empty(a) && empty(b));
-                            }
-                            if self.position {
-                                let d2: f32 = (0..3).map(|c| (t(p_at + c) - g(p_at + c)) * (t(p_at + c) - g(p_at + c))).sum();
-                                ok &= d2 <= plim * plim;
-                            } else if self.depth {
-                                let d = g(d_at);
-                                ok &= (t(d_at) - d).abs() <= cfg.depth_limit * d.abs();
-                            }
-                            let (pl, pn) = ([t(LIGHT), t(LIGHT + 1), t(LIGHT + 2)], t(COUNT));
-                            ok &= pl.iter().all(|v| v.is_finite()) && pn.is_finite() && pn >= 0.0;
-                            if ok {
-                                tw += wt;
-                                n += wt * pn;
-                                for ch in 0..3 {
-                                    prev[ch] += wt * pl[ch];
-                                }
-                                let po = [t(OUTPUT), t(OUTPUT + 1), t(OUTPUT + 2)];
-                                if po.iter().all(|v| v.is_finite()) {
-                                    ow += wt;
-                                    for ch in 0..3 {
-                                        out[ch] += wt * po[ch];
-                                    }
-                                }
-                            }
-                        }
+                let row = Row { y, read, raw, cur: cur_row, mv, clamped: inp.fireflies.is_some(), has_history };
+                let mut x = 0;
+                while x < w {
+                    // 8 pixels at once where their taps allow; the group's pixels one by one where not
+                    let group = if self.lanes { lanes::accumulate(self, &row, x, out_row, px_row) } else { None };
+                    if let Some(rejected) = group {
+                        c.rejected += rejected;
+                        x += lanes::LANES;
+                        continue;
                     }
-                    let (acc, count) = if tw > 0.0 {
-                        let n = n / tw;
-                        let inv = 1.0 / tw;
-                        let prev = [prev[0] * inv, prev[1] * inv, prev[2] * inv];
-                        if cur_ok {
-                            let count = (n + kept).min(cfg.max_history);
-                            let a = if count > 0.0 { (kept / count).max(kept / cfg.max_history) } else { 1.0 };
-                            (lerp3(prev, cur, a), count)
-                        } else {
-                            (prev, n) // a NaN/Inf sample is bridged with the history
-                        }
-                    } else {
-                        c.rejected += has_history as u64;
-                        // a NaN/Inf sample without history stays: the denoiser excludes it
-                        (cur, kept.max(1e-3))
-                    };
-                    for (ch, v) in acc.into_iter().enumerate() {
-                        out_row[at(LIGHT + ch)] = v;
+                    let end = (x + lanes::LANES).min(w);
+                    for x in x..end {
+                        self.accumulate_pixel(&row, x, out_row, px_row, &mut c);
                     }
-                    out_row[at(COUNT)] = count;
-                    if ow > 0.0 {
-                        let inv = 1.0 / ow;
-                        pv.copy_from_slice(&[out[0] * inv, out[1] * inv, out[2] * inv]);
-                    } else {
-                        pv[0] = f32::NAN;
-                    }
+                    x = end;
                 }
             }
         }
         Ok(c)
+    }
+
+    /// The record fields of the normal, the position and the depth (those the plan has).
+    fn guide_fields(&self) -> (usize, usize, usize) {
+        let p_at = GUIDES + 3 * self.normal as usize;
+        (GUIDES, p_at, p_at + 3 * self.position as usize)
+    }
+    /// Largest motion component taken as a motion vector, in pixels.
+    fn max_motion(&self) -> f32 {
+        MAX_MOTION_FRAMES * self.width.max(self.height) as f32
+    }
+
+    /// Step 1 for pixel `x` of a row: the reference the 8-pixel groups of
+    /// [`lanes::accumulate`] equal bit for bit. `out_row`: the row's record
+    /// (the current guides filled in), `px_row`: its per-pixel values.
+    fn accumulate_pixel(&self, r: &Row<'_>, x: usize, out_row: &mut [f32], px_row: &mut [f32], c: &mut Counts) {
+        let (w, h, rec, cfg) = (self.width, self.height, self.record(), &self.cfg);
+        let (n_at, p_at, d_at) = self.guide_fields();
+        // field `f` of this pixel's record
+        let at = |f: usize| f * w + x;
+        let rawc = [r.raw[x], r.raw[w + x], r.raw[2 * w + x]];
+        let cur = [r.cur[x], r.cur[w + x], r.cur[2 * w + x]];
+        let cur_ok = cur.iter().all(|v| v.is_finite());
+        c.nonfinite += !cur_ok as u64;
+        let kept = if r.clamped { fireflies::kept(rawc, cur) } else { 1.0 };
+        let (mx, my) = (r.mv[x], r.mv[w + x]);
+        let max_motion = self.max_motion();
+        let motion_ok = mx.abs() <= max_motion && my.abs() <= max_motion; // false for NaN
+        c.invalid_motion += (r.has_history && !motion_ok) as u64;
+        let (px, py) = (x as f32 + mx, r.y as f32 + my);
+        let (mut tw, mut n, mut prev) = (0f32, 0f32, [0f32; 3]);
+        // the previous output through the accepted taps, for step 3
+        let (mut ow, mut out) = (0f32, [0f32; 3]);
+        if r.has_history && motion_ok {
+            let g = |f: usize| out_row[at(f)];
+            let depth = if self.depth { g(d_at).abs() } else { 1.0 };
+            let plim = cfg.position_limit * depth;
+            for (tx, ty, wt) in bilinear_taps(px, py) {
+                if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
+                    continue;
+                }
+                // the tap's record row, and its field `f`
+                let j = ty as usize * w * rec + tx as usize;
+                let Some(trow) = r.read.get(j..j + (rec - 1) * w + 1) else { continue };
+                let t = |f: usize| trow[f * w];
+                let mut ok = true;
+                if self.normal {
+                    let (a, b) = ([g(n_at), g(n_at + 1), g(n_at + 2)], [t(n_at), t(n_at + 1), t(n_at + 2)]);
+                    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+                    let empty = |v: [f32; 3]| v[0] == 0.0 && v[1] == 0.0 && v[2] == 0.0;
+                    // (no geometry on both sides: sky continues sky)
+                    ok &= dot >= cfg.normal_limit || (empty(a) && empty(b));
+                }
+                if self.position {
+                    let d2: f32 = (0..3).map(|c| (t(p_at + c) - g(p_at + c)) * (t(p_at + c) - g(p_at + c))).sum();
+                    ok &= d2 <= plim * plim;
+                } else if self.depth {
+                    let d = g(d_at);
+                    ok &= (t(d_at) - d).abs() <= cfg.depth_limit * d.abs();
+                }
+                let (pl, pn) = ([t(LIGHT), t(LIGHT + 1), t(LIGHT + 2)], t(COUNT));
+                ok &= pl.iter().all(|v| v.is_finite()) && pn.is_finite() && pn >= 0.0;
+                if ok {
+                    tw += wt;
+                    n += wt * pn;
+                    for ch in 0..3 {
+                        prev[ch] += wt * pl[ch];
+                    }
+                    let po = [t(OUTPUT), t(OUTPUT + 1), t(OUTPUT + 2)];
+                    if po.iter().all(|v| v.is_finite()) {
+                        ow += wt;
+                        for ch in 0..3 {
+                            out[ch] += wt * po[ch];
+                        }
+                    }
+                }
+            }
+        }
+        let (acc, count) = if tw > 0.0 {
+            let n = n / tw;
+            let inv = 1.0 / tw;
+            let prev = [prev[0] * inv, prev[1] * inv, prev[2] * inv];
+            if cur_ok {
+                let count = (n + kept).min(cfg.max_history);
+                let a = if count > 0.0 { (kept / count).max(kept / cfg.max_history) } else { 1.0 };
+                (lerp3(prev, cur, a), count)
+            } else {
+                (prev, n) // a NaN/Inf sample is bridged with the history
+            }
+        } else {
+            c.rejected += r.has_history as u64;
+            // a NaN/Inf sample without history stays: the denoiser excludes it
+            (cur, kept.max(1e-3))
+        };
+        for (ch, v) in acc.into_iter().enumerate() {
+            out_row[at(LIGHT + ch)] = v;
+        }
+        out_row[at(COUNT)] = count;
+        let pv = if ow > 0.0 {
+            let inv = 1.0 / ow;
+            [out[0] * inv, out[1] * inv, out[2] * inv]
+        } else {
+            [f32::NAN; 3]
+        };
+        for (ch, v) in pv.into_iter().enumerate() {
+            px_row[ch * w + x] = v;
+        }
     }
 
     /// Step 3 for the whole frame: `current`, the denoiser's output of this
@@ -781,82 +854,118 @@ impl Reprojection {
         out: &mut ImageViewMut<'_>,
     ) -> Result<(), Error> {
         let (w, h) = (self.width, self.height);
-        let cfg = &self.cfg;
         let rec = self.record();
         let n_rows = write.len() / (w * rec);
         if y0 + n_rows > h || pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < RESOLVE_ROWS * w || out.height() < n_rows {
             return Err(Error::InvalidTile { index: y0, count: h });
         }
-        // RESOLVE_ROWS: a ring of 3 rows of horizontal 3-sums of YCoCg and of
-        // its square (6 values per pixel), then the output row (3 planes of a row)
-        let (ring, rest) = rows.split_at_mut(18 * w);
+        let (ring, rest) = rows.split_at_mut(3 * RING_PLANES * w);
         let out_row = &mut rest[..3 * w];
-        let hsums = |y: usize, dst: &mut [f32]| {
-            let v = |x: usize| {
-                let i = 3 * (y * w + x);
-                ycocg([current[i], current[i + 1], current[i + 2]])
-            };
-            let (mut a, mut b) = ([0f32; 3], v(0));
-            for x in 0..w {
-                let c = if x + 1 < w { v(x + 1) } else { [0.0; 3] };
-                let d = &mut dst[6 * x..6 * x + 6];
-                for ch in 0..3 {
-                    d[ch] = a[ch] + b[ch] + c[ch];
-                    d[3 + ch] = a[ch] * a[ch] + b[ch] * b[ch] + c[ch] * c[ch];
-                }
-                (a, b) = (b, c);
-            }
-        };
         if blend {
-            for y in y0.saturating_sub(1)..(y0 + 1).min(h) {
-                hsums(y, &mut ring[(y % 3) * 6 * w..(y % 3 + 1) * 6 * w]);
+            for y in y0.saturating_sub(1)..y0 + 1 {
+                self.resolve_ring_row(current, y, ring, out_row, true);
             }
         }
         for y in y0..y0 + n_rows {
-            if blend && y + 1 < h {
-                let slot = (y + 1) % 3;
-                hsums(y + 1, &mut ring[slot * 6 * w..(slot + 1) * 6 * w]);
+            if !blend {
+                self.resolve_ring_row(current, y, ring, out_row, false);
+            } else if y + 1 < h {
+                self.resolve_ring_row(current, y + 1, ring, out_row, true);
             }
+            let (ya, yb) = (y.saturating_sub(1), (y + 2).min(h));
+            let r = ResolveRow {
+                ring,
+                slots: [ya, ya + 1, yb - 1].map(|sy| (sy % 3) * RING_PLANES * w),
+                rows: yb - ya,
+                cur: (y % 3) * RING_PLANES * w,
+                prev: &pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES],
+                blend,
+                clamp_negative,
+            };
             let wrow = &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec];
-            let prow = &pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES];
-            for (x, pv) in prow.chunks_exact(PIXEL_VALUES).enumerate() {
-                let i = y * w + x;
-                let cur = [current[3 * i], current[3 * i + 1], current[3 * i + 2]];
-                let mut res = cur;
-                if blend && !pv[0].is_nan() {
-                    let (mut s1, mut s2) = ([0f32; 3], [0f32; 3]);
-                    let (ya, yb) = (y.saturating_sub(1), (y + 2).min(h));
-                    for sy in ya..yb {
-                        let d = &ring[(sy % 3) * 6 * w + 6 * x..(sy % 3) * 6 * w + 6 * x + 6];
-                        for ch in 0..3 {
-                            s1[ch] += d[ch];
-                            s2[ch] += d[3 + ch];
-                        }
-                    }
-                    let cols = (x + 2).min(w) - x.saturating_sub(1);
-                    let inv = 1.0 / ((yb - ya) * cols) as f32;
-                    let p = ycocg([pv[0], pv[1], pv[2]]);
-                    let mut clipped = [0f32; 3];
-                    for ch in 0..3 {
-                        let mu = s1[ch] * inv;
-                        let sd = libm::sqrtf((s2[ch] * inv - mu * mu).max(0.0));
-                        clipped[ch] = p[ch].max(mu - cfg.clip_gamma * sd).min(mu + cfg.clip_gamma * sd);
-                    }
-                    let n = wrow[COUNT * w + x];
-                    let a = if n > 0.0 { (1.0 / n).max(cfg.output_alpha).min(1.0) } else { 1.0 };
-                    res = lerp3(rgb(clipped), cur, a);
+            let mut x = 0;
+            while x < w {
+                if self.lanes && lanes::resolve(self, &r, x, wrow, out_row).is_some() {
+                    x += lanes::LANES;
+                    continue;
                 }
-                for ch in 0..3 {
-                    let v = if clamp_negative { res[ch].max(0.0) } else { res[ch] };
-                    let v = if v.is_finite() { v } else { 0.0 };
-                    wrow[(OUTPUT + ch) * w + x] = v;
-                    out_row[ch * w + x] = v;
+                let end = if x == 0 { 1 } else { (x + lanes::LANES).min(w) };
+                for x in x..end {
+                    self.resolve_pixel(&r, x, wrow, out_row);
                 }
+                x = end;
             }
             out.write_row_n(y - y0, 0, [&out_row[..w], &out_row[w..2 * w], &out_row[2 * w..]])
                 .ok_or(Error::InvalidTile { index: y, count: h })?;
         }
         Ok(())
+    }
+
+    /// Fills the ring slot of frame row `y`: the row of `current` (RGB
+    /// interleaved) as 3 planes and, with `sums`, the horizontal 3-sums of its
+    /// YCoCg and of their squares (`tmp`: 3 rows of working space).
+    fn resolve_ring_row(&self, current: &[f32], y: usize, ring: &mut [f32], tmp: &mut [f32], sums: bool) {
+        let w = self.width;
+        let slot = &mut ring[(y % 3) * RING_PLANES * w..(y % 3 + 1) * RING_PLANES * w];
+        let (rgb_planes, sum_planes) = slot.split_at_mut(3 * w);
+        let src = &current[3 * y * w..3 * (y + 1) * w];
+        for (x, px) in src.chunks_exact(3).enumerate() {
+            for ch in 0..3 {
+                rgb_planes[ch * w + x] = px[ch];
+            }
+        }
+        if !sums {
+            return;
+        }
+        for x in 0..w {
+            let c = ycocg([rgb_planes[x], rgb_planes[w + x], rgb_planes[2 * w + x]]);
+            for ch in 0..3 {
+                tmp[ch * w + x] = c[ch];
+            }
+        }
+        let (s1, s2) = sum_planes.split_at_mut(3 * w);
+        for ch in 0..3 {
+            let v = &tmp[ch * w..(ch + 1) * w];
+            let (s1, s2) = (&mut s1[ch * w..(ch + 1) * w], &mut s2[ch * w..(ch + 1) * w]);
+            lanes::three_sums(v, s1, s2);
+        }
+    }
+
+    /// Step 3 for pixel `x` of a row: the reference the 8-pixel groups of
+    /// [`lanes::resolve`] equal bit for bit. Writes the pixel's output into
+    /// the record row `wrow` and into `out_row` (3 planes).
+    fn resolve_pixel(&self, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) {
+        let (w, cfg) = (self.width, &self.cfg);
+        let plane = |base: usize, p: usize| r.ring[base + p * w + x];
+        let cur = [plane(r.cur, 0), plane(r.cur, 1), plane(r.cur, 2)];
+        let mut res = cur;
+        if r.blend && !r.prev[x].is_nan() {
+            let (mut s1, mut s2) = ([0f32; 3], [0f32; 3]);
+            for &slot in &r.slots[..r.rows] {
+                for ch in 0..3 {
+                    s1[ch] += plane(slot, 3 + ch);
+                    s2[ch] += plane(slot, 6 + ch);
+                }
+            }
+            let cols = (x + 2).min(w) - x.saturating_sub(1);
+            let inv = 1.0 / (r.rows * cols) as f32;
+            let p = ycocg([r.prev[x], r.prev[w + x], r.prev[2 * w + x]]);
+            let mut clipped = [0f32; 3];
+            for ch in 0..3 {
+                let mu = s1[ch] * inv;
+                let sd = libm::sqrtf((s2[ch] * inv - mu * mu).max(0.0));
+                clipped[ch] = p[ch].max(mu - cfg.clip_gamma * sd).min(mu + cfg.clip_gamma * sd);
+            }
+            let n = wrow[COUNT * w + x];
+            let a = if n > 0.0 { (1.0 / n).max(cfg.output_alpha).min(1.0) } else { 1.0 };
+            res = lerp3(rgb(clipped), cur, a);
+        }
+        for ch in 0..3 {
+            let v = if r.clamp_negative { res[ch].max(0.0) } else { res[ch] };
+            let v = if v.is_finite() { v } else { 0.0 };
+            wrow[(OUTPUT + ch) * w + x] = v;
+            out_row[ch * w + x] = v;
+        }
     }
 }
 

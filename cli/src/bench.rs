@@ -39,6 +39,13 @@ pub fn bench(
         println!("GPU adapter: {}; times include upload and readback", gpu.adapter_name());
     }
     let mut out = vec![0f32; w * h * 3];
+    if let Method::Temporal(_) = &b.method {
+        // time a frame with a history (the first frame of a sequence has none
+        // and skips the reprojection): every timed run restarts from here
+        for _ in 0..2 {
+            b.method.run(&inputs, &mut out)?;
+        }
+    }
     let (med, all) = time_method(&mut b.method, &inputs, &mut out, runs.max(5))?;
     if let Method::FlrGpu { .. } = &b.method {
         gpu_pass_times(&mut b.method, &inputs, &mut out, runs.max(5))?;

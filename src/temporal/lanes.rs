@@ -1,0 +1,239 @@
+//! Steps 1 and 3 of the temporal stage on groups of 8 pixels: the arithmetic
+//! of the per-pixel code in [`super`], in the same order, so that both give
+//! the same bits (`tests/temporal.rs` holds them to it). A group that does
+//! not qualify (a tap outside the frame, taps at different offsets, NaN/Inf
+//! light or motion) returns `None` and its pixels run one by one.
+
+use super::{Reprojection, ResolveRow, Row, COUNT, LIGHT, OUTPUT};
+use crate::kernels::LUMA;
+use crate::reproject::floor;
+use wide::f32x8;
+
+/// Pixels per group.
+pub(super) const LANES: usize = 8;
+
+/// `s[i..i + 8]`.
+#[inline(always)]
+fn load(s: &[f32], i: usize) -> Option<f32x8> {
+    let a: [f32; LANES] = s.get(i..i + LANES)?.try_into().ok()?;
+    Some(f32x8::from(a))
+}
+
+/// `s[i..i + 8] = v`.
+#[inline(always)]
+fn store(s: &mut [f32], i: usize, v: f32x8) -> Option<()> {
+    s.get_mut(i..i + LANES)?.copy_from_slice(&v.to_array());
+    Some(())
+}
+
+/// All lanes finite.
+#[inline(always)]
+fn finite(v: &[f32x8]) -> f32x8 {
+    v.iter().fold(f32x8::splat(f32::from_bits(u32::MAX)), |m, v| m & v.is_finite())
+}
+
+/// Step 1 ([`Reprojection::accumulate_pixel`]) for pixels `x..x + 8` of a
+/// row whose 4 taps per pixel lie inside the frame at one common offset (so
+/// each tap's fields are 8 consecutive values of the previous records).
+/// Returns the count of pixels without history.
+#[inline]
+pub(super) fn accumulate(st: &Reprojection, r: &Row<'_>, x: usize, out_row: &mut [f32], px_row: &mut [f32]) -> Option<u64> {
+    let (w, h, rec, cfg) = (st.width, st.height, st.record(), &st.cfg);
+    if !r.has_history || x + LANES > w {
+        return None;
+    }
+    let (mx, my) = (load(r.mv, x)?, load(r.mv, w + x)?);
+    let lim = f32x8::splat(st.max_motion());
+    if !(mx.abs().simd_le(lim) & my.abs().simd_le(lim)).all() {
+        return None;
+    }
+    let raw = [load(r.raw, x)?, load(r.raw, w + x)?, load(r.raw, 2 * w + x)?];
+    let cur = [load(r.cur, x)?, load(r.cur, w + x)?, load(r.cur, 2 * w + x)?];
+    if !(finite(&raw) & finite(&cur)).all() {
+        return None;
+    }
+    // the taps: (ix, iy) of lane l at (x + l + dx, iy)
+    let xs = f32x8::from(core::array::from_fn::<f32, LANES, _>(|l| (x + l) as f32));
+    let (px, py) = (xs + mx, f32x8::splat(r.y as f32) + my);
+    let (pxa, pya) = (px.to_array(), py.to_array());
+    let fy = floor(pya[0]);
+    let dx = floor(pxa[0]) as i64 - x as i64;
+    let mut fx = [0f32; LANES];
+    for l in 0..LANES {
+        fx[l] = floor(pxa[l]);
+        if fx[l] as i64 - (x + l) as i64 != dx || floor(pya[l]) != fy {
+            return None;
+        }
+    }
+    let (bx, iy) = (x as i64 + dx, fy as i64);
+    if bx < 0 || bx + LANES as i64 >= w as i64 || iy < 0 || iy + 1 >= h as i64 {
+        return None;
+    }
+    let (bx, iy) = (bx as usize, iy as usize);
+    let one = f32x8::ONE;
+    let (ax, ay) = (px - f32x8::from(fx), py - f32x8::splat(fy));
+    let taps = [(bx, iy, (one - ax) * (one - ay)), (bx + 1, iy, ax * (one - ay)), (bx, iy + 1, (one - ax) * ay), (bx + 1, iy + 1, ax * ay)];
+    let (n_at, p_at, d_at) = st.guide_fields();
+    let g = |f: usize| load(out_row, f * w + x);
+    let zero = f32x8::ZERO;
+    let empty = |v: &[f32x8; 3]| v[0].simd_eq(zero) & v[1].simd_eq(zero) & v[2].simd_eq(zero);
+    let normal = if st.normal { [g(n_at)?, g(n_at + 1)?, g(n_at + 2)?] } else { [zero; 3] };
+    let position = if st.position { [g(p_at)?, g(p_at + 1)?, g(p_at + 2)?] } else { [zero; 3] };
+    let d = if st.depth { g(d_at)? } else { zero };
+    let depth = if st.depth { d.abs() } else { one };
+    let plim = f32x8::splat(cfg.position_limit) * depth;
+    let (mut tw, mut n, mut prev) = (zero, zero, [zero; 3]);
+    let (mut ow, mut out) = (zero, [zero; 3]);
+    for (tx, ty, wt) in taps {
+        let j = ty * w * rec + tx;
+        let t = |f: usize| load(r.read, j + f * w);
+        let mut ok = wt.simd_gt(zero);
+        if st.normal {
+            let b = [t(n_at)?, t(n_at + 1)?, t(n_at + 2)?];
+            let dot = normal[0] * b[0] + normal[1] * b[1] + normal[2] * b[2];
+            ok &= dot.simd_ge(f32x8::splat(cfg.normal_limit)) | (empty(&normal) & empty(&b));
+        }
+        if st.position {
+            let e = [t(p_at)? - position[0], t(p_at + 1)? - position[1], t(p_at + 2)? - position[2]];
+            ok &= (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).simd_le(plim * plim);
+        } else if st.depth {
+            ok &= (t(d_at)? - d).abs().simd_le(f32x8::splat(cfg.depth_limit) * d.abs());
+        }
+        let (pl, pn) = ([t(LIGHT)?, t(LIGHT + 1)?, t(LIGHT + 2)?], t(COUNT)?);
+        ok &= finite(&pl) & pn.is_finite() & pn.simd_ge(zero);
+        // a rejected tap adds +0, which leaves these sums (never -0) as they are
+        tw += ok.select(wt, zero);
+        n += ok.select(wt * pn, zero);
+        for ch in 0..3 {
+            prev[ch] += ok.select(wt * pl[ch], zero);
+        }
+        let po = [t(OUTPUT)?, t(OUTPUT + 1)?, t(OUTPUT + 2)?];
+        let ok = ok & finite(&po);
+        ow += ok.select(wt, zero);
+        for ch in 0..3 {
+            out[ch] += ok.select(wt * po[ch], zero);
+        }
+    }
+    let kept = if r.clamped { kept(raw, cur) } else { one };
+    let max_history = f32x8::splat(cfg.max_history);
+    let has = tw.simd_gt(zero);
+    let (nn, inv) = (n / tw, one / tw);
+    let count = (nn + kept).min(max_history);
+    let a = count.simd_gt(zero).select((kept / count).max(kept / max_history), one);
+    let count = has.select(count, kept.max(f32x8::splat(1e-3)));
+    for ch in 0..3 {
+        let old = prev[ch] * inv;
+        store(out_row, (LIGHT + ch) * w + x, has.select(old + a * (cur[ch] - old), cur[ch]))?;
+    }
+    store(out_row, COUNT * w + x, count)?;
+    let (seen, inv) = (ow.simd_gt(zero), one / ow);
+    for (ch, o) in out.into_iter().enumerate() {
+        store(px_row, ch * w + x, seen.select(o * inv, f32x8::splat(f32::NAN)))?;
+    }
+    Some((!has.to_bitmask() & 0xff).count_ones() as u64)
+}
+
+/// [`crate::fireflies::kept`] of finite samples.
+#[inline(always)]
+fn kept(raw: [f32x8; 3], clamped: [f32x8; 3]) -> f32x8 {
+    let l = |p: [f32x8; 3]| f32x8::splat(LUMA[0]) * p[0] + f32x8::splat(LUMA[1]) * p[1] + f32x8::splat(LUMA[2]) * p[2];
+    let (lr, lc) = (l(raw), l(clamped));
+    let lowered = lr.simd_gt(lc) & lr.abs().simd_le(f32x8::splat(f32::MAX)) & lc.simd_ge(f32x8::ZERO);
+    // lr > lc ≥ 0: the ratio is in [0, 1] already (the scalar code's clamp keeps it)
+    lowered.select(lc / lr, f32x8::ONE)
+}
+
+/// Horizontal 3-sums of `v` and of its squares (0 beyond the ends), in the
+/// order `(a + b) + c`.
+pub(super) fn three_sums(v: &[f32], s1: &mut [f32], s2: &mut [f32]) {
+    let w = v.len().min(s1.len()).min(s2.len());
+    let one = |x: usize, s1: &mut [f32], s2: &mut [f32]| {
+        let (a, b, c) = (if x > 0 { v[x - 1] } else { 0.0 }, v[x], if x + 1 < w { v[x + 1] } else { 0.0 });
+        s1[x] = a + b + c;
+        s2[x] = a * a + b * b + c * c;
+    };
+    if w == 0 {
+        return;
+    }
+    one(0, s1, s2);
+    let mut x = 1;
+    while x + LANES < w {
+        if let (Some(a), Some(b), Some(c)) = (load(v, x - 1), load(v, x), load(v, x + 1)) {
+            store(s1, x, a + b + c);
+            store(s2, x, a * a + b * b + c * c);
+        }
+        x += LANES;
+    }
+    for x in x..w {
+        one(x, s1, s2);
+    }
+}
+
+/// RGB → YCoCg ([`crate::reproject::ycocg`]).
+#[inline(always)]
+fn ycocg(c: [f32x8; 3]) -> [f32x8; 3] {
+    let two = f32x8::splat(2.0);
+    [c[0] + two * c[1] + c[2], two * c[0] - two * c[2], -c[0] + two * c[1] - c[2]]
+}
+
+/// YCoCg → RGB ([`crate::reproject::rgb`]).
+#[inline(always)]
+fn rgb(c: [f32x8; 3]) -> [f32x8; 3] {
+    let q = f32x8::splat(0.25);
+    [q * (c[0] + c[1] - c[2]), q * (c[0] + c[2]), q * (c[0] - c[1] - c[2])]
+}
+
+/// Step 3 ([`Reprojection::resolve_pixel`]) for pixels `x..x + 8` of a row,
+/// none of them in the first or last column (their clip windows are 3 wide).
+#[inline]
+pub(super) fn resolve(st: &Reprojection, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) -> Option<()> {
+    let (w, cfg) = (st.width, &st.cfg);
+    if x == 0 || x + LANES >= w {
+        return None;
+    }
+    let plane = |base: usize, p: usize| load(r.ring, base + p * w + x);
+    let cur = [plane(r.cur, 0)?, plane(r.cur, 1)?, plane(r.cur, 2)?];
+    let mut res = cur;
+    let zero = f32x8::ZERO;
+    if r.blend {
+        let pv = [load(r.prev, x)?, load(r.prev, w + x)?, load(r.prev, 2 * w + x)?];
+        let blends = !pv[0].is_nan();
+        if blends.any() {
+            let (mut s1, mut s2) = ([zero; 3], [zero; 3]);
+            for &slot in r.slots.get(..r.rows)? {
+                for ch in 0..3 {
+                    s1[ch] += plane(slot, 3 + ch)?;
+                    s2[ch] += plane(slot, 6 + ch)?;
+                }
+            }
+            let p = ycocg(pv);
+            // NaN/Inf in the statistics: the pixels one by one (f32::max and
+            // min treat NaN as this crate's SIMD does not)
+            if (blends & !(finite(&s1) & finite(&s2) & finite(&p))).any() {
+                return None;
+            }
+            let inv = f32x8::splat(1.0 / (r.rows * 3) as f32);
+            let gamma = f32x8::splat(cfg.clip_gamma);
+            let mut clipped = [zero; 3];
+            for ch in 0..3 {
+                let mu = s1[ch] * inv;
+                let sd = (s2[ch] * inv - mu * mu).max(zero).sqrt();
+                clipped[ch] = p[ch].max(mu - gamma * sd).min(mu + gamma * sd);
+            }
+            let n = load(wrow, COUNT * w + x)?;
+            let one = f32x8::ONE;
+            let a = n.simd_gt(zero).select((one / n).max(f32x8::splat(cfg.output_alpha)).min(one), one);
+            let old = rgb(clipped);
+            for ch in 0..3 {
+                res[ch] = blends.select(old[ch] + a * (cur[ch] - old[ch]), cur[ch]);
+            }
+        }
+    }
+    for (ch, v) in res.into_iter().enumerate() {
+        let v = if r.clamp_negative { v.max(zero) } else { v };
+        let v = v.is_finite().select(v, zero);
+        store(wrow, (OUTPUT + ch) * w + x, v)?;
+        store(out_row, ch * w + x, v)?;
+    }
+    Some(())
+}
