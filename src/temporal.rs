@@ -221,7 +221,7 @@ pub struct Reprojection {
     normal: bool,
     position: bool,
     depth: bool,
-    /// Steps 1 and 3 on groups of 8 pixels where they qualify ([`lanes`]);
+    /// Steps 1 and 3 on groups of pixels where they qualify ([`lanes`]);
     /// false: every pixel on its own (the reference the groups are tested against).
     lanes: bool,
 }
@@ -252,7 +252,7 @@ impl Reprojection {
         Ok(Reprojection { cfg, width, height, normal: guides.normal, position: guides.position, depth: guides.depth, lanes: true })
     }
     /// The same stage with steps 1 and 3 run pixel by pixel: the reference
-    /// its 8-pixel groups are tested against (the same bits).
+    /// its pixel groups are tested against (the same bits).
     #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[allow(dead_code)]
     fn per_pixel(self) -> Self {
@@ -628,7 +628,7 @@ impl Reprojection {
                 let row = Row { y, read, raw, cur: cur_row, mv, clamped: inp.fireflies.is_some(), has_history };
                 let mut x = 0;
                 while x < w {
-                    // 8 pixels at once where their taps allow; the group's pixels one by one where not
+                    // a group of pixels at once where their taps allow; the group's pixels one by one where not
                     let group = if self.lanes { lanes::accumulate(self, &row, x, out_row, px_row) } else { None };
                     if let Some(rejected) = group {
                         c.rejected += rejected;
@@ -656,7 +656,7 @@ impl Reprojection {
         MAX_MOTION_FRAMES * self.width.max(self.height) as f32
     }
 
-    /// Step 1 for pixel `x` of a row: the reference the 8-pixel groups of
+    /// Step 1 for pixel `x` of a row: the reference the pixel groups of
     /// [`lanes::accumulate`] equal bit for bit. `out_row`: the row's record
     /// (the current guides filled in), `px_row`: its per-pixel values.
     fn accumulate_pixel(&self, r: &Row<'_>, x: usize, out_row: &mut [f32], px_row: &mut [f32], c: &mut Counts) {
@@ -931,7 +931,7 @@ impl Reprojection {
         }
     }
 
-    /// Step 3 for pixel `x` of a row: the reference the 8-pixel groups of
+    /// Step 3 for pixel `x` of a row: the reference the pixel groups of
     /// [`lanes::resolve`] equal bit for bit. Writes the pixel's output into
     /// the record row `wrow` and into `out_row` (3 planes).
     fn resolve_pixel(&self, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) {

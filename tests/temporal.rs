@@ -358,13 +358,13 @@ fn parallel_equals_one_thread() {
     }
 }
 
-/// Steps 1 and 3 on groups of 8 pixels give the bits of the per-pixel
+/// Steps 1 and 3 on groups of pixels (SIMD lanes) give the bits of the per-pixel
 /// reference (`Reprojection::per_pixel`): awkward widths, motion that moves a
 /// group as one, pixel by pixel, and out of the frame, NaN/Inf light and
 /// motion, sky (no normal), with and without the firefly clamp, for each set
 /// of rejection guides.
 #[test]
-fn groups_of_8_pixels_equal_the_per_pixel_reference() {
+fn pixel_groups_equal_the_per_pixel_reference() {
     let sets = [
         GuideSet::NORMAL_DEPTH,
         GuideSet { position: true, ..GuideSet::NORMAL_DEPTH },
