@@ -37,10 +37,17 @@ fn store(s: &mut [f32], i: usize, v: V) -> Option<()> {
     Some(())
 }
 
-/// All lanes finite.
+/// The lanes where every value of `v` is finite: `0 · v` is ±0 for a finite
+/// value and NaN for NaN/±Inf, and a sum with a NaN is NaN.
 #[inline(always)]
 fn finite(v: &[V]) -> V {
-    v.iter().fold(V::splat(f32::from_bits(u32::MAX)), |m, v| m & v.is_finite())
+    v.iter().fold(V::ZERO, |s, v| s + *v * V::ZERO).simd_eq(V::ZERO)
+}
+
+/// `v` where `mask` is set, +0 elsewhere (a `select` against zero in one instruction).
+#[inline(always)]
+fn keep(mask: V, v: V) -> V {
+    v & mask
 }
 
 /// Step 1 ([`Reprojection::accumulate_pixel`]) for pixels `x..x + LANES` of a
@@ -109,18 +116,18 @@ pub(super) fn accumulate(st: &Reprojection, r: &Row<'_>, x: usize, out_row: &mut
             ok &= (t(d_at)? - d).abs().simd_le(V::splat(cfg.depth_limit) * d.abs());
         }
         let (pl, pn) = ([t(LIGHT)?, t(LIGHT + 1)?, t(LIGHT + 2)?], t(COUNT)?);
-        ok &= finite(&pl) & pn.is_finite() & pn.simd_ge(zero);
+        ok &= finite(&[pl[0], pl[1], pl[2], pn]) & pn.simd_ge(zero);
         // a rejected tap adds +0, which leaves these sums (never -0) as they are
-        tw += ok.select(wt, zero);
-        n += ok.select(wt * pn, zero);
+        tw += keep(ok, wt);
+        n += keep(ok, wt * pn);
         for ch in 0..3 {
-            prev[ch] += ok.select(wt * pl[ch], zero);
+            prev[ch] += keep(ok, wt * pl[ch]);
         }
         let po = [t(OUTPUT)?, t(OUTPUT + 1)?, t(OUTPUT + 2)?];
         let ok = ok & finite(&po);
-        ow += ok.select(wt, zero);
+        ow += keep(ok, wt);
         for ch in 0..3 {
-            out[ch] += ok.select(wt * po[ch], zero);
+            out[ch] += keep(ok, wt * po[ch]);
         }
     }
     let kept = if r.clamped { kept(raw, cur) } else { one };
