@@ -65,8 +65,9 @@ pub fn bench(
         let bytes = packed_bytes(&inputs, &set, planar);
         let copy = memcpy_median(bytes, all.len());
         println!(
-            "baseline, same run: memcpy of the {:.1} MB one call must at least move (each input layer read once, the RGB output written once; one thread): median {copy:.3} ms; {method} takes {:.1}x that",
+            "baseline, same run: memcpy of the {:.1} MB one call must at least move (each input layer read once, the RGB output written once{}; one thread): median {copy:.3} ms; {method} takes {:.1}x that",
             bytes as f64 / 1e6,
+            if let Method::Temporal(_) = &b.method { ", the history read and written" } else { "" },
             med / copy
         );
     }

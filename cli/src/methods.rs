@@ -606,9 +606,9 @@ pub struct Built {
     pub label: String,
     pub flags: String,
     /// Bytes one call must at least move: every f32 input layer it reads,
-    /// once, and the f32 RGB output, once (`lrd bench`'s memory-copy
-    /// baseline). `None` where that is not the whole story: the temporal
-    /// pipelines (their history) and the GPU path (upload and readback).
+    /// once, and the f32 RGB output, once; the temporal pipelines also read
+    /// the motion and one history slot and write the other (`lrd bench`'s
+    /// memory-copy baseline). `None` for the GPU path (upload and readback).
     pub min_bytes: Option<usize>,
 }
 
@@ -616,6 +616,12 @@ pub struct Built {
 /// `noisy_px` pixels and `guide_channels` f32 guide values per output pixel.
 fn one_pass_bytes(w: usize, h: usize, noisy_px: usize, guide_channels: usize) -> usize {
     4 * (3 * noisy_px + (guide_channels + 3) * w * h)
+}
+
+/// [`Built::min_bytes`] of a temporal pipeline: a single frame's, the motion
+/// (2 values per pixel), and its history's two slots (one read, one written).
+fn temporal_bytes(w: usize, h: usize, guide_channels: usize, r: &TemporalRunner) -> usize {
+    one_pass_bytes(w, h, w * h, guide_channels) + 4 * (2 * w * h + r.history_len())
 }
 
 impl Method {
@@ -655,8 +661,9 @@ impl Method {
                     flags += &format!(" --history {} --output-alpha {} --clip-gamma {}", t.max_history, t.output_alpha, t.clip_gamma);
                 }
                 (label, flags) = firefly_history_label(label, flags, temporal.firefly_history);
-                let method = Method::Temporal(Box::new(TemporalRunner::flr(cfg, temporal, w, h, threads)?));
-                Ok(Built { method, label, flags, min_bytes: None })
+                let runner = TemporalRunner::flr(cfg, temporal, w, h, threads)?;
+                let min_bytes = Some(temporal_bytes(w, h, cfg.guides.channels(), &runner));
+                Ok(Built { method: Method::Temporal(Box::new(runner)), label, flags, min_bytes })
             }
             "flnr" => {
                 a.only_for(Family::Flnr)?;
@@ -685,18 +692,18 @@ impl Method {
             "walr" | "walr-temporal" => {
                 let cfg = walr_config(a, inputs)?;
                 let (label, flags) = walr_flags(name, &cfg);
-                let min_bytes = (name == "walr").then(|| one_pass_bytes(w, h, w * h, cfg.guides.channels()));
-                let method = if name == "walr" {
-                    Method::Walr(Box::new(WalrRunner::new(cfg, w, h, threads)?))
+                let (method, min_bytes) = if name == "walr" {
+                    (Method::Walr(Box::new(WalrRunner::new(cfg, w, h, threads)?)), one_pass_bytes(w, h, w * h, cfg.guides.channels()))
                 } else {
-                    Method::Temporal(Box::new(TemporalRunner::walr(cfg, w, h)?))
+                    let runner = TemporalRunner::walr(cfg, w, h)?;
+                    let bytes = temporal_bytes(w, h, cfg.guides.channels(), &runner);
+                    (Method::Temporal(Box::new(runner)), bytes)
                 };
-                Ok(Built { method, label, flags, min_bytes })
+                Ok(Built { method, label, flags, min_bytes: Some(min_bytes) })
             }
             _ => {
                 let cfg = bmfr_config(a, inputs)?;
                 let temporal = name == "bmfr-temporal";
-                let min_bytes = (!temporal).then(|| one_pass_bytes(w, h, w * h, cfg.guides.channels()));
                 let mut label = format!("{name} {} b{}", short_guides(&cfg.guides), cfg.block);
                 let mut flags = format!("--method {name} --guides {} --block {}", guides_string(&cfg.guides), cfg.block);
                 if cfg.shrinkage != BmfrConfig::default().shrinkage {
@@ -710,12 +717,14 @@ impl Method {
                 if temporal {
                     (label, flags) = firefly_history_label(label, flags, cfg.temporal.firefly_history);
                 }
-                let method = if temporal {
-                    Method::Temporal(Box::new(TemporalRunner::new(cfg, w, h)?))
+                let (method, min_bytes) = if temporal {
+                    let runner = TemporalRunner::new(cfg, w, h)?;
+                    let bytes = temporal_bytes(w, h, cfg.guides.channels(), &runner);
+                    (Method::Temporal(Box::new(runner)), bytes)
                 } else {
-                    Method::Bmfr(Box::new(BmfrRunner::new(cfg, w, h, threads)?))
+                    (Method::Bmfr(Box::new(BmfrRunner::new(cfg, w, h, threads)?)), one_pass_bytes(w, h, w * h, cfg.guides.channels()))
                 };
-                Ok(Built { method, label, flags, min_bytes })
+                Ok(Built { method, label, flags, min_bytes: Some(min_bytes) })
             }
         }
     }

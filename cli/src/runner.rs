@@ -465,6 +465,10 @@ impl TemporalRunner {
     fn with(scratch: usize, history: usize, pipeline: Pipeline) -> Self {
         TemporalRunner { scratch: vec![0f32; scratch], history: vec![0f32; history], pipeline, frames: 0, saved: None }
     }
+    /// f32 values of the history (both slots).
+    pub fn history_len(&self) -> usize {
+        self.history.len()
+    }
     pub fn save(&mut self) {
         self.saved = Some((self.history.clone(), self.frames));
     }
