@@ -2,8 +2,9 @@
 //! (`Reprojection::accumulate`, with the firefly clamp) and step 3
 //! (`Reprojection::resolve`) on a frame with a history, a quarter-pixel pan
 //! (every pixel reprojects through 4 taps), normal + depth, one thread; the
-//! pixel groups against the per-pixel reference, alternated; minimum and
-//! median of RUNS (default 15) each.
+//! pixel groups in `wide`'s lanes and in AVX2's (where the CPU has it)
+//! against the per-pixel reference, alternated; minimum and median of RUNS
+//! (default 15) each.
 //! `cargo bench --bench temporal_stage [-- WIDTH HEIGHT [RUNS]]`
 use lrdenoise::temporal::{History, Inputs, Reprojection, TemporalConfig};
 use lrdenoise::*;
@@ -30,7 +31,12 @@ fn main() {
         motion: Some(ImageView::interleaved(&motion, w, h, 2).unwrap()),
     };
     let fast = Reprojection::new(TemporalConfig::default(), GuideSet::NORMAL_DEPTH, w, h).unwrap();
-    let stages = [("pixel groups", fast), ("per pixel", fast.per_pixel())];
+    let mut stages = vec![("per pixel", fast.per_pixel())];
+    for (name, isa) in [("portable lanes", isa::Isa::Portable), ("AVX2 lanes", isa::Isa::Avx2Fma)] {
+        if let Some(st) = fast.with_isa(isa) {
+            stages.push((name, st));
+        }
+    }
     let mut hist = vec![0f32; fast.history_len()];
     let mut scratch = vec![0f32; fast.scratch_len()];
     let mut out = vec![0f32; 3 * n];
@@ -64,6 +70,6 @@ fn main() {
     println!("temporal stage {w}x{h}, one thread, {runs} runs: min / median ms");
     for ((name, _), (a, r)) in stages.iter().zip(times.iter_mut()) {
         let ((amin, amed), (rmin, rmed)) = (stat(a), stat(r));
-        println!("{name:>12}: step 1 {amin:.2} / {amed:.2}, step 3 {rmin:.2} / {rmed:.2}");
+        println!("{name:>14}: step 1 {amin:.2} / {amed:.2}, step 3 {rmin:.2} / {rmed:.2}");
     }
 }

@@ -36,6 +36,7 @@ use crate::error::{Arg, Error};
 use crate::fireflies;
 use crate::guides::{GuideSet, Guides};
 use crate::image::{ImageView, ImageViewMut, RowBands};
+use crate::isa::Isa;
 use crate::parallel::{run_tiles, Bands, Executor};
 use crate::report::Report;
 use crate::reproject::{bilinear_taps, rgb, ycocg};
@@ -221,9 +222,10 @@ pub struct Reprojection {
     normal: bool,
     position: bool,
     depth: bool,
-    /// Steps 1 and 3 on groups of pixels where they qualify ([`lanes`]);
-    /// false: every pixel on its own (the reference the groups are tested against).
-    lanes: bool,
+    /// Steps 1 and 3 on groups of pixels in these lanes where they qualify
+    /// ([`lanes`]); `None`: every pixel on its own (the reference the groups
+    /// are tested against).
+    lanes: Option<Isa>,
 }
 
 /// Values per pixel [`Reprojection::accumulate`] leaves for
@@ -249,14 +251,29 @@ impl Reprojection {
         if width == 0 || height == 0 || width > crate::image::MAX_DIM || height > crate::image::MAX_DIM {
             return Err(Error::InvalidSize { arg: Arg::Output, width, height });
         }
-        Ok(Reprojection { cfg, width, height, normal: guides.normal, position: guides.position, depth: guides.depth, lanes: true })
+        Ok(Reprojection {
+            cfg,
+            width,
+            height,
+            normal: guides.normal,
+            position: guides.position,
+            depth: guides.depth,
+            lanes: Some(Isa::detect()),
+        })
     }
     /// The same stage with steps 1 and 3 run pixel by pixel: the reference
     /// its pixel groups are tested against (the same bits).
     #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[allow(dead_code)]
     fn per_pixel(self) -> Self {
-        Reprojection { lanes: false, ..self }
+        Reprojection { lanes: None, ..self }
+    }
+    /// The same stage with its pixel groups in the lanes of `isa` (`None` if
+    /// this build cannot run them on this CPU).
+    #[cfg_attr(feature = "internals", visibility::make(pub))]
+    #[allow(dead_code)]
+    fn with_isa(self, isa: Isa) -> Option<Self> {
+        isa.available().then_some(Reprojection { lanes: Some(isa), ..self })
     }
     /// The settings.
     pub fn config(&self) -> &TemporalConfig {
@@ -629,13 +646,12 @@ impl Reprojection {
                 let mut x = 0;
                 while x < w {
                     // a group of pixels at once where their taps allow; the group's pixels one by one where not
-                    let group = if self.lanes { lanes::accumulate(self, &row, x, out_row, px_row) } else { None };
-                    if let Some(rejected) = group {
+                    if let Some((done, rejected)) = self.lanes.and_then(|isa| lanes::accumulate(self, isa, &row, x, out_row, px_row)) {
                         c.rejected += rejected;
-                        x += lanes::LANES;
+                        x += done;
                         continue;
                     }
-                    let end = (x + lanes::LANES).min(w);
+                    let end = (x + lanes::MAX_LANES).min(w);
                     for x in x..end {
                         self.accumulate_pixel(&row, x, out_row, px_row, &mut c);
                     }
@@ -885,11 +901,11 @@ impl Reprojection {
             let wrow = &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec];
             let mut x = 0;
             while x < w {
-                if self.lanes && lanes::resolve(self, &r, x, wrow, out_row).is_some() {
-                    x += lanes::LANES;
+                if let Some(done) = self.lanes.and_then(|isa| lanes::resolve(self, isa, &r, x, wrow, out_row)) {
+                    x += done;
                     continue;
                 }
-                let end = if x == 0 { 1 } else { (x + lanes::LANES).min(w) };
+                let end = if x == 0 { 1 } else { (x + lanes::MAX_LANES).min(w) };
                 for x in x..end {
                     self.resolve_pixel(&r, x, wrow, out_row);
                 }

@@ -358,8 +358,9 @@ fn parallel_equals_one_thread() {
     }
 }
 
-/// Steps 1 and 3 on groups of pixels (SIMD lanes) give the bits of the per-pixel
-/// reference (`Reprojection::per_pixel`): awkward widths, motion that moves a
+/// Steps 1 and 3 on groups of pixels (SIMD lanes: `wide`'s, and AVX2's where
+/// the CPU has it) give the bits of the per-pixel reference
+/// (`Reprojection::per_pixel`): awkward widths, motion that moves a
 /// group as one, pixel by pixel, and out of the frame, NaN/Inf light and
 /// motion, sky (no normal), with and without the firefly clamp, for each set
 /// of rejection guides.
@@ -375,66 +376,68 @@ fn pixel_groups_equal_the_per_pixel_reference() {
         for set in sets {
             for clamp in [None, Some(fireflies::DEFAULT_STRENGTH)] {
                 let cfg = TemporalConfig::default();
-                let (fast, slow) = (Reprojection::new(cfg, set, w, h).unwrap(), Reprojection::new(cfg, set, w, h).unwrap().per_pixel());
-                let (mut ha, mut hb) = (vec![0f32; fast.history_len()], vec![0f32; fast.history_len()]);
-                let (mut sa, mut sb) =
-                    (vec![0f32; fast.frame_scratch_len(None).unwrap()], vec![0f32; fast.frame_scratch_len(None).unwrap()]);
-                for k in 0..4u64 {
-                    let mut f = frame_at(w, h, k);
-                    let mut rng = Rng(k + 7);
-                    // a pan (groups move as one), per-pixel jitter in a band of rows, motion out of the frame
-                    let mv: Vec<f32> = (0..w * h)
-                        .flat_map(|i| {
-                            let (x, y) = (i % w, i / w);
-                            let j = if y % 4 == 1 { rng.f32() - 0.5 } else { 0.0 };
-                            match (x * 7 + y * 3 + k as usize) % 97 {
-                                0 => [f32::NAN, 0.0],
-                                1 => [f32::INFINITY, 0.0],
-                                2 => [3.0 * w as f32, 0.0],
-                                _ => [0.6 + j - 0.2 * k as f32, -0.35 + 0.1 * k as f32],
-                            }
-                        })
-                        .collect();
-                    for (i, n) in f.noisy.iter_mut().enumerate() {
-                        match (i * 13 + k as usize) % 101 {
-                            0 => *n = f32::NAN,
-                            1 => *n = f32::INFINITY,
-                            2 => *n *= 300.0,
-                            _ => {}
-                        }
-                    }
-                    // a strip of sky: no normal, no depth
-                    for i in (0..w * h).filter(|i| i % w < w / 5) {
-                        f.normal[3 * i..3 * i + 3].fill(0.0);
-                    }
-                    let guides = f.guides(set);
-                    let mut outs = Vec::new();
-                    for (st, hist, scratch) in [(&fast, &mut ha, &mut sa), (&slow, &mut hb, &mut sb)] {
-                        let mut history = History::resume(hist, k as u32);
-                        let mut out = vec![f32::NAN; 3 * w * h];
-                        let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
-                        let noisy = ImageView::interleaved(&f.noisy, w, h, 3).unwrap();
-                        let motion = ImageView::interleaved(&mv, w, h, 2).unwrap();
-                        // the fit: the accumulated light, brightened where x is odd (so the clip has contrast)
-                        let rep = st
-                            .run_frame(noisy, guides, Some(motion), clamp, true, &mut history, scratch, None, &mut ov, |acc, _, o| {
-                                for y in 0..h {
-                                    for c in 0..3 {
-                                        let row: Vec<f32> =
-                                            (0..w).map(|x| acc.get(x, y, c).unwrap() * if x % 2 == 1 { 1.5 } else { 1.0 }).collect();
-                                        o.write_row(y, c, 0, &row).unwrap();
-                                    }
+                let slow = Reprojection::new(cfg, set, w, h).unwrap().per_pixel();
+                for fast in [isa::Isa::Portable, isa::Isa::Avx2Fma].into_iter().filter_map(|i| slow.with_isa(i)) {
+                    let (mut ha, mut hb) = (vec![0f32; fast.history_len()], vec![0f32; fast.history_len()]);
+                    let (mut sa, mut sb) =
+                        (vec![0f32; fast.frame_scratch_len(None).unwrap()], vec![0f32; fast.frame_scratch_len(None).unwrap()]);
+                    for k in 0..4u64 {
+                        let mut f = frame_at(w, h, k);
+                        let mut rng = Rng(k + 7);
+                        // a pan (groups move as one), per-pixel jitter in a band of rows, motion out of the frame
+                        let mv: Vec<f32> = (0..w * h)
+                            .flat_map(|i| {
+                                let (x, y) = (i % w, i / w);
+                                let j = if y % 4 == 1 { rng.f32() - 0.5 } else { 0.0 };
+                                match (x * 7 + y * 3 + k as usize) % 97 {
+                                    0 => [f32::NAN, 0.0],
+                                    1 => [f32::INFINITY, 0.0],
+                                    2 => [3.0 * w as f32, 0.0],
+                                    _ => [0.6 + j - 0.2 * k as f32, -0.35 + 0.1 * k as f32],
                                 }
-                                Ok(Report::default())
                             })
-                            .unwrap();
-                        outs.push((out, rep));
+                            .collect();
+                        for (i, n) in f.noisy.iter_mut().enumerate() {
+                            match (i * 13 + k as usize) % 101 {
+                                0 => *n = f32::NAN,
+                                1 => *n = f32::INFINITY,
+                                2 => *n *= 300.0,
+                                _ => {}
+                            }
+                        }
+                        // a strip of sky: no normal, no depth
+                        for i in (0..w * h).filter(|i| i % w < w / 5) {
+                            f.normal[3 * i..3 * i + 3].fill(0.0);
+                        }
+                        let guides = f.guides(set);
+                        let mut outs = Vec::new();
+                        for (st, hist, scratch) in [(&fast, &mut ha, &mut sa), (&slow, &mut hb, &mut sb)] {
+                            let mut history = History::resume(hist, k as u32);
+                            let mut out = vec![f32::NAN; 3 * w * h];
+                            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+                            let noisy = ImageView::interleaved(&f.noisy, w, h, 3).unwrap();
+                            let motion = ImageView::interleaved(&mv, w, h, 2).unwrap();
+                            // the fit: the accumulated light, brightened where x is odd (so the clip has contrast)
+                            let rep = st
+                                .run_frame(noisy, guides, Some(motion), clamp, true, &mut history, scratch, None, &mut ov, |acc, _, o| {
+                                    for y in 0..h {
+                                        for c in 0..3 {
+                                            let row: Vec<f32> =
+                                                (0..w).map(|x| acc.get(x, y, c).unwrap() * if x % 2 == 1 { 1.5 } else { 1.0 }).collect();
+                                            o.write_row(y, c, 0, &row).unwrap();
+                                        }
+                                    }
+                                    Ok(Report::default())
+                                })
+                                .unwrap();
+                            outs.push((out, rep));
+                        }
+                        let same = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(p, q)| p.to_bits() == q.to_bits());
+                        let at = format!("{w}x{h} {set:?} clamp {clamp:?} frame {k} {fast:?}");
+                        assert!(same(&outs[0].0, &outs[1].0), "output, {at}");
+                        assert_eq!(outs[0].1, outs[1].1, "counts, {at}");
+                        assert!(same(&ha, &hb), "history, {at}");
                     }
-                    let same = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(p, q)| p.to_bits() == q.to_bits());
-                    let at = format!("{w}x{h} {set:?} clamp {clamp:?} frame {k}");
-                    assert!(same(&outs[0].0, &outs[1].0), "output, {at}");
-                    assert_eq!(outs[0].1, outs[1].1, "counts, {at}");
-                    assert!(same(&ha, &hb), "history, {at}");
                 }
             }
         }
