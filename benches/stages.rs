@@ -112,7 +112,11 @@ fn main() {
         println!("| {name} | {ms:.2} | {:.1} | {:.0} | {mem:.2} | {comp:.2} | {:.1}× |", bytes / 1e6, flops / 1e6, ms / mem.max(comp));
         (tt, tm, tc) = (tt + ms, tm + mem, tc + comp);
     }
-    println!("| whole frame | {tt:.2} | | | {tm:.2} | {tc:.2} | {:.1}× |", tt / tm.max(tc));
+    println!("| whole frame, stage by stage | {tt:.2} | | | {tm:.2} | {tc:.2} | {:.1}× |", tt / tm.max(tc));
+    // what a streaming data flow would move: each input read once, the output written once
+    let one_pass = px * 4.0 * (3.0 + q + 3.0);
+    let floor = one_pass / bw * 1e3;
+    println!("| whole frame, one pass | {tt:.2} | {:.1} | | {floor:.2} | {tc:.2} | {:.1}× |", one_pass / 1e6, tt / floor.max(tc));
 }
 
 /// Bytes per second of a 256 MiB copy (each byte read and written), the
