@@ -164,6 +164,16 @@ fn fma_chains(iters: usize, f64: bool) -> (f64, usize) {
             }
         };
     }
+    if f64 {
+        let (a, b) = (wide::f64x4::splat(0.9999), wide::f64x4::splat(1e-4));
+        let mut acc = [wide::f64x4::splat(0.5); 12];
+        for _ in 0..iters {
+            for v in acc.iter_mut() {
+                *v = v.mul_add(a, b);
+            }
+        }
+        return (acc.iter().map(|v| v.reduce_add()).sum(), 12 * 4 * 2);
+    }
     let (a, b) = (wide::f32x8::splat(0.9999), wide::f32x8::splat(1e-4));
     let mut acc = [wide::f32x8::splat(0.5); 12];
     for _ in 0..iters {

@@ -19,7 +19,7 @@ use core::sync::atomic::{AtomicU8, Ordering};
 /// too.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Isa {
-    /// `wide`'s `f32x8` (the build's instruction set).
+    /// `wide`'s lanes (the build's instruction set).
     Portable,
     /// `core::arch` AVX2 + FMA intrinsics (x86-64 only).
     Avx2Fma,
@@ -47,7 +47,8 @@ impl Isa {
     /// file: the build's `wide` lacks AVX2 + FMA (a plain x86-64 build, whose
     /// lanes are SSE2), `self` is [`Isa::Avx2Fma`] and the CPU has it. The
     /// one rule of every kernel's dispatch (`qr`, `moments`, `solve`,
-    /// `apply`, `blur`; `conv` runs its file in every build). An `x86-64-v3`
+    /// `apply`, `blur`, the temporal stage's lanes; `conv` runs its file in
+    /// every build). An `x86-64-v3`
     /// build keeps `wide`'s lanes, which compile to the same instructions and
     /// are faster there than the intrinsics files (whose functions do not
     /// inline into their callers). The call stays behind

@@ -645,7 +645,7 @@ impl Reprojection {
                 let row = Row { y, read, raw, cur: cur_row, mv, clamped: inp.fireflies.is_some(), has_history };
                 let mut x = 0;
                 while x < w {
-                    // a group of pixels at once where their taps allow; the group's pixels one by one where not
+                    // a group of pixels at once where their taps allow; the next pixels one by one where not
                     if let Some((done, rejected)) = self.lanes.and_then(|isa| lanes::accumulate(self, isa, &row, x, out_row, px_row)) {
                         c.rejected += rejected;
                         x += done;
@@ -969,15 +969,23 @@ impl Reprojection {
             let mut clipped = [0f32; 3];
             for ch in 0..3 {
                 let mu = s1[ch] * inv;
-                let sd = libm::sqrtf((s2[ch] * inv - mu * mu).max(0.0));
-                clipped[ch] = p[ch].max(mu - cfg.clip_gamma * sd).min(mu + cfg.clip_gamma * sd);
+                // (compares, not f32::max/min, whose choice between ±0 is unspecified)
+                let var = s2[ch] * inv - mu * mu;
+                let sd = libm::sqrtf(if var > 0.0 { var } else { 0.0 });
+                let (lo, hi) = (mu - cfg.clip_gamma * sd, mu + cfg.clip_gamma * sd);
+                let c = if p[ch] >= lo { p[ch] } else { lo };
+                clipped[ch] = if c <= hi { c } else { hi };
             }
             let n = wrow[COUNT * w + x];
             let a = if n > 0.0 { (1.0 / n).max(cfg.output_alpha).min(1.0) } else { 1.0 };
             res = lerp3(rgb(clipped), cur, a);
         }
         for ch in 0..3 {
-            let v = if r.clamp_negative { res[ch].max(0.0) } else { res[ch] };
+            let v = match r.clamp_negative {
+                true if res[ch] > 0.0 => res[ch],
+                true => 0.0,
+                false => res[ch],
+            };
             let v = if v.is_finite() { v } else { 0.0 };
             wrow[(OUTPUT + ch) * w + x] = v;
             out_row[ch * w + x] = v;

@@ -362,8 +362,9 @@ fn parallel_equals_one_thread() {
 /// the CPU has it) give the bits of the per-pixel reference
 /// (`Reprojection::per_pixel`): awkward widths, motion that moves a
 /// group as one, pixel by pixel, and out of the frame, NaN/Inf light and
-/// motion, sky (no normal), with and without the firefly clamp, for each set
-/// of rejection guides.
+/// motion, sky (no normal), negative light, with and without the firefly
+/// clamp, the clamp of negative results and a narrower clip, for each set of
+/// rejection guides.
 #[test]
 fn pixel_groups_equal_the_per_pixel_reference() {
     let sets = [
@@ -375,7 +376,11 @@ fn pixel_groups_equal_the_per_pixel_reference() {
     for (w, h) in [(1, 1), (7, 3), (9, 9), (17, 5), (255, 12), (256, 9), (257, 17)] {
         for set in sets {
             for clamp in [None, Some(fireflies::DEFAULT_STRENGTH)] {
-                let cfg = TemporalConfig::default();
+                // the default settings, and a narrow clip with a slow blend and negative results kept
+                let (cfg, clamp_negative) = match clamp {
+                    None => (TemporalConfig::default(), true),
+                    Some(_) => (TemporalConfig { clip_gamma: 1.0, output_alpha: 0.25, ..Default::default() }, false),
+                };
                 let slow = Reprojection::new(cfg, set, w, h).unwrap().per_pixel();
                 for fast in [isa::Isa::Portable, isa::Isa::Avx2Fma].into_iter().filter_map(|i| slow.with_isa(i)) {
                     let (mut ha, mut hb) = (vec![0f32; fast.history_len()], vec![0f32; fast.history_len()]);
@@ -392,7 +397,7 @@ fn pixel_groups_equal_the_per_pixel_reference() {
                                 match (x * 7 + y * 3 + k as usize) % 97 {
                                     0 => [f32::NAN, 0.0],
                                     1 => [f32::INFINITY, 0.0],
-                                    2 => [3.0 * w as f32, 0.0],
+                                    2 => [w as f32 + 2.5, 0.0],
                                     _ => [0.6 + j - 0.2 * k as f32, -0.35 + 0.1 * k as f32],
                                 }
                             })
@@ -405,7 +410,7 @@ fn pixel_groups_equal_the_per_pixel_reference() {
                                 _ => {}
                             }
                         }
-                        // a strip of sky: no normal, no depth
+                        // a strip of sky: no normal
                         for i in (0..w * h).filter(|i| i % w < w / 5) {
                             f.normal[3 * i..3 * i + 3].fill(0.0);
                         }
@@ -417,18 +422,34 @@ fn pixel_groups_equal_the_per_pixel_reference() {
                             let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
                             let noisy = ImageView::interleaved(&f.noisy, w, h, 3).unwrap();
                             let motion = ImageView::interleaved(&mv, w, h, 2).unwrap();
-                            // the fit: the accumulated light, brightened where x is odd (so the clip has contrast)
+                            // the fit: the accumulated light, brightened where x is odd (so the clip
+                            // has contrast), lowered below 0 in every third column
                             let rep = st
-                                .run_frame(noisy, guides, Some(motion), clamp, true, &mut history, scratch, None, &mut ov, |acc, _, o| {
-                                    for y in 0..h {
-                                        for c in 0..3 {
-                                            let row: Vec<f32> =
-                                                (0..w).map(|x| acc.get(x, y, c).unwrap() * if x % 2 == 1 { 1.5 } else { 1.0 }).collect();
-                                            o.write_row(y, c, 0, &row).unwrap();
+                                .run_frame(
+                                    noisy,
+                                    guides,
+                                    Some(motion),
+                                    clamp,
+                                    clamp_negative,
+                                    &mut history,
+                                    scratch,
+                                    None,
+                                    &mut ov,
+                                    |acc, _, o| {
+                                        for y in 0..h {
+                                            for c in 0..3 {
+                                                let row: Vec<f32> = (0..w)
+                                                    .map(|x| {
+                                                        acc.get(x, y, c).unwrap() * if x % 2 == 1 { 1.5 } else { 1.0 }
+                                                            - if x % 3 == 0 { 0.4 } else { 0.0 }
+                                                    })
+                                                    .collect();
+                                                o.write_row(y, c, 0, &row).unwrap();
+                                            }
                                         }
-                                    }
-                                    Ok(Report::default())
-                                })
+                                        Ok(Report::default())
+                                    },
+                                )
                                 .unwrap();
                             outs.push((out, rep));
                         }

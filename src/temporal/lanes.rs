@@ -4,10 +4,11 @@
 //! that does not qualify (a tap outside the frame, taps at different offsets,
 //! NaN/Inf light or motion) returns `None` and its pixels run one by one.
 //!
-//! The kernels are written once over [`Lane`]: `wide`'s lanes (4 in an SSE
-//! build, whose 8-lane type is two registers and would not hold a group's
-//! state; 8 in an AVX build) and, chosen at run time by [`Isa`] in a build
-//! without AVX2, 8 AVX2 lanes ([`avx2`]).
+//! The kernels are written once over [`Lane`]: `wide`'s lanes (4 in a build
+//! without AVX, whose 8-lane type is two registers and would not hold a
+//! group's state; 8 with AVX; 4 NEON lanes on aarch64) and, chosen at run
+//! time by [`Isa`] in an x86-64 build without AVX2 + FMA, 8 AVX2 lanes
+//! ([`avx2`]).
 
 use super::{Reprojection, ResolveRow, Row, COUNT, LIGHT, OUTPUT};
 use crate::isa::Isa;
@@ -56,9 +57,10 @@ pub(super) trait Lane:
     fn sqrt(self) -> Self;
     fn is_nan(self) -> Self;
     fn is_finite(self) -> Self;
-    /// `self` where `o` is NaN, else the larger (of equal values, `o`).
+    /// `self` where `o` is NaN, else the larger (step 1 takes it where the
+    /// two are never equal zeros of different signs).
     fn max(self, o: Self) -> Self;
-    /// `self` where `o` is NaN, else the smaller (of equal values, `o`).
+    /// `self` where `o` is NaN, else the smaller (as [`Lane::max`]).
     fn min(self, o: Self) -> Self;
     /// Bit `l` set where lane `l` of the mask is.
     fn bitmask(self) -> u32;
@@ -157,7 +159,7 @@ impl Lane for Portable {
 fn width(isa: Isa) -> usize {
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
-        return avx2::Avx::N;
+        return avx2::WIDTH;
     }
     let _ = isa;
     Portable::N
@@ -404,8 +406,7 @@ pub(super) fn resolve_with<L: Lane>(st: &Reprojection, r: &ResolveRow<'_>, x: us
                 }
             }
             let p = ycocg(pv);
-            // NaN/Inf in the statistics: the pixels one by one (f32::max and
-            // min treat NaN as this crate's SIMD does not)
+            // NaN/Inf in the statistics: the pixels one by one
             if (blends & !(finite(s1) & finite(s2) & finite(p))).any() {
                 return None;
             }
@@ -414,8 +415,11 @@ pub(super) fn resolve_with<L: Lane>(st: &Reprojection, r: &ResolveRow<'_>, x: us
             let mut clipped = [zero; 3];
             for ch in 0..3 {
                 let mu = s1[ch] * inv;
-                let sd = (s2[ch] * inv - mu * mu).max(zero).sqrt();
-                clipped[ch] = p[ch].max(mu - gamma * sd).min(mu + gamma * sd);
+                let var = s2[ch] * inv - mu * mu;
+                let sd = var.gt(zero).select(var, zero).sqrt();
+                let (lo, hi) = (mu - gamma * sd, mu + gamma * sd);
+                let c = p[ch].ge(lo).select(p[ch], lo);
+                clipped[ch] = c.le(hi).select(c, hi);
             }
             let n = L::load(wrow, COUNT * w + x)?;
             let one = L::splat(1.0);
@@ -427,7 +431,7 @@ pub(super) fn resolve_with<L: Lane>(st: &Reprojection, r: &ResolveRow<'_>, x: us
         }
     }
     for (ch, v) in res.into_iter().enumerate() {
-        let v = if r.clamp_negative { v.max(zero) } else { v };
+        let v = if r.clamp_negative { v.gt(zero).select(v, zero) } else { v };
         let v = v.is_finite().select(v, zero);
         v.store(wrow, (OUTPUT + ch) * w + x)?;
         v.store(out_row, ch * w + x)?;

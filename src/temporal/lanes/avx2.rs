@@ -1,6 +1,6 @@
 //! 8 AVX2 lanes for the temporal stage's groups ([`super::Lane`]), chosen at
-//! run time in builds whose `wide` lanes are SSE: the entries compile the
-//! kernels of [`super`] with AVX2 enabled, so the [`Avx`] operations inline
+//! run time in x86-64 builds without AVX2 + FMA: the entries compile the
+//! kernels of [`super`] with AVX2 enabled, so the `Avx` operations inline
 //! as single instructions. Each operation is the one `wide` does in an AVX
 //! build (`max`/`min` included), so both give the same bits.
 
@@ -8,10 +8,13 @@ use super::{accumulate_with, resolve_with, Lane, Reprojection, ResolveRow, Row};
 use core::arch::x86_64::*;
 use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not, Sub};
 
-/// 8 f32 lanes in an AVX register. Only the entries below, which the caller
-/// runs on a CPU with AVX2 and FMA, make one.
+/// Pixels per group.
+pub(super) const WIDTH: usize = 8;
+
+/// 8 f32 lanes in an AVX register. Private to this file: only the entries
+/// below, which the caller runs on a CPU with AVX2 and FMA, make one.
 #[derive(Clone, Copy)]
-pub(super) struct Avx(__m256);
+struct Avx(__m256);
 
 /// Step 1 for 8 pixels ([`accumulate_with`]).
 ///
@@ -88,7 +91,7 @@ impl Avx {
 }
 
 impl Lane for Avx {
-    const N: usize = 8;
+    const N: usize = WIDTH;
     #[inline(always)]
     fn splat(v: f32) -> Self {
         Avx(unsafe { _mm256_set1_ps(v) })
