@@ -24,6 +24,8 @@ pub enum Arg {
     History,
     /// Motion vectors.
     Motion,
+    /// Per-pixel sample weights (`Frame::weights`).
+    Weights,
 }
 
 /// Everything that can go wrong. Small and `Copy`, carries the data needed

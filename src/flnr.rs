@@ -444,7 +444,7 @@ impl<'w> Flnr<'w> {
             model.user[k] = Some(plane(k)?);
             map.user[k] = Some(plane(self.q + k)?);
         }
-        Ok(Frame { noisy: frame.noisy, guides: map, guides_low: Some(model) })
+        Ok(Frame { noisy: frame.noisy, guides: map, guides_low: Some(model), weights: frame.weights })
     }
 
     /// Denoises one frame (normal, depth and AO guides) on the calling thread.

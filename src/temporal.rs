@@ -362,6 +362,26 @@ impl Reprojection {
         ImageView::f32(write, w, h, 3, layout)
     }
 
+    /// The history length of each pixel as step 1 wrote it into the
+    /// history's write slot (1 channel), for a fit that weighs pixels by it.
+    pub fn history_lengths<'h>(&self, history: &'h mut History<'_>) -> Result<ImageView<'h>, Error> {
+        Ok(self.accumulated_and_lengths(history)?.1)
+    }
+
+    /// [`Reprojection::accumulated`] and [`Reprojection::history_lengths`].
+    fn accumulated_and_lengths<'h>(&self, history: &'h mut History<'_>) -> Result<(ImageView<'h>, ImageView<'h>), Error> {
+        let (w, h) = (self.width, self.height);
+        let rec = self.record();
+        self.check_history(history)?;
+        let (_, write) = self.slots(history);
+        let write: &'h [f32] = write;
+        let view = |f: usize, ch: usize| {
+            let layout = crate::image::Layout { offset: f * w, pixel_stride: 1, row_stride: rec * w, channel_stride: w };
+            ImageView::f32(write, w, h, ch, layout)
+        };
+        Ok((view(LIGHT, 3)?, view(COUNT, 1)?))
+    }
+
     /// Step 1 for the whole frame: reads the inputs, writes the accumulated
     /// light, the history length and the guides into the history's write slot
     /// and the reprojected previous output into `scratch`
@@ -451,8 +471,8 @@ impl Reprojection {
 
     /// One frame of a temporal pipeline around a single-frame denoiser:
     /// accumulates `noisy`, clamped with `fireflies` (step 1), calls
-    /// `fit(accumulated, frame_index, fitted)` (step 2: the denoiser on the
-    /// accumulated light, into an RGB image of the frame's size) and resolves
+    /// `fit(accumulated, history_lengths, frame_index, fitted)` (step 2: the
+    /// denoiser on the accumulated light, into an RGB image of the frame's size) and resolves
     /// into `out` (step 3). `parallel`: the workers and executor of both
     /// passes (the fit brings its own). The report holds the stage's counts
     /// and the fit's, but for its NaN/Inf noisy samples (the stage counted,
@@ -469,7 +489,7 @@ impl Reprojection {
         scratch: &mut [f32],
         parallel: Option<(usize, Executor<'_>)>,
         out: &mut ImageViewMut<'_>,
-        fit: impl FnOnce(ImageView<'_>, u32, &mut ImageViewMut<'_>) -> Result<Report, Error>,
+        fit: impl FnOnce(ImageView<'_>, ImageView<'_>, u32, &mut ImageViewMut<'_>) -> Result<Report, Error>,
     ) -> Result<Report, Error> {
         let (w, h, np) = (self.width, self.height, self.plane());
         self.check_history(history)?;
@@ -493,9 +513,9 @@ impl Reprojection {
         rep.clamped_fireflies = c.clamped;
         let index = history.frames;
         {
-            let acc = self.accumulated(history)?;
+            let (acc, lengths) = self.accumulated_and_lengths(history)?;
             let mut fit_out = ImageViewMut::interleaved(fitted, w, h, 3)?;
-            let r = fit(acc, index, &mut fit_out)?;
+            let r = fit(acc, lengths, index, &mut fit_out)?;
             rep += Report { nonfinite_noisy: 0, ..r };
         }
         match parallel {

@@ -469,3 +469,134 @@ fn output_layouts_agree_streamed_or_not() {
         }
     }
 }
+
+/// Per-pixel sample weights (`Frame::weights`): random weights, zeros and
+/// weights that are not finite and positive (which exclude their pixel)
+/// against the f64 reference with each pixel's taps and frame statistics
+/// multiplied by its weight, for every guide set, with and without the AO
+/// demodulation; every output is finite, a weight-0 pixel included.
+#[test]
+fn sample_weights_match_reference() {
+    for (s, set) in SETS.iter().enumerate() {
+        let f = Owned::synthetic(29, 23, 40 + s as u64, 0.5);
+        let mut seed = 91 + s as u32;
+        let mut weights: Vec<f32> = (0..f.w * f.h).map(|_| 3.0 * lrdenoise_test_uniform(&mut seed)).collect();
+        for (i, w) in weights.iter_mut().enumerate() {
+            match i % 11 {
+                0 => *w = 0.0,
+                3 if i % 7 == 0 => *w = f32::NAN,
+                5 if i % 7 == 0 => *w = -1.0,
+                7 if i % 7 == 0 => *w = f32::INFINITY,
+                _ => {}
+            }
+        }
+        let wide: Vec<f64> = weights.iter().map(|&v| v as f64).collect();
+        for demod in [None, Some(0.1)] {
+            let mut c = FlrConfig { ao_demodulation: demod, ..cfg(*set, 1) };
+            c.blur = Blur::Gaussian { sigma: 3.0, radius: None };
+            let mut frame = f.frame(*set);
+            frame.weights = Some(ImageView::interleaved(&weights, f.w, f.h, 1).unwrap());
+            let (out, _) = run_frame(c, f.w, f.h, &frame);
+            let want = reference_weighted(&c, f.w, f.h, &f.channels(*set), &f.noisy, Some(&wide));
+            let (max, mean) = diff(&out, &want);
+            assert!(max < 5e-4 && mean < 5e-5, "set {set:?} demodulation {demod:?}: max {max} mean {mean}");
+            assert!(out.iter().all(|v| v.is_finite()));
+            // and the weights make a difference the reference sees
+            let plain = reference(&c, f.w, f.h, &f.channels(*set), &f.noisy);
+            let (moved, _) = diff(&out, &plain);
+            assert!(moved > 10.0 * max, "set {set:?}: weights moved the output by {moved} only");
+        }
+    }
+}
+
+/// Uniform weights fit as no weights (to rounding), in blocks of 8 and 16
+/// with both kernels; weighted SIMD and scalar agree; tiles over threads
+/// equal the whole frame bit for bit with weights.
+#[test]
+fn sample_weights_uniform_simd_and_tiles() {
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    for (w, h) in [(64, 40), (257, 19), (7, 3)] {
+        let f = Owned::synthetic(w, h, 77, 0.7);
+        let uniform = vec![4.0f32; w * h];
+        let mut seed = 5u32;
+        let random: Vec<f32> = (0..w * h).map(|_| 0.1 + 2.0 * lrdenoise_test_uniform(&mut seed)).collect();
+        for b in [8, 16] {
+            let (plain, _) = run(cfg(set, b), &f);
+            let weighted = |weights: &[f32], kernel: Kernel| {
+                let mut frame = f.frame(set);
+                frame.weights = Some(ImageView::interleaved(weights, w, h, 1).unwrap());
+                run_frame(FlrConfig { kernel, ..cfg(set, b) }, w, h, &frame).0
+            };
+            let rel = |a: &[f32], c: &[f32]| a.iter().zip(c).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max);
+            let u = weighted(&uniform, Kernel::Simd);
+            assert!(rel(&u, &plain) < 1e-3, "{w}x{h} B{b}: uniform weights moved the output by {}", rel(&u, &plain));
+            let (simd, scalar) = (weighted(&random, Kernel::Simd), weighted(&random, Kernel::Scalar));
+            assert!(rel(&simd, &scalar) < 1e-3, "{w}x{h} B{b}: SIMD vs scalar {}", rel(&simd, &scalar));
+            // tiles over two threads, bit for bit
+            let c = cfg(set, b);
+            let flr = Flr::new(c, w, h).unwrap();
+            let mut scratch = vec![0f64; flr.tiled_scratch_len(2).unwrap()];
+            let mut out = vec![f32::NAN; w * h * 3];
+            let mut frame = f.frame(set);
+            frame.weights = Some(ImageView::interleaved(&random, w, h, 1).unwrap());
+            let exec = |n: usize, job: &(dyn Fn(usize, usize) + Sync)| {
+                std::thread::scope(|s| {
+                    for worker in 0..2 {
+                        s.spawn(move || (worker..n).step_by(2).for_each(|i| job(i, worker)));
+                    }
+                })
+            };
+            flr.denoise_parallel(&frame, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap(), 2, &exec).unwrap();
+            assert_eq!(out, simd, "{w}x{h} B{b}: tiles over threads differ from the whole frame");
+        }
+    }
+    // a weight image of another size is refused
+    let f = Owned::synthetic(16, 8, 1, 0.5);
+    let small = vec![1.0f32; 8 * 8];
+    let mut frame = f.frame(set);
+    frame.weights = Some(ImageView::interleaved(&small, 8, 8, 1).unwrap());
+    let flr = Flr::new(cfg(set, 8), 16, 8).unwrap();
+    let mut scratch = vec![0f64; flr.scratch_len()];
+    let mut out = vec![0f32; 16 * 8 * 3];
+    let err = flr.denoise(&frame, &mut scratch, &mut ImageViewMut::interleaved(&mut out, 16, 8, 3).unwrap()).unwrap_err();
+    assert!(matches!(err, Error::SizeMismatch { arg: error::Arg::Weights, .. }), "{err:?}");
+}
+
+/// A checkerboard of weights 0 and 1 (a frame rendered on half its pixels):
+/// what the unrendered pixels hold (huge values, NaN) changes no output bit,
+/// and every pixel, the unrendered ones included, gets a finite prediction.
+/// (Without the firefly clamp, whose statistics take every finite pixel
+/// whatever its weight: `Frame::weights`.)
+#[test]
+fn weight_zero_pixels_do_not_reach_the_fit() {
+    let set = GuideSet::NORMAL_DEPTH_AO;
+    for (w, h, b) in [(64, 40, 8), (37, 21, 8), (33, 17, 1)] {
+        let f = Owned::synthetic(w, h, 12, 0.5);
+        let board: Vec<f32> = (0..w * h).map(|i| ((i % w + i / w) % 2) as f32).collect();
+        let run_with = |noisy: &[f32]| {
+            let mut g = f.clone();
+            g.noisy = noisy.to_vec();
+            let mut frame = g.frame(set);
+            frame.weights = Some(ImageView::interleaved(&board, w, h, 1).unwrap());
+            run_frame(FlrConfig { block: b, fireflies: None, ..FlrConfig::with_guides(set) }, w, h, &frame)
+        };
+        let (want, _) = run_with(&f.noisy);
+        assert!(want.iter().all(|v| v.is_finite()));
+        for garbage in [1e6f32, f32::NAN] {
+            let noisy: Vec<f32> = f.noisy.iter().enumerate().map(|(i, &v)| if board[i / 3] == 0.0 { garbage } else { v }).collect();
+            let (got, _) = run_with(&noisy);
+            assert!(
+                got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{w}x{h} B{b}: {garbage} in unrendered pixels moved the output"
+            );
+        }
+    }
+}
+
+/// Uniform in [0, 1) from a small xorshift (the tests' own, no dependency).
+fn lrdenoise_test_uniform(s: &mut u32) -> f32 {
+    *s ^= *s << 13;
+    *s ^= *s >> 17;
+    *s ^= *s << 5;
+    (*s >> 8) as f32 / (1u32 << 24) as f32
+}

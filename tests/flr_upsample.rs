@@ -44,7 +44,12 @@ fn upsampled_denoise_is_close_to_full_resolution() {
                 ao: Some(ImageView::interleaved(&ao, lw, lh, 1).unwrap()),
                 ..Default::default()
             };
-            let frame = Frame { noisy: ImageView::interleaved(&noisy, lw, lh, 3).unwrap(), guides: f.guides(set), guides_low: Some(low) };
+            let frame = Frame {
+                noisy: ImageView::interleaved(&noisy, lw, lh, 3).unwrap(),
+                guides: f.guides(set),
+                guides_low: Some(low),
+                weights: None,
+            };
             let c = FlrConfig { upsample: u, ..cfg(set, 8) };
             let flr = Flr::new(c, w, h).unwrap();
             assert_eq!(flr.input_size(), (lw, lh));

@@ -159,6 +159,71 @@ fn disoccluded_pixels_restart_from_their_own_sample() {
     }
 }
 
+/// The fit weighed by history length (`TemporalFlr::with_history_weights`):
+/// where every pixel has the same history (a static camera) it equals the
+/// unweighted fit to rounding (without the firefly clamp); after a disocclusion (left columns restart at
+/// 1, the rest hold 2, as `Reprojection::history_lengths` says) it differs;
+/// and a frame that brings its own `Frame::weights` is refused.
+#[test]
+fn history_weights_weigh_the_fit_by_history_length() {
+    let (w, h) = (40, 24);
+    let f: Vec<Owned> = (0..3).map(|t| frame_at(w, h, t)).collect();
+    let mv: Vec<f32> = (0..w * h).flat_map(|i| if i % w < 8 { [-100.0, 0.0] } else { [0.0, 0.0] }).collect();
+    let run = |weights: bool, motion: Option<&[f32]>| {
+        // (without the firefly clamp, whose clamped samples count as less than one)
+        let mut seq = Seq::new(FlrConfig { fireflies: None, ..cfg() }, TemporalConfig::default(), w, h);
+        seq.plan = seq.plan.clone().with_history_weights(weights);
+        assert_eq!(seq.plan.history_weights(), weights);
+        (0..3).map(|t| seq.next(&f[t], if t == 0 { None } else { motion }, 1).0).last().unwrap()
+    };
+    let rel = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max);
+    let (plain, weighed) = (run(false, None), run(true, None));
+    assert!(rel(&weighed, &plain) < 1e-3, "static: {}", rel(&weighed, &plain));
+    let (plain, weighed) = (run(false, Some(&mv)), run(true, Some(&mv)));
+    assert!(rel(&weighed, &plain) > 1e-3, "a disocclusion: the weights changed nothing");
+
+    // the history lengths the weights are
+    let st = Reprojection::new(TemporalConfig::default(), SET, w, h).unwrap();
+    let (mut hist, mut scratch) = (vec![0f32; st.history_len()], vec![0f32; st.scratch_len()]);
+    let mut history = History::new(&mut hist);
+    for (t, m) in [(0, None), (1, Some(&mv[..]))] {
+        let inp = Inputs {
+            noisy: ImageView::interleaved(&f[t].noisy, w, h, 3).unwrap(),
+            fireflies: None,
+            guides: f[t].guides(SET),
+            motion: m.map(|m| ImageView::interleaved(m, w, h, 2).unwrap()),
+        };
+        st.accumulate(&inp, &mut history, &mut scratch).unwrap();
+        if t == 1 {
+            let n = st.history_lengths(&mut history).unwrap();
+            for (x, y) in [(0, 0), (7, 23), (8, 0), (39, 23)] {
+                assert_eq!(n.get(x, y, 0).unwrap(), if x < 8 { 1.0 } else { 2.0 }, "({x}, {y})");
+            }
+        }
+        let mut out = vec![0f32; 3 * w * h];
+        st.resolve(
+            &vec![0.25f32; 3 * w * h],
+            &mut history,
+            &mut scratch,
+            false,
+            true,
+            &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap(),
+        )
+        .unwrap();
+    }
+
+    let plan = TemporalFlr::new(cfg(), TemporalConfig::default(), w, h).unwrap();
+    let (mut hist, mut scratch, mut flr_scratch) =
+        (vec![0f32; plan.history_len()], vec![0f32; plan.scratch_len()], vec![0f64; plan.flr_scratch_len()]);
+    let ones = vec![1f32; w * h];
+    let mut frame = f[0].frame(SET);
+    frame.weights = Some(ImageView::interleaved(&ones, w, h, 1).unwrap());
+    let mut out = vec![0f32; 3 * w * h];
+    let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+    let err = plan.denoise(&frame, None, &mut History::new(&mut hist), &mut scratch, &mut flr_scratch, &mut ov).unwrap_err();
+    assert!(matches!(err, Error::Unsupported(_)), "{err:?}");
+}
+
 /// Frame 0 then frame 1 of a static sequence through the stage alone, with
 /// the firefly clamp; returns frame 1's counts and accumulated light.
 fn two_frames(cfg: TemporalConfig, f0: &Owned, f1: &Owned) -> (temporal::Counts, Vec<f32>) {
@@ -435,7 +500,7 @@ fn pixel_groups_equal_the_per_pixel_reference() {
                                     scratch,
                                     None,
                                     &mut ov,
-                                    |acc, _, o| {
+                                    |acc, _, _, o| {
                                         for y in 0..h {
                                             for c in 0..3 {
                                                 let row: Vec<f32> = (0..w)

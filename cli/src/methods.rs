@@ -99,6 +99,9 @@ pub struct FlrArgs {
     /// Temporal pipelines (flr-temporal, bmfr-temporal, walr-temporal): the firefly clamp's reference is at most F times the brightest sample the previous frame kept around each cell (default 2; 0 = off)
     #[arg(long, value_name = "F")]
     pub firefly_history: Option<f32>,
+    /// flr-temporal: the fit weighs each pixel by its history length, the samples its accumulated light averages (default off)
+    #[arg(long)]
+    pub history_weights: bool,
 }
 
 impl FlrArgs {
@@ -116,7 +119,7 @@ impl FlrArgs {
     /// method because `eval`, `report` and `bench` take one flag set for
     /// several methods at once, `--methods flr,bmfr`; this table gives clap's
     /// refusal instead, naming whose flag it is and what the method takes.)
-    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 25] {
+    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 26] {
         use Family::*;
         [
             ("--guides", self.guides.is_some(), &[Flr, Bmfr, Walr]),
@@ -145,6 +148,7 @@ impl FlrArgs {
             ("--output-alpha", self.output_alpha.is_some(), &[Flr]),
             ("--clip-gamma", self.clip_gamma.is_some(), &[Flr]),
             ("--firefly-history", self.firefly_history.is_some(), &[Flr, Bmfr, Walr]),
+            ("--history-weights", self.history_weights, &[Flr]),
         ]
     }
 
@@ -661,7 +665,11 @@ impl Method {
                     flags += &format!(" --history {} --output-alpha {} --clip-gamma {}", t.max_history, t.output_alpha, t.clip_gamma);
                 }
                 (label, flags) = firefly_history_label(label, flags, temporal.firefly_history);
-                let runner = TemporalRunner::flr(cfg, temporal, w, h, threads)?;
+                if a.history_weights {
+                    label += " hw";
+                    flags += " --history-weights";
+                }
+                let runner = TemporalRunner::flr(cfg, temporal, a.history_weights, w, h, threads)?;
                 let min_bytes = Some(temporal_bytes(w, h, cfg.guides.channels(), &runner));
                 Ok(Built { method: Method::Temporal(Box::new(runner)), label, flags, min_bytes })
             }
@@ -750,7 +758,7 @@ impl Method {
                     None => (inputs, None),
                 };
                 let noisy = src.noisy_view().map_err(err)?;
-                let frame = lrdenoise::Frame { noisy, guides: inputs.guides(&set).map_err(err)?, guides_low };
+                let frame = lrdenoise::Frame { noisy, guides: inputs.guides(&set).map_err(err)?, guides_low, weights: None };
                 let mut ov = lrdenoise::ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(err)?;
                 gpu.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
             }

@@ -258,7 +258,7 @@ impl FlrRunner {
             None => (full, None),
         };
         let noisy = noisy_src.noisy_view().map_err(|e| e.to_string())?;
-        let frame = Frame { noisy, guides: full.guides(&set).map_err(|e| e.to_string())?, guides_low };
+        let frame = Frame { noisy, guides: full.guides(&set).map_err(|e| e.to_string())?, guides_low, weights: None };
         let mut ov = ImageViewMut::interleaved(out, full.w, full.h, 3).map_err(|e| e.to_string())?;
         let r = match &self.pool {
             None => self.flr.denoise(&frame, &mut self.scratch, &mut ov),
@@ -455,8 +455,15 @@ impl TemporalRunner {
         let walr = Walr::new(cfg, w, h).map_err(|e| format!("walr: {e}"))?;
         Ok(Self::with(walr.temporal_scratch_len(), walr.history_len(), Pipeline::Walr(walr)))
     }
-    pub fn flr(cfg: FlrConfig, temporal: TemporalConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
-        let plan = TemporalFlr::new(cfg, temporal, w, h).map_err(|e| format!("flr-temporal: {e}"))?;
+    pub fn flr(
+        cfg: FlrConfig,
+        temporal: TemporalConfig,
+        history_weights: bool,
+        w: usize,
+        h: usize,
+        threads: usize,
+    ) -> Result<Self, String> {
+        let plan = TemporalFlr::new(cfg, temporal, w, h).map_err(|e| format!("flr-temporal: {e}"))?.with_history_weights(history_weights);
         let threads = threads.max(1);
         let flr_scratch = vec![0f64; plan.parallel_flr_scratch_len(threads)];
         let (scratch, history) = (plan.parallel_scratch_len(threads).max(plan.scratch_len()), plan.history_len());

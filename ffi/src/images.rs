@@ -259,6 +259,8 @@ pub(crate) unsafe fn frame_views<'a>(frame: &LrdFrame, low_ok: bool) -> Result<F
             noisy: view(&frame.noisy, 3)?.ok_or(LRD_STATUS_NULL_POINTER)?,
             guides: guides(&frame.guides)?,
             guides_low: if low { None } else { Some(guides(&frame.guides_low)?) },
+            // (the C API has no per-pixel sample weights)
+            weights: None,
         })
     }
 }

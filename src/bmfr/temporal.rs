@@ -67,7 +67,7 @@ impl Bmfr {
             rest,
             None,
             out,
-            |acc, index, o| {
+            |acc, _, index, o| {
                 // the fit on the accumulated colour (clamped already: the fit does not clamp it again)
                 let mut fit_frame = f;
                 fit_frame.noisy = acc;

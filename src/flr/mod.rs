@@ -108,6 +108,33 @@ fn centre_and_mask_in_place(m: f32, dst: &mut [f32], mask: &mut [f32]) {
     }
 }
 
+/// 1 / the mean of the weights in `weights` (channel 0) that are finite and
+/// positive, summed in f64 row by row; 1 if there is none.
+fn weight_scale(weights: &ImageView<'_>) -> f32 {
+    let (mut sum, mut n) = (0f64, 0usize);
+    let mut row = [0f32; 256];
+    for y in 0..weights.height() {
+        for x0 in (0..weights.width()).step_by(row.len()) {
+            let len = row.len().min(weights.width() - x0);
+            if weights.read_row(y, 0, x0, &mut row[..len]).is_none() {
+                return 1.0;
+            }
+            for &w in &row[..len] {
+                if w > 0.0 && w <= f32::MAX {
+                    sum += w as f64;
+                    n += 1;
+                }
+            }
+        }
+    }
+    let scale = n as f64 / sum;
+    if n > 0 && scale.is_finite() && scale > 0.0 {
+        scale as f32
+    } else {
+        1.0
+    }
+}
+
 /// Number of zero entries (integer count: vectorises, unlike an f32 sum).
 #[inline]
 fn count_zero(mask: &[f32]) -> usize {
@@ -125,6 +152,12 @@ pub struct Stats {
     pub mean: [f64; MAX_GUIDES],
     /// Per guide channel: the frame standard deviation (1 for constants).
     pub scale: [f64; MAX_GUIDES],
+    /// With [`Frame::weights`]: 1 / the mean of the frame's weights that are
+    /// finite and positive (1 without weights, or without such a weight). The
+    /// moments weigh pixels by `w · weight_scale`, whose mean is 1, so that
+    /// the adaptive window's sample counts stay counts of pixels and only the
+    /// weights' ratios matter.
+    pub weight_scale: f32,
 }
 
 /// Sums over the cells of their weights, guide sums and guide squares,
@@ -138,7 +171,7 @@ struct StatsSums {
 
 impl Default for Stats {
     fn default() -> Self {
-        Stats { reference: [0.0; MAX_GUIDES], mean: [0.0; MAX_GUIDES], scale: [1.0; MAX_GUIDES] }
+        Stats { reference: [0.0; MAX_GUIDES], mean: [0.0; MAX_GUIDES], scale: [1.0; MAX_GUIDES], weight_scale: 1.0 }
     }
 }
 
@@ -150,6 +183,8 @@ pub struct CheckedFrame<'a> {
     fit: [Option<ImageView<'a>>; MAX_GUIDES],
     /// Guides the model is applied to (output resolution).
     map: [Option<ImageView<'a>>; MAX_GUIDES],
+    /// Per-pixel weights of the fit ([`Frame::weights`]).
+    weights: Option<ImageView<'a>>,
 }
 
 /// The scratch buffer split into its regions.
@@ -562,7 +597,12 @@ impl Flr {
             (_, None) if self.q == 0 => map,
             (_, None) => return Err(Error::Unsupported("upsampling needs guides_low at the noisy resolution")),
         };
-        Ok(CheckedFrame { noisy: frame.noisy, fit, map })
+        if let Some(wv) = frame.weights {
+            if (wv.width(), wv.height()) != (self.in_w, self.in_h) {
+                return Err(Error::SizeMismatch { arg: Arg::Weights, expected: (self.in_w, self.in_h), got: (wv.width(), wv.height()) });
+            }
+        }
+        Ok(CheckedFrame { noisy: frame.noisy, fit, map, weights: frame.weights })
     }
 
     /// Stage 0: picks the per-guide reference (the first finite value among
@@ -585,6 +625,9 @@ impl Flr {
                     }
                 }
             }
+        }
+        if let Some(wv) = frame.weights {
+            st.weight_scale = weight_scale(&wv);
         }
         st
     }
@@ -615,7 +658,7 @@ impl Flr {
         let mut clamp =
             self.cfg.fireflies.map(|k| FireflyClamp { k, band: None, width: self.in_w, work: &mut clamp_work[..self.firefly_len()] });
         for (j, cells_row) in (r0..r1).zip(cells_tile.chunks_exact_mut(row_len)) {
-            rep += if self.reads_in_place(j) {
+            rep += if frame.weights.is_none() && self.reads_in_place(j) {
                 self.moments_in_place(frame, stats, (t, j), cells_row, worker, &mut block_scratch, clamp.as_mut())?
             } else {
                 // (Splitting rows into column chunks to keep the planes in L2 was
@@ -795,7 +838,17 @@ impl Flr {
             }
             let (wplane, rest) = buf.split_at_mut(plane);
             let wrow = &mut wplane[o..o + vw];
-            wrow.fill(1.0);
+            match frame.weights {
+                // the plane holds √w (`BandPlanes`); 0 for weights that are not finite and positive
+                Some(wv) => {
+                    wv.read_row(y, 0, x0, wrow).ok_or(bad)?;
+                    for v in wrow.iter_mut() {
+                        let w = *v * stats.weight_scale;
+                        *v = if *v > 0.0 && w <= f32::MAX { libm::sqrtf(w) } else { 0.0 };
+                    }
+                }
+                None => wrow.fill(1.0),
+            }
             {
                 let (colour, guides) = rest.split_at_mut(3 * plane);
                 let (p0, p12) = colour.split_at_mut(plane);

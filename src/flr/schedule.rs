@@ -143,7 +143,11 @@ impl Flr {
     /// least [`Flr::scratch_len`] values; `out` is the output-size, ≥ 3-channel
     /// image. Allocates nothing.
     pub fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
-        let f = self.check_frame(frame)?;
+        self.denoise_checked(&self.check_frame(frame)?, scratch, out)
+    }
+
+    /// [`Flr::denoise`] of a checked frame.
+    pub(crate) fn denoise_checked(&self, f: &CheckedFrame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
         self.check_output(out)?;
         let tiled = self.tiled(scratch, 1)?;
         let mut rep = Report::default();
@@ -151,9 +155,9 @@ impl Flr {
             for tile in 0..self.stage_tiles(stage) {
                 rep += if stage == Stage::Apply {
                     let (y0, y1) = self.tile_pixel_rows(tile)?;
-                    tiled.run(&f, stage, tile, 0, Some(&mut out.rows(y0, y1 - y0)?))?
+                    tiled.run(f, stage, tile, 0, Some(&mut out.rows(y0, y1 - y0)?))?
                 } else {
-                    tiled.run(&f, stage, tile, 0, None)?
+                    tiled.run(f, stage, tile, 0, None)?
                 };
             }
         }
@@ -542,7 +546,18 @@ impl Flr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
-        let f = self.check_frame(frame)?;
+        self.denoise_parallel_checked(&self.check_frame(frame)?, scratch, out, workers, for_each)
+    }
+
+    /// [`Flr::denoise_parallel`] of a checked frame.
+    pub(crate) fn denoise_parallel_checked(
+        &self,
+        f: &CheckedFrame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
         let tiled = self.tiled(scratch, workers)?;
         self.check_output(out)?;
         let bands = crate::image::RowBands::new(out)
@@ -550,7 +565,7 @@ impl Flr {
         let shared = Shared { tiled: &tiled, out: bands, result: ResultCell::new() };
         for stage in Stage::ALL {
             let n = self.stage_tiles(stage);
-            let run = |tile: usize, worker: usize| shared.run(&f, stage, tile, worker);
+            let run = |tile: usize, worker: usize| shared.run(f, stage, tile, worker);
             if n == 1 {
                 run(0, 0);
             } else {

@@ -37,7 +37,7 @@
 //! ```
 
 use super::config::FlrConfig;
-use super::Flr;
+use super::{CheckedFrame, Flr};
 use crate::error::Error;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut};
@@ -54,6 +54,8 @@ pub struct TemporalFlr {
     single: Flr,
     stage: Reprojection,
     fireflies: Option<f32>,
+    /// Whether the fit weighs each pixel by its history length.
+    history_weights: bool,
 }
 
 impl TemporalFlr {
@@ -67,7 +69,22 @@ impl TemporalFlr {
         let single = Flr::new(cfg, width, height)?;
         let flr = Flr::new(FlrConfig { fireflies: None, ..cfg }, width, height)?;
         let stage = Reprojection::new(temporal, cfg.guides, width, height)?;
-        Ok(TemporalFlr { flr, single, stage, fireflies: cfg.fireflies })
+        Ok(TemporalFlr { flr, single, stage, fireflies: cfg.fireflies, history_weights: false })
+    }
+    /// With `on`, FLR's fit weighs each pixel by its history length (the
+    /// samples its accumulated light averages, [`Frame::weights`]), so that
+    /// young pixels (disocclusions, the edge a pan uncovers) move the fit less
+    /// than converged ones; they are still predicted through their guides.
+    /// Off by default: on the training sequences it changed the mean PSNR of
+    /// the last 4 frames by less than 0.01 dB (`docs/METHODS.md`), and it
+    /// moves the moments off FLR's in-place fast path.
+    pub fn with_history_weights(mut self, on: bool) -> Self {
+        self.history_weights = on;
+        self
+    }
+    /// Whether the fit weighs pixels by their history length ([`TemporalFlr::with_history_weights`]).
+    pub fn history_weights(&self) -> bool {
+        self.history_weights
     }
     /// The FLR plan that runs on the accumulated light (its clamp is off).
     pub fn flr(&self) -> &Flr {
@@ -115,7 +132,7 @@ impl TemporalFlr {
         flr_scratch: &mut [f64],
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
-        self.run(frame, motion, history, scratch, out, None, |flr, f, o| flr.denoise(f, flr_scratch, o))
+        self.run(frame, motion, history, scratch, out, None, |flr, f, o| flr.denoise_checked(f, flr_scratch, o))
     }
 
     /// [`TemporalFlr::denoise`] with FLR's tiles over the caller's executor
@@ -133,7 +150,7 @@ impl TemporalFlr {
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
         self.run(frame, motion, history, scratch, out, Some((workers, for_each)), |flr, f, o| {
-            flr.denoise_parallel(f, flr_scratch, o, workers, for_each)
+            flr.denoise_parallel_checked(f, flr_scratch, o, workers, for_each)
         })
     }
 
@@ -146,18 +163,33 @@ impl TemporalFlr {
         scratch: &mut [f32],
         out: &mut ImageViewMut<'_>,
         parallel: Option<(usize, Executor<'_>)>,
-        fit: impl FnOnce(&Flr, &Frame<'_>, &mut ImageViewMut<'_>) -> Result<Report, Error>,
+        fit: impl FnOnce(&Flr, &CheckedFrame<'_>, &mut ImageViewMut<'_>) -> Result<Report, Error>,
     ) -> Result<Report, Error> {
         self.flr.check_output(out)?;
         self.flr.check_frame(frame)?;
         if frame.guides_low.is_some() {
             return Err(Error::Unsupported("temporal FLR with a second (low-resolution) guide set"));
         }
+        if frame.weights.is_some() {
+            return Err(Error::Unsupported("temporal FLR with Frame::weights (see TemporalFlr::with_history_weights)"));
+        }
         let clamp_negative = self.flr.config().clamp_negative;
         let (guides, st) = (frame.guides, &self.stage);
-        st.run_frame(frame.noisy, guides, motion.copied(), self.fireflies, clamp_negative, history, scratch, parallel, out, |acc, _, o| {
-            fit(&self.flr, &Frame { noisy: acc, guides, guides_low: None }, o)
-        })
+        st.run_frame(
+            frame.noisy,
+            guides,
+            motion.copied(),
+            self.fireflies,
+            clamp_negative,
+            history,
+            scratch,
+            parallel,
+            out,
+            |acc, lengths, _, o| {
+                let weights = self.history_weights.then_some(lengths);
+                fit(&self.flr, &self.flr.check_frame(&Frame { noisy: acc, guides, guides_low: None, weights })?, o)
+            },
+        )
     }
 }
 

@@ -73,7 +73,7 @@ impl Walr {
             rest,
             None,
             out,
-            |acc, index, o| {
+            |acc, _, index, o| {
                 // WALR on the accumulated light (clamped already: WALR does not clamp it again)
                 let f2 = self.check_frame(&Frame { noisy: acc, ..*frame })?;
                 let prep = self.prepare_with(&f2, index, None);

@@ -314,15 +314,22 @@ pub fn valid_pixels(w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<b
 /// equations written out plainly. `guides[q][pixel]`, `y` interleaved RGB.
 /// Pixels with a non-finite value are excluded. Output interleaved RGB, no clamping.
 pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<f64> {
+    reference_weighted(cfg, w, h, guides, y, None)
+}
+
+/// [`reference`] with per-pixel sample weights (`Frame::weights`): each
+/// pixel's window taps and its share of the frame statistics are multiplied
+/// by its weight; a weight that is not finite and positive excludes it.
+pub fn reference_weighted(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32], weights: Option<&[f64]>) -> Vec<f64> {
     if let Some(s) = demodulation(cfg, guides) {
         // y / s fitted without it, the prediction times s (`FlrConfig::ao_demodulation`)
         let plain = FlrConfig { ao_demodulation: None, ..*cfg };
-        let mut out = reference(&plain, w, h, guides, &demodulate(y, &s));
+        let mut out = reference_weighted(&plain, w, h, guides, &demodulate(y, &s), weights);
         out.iter_mut().enumerate().for_each(|(i, v)| *v *= s[i / 3]);
         return out;
     }
     let q = guides.len();
-    let models = reference_models(cfg, w, h, guides, y);
+    let models = reference_models_weighted(cfg, w, h, guides, y, weights);
     let mut out = vec![0.0; 3 * w * h];
     for (k, m) in models.iter().enumerate() {
         if let Some(m) = m {
@@ -337,13 +344,30 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
 
 /// Each pixel's model of [`reference`] (`None` where its window is empty).
 pub fn reference_models(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32]) -> Vec<Option<PixelModel>> {
+    reference_models_weighted(cfg, w, h, guides, y, None)
+}
+
+/// [`reference_models`] with per-pixel weights ([`reference_weighted`]).
+fn reference_models_weighted(
+    cfg: &FlrConfig,
+    w: usize,
+    h: usize,
+    guides: &[Vec<f64>],
+    y: &[f32],
+    weights: Option<&[f64]>,
+) -> Vec<Option<PixelModel>> {
     let (kern, r) = window_kernel(cfg.blur);
-    let valid = valid_pixels(w, h, guides, y);
-    let scales = frame_scales(w, h, guides, &valid);
+    let pw: Vec<f64> = match weights {
+        Some(wt) => wt.iter().map(|&v| if v > 0.0 && v.is_finite() { v } else { 0.0 }).collect(),
+        None => vec![1.0; w * h],
+    };
+    let valid: Vec<bool> = valid_pixels(w, h, guides, y).iter().zip(&pw).map(|(v, p)| *v && *p > 0.0).collect();
+    let scales = frame_scales_weighted(w, h, guides, &valid, &pw);
     let mut out = vec![None; w * h];
     for py in 0..h as isize {
         for px in 0..w as isize {
-            let idx = window_taps(&kern, r, (w, h), &valid, (px, py));
+            let mut idx = window_taps(&kern, r, (w, h), &valid, (px, py));
+            idx.iter_mut().for_each(|t| t.1 *= pw[t.0]);
             out[(py as usize) * w + px as usize] = fit_taps(cfg, guides, y, &idx, &scales);
         }
     }
@@ -353,13 +377,19 @@ pub fn reference_models(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>]
 /// Frame mean and scale of each guide over the valid pixels (two-pass): the
 /// normalized solve's standardisation.
 pub fn frame_scales(w: usize, h: usize, guides: &[Vec<f64>], valid: &[bool]) -> (Vec<f64>, Vec<f64>) {
+    frame_scales_weighted(w, h, guides, valid, &vec![1.0; w * h])
+}
+
+/// [`frame_scales`] with each valid pixel counted `pw` times.
+fn frame_scales_weighted(w: usize, h: usize, guides: &[Vec<f64>], valid: &[bool], pw: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let q = guides.len();
-    let nv = valid.iter().filter(|v| **v).count().max(1) as f64;
+    let nv = (0..w * h).filter(|&i| valid[i]).map(|i| pw[i]).sum::<f64>();
+    let nv = if nv > 0.0 { nv } else { 1.0 };
     let mut fmean = vec![0.0; q];
     let mut fscale = vec![1.0; q];
     for a in 0..q {
-        let m: f64 = (0..w * h).filter(|&i| valid[i]).map(|i| guides[a][i]).sum::<f64>() / nv;
-        let v: f64 = (0..w * h).filter(|&i| valid[i]).map(|i| (guides[a][i] - m).powi(2)).sum::<f64>() / nv;
+        let m: f64 = (0..w * h).filter(|&i| valid[i]).map(|i| pw[i] * guides[a][i]).sum::<f64>() / nv;
+        let v: f64 = (0..w * h).filter(|&i| valid[i]).map(|i| pw[i] * (guides[a][i] - m).powi(2)).sum::<f64>() / nv;
         fmean[a] = m;
         let sd = v.sqrt().max(1e-6 * m.abs());
         fscale[a] = if sd > 0.0 { sd } else { 1.0 };

@@ -56,13 +56,16 @@ unsafe fn all_finite(v: __m256) -> bool {
 }
 
 /// [`super::accumulate`] with AVX2 + FMA: the block sums of the group vectors
-/// into `acc`; with `check`, `false` as soon as a plain sum is not finite.
+/// into `acc` (plain sums weighted by `weights` where given); with `check`,
+/// `false` as soon as a plain sum is not finite.
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA ([`crate::isa::Isa::Avx2Fma`] available).
+#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn accumulate<const Q: usize>(
     groups: &[[f32x8; VW]],
+    weights: Option<&[f32x8]>,
     sums: &mut [f32x8; MAX_K],
     wsum: f32x8,
     lay: &CellLayout,
@@ -77,9 +80,19 @@ pub(super) unsafe fn accumulate<const Q: usize>(
     sums[0] = wsum;
     let mut plain = [zero; VW];
     let mut energy = zero;
-    for vg in groups.chunks_exact(VW) {
-        for j in 0..Q + 3 {
-            plain[j] = _mm256_add_ps(plain[j], vg[j]);
+    let weights: Option<&[__m256]> = weights.map(bytemuck::cast_slice);
+    for (i, vg) in groups.chunks_exact(VW).enumerate() {
+        match weights {
+            Some(s) => {
+                for j in 0..Q + 3 {
+                    plain[j] = _mm256_fmadd_ps(s[i], vg[j], plain[j]);
+                }
+            }
+            None => {
+                for j in 0..Q + 3 {
+                    plain[j] = _mm256_add_ps(plain[j], vg[j]);
+                }
+            }
         }
         let l = _mm256_fmadd_ps(vg[Q], luma[0], _mm256_fmadd_ps(vg[Q + 1], luma[1], _mm256_mul_ps(vg[Q + 2], luma[2])));
         energy = _mm256_fmadd_ps(l, l, energy);

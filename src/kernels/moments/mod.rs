@@ -22,8 +22,11 @@ use wide::f32x8;
 const MAX_K: usize = super::moment_count(MAX_GUIDES);
 
 /// A band of `rows` input rows, `width` (padded to whole blocks) pixels each,
-/// as planes: weight (1 = valid, 0 = excluded), y0, y1, y2, then one plane per
-/// guide holding `g − m` (zero where excluded).
+/// as planes: `s`, the square root of the pixel's weight (1 = valid, 0 =
+/// excluded; a weight `w` between counts the pixel `w` times), y0, y1, y2,
+/// then one plane per guide holding `g − m` (every plane zero where `s` is).
+/// The moments are the `w`-weighted sums (`Σ w`, `Σ w g`, `Σ w g y`, …): the
+/// kernels scale the guides and the colours by `s`, so products carry `s²`.
 #[derive(Clone, Copy, Debug)]
 pub struct BandPlanes<'a> {
     /// The planes, `rows × width` values each, one after another.
@@ -55,11 +58,13 @@ pub struct BlockScratch {
     /// here rather than on the stack: at `MAX_K` vectors (4 KiB) a fresh
     /// zeroed array per block was a `memset` costing ~1 ms per 1080p frame.
     sums: [f32x8; MAX_K],
+    /// Per group of a gathered block: `s`, the square roots of the weights.
+    weights: [f32x8; MAX_GROUPS],
 }
 
 impl Default for BlockScratch {
     fn default() -> Self {
-        BlockScratch { groups: [[f32x8::ZERO; VW]; MAX_GROUPS], sums: [f32x8::ZERO; MAX_K] }
+        BlockScratch { groups: [[f32x8::ZERO; VW]; MAX_GROUPS], sums: [f32x8::ZERO; MAX_K], weights: [f32x8::ZERO; MAX_GROUPS] }
     }
 }
 
@@ -207,7 +212,7 @@ pub fn moments_rows<const Q: usize>(
         let ng = groups_plain_on::<Q>(isa, band, x0, block, &r, &mut scratch.groups);
         // every lane of every group has weight 1
         let wsum = f32x8::splat(ng as f32);
-        if !accumulate_on::<Q>(isa, &scratch.groups[..ng], &mut scratch.sums, wsum, &lay, &mut acc, true) {
+        if !accumulate_on::<Q>(isa, &scratch.groups[..ng], None, &mut scratch.sums, wsum, &lay, &mut acc, true) {
             // Some value is NaN/Inf: count, pick the first valid pixel, mask.
             let Some(r2) = first_valid::<Q>(band, x0, block, &mut counts) else {
                 cell.fill(0.0);
@@ -216,7 +221,7 @@ pub fn moments_rows<const Q: usize>(
             };
             r = r2;
             let (ng, wsum) = groups_masked::<Q>(band, x0, block, &r, &mut scratch.groups);
-            accumulate_on::<Q>(isa, &scratch.groups[..ng], &mut scratch.sums, wsum, &lay, &mut acc, false);
+            accumulate_on::<Q>(isa, &scratch.groups[..ng], None, &mut scratch.sums, wsum, &lay, &mut acc, false);
         }
         store_shifted::<Q>(&acc, &r, &lay, cell);
     }
@@ -386,23 +391,24 @@ fn block_scalar<const Q: usize>(
     for row in 0..band.rows {
         let base = row * band.width;
         for i in base + x0..base + x0 + block {
-            let wi = w[i];
+            // s = √w: e and y scaled by s, plain sums by s again
+            let si = w[i];
             let mut e = [0f32; MAX_GUIDES];
             for q in 0..Q {
-                e[q] = (g[q][i] - r[q]) * wi;
+                e[q] = (g[q][i] - r[q]) * si;
             }
-            let yy = [y[0][i], y[1][i], y[2][i]];
-            acc[0] += wi;
+            let yy = [y[0][i] * si, y[1][i] * si, y[2][i] * si];
+            acc[0] += si * si;
             let mut p = lay.ss;
             for a in 0..Q {
-                acc[lay.s + a] += e[a];
+                acc[lay.s + a] += si * e[a];
                 for b in a..Q {
                     acc[p] += e[a] * e[b];
                     p += 1;
                 }
             }
             for c in 0..3 {
-                acc[lay.t + c] += yy[c];
+                acc[lay.t + c] += si * yy[c];
             }
             let [l0, l1, l2] = super::LUMA;
             let l = yy[0] * l0 + yy[1] * l1 + yy[2] * l2;
@@ -457,30 +463,35 @@ fn block_simd<const Q: usize>(
         let base = row * band.width;
         let mut i = base + x0;
         while i < base + x0 + block && ng < MAX_GROUPS {
-            let wi = load(w, i);
-            wsum += wi;
+            // s = √w: e and y scaled by s, plain sums by s again (`accumulate`)
+            let si = load(w, i);
+            wsum = si.mul_add(si, wsum);
+            scratch.weights[ng] = si;
             let vg = &mut v[ng];
             for q in 0..Q {
-                vg[q] = (load(g[q], i) - rv[q]) * wi;
+                vg[q] = (load(g[q], i) - rv[q]) * si;
             }
             for c in 0..3 {
-                vg[Q + c] = load(y[c], i);
+                vg[Q + c] = load(y[c], i) * si;
             }
             ng += 1;
             i += 8;
         }
     }
-    accumulate_on::<Q>(isa, &scratch.groups[..ng], &mut scratch.sums, wsum, lay, acc, false);
+    let weights = Some(&scratch.weights[..ng]);
+    accumulate_on::<Q>(isa, &scratch.groups[..ng], weights, &mut scratch.sums, wsum, lay, acc, false);
 }
 
 /// [`accumulate`] on the given instruction set: in AVX2 + FMA intrinsics
 /// when `isa` says so, the build's `wide` lacks them and the CPU has them
 /// (the moments' main cost: a default x86-64 build's SSE2 lanes took ~1.7×
 /// as long), else the portable lanes.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn accumulate_on<const Q: usize>(
     isa: Isa,
     groups: &[[f32x8; VW]],
+    weights: Option<&[f32x8]>,
     sums: &mut [f32x8; MAX_K],
     wsum: f32x8,
     lay: &CellLayout,
@@ -490,21 +501,25 @@ fn accumulate_on<const Q: usize>(
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
         // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
-        return unsafe { avx2::accumulate::<Q>(groups, sums, wsum, lay, acc, check) };
+        return unsafe { avx2::accumulate::<Q>(groups, weights, sums, wsum, lay, acc, check) };
     }
     let _ = isa;
-    accumulate::<Q>(groups, sums, wsum, lay, acc, check)
+    accumulate::<Q>(groups, weights, sums, wsum, lay, acc, check)
 }
 
 /// Block sums of the group vectors `v = [e_0..e_Q, y_0, y_1, y_2]` into
 /// `acc` (cell layout, about the block reference): plain sums, then for each
 /// guide `a` the whole row `Σ v_a v_b, b ≥ a` (that is `S_a·` and `P_a·`)
 /// accumulated in registers over the groups, one fused multiply-add per
-/// product, reduced eight at a time. With `check`, returns `false` (and
-/// leaves `acc` unspecified) as soon as a plain sum is not finite.
+/// product, reduced eight at a time. With `weights` (`s` per group, the
+/// vectors scaled by it), the plain sums are `Σ s v`, so that every moment
+/// carries `s²`. With `check`, returns `false` (and leaves `acc`
+/// unspecified) as soon as a plain sum is not finite.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn accumulate<const Q: usize>(
     groups: &[[f32x8; VW]],
+    weights: Option<&[f32x8]>,
     sums: &mut [f32x8; MAX_K],
     wsum: f32x8,
     lay: &CellLayout,
@@ -518,9 +533,18 @@ fn accumulate<const Q: usize>(
     let mut plain = [f32x8::ZERO; VW];
     let mut energy = f32x8::ZERO;
     let luma = super::LUMA.map(f32x8::splat);
-    for vg in groups {
-        for j in 0..Q + 3 {
-            plain[j] += vg[j];
+    for (i, vg) in groups.iter().enumerate() {
+        match weights {
+            Some(s) => {
+                for j in 0..Q + 3 {
+                    plain[j] = s[i].mul_add(vg[j], plain[j]);
+                }
+            }
+            None => {
+                for j in 0..Q + 3 {
+                    plain[j] += vg[j];
+                }
+            }
         }
         let l = vg[Q].mul_add(luma[0], vg[Q + 1].mul_add(luma[1], vg[Q + 2] * luma[2]));
         energy = l.mul_add(l, energy);
@@ -658,34 +682,54 @@ mod tests {
         }
         let mut seed = 777u32;
         let mut rnd = || crate::hash::uniform(&mut seed) as f32;
-        fn run<const Q: usize>(isa: Isa, groups: &[[f32x8; VW]], check: bool) -> (bool, [f32; MAX_K]) {
+        type Weights<'a> = Option<&'a [f32x8]>;
+        fn run<const Q: usize>(isa: Isa, groups: &[[f32x8; VW]], weights: Weights<'_>, check: bool) -> (bool, [f32; MAX_K]) {
             let (mut sums, mut acc) = ([f32x8::ZERO; MAX_K], [0f32; MAX_K]);
             let (wsum, lay) = (f32x8::splat(groups.len() as f32), CellLayout::new(Q));
             let ok = match isa {
-                Isa::Portable => accumulate::<Q>(groups, &mut sums, wsum, &lay, &mut acc, check),
+                Isa::Portable => accumulate::<Q>(groups, weights, &mut sums, wsum, &lay, &mut acc, check),
                 // SAFETY: the test returned early unless the CPU has AVX2 and FMA.
                 // (Called directly: `accumulate_on` skips it where `wide` is AVX2.)
-                Isa::Avx2Fma => unsafe { avx2::accumulate::<Q>(groups, &mut sums, wsum, &lay, &mut acc, check) },
+                Isa::Avx2Fma => unsafe { avx2::accumulate::<Q>(groups, weights, &mut sums, wsum, &lay, &mut acc, check) },
             };
             (ok, acc)
         }
-        fn compare<const Q: usize>(groups: &[[f32x8; VW]]) {
+        // weights between 0 and 2 per lane, for the weighted plain sums (a seed of their own)
+        let mut wseed = 4242u32;
+        let mut weights = [f32x8::ZERO; MAX_GROUPS];
+        for w in weights.iter_mut() {
+            *w = f32x8::from(core::array::from_fn::<f32, 8, _>(|_| 2.0 * crate::hash::uniform(&mut wseed) as f32));
+        }
+        let compare = |groups: &[[f32x8; VW]], q: usize| {
+            let w = Some(&weights[..groups.len()]);
+            match q {
+                0 => compare::<0>(groups, w),
+                1 => compare::<1>(groups, w),
+                5 => compare::<5>(groups, w),
+                8 => compare::<8>(groups, w),
+                _ => compare::<MAX_GUIDES>(groups, w),
+            }
+        };
+        fn compare<const Q: usize>(groups: &[[f32x8; VW]], weights: Weights<'_>) {
             let k = CellLayout::new(Q).k;
-            for check in [false, true] {
-                let (pok, p) = run::<Q>(Isa::Portable, groups, check);
-                let (aok, a) = run::<Q>(Isa::Avx2Fma, groups, check);
+            for (check, weights) in [(false, None), (true, None), (false, weights), (true, weights)] {
+                let (pok, p) = run::<Q>(Isa::Portable, groups, weights, check);
+                let (aok, a) = run::<Q>(Isa::Avx2Fma, groups, weights, check);
                 assert_eq!(pok, aok, "Q {Q} check {check}");
                 if !pok {
                     continue;
                 }
                 let fused = cfg!(all(target_feature = "avx2", target_feature = "fma"));
+                // (weighted plain sums are products too: fused against separate
+                // rounding over 32 groups of terms up to 20, which may cancel)
+                let bound = if weights.is_some() { 2e-4 } else { 1e-5 };
                 for j in 0..k {
                     if p[j].is_nan() {
                         assert!(a[j].is_nan(), "Q {Q} moment {j}: NaN vs {}", a[j]);
                     } else if fused {
                         assert_eq!(p[j].to_bits(), a[j].to_bits(), "Q {Q} moment {j}: {} vs {}", p[j], a[j]);
                     } else {
-                        assert!((p[j] - a[j]).abs() <= 1e-5 * (1.0 + p[j].abs()), "Q {Q} moment {j}: {} vs {}", p[j], a[j]);
+                        assert!((p[j] - a[j]).abs() <= bound * (1.0 + p[j].abs()), "Q {Q} moment {j}: {} vs {}", p[j], a[j]);
                     }
                 }
             }
@@ -697,17 +741,15 @@ mod tests {
                     *v = f32x8::from(core::array::from_fn::<f32, 8, _>(|_| 10.0 * rnd()));
                 }
             }
-            compare::<0>(&groups[..ng]);
-            compare::<1>(&groups[..ng]);
-            compare::<5>(&groups[..ng]);
-            compare::<8>(&groups[..ng]);
-            compare::<MAX_GUIDES>(&groups[..ng]);
+            for q in [0, 1, 5, 8, MAX_GUIDES] {
+                compare(&groups[..ng], q);
+            }
             // a NaN in a colour plane: both refuse the block with `check`
             let mut bad = groups;
             let mut lanes = bad[ng - 1][5 + 1].to_array();
             lanes[3] = f32::NAN;
             bad[ng - 1][5 + 1] = f32x8::from(lanes);
-            compare::<5>(&bad[..ng]);
+            compare(&bad[..ng], 5);
         }
     }
 
