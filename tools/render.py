@@ -11,7 +11,8 @@ are reported on `test`, and `data/` (the bundled samples) comes from `test`.
     python3 tools/render.py --out data --sample      # the committed sample set
 
 Layers: noisy (1 spp), noisy4, reference, albedo, normal, depth, position, ao
-(plus motion for sequences), half floats except position and depth (float).
+(plus motion for sequences, and reference_b with --second-reference), half
+floats except position and depth (float).
 Noisy/reference are *demodulated diffuse indirect* light: at the primary hit a
 cosine-weighted direction is sampled and Mitsuba's `path` integrator
 (hide_emitters, max_depth 3) is evaluated along it; with the cosine pdf and a
@@ -207,7 +208,7 @@ def inject(noisy, p, k, seed):
     noisy[hit] = k * lum
 
 
-def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0):
+def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0, second_reference=False):
     integ = mi.load_dict({"type": "path", "max_depth": 3, "hide_emitters": True})
     n = w * h
     idx = dr.arange(mi.UInt32, n)
@@ -256,6 +257,9 @@ def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_ra
     for name, spp in spps.items():
         out[name] = indirect(spp, seed + zlib.crc32(name.encode()) % 1000)
     out["reference"] = indirect(ref_spp, seed + 99991)
+    if second_reference:
+        # the same light from other samples: the reference's own noise (`lrd eval`'s flicker floor)
+        out["reference_b"] = indirect(ref_spp, seed + 77773)
 
     # ambient occlusion: fraction of cosine rays unoccluded within ao_dist
     sampler = mi.load_dict({"type": "independent"})
@@ -307,6 +311,11 @@ def main():
     ap.add_argument("--seq", type=int, default=0, help="also render a sequence of N frames per scene")
     ap.add_argument("--motion", default="pan", help=f"comma list of camera motions for --seq: {', '.join(MOTIONS)}")
     ap.add_argument("--seq-only", action="store_true", help="render only the sequences, not the stills")
+    ap.add_argument(
+        "--second-reference",
+        action="store_true",
+        help="also render reference_b, the reference from other samples (lrd eval then reports the flicker the reference's noise adds)",
+    )
     ap.add_argument("--sample", action="store_true", help="render the committed data/ sample set")
     a = ap.parse_args()
     w, h = map(int, a.size.lower().split("x"))
@@ -344,7 +353,7 @@ def main():
             prev = None
             for i in range(a.seq):
                 sensor = mi.load_dict(sensor_dict(camera_at(motion, i, a.seq, cam0, sc), w, h))
-                lay = render_frame(scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i)
+                lay = render_frame(scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i, second_reference=a.second_reference)
                 if motion == "burst" and i == a.seq // 2:
                     inject(lay["noisy"], p=1e-3, k=100.0, seed=seed * 100 + i)
                 write_exr(os.path.join(d, f"frame_{i:04d}.exr"), lay)

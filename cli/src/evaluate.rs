@@ -94,6 +94,12 @@ pub struct Record {
     /// (`metrics::flicker`); `None` elsewhere.
     #[serde(default)]
     pub flicker: Option<f64>,
+    /// Sequences whose frames carry a second, independent reference
+    /// (`reference_b`, `tools/render.py --second-reference`): the flicker the
+    /// reference's own noise puts into every method's figure, `flicker(B vs
+    /// A) / √2` (`metrics::flicker`); `None` elsewhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_flicker: Option<f64>,
     /// The robustness case of the input (`inject::Injection::name`; "clean"
     /// or empty for the frame as rendered).
     #[serde(default)]
@@ -233,6 +239,8 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
     let mut records = vec![];
     let mut images = vec![];
     let mut carry: Vec<Option<Carry>> = variants.iter().map(|_| None).collect();
+    // the previous frame's sequence and tone-mapped references A and B
+    let mut prev_refs: Option<(PathBuf, Vec<f32>, Vec<f32>)> = None;
     for path in frames {
         let mut exr = ExrFrame::read(path)?;
         // a sequence's frames get different pixels: salted by their number
@@ -252,6 +260,23 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
         let r_mod: Vec<f32> = reference.iter().zip(&albedo).map(|(a, b)| a * b).collect();
         let l = lrdenoise_cli::metrics::mean_luminance(&r_mod);
         let ref_tm = lrdenoise_cli::metrics::tonemap(&r_mod, l);
+        // the reference's own flicker, from a second reference rendered with other samples
+        let ref_b_tm = if exr.has("reference_b") {
+            let b = exr.layer("reference_b", 3, path)?.interleaved(3);
+            let b_mod: Vec<f32> = b.iter().zip(&albedo).map(|(a, b)| a * b).collect();
+            Some(lrdenoise_cli::metrics::tonemap(&b_mod, l))
+        } else {
+            None
+        };
+        let reference_flicker = match (&seq, prev_refs.take(), &ref_b_tm, &base.motion) {
+            (Some(s), Some((ps, pa, pb)), Some(b), Some(mv)) if &ps == s => {
+                lrdenoise_cli::metrics::flicker(b, &pb, &ref_tm, &pa, mv, w, h).map(|f| f / std::f64::consts::SQRT_2)
+            }
+            _ => None,
+        };
+        if let (Some(s), Some(b)) = (&seq, &ref_b_tm) {
+            prev_refs = Some((s.clone(), ref_tm.clone(), b.clone()));
+        }
         let mut fi = FrameImages { frame: name.clone(), w, h, reference_tm: vec![], rows: vec![] };
         if opt.keep_images {
             fi.reference_tm = ref_tm.clone();
@@ -327,6 +352,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 height: h,
                 flags: built.flags.clone(),
                 flicker,
+                reference_flicker,
                 inject: opt.inject.name(),
                 sequence: seq.as_ref().and_then(|s| s.file_name()).map(|s| s.to_string_lossy().to_string()),
                 variant: Some(vi),
@@ -376,6 +402,7 @@ pub fn means(records: &[Record]) -> Vec<Record> {
                     let f: Vec<f64> = rs.iter().filter_map(|r| r.flicker).collect();
                     (!f.is_empty()).then(|| f.iter().sum::<f64>() / f.len() as f64)
                 },
+                reference_flicker: None,
                 inject: rs[0].inject.clone(),
                 sequence: None,
                 variant: rs[0].variant,

@@ -208,6 +208,34 @@ int main(int argc, char **argv) {
     if (lrd_flr_denoise(&cfg, &odd, &out, scratch, bytes, NULL) != LRD_STATUS_INVALID_ARGUMENT) return 3;
     if (lrd_status_string(9999) == NULL) return 3;
 
+    /* sample weights: a checkerboard (half the pixels rendered, the clamp off); what the
+       unrendered pixels hold changes no output value, and they still get one */
+    {
+        float *weights = malloc(sizeof(float) * W * H), *garbage = malloc(sizeof(float) * 3 * W * H);
+        float *a = malloc(sizeof(float) * 3 * W * H), *b = malloc(sizeof(float) * 3 * W * H);
+        if (!weights || !garbage || !a || !b) return 2;
+        for (int i = 0; i < W * H; i++) {
+            weights[i] = (float)((i % W + i / W) % 2);
+            for (int c = 0; c < 3; c++) garbage[3 * i + c] = weights[i] != 0.0f ? noisy[3 * i + c] : 1e6f;
+        }
+        LrdFlrConfig plain = cfg;
+        plain.fireflies = 0.0f;
+        LrdFrame weighted = frame;
+        weighted.weights = image(weights, 1);
+        LrdImageMut wout = out;
+        wout.data = a;
+        CHECK(lrd_flr_denoise(&plain, &weighted, &wout, scratch, bytes, NULL));
+        weighted.noisy = image(garbage, 3);
+        wout.data = b;
+        CHECK(lrd_flr_denoise(&plain, &weighted, &wout, scratch, bytes, NULL));
+        for (int i = 0; i < 3 * W * H; i++)
+            if (a[i] != b[i] || !(a[i] == a[i])) return 4;
+        /* weights that share memory with the output are refused */
+        weighted.weights = image(b, 1);
+        if (lrd_flr_denoise(&plain, &weighted, &wout, scratch, bytes, NULL) != LRD_STATUS_INVALID_ARGUMENT) return 3;
+        free(weights); free(garbage); free(a); free(b);
+    }
+
     /* tiled on WORKERS threads (worker 0 on this one) */
     uint32_t tiles = 0;
     size_t tbytes = 0;

@@ -112,6 +112,15 @@ pub struct LrdFrame {
     /// NULL otherwise (BMFR, WALR and FLNR return LRD_STATUS_UNSUPPORTED if
     /// any is set).
     pub guides_low: LrdGuides,
+    /// FLR and FLNR: per-pixel sample weights of the fit, 1 channel at the
+    /// noisy image's size, or `data` NULL for none. Each pixel counts `w`
+    /// times in its windows: a pixel's sample count under adaptive sampling,
+    /// or 0 for a pixel without a sample this frame (it is then predicted
+    /// from its neighbours through its guides). A weight that is not finite
+    /// and positive excludes its pixel; only ratios matter. The firefly
+    /// clamp still measures every finite pixel. BMFR, WALR and the temporal
+    /// pipelines return LRD_STATUS_UNSUPPORTED when it is set.
+    pub weights: LrdImage,
 }
 
 /// Guide bits for [`LrdFlrConfig::guides`] and the `guides` of LrdBmfrConfig
@@ -259,8 +268,7 @@ pub(crate) unsafe fn frame_views<'a>(frame: &LrdFrame, low_ok: bool) -> Result<F
             noisy: view(&frame.noisy, 3)?.ok_or(LRD_STATUS_NULL_POINTER)?,
             guides: guides(&frame.guides)?,
             guides_low: if low { None } else { Some(guides(&frame.guides_low)?) },
-            // (the C API has no per-pixel sample weights)
-            weights: None,
+            weights: view(&frame.weights, 1)?,
         })
     }
 }
@@ -289,12 +297,15 @@ pub(crate) fn check_scratch(scratch: *mut c_void) -> Result<(), LrdStatus> {
     }
 }
 
-/// Every image of a frame with its channel count: noisy, guides, low-resolution guides.
+/// Every image of a frame with its channel count: noisy, guides, low-resolution guides, weights.
 pub(crate) fn images(frame: &LrdFrame) -> impl Iterator<Item = (&LrdImage, usize)> + '_ {
     fn guides(g: &LrdGuides) -> impl Iterator<Item = (&LrdImage, usize)> + '_ {
         [(&g.normal, 3), (&g.depth, 1), (&g.position, 3), (&g.ao, 1)].into_iter().chain(g.user.iter().map(|u| (u, 1)))
     }
-    core::iter::once((&frame.noisy, 3)).chain(guides(&frame.guides)).chain(guides(&frame.guides_low))
+    core::iter::once((&frame.noisy, 3))
+        .chain(guides(&frame.guides))
+        .chain(guides(&frame.guides_low))
+        .chain(core::iter::once((&frame.weights, 1)))
 }
 
 /// Bytes `[start, end)` an image spans (None for an absent or invalid image:

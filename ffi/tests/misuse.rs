@@ -45,7 +45,12 @@ impl Case {
         Case { w, h, noisy, depth, ao, cfg }
     }
     fn frame(&self) -> LrdFrame {
-        let mut f = LrdFrame { noisy: img(self.noisy.as_ptr(), self.w, self.h, 3), guides: guides_none(), guides_low: guides_none() };
+        let mut f = LrdFrame {
+            noisy: img(self.noisy.as_ptr(), self.w, self.h, 3),
+            guides: guides_none(),
+            guides_low: guides_none(),
+            weights: none(),
+        };
         f.guides.depth = img(self.depth.as_ptr(), self.w, self.h, 1);
         f.guides.ao = img(self.ao.as_ptr(), self.w, self.h, 1);
         f
@@ -220,7 +225,7 @@ fn temporal_outputs_that_overlap_are_refused() {
     let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == 2 { 1.0 } else { 0.0 }).collect();
     let position: Vec<f32> = (0..3 * n).map(|i| (i % 97) as f32 * 0.01).collect();
     let cfg = lrd_bmfr_config_default();
-    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none() };
+    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), weights: none() };
     frame.guides.normal = img(normal.as_ptr(), w, h, 3);
     frame.guides.position = img(position.as_ptr(), w, h, 3);
     let (mut sb, mut hb) = (0, 0);

@@ -238,6 +238,7 @@ mod tests {
             height: 8,
             flags: String::new(),
             flicker: None,
+            reference_flicker: None,
             inject: inject.into(),
             sequence: None,
             variant: None,
