@@ -34,11 +34,27 @@ except Exception:  # no LLVM: 10x slower but works
 SPLIT = {
     "train": [("box", 1), ("clutter", 1), ("colonnade", 1), ("box", 2), ("clutter", 2), ("room", 1)],
     "test": [("room", 7), ("poles", 7), ("farclutter", 7), ("colonnade", 7), ("box", 7)],
+    # Generalization (FLNR): the wide training set spans six families, each seed with its own
+    # camera field of view, distance and path depth; the held-out families are never trained
+    # or tuned on (gallery: thin slats and textured walls; poles; farclutter far from the origin).
+    "wide": [(f, s) for f in ("box", "clutter", "colonnade", "room", "courtyard", "hall") for s in range(11, 19)],
+    "heldout-families": [(f, s) for f in ("gallery", "poles", "farclutter") for s in range(31, 35)],
 }
+# Families whose seeds also draw the camera's field of view and distance and the path depth.
+VARIED = ("courtyard", "hall", "gallery")
 
 
 def diffuse(rgb):
+    """A Lambertian BSDF of an RGB albedo, or of a texture dict (`checker`)."""
+    if isinstance(rgb, dict):
+        return {"type": "diffuse", "reflectance": rgb}
     return {"type": "diffuse", "reflectance": {"type": "rgb", "value": [float(c) for c in rgb]}}
+
+
+def checker(rng, scale, lo=0.2, hi=0.85):
+    """A checkerboard albedo of two random colours, `scale` squares per unit of the shape's uv."""
+    rgb = lambda: {"type": "rgb", "value": color(rng, lo, hi).tolist()}
+    return {"type": "checkerboard", "color0": rgb(), "color1": rgb(), "to_uv": mi.ScalarTransform4f().scale([float(scale), float(scale), 1.0])}
 
 
 def xform(translate=(0, 0, 0), scale=(1, 1, 1), rotate=None):
@@ -144,9 +160,85 @@ def scene_dict(family, seed):
         S["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [0.1, 0.1, 0.12]}}
         cam = ((0, 1.8, 5.0), (0, 1.5, -2), 55)
         ao = 1.0
+    elif family == "courtyard":
+        # open: sun and sky only, a textured ground, low walls, objects of every size
+        S["floor"] = rect((0, 0, 0), (15, 15, 1), checker(rng, rng.uniform(4, 30), 0.3, 0.7), ((1, 0, 0), -90))
+        for k in range(int(rng.integers(1, 4))):
+            S[f"wall{k}"] = cube((rng.uniform(-6, 6), 0.6, rng.uniform(-8, -3)), (rng.uniform(1, 4), 0.6, 0.15), color(rng, 0.4, 0.8), ((0, 1, 0), rng.uniform(-40, 40)))
+        for i in range(int(rng.integers(8, 20))):
+            c = (rng.uniform(-5, 5), 0, rng.uniform(-7, 2))
+            s = rng.uniform(0.1, 1.2, 3)
+            k = rng.random()
+            alb = checker(rng, rng.uniform(2, 12)) if rng.random() < 0.3 else color(rng)
+            if k < 0.35:
+                S[f"c{i}"] = cube((c[0], s[1], c[2]), s, alb, ((0, 1, 0), rng.uniform(0, 90)))
+            elif k < 0.7:
+                S[f"s{i}"] = sphere((c[0], s[0], c[2]), s[0], alb)
+            else:
+                S[f"y{i}"] = cylinder((c[0], 0, c[2]), (c[0], 3 * s[1] + 0.3, c[2]), 0.15 * s[0] + 0.01, alb)
+        elev = rng.uniform(0.2, 1.2)
+        S["sun"] = {"type": "directional", "direction": [rng.uniform(-1, 1), -elev, rng.uniform(-1, 0.3)], "irradiance": {"type": "rgb", "value": (rng.uniform(4, 10) * np.array([1.0, 0.92, 0.8])).tolist()}}
+        S["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": (rng.uniform(0.1, 0.6) * np.array([0.6, 0.75, 1.0])).tolist()}}
+        cam = ((rng.uniform(-3, 3), rng.uniform(0.8, 4.0), rng.uniform(4, 9)), (rng.uniform(-1, 1), 0.6, -2), rng.uniform(35, 85))
+        ao = 1.5
+    elif family == "hall":
+        # closed and large, lit only by small bright emitters; flat walls, curved objects
+        W, H = rng.uniform(5, 8), rng.uniform(3, 5)
+        wall = color(rng, 0.4, 0.85)
+        S["floor"] = rect((0, 0, 0), (W, W, 1), checker(rng, rng.uniform(2, 10), 0.3, 0.7) if rng.random() < 0.5 else color(rng, 0.3, 0.7), ((1, 0, 0), -90))
+        S["ceil"] = rect((0, H, 0), (W, W, 1), wall, ((1, 0, 0), 90))
+        S["back"] = rect((0, H / 2, -W), (W, H / 2, 1), checker(rng, rng.uniform(1, 6)) if rng.random() < 0.5 else wall)
+        S["front"] = rect((0, H / 2, W), (W, H / 2, 1), wall, ((0, 1, 0), 180))
+        S["left"] = rect((-W, H / 2, 0), (W, H / 2, 1), color(rng, 0.3, 0.85), ((0, 1, 0), 90))
+        S["right"] = rect((W, H / 2, 0), (W, H / 2, 1), color(rng, 0.3, 0.85), ((0, 1, 0), -90))
+        for k in range(int(rng.integers(2, 7))):
+            p = (rng.uniform(-W + 1, W - 1), rng.uniform(0.5 * H, H - 0.3), rng.uniform(-W + 1, W - 1))
+            r = rng.uniform(0.04, 0.2)
+            S[f"lamp{k}"] = {"type": "sphere", "center": list(map(float, p)), "radius": float(r), "bsdf": diffuse((0, 0, 0)),
+                             "emitter": {"type": "area", "radiance": {"type": "rgb", "value": (rng.uniform(20, 120) * (0.4 / r) ** 2 * np.array([1.0, 0.9, 0.75]) / 16).tolist()}}}
+        for i in range(int(rng.integers(4, 12))):
+            c = (rng.uniform(-W + 1, W - 1), 0, rng.uniform(-W + 1, W - 2))
+            s = rng.uniform(0.2, 1.0, 3)
+            if rng.random() < 0.5:
+                S[f"s{i}"] = sphere((c[0], s[0], c[2]), s[0], color(rng))
+            else:
+                S[f"y{i}"] = cylinder((c[0], 0, c[2]), (c[0], 2 * s[1] + 0.2, c[2]), 0.4 * s[0], color(rng))
+        cam = ((rng.uniform(-W / 2, W / 2), rng.uniform(1.0, H - 0.5), W - 0.5), (rng.uniform(-1, 1), rng.uniform(0.5, 1.5), -W), rng.uniform(45, 80))
+        ao = 1.0
+    elif family == "gallery":
+        # thin geometry: slatted screens in front of textured walls, an area light and a doorway of sky
+        W = 6.0
+        S["floor"] = rect((0, 0, 0), (W, W, 1), color(rng, 0.3, 0.7), ((1, 0, 0), -90))
+        S["ceil"] = rect((0, 4, 0), (W, W, 1), color(rng, 0.6, 0.85), ((1, 0, 0), 90))
+        S["back"] = rect((0, 2, -W), (W, 2, 1), checker(rng, rng.uniform(3, 16)))
+        S["left"] = rect((-W, 2, 0), (W, 2, 1), checker(rng, rng.uniform(3, 16)), ((0, 1, 0), 90))
+        # the right wall has a doorway (two panels and a lintel) to the sky
+        S["rw0"] = rect((W, 2, -3.5), (2.5, 2, 1), color(rng, 0.5, 0.8), ((0, 1, 0), -90))
+        S["rw1"] = rect((W, 2, 3.5), (2.5, 2, 1), color(rng, 0.5, 0.8), ((0, 1, 0), -90))
+        S["rw2"] = rect((W, 3.5, 0), (1.0, 0.5, 1), color(rng, 0.5, 0.8), ((0, 1, 0), -90))
+        S["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": (rng.uniform(0.5, 2.0) * np.array([0.7, 0.8, 1.0])).tolist()}}
+        S["light"] = rect((rng.uniform(-2, 2), 3.99, rng.uniform(-3, 0)), (0.8, 0.8, 1), (0, 0, 0), ((1, 0, 0), 90), emit=(rng.uniform(8, 20) * np.array([1.0, 0.95, 0.85])).tolist())
+        for k in range(int(rng.integers(2, 4))):
+            x0, z0, ang = rng.uniform(-4, 3), rng.uniform(-5, 0), rng.uniform(-30, 30)
+            slat = color(rng, 0.3, 0.9)
+            for j in range(int(rng.integers(8, 20))):
+                S[f"sl{k}_{j}"] = cube((x0 + 0.18 * j, 1.4, z0), (rng.uniform(0.01, 0.04), 1.4, 0.2), slat, ((0, 1, 0), ang))
+        for i in range(int(rng.integers(2, 6))):
+            c = (rng.uniform(-4, 4), 0, rng.uniform(-4, 2))
+            r = rng.uniform(0.2, 0.7)
+            S[f"s{i}"] = sphere((c[0], r, c[2]), r, color(rng))
+        cam = ((rng.uniform(-2, 2), rng.uniform(1.2, 2.5), W - 0.5), (rng.uniform(-1, 1), 1.4, -W), rng.uniform(50, 90))
+        ao = 1.0
     else:
         raise SystemExit(f"unknown scene family {family}")
     return S, cam, ao, off, sc
+
+
+def max_depth(family, seed):
+    """Path depth of the indirect light: 3, or for the VARIED families one of 2..5 drawn from the seed."""
+    if family not in VARIED:
+        return 3
+    return int(np.random.default_rng(seed * 7 + zlib.crc32(family.encode()) % 991).integers(2, 6))
 
 
 def place(S, cam, off, sc):
@@ -208,12 +300,20 @@ def inject(noisy, p, k, seed):
     noisy[hit] = k * lum
 
 
-def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0, second_reference=False):
-    integ = mi.load_dict({"type": "path", "max_depth": 3, "hide_emitters": True})
+def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0, second_reference=False, depth=3, jitter=False):
+    """The layers of one frame. `depth`: the path integrator's max_depth; `jitter`: the guides
+    (and the primary hit every light layer starts from) through a random point of each pixel,
+    as a 1-spp G-buffer gives, instead of its centre."""
+    integ = mi.load_dict({"type": "path", "max_depth": int(depth), "hide_emitters": True})
     n = w * h
     idx = dr.arange(mi.UInt32, n)
-    px = mi.Float(idx % w) + 0.5
-    py = mi.Float(idx // w) + 0.5
+    if jitter:
+        j = np.random.default_rng(seed + 4243).random((2, n))
+        px = mi.Float(idx % w) + mi.Float(j[0])
+        py = mi.Float(idx // w) + mi.Float(j[1])
+    else:
+        px = mi.Float(idx % w) + 0.5
+        py = mi.Float(idx // w) + 0.5
     ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / w, py / h), mi.Point2f(0.5, 0.5))
     si = scene.ray_intersect(ray)
     valid = si.is_valid()
@@ -317,6 +417,7 @@ def main():
         help="also render reference_b, the reference from other samples (lrd eval then reports the flicker the reference's noise adds)",
     )
     ap.add_argument("--sample", action="store_true", help="render the committed data/ sample set")
+    ap.add_argument("--noisy-guides", action="store_true", help="guides as a 1-spp renderer has them: a random point of each pixel, AO from 4 rays")
     a = ap.parse_args()
     w, h = map(int, a.size.lower().split("x"))
     scenes = SPLIT[a.split]
@@ -329,12 +430,15 @@ def main():
         a.seq = 6
     os.makedirs(a.out, exist_ok=True)
     spps = {"noisy": 1, "noisy4": 4}
+
+    def opts(fam, seed):
+        return {"depth": max_depth(fam, seed), "jitter": a.noisy_guides, "ao_rays": 4 if a.noisy_guides else 64}
     for fam, seed in ([] if a.seq_only else scenes):
         S, cam, ao, off, sc = scene_dict(fam, seed)
         S, cam = place(S, cam, off, sc)
         scene = mi.load_dict({"type": "scene", **S})
         sensor = mi.load_dict(sensor_dict(cam, w, h))
-        lay = render_frame(scene, sensor, None, w, h, spps, a.ref_spp, ao * sc, seed=seed)
+        lay = render_frame(scene, sensor, None, w, h, spps, a.ref_spp, ao * sc, seed=seed, **opts(fam, seed))
         path = os.path.join(a.out, f"{fam}_{seed}.exr")
         write_exr(path, lay)
         print("wrote", path, flush=True)
@@ -353,7 +457,9 @@ def main():
             prev = None
             for i in range(a.seq):
                 sensor = mi.load_dict(sensor_dict(camera_at(motion, i, a.seq, cam0, sc), w, h))
-                lay = render_frame(scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i, second_reference=a.second_reference)
+                lay = render_frame(
+                    scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i, second_reference=a.second_reference, **opts(fam, seed)
+                )
                 if motion == "burst" and i == a.seq // 2:
                     inject(lay["noisy"], p=1e-3, k=100.0, seed=seed * 100 + i)
                 write_exr(os.path.join(d, f"frame_{i:04d}.exr"), lay)
