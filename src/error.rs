@@ -24,7 +24,7 @@ pub enum Arg {
     History,
     /// Motion vectors.
     Motion,
-    /// Per-pixel sample weights (`Frame::weights`).
+    /// Per-pixel sample weights (`Frame::sample_weights`).
     Weights,
 }
 

@@ -347,6 +347,10 @@ impl<'w> Flnr<'w> {
         if frame.guides_low.is_some() {
             return Err(Error::Unsupported("FLNR has no joint upsampling (guides_low given)"));
         }
+        if frame.sample_weights.is_some() {
+            // (its network reads every pixel's light, sampled or not)
+            return Err(Error::Unsupported("FLNR has no per-pixel sample weights (Frame::sample_weights given)"));
+        }
         let cv = frame.guides.channel_views(&INPUT_GUIDES, w, h, Arg::Guide)?;
         let mut views = [*n; 5];
         for (v, c) in views.iter_mut().zip(&cv) {
@@ -444,7 +448,7 @@ impl<'w> Flnr<'w> {
             model.user[k] = Some(plane(k)?);
             map.user[k] = Some(plane(self.q + k)?);
         }
-        Ok(Frame { noisy: frame.noisy, guides: map, guides_low: Some(model), weights: frame.weights })
+        Ok(Frame { noisy: frame.noisy, guides: map, guides_low: Some(model), sample_weights: None })
     }
 
     /// Denoises one frame (normal, depth and AO guides) on the calling thread.

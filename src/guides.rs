@@ -133,23 +133,27 @@ pub struct Frame<'a> {
     /// with `guides` = `X'_map`). `None`: fit and apply on `guides`.
     pub guides_low: Option<Guides<'a>>,
     /// Per-pixel sample weights of the fit, at the noisy input's resolution
-    /// (FLR and FLNR only; channel 0 is read): each pixel counts `w` times in
-    /// its windows, so the regression leans on pixels of large `w`: a pixel's
-    /// sample count under adaptive sampling, or 0 for a pixel that has no
-    /// sample this frame (checkerboard or sparse rendering), which is then
-    /// predicted from its neighbours through its guides. A weight that is not
-    /// finite and positive excludes the pixel from the fit. Only ratios
-    /// matter: uniform weights fit as `None` does, up to rounding. The firefly
-    /// clamp ([`crate::FlrConfig::fireflies`]) still measures every finite
-    /// pixel whatever its weight: turn it off, or fill pixels without a sample
-    /// with a value of their neighbourhood's scale. `None`: every finite pixel
-    /// has weight 1.
-    pub weights: Option<ImageView<'a>>,
+    /// (single-frame FLR on the CPU only; channel 0 is read): each pixel
+    /// counts `w` times in its windows, so the regression leans on pixels of
+    /// large `w`: a pixel's sample count under adaptive sampling, or 0 for a
+    /// pixel that has no sample this frame (checkerboard or sparse
+    /// rendering), which is then predicted from its neighbours through its
+    /// guides. A weight that is not finite and positive excludes the pixel
+    /// from the fit. Only ratios matter: the weights are scaled to a frame
+    /// mean of 1, and uniform weights fit as `None` does, up to rounding. The
+    /// adaptive window counts a window's weight as its share of pixels, so
+    /// windows of weights below the frame's mean lean towards the larger
+    /// windows. The firefly clamp ([`crate::FlrConfig::fireflies`]) still
+    /// measures every finite pixel whatever its weight: turn it off, or fill
+    /// pixels without a sample with a value of their neighbourhood's scale.
+    /// FLNR, BMFR, WALR, the temporal pipelines and the GPU path refuse it.
+    /// `None`: every finite pixel has weight 1.
+    pub sample_weights: Option<ImageView<'a>>,
 }
 
 impl<'a> Frame<'a> {
     /// A frame at one resolution (no upsampling).
     pub fn new(noisy: ImageView<'a>, guides: Guides<'a>) -> Self {
-        Frame { noisy, guides, guides_low: None, weights: None }
+        Frame { noisy, guides, guides_low: None, sample_weights: None }
     }
 }

@@ -355,11 +355,7 @@ impl Reprojection {
     /// wrote it into the history's write slot, as a view the denoiser reads
     /// (3 channels, each channel's row `w` values after the previous one's).
     pub fn accumulated<'h>(&self, history: &'h mut History<'_>) -> Result<ImageView<'h>, Error> {
-        let (w, h) = (self.width, self.height);
-        let rec = self.record();
-        let (_, write) = self.slots(history);
-        let layout = crate::image::Layout { offset: LIGHT * w, pixel_stride: 1, row_stride: rec * w, channel_stride: w };
-        ImageView::f32(write, w, h, 3, layout)
+        Ok(self.accumulated_and_lengths(history)?.0)
     }
 
     /// The history length of each pixel as step 1 wrote it into the

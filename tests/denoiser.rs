@@ -156,3 +156,25 @@ fn parallel_through_the_trait_equals_one_thread() {
         }
     }
 }
+
+/// Per-pixel sample weights are single-frame FLR's: FLNR, BMFR and WALR
+/// refuse a frame that has them, through the trait, as `Unsupported`.
+#[test]
+fn sample_weights_are_refused_where_unsupported() {
+    let blob = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/train/flnr.bin")).unwrap();
+    let (w, h) = (40, 24);
+    let f = Owned::synthetic(w, h, 13, 0.3);
+    let ones = vec![1f32; w * h];
+    let b = Bmfr::new(BmfrConfig::default(), w, h).unwrap();
+    let wl = Walr::new(WalrConfig::default(), w, h).unwrap();
+    let fl = Flnr::new(FlnrConfig::new(&blob), w, h).unwrap();
+    let methods: [(&dyn Denoiser, GuideSet); 3] = [(&b, b.config().guides), (&wl, wl.config().guides), (&fl, flnr::INPUT_GUIDES)];
+    for (i, (m, set)) in methods.into_iter().enumerate() {
+        let mut frame = f.frame(set);
+        frame.sample_weights = Some(ImageView::interleaved(&ones, w, h, 1).unwrap());
+        let mut out = vec![0f32; 3 * w * h];
+        let mut scratch = vec![0f64; m.scratch_len()];
+        let e = m.denoise(&frame, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap());
+        assert!(matches!(e, Err(Error::Unsupported(_))), "method {i}: {e:?}");
+    }
+}

@@ -470,7 +470,7 @@ fn output_layouts_agree_streamed_or_not() {
     }
 }
 
-/// Per-pixel sample weights (`Frame::weights`): random weights, zeros and
+/// Per-pixel sample weights (`Frame::sample_weights`): random weights, zeros and
 /// weights that are not finite and positive (which exclude their pixel)
 /// against the f64 reference with each pixel's taps and frame statistics
 /// multiplied by its weight, for every guide set, with and without the AO
@@ -495,7 +495,7 @@ fn sample_weights_match_reference() {
             let mut c = FlrConfig { ao_demodulation: demod, ..cfg(*set, 1) };
             c.blur = Blur::Gaussian { sigma: 3.0, radius: None };
             let mut frame = f.frame(*set);
-            frame.weights = Some(ImageView::interleaved(&weights, f.w, f.h, 1).unwrap());
+            frame.sample_weights = Some(ImageView::interleaved(&weights, f.w, f.h, 1).unwrap());
             let (out, _) = run_frame(c, f.w, f.h, &frame);
             let want = reference_weighted(&c, f.w, f.h, &f.channels(*set), &f.noisy, Some(&wide));
             let (max, mean) = diff(&out, &want);
@@ -509,9 +509,10 @@ fn sample_weights_match_reference() {
     }
 }
 
-/// Uniform weights fit as no weights (to rounding), in blocks of 8 and 16
-/// with both kernels; weighted SIMD and scalar agree; tiles over threads
-/// equal the whole frame bit for bit with weights.
+/// Uniform weights fit as no weights (bit for bit: they scale to exactly 1),
+/// in blocks of 8 and 16; weighted SIMD and scalar agree, with zero, NaN and
+/// +∞ weights among random ones; tiles over threads equal the whole frame bit
+/// for bit with weights; every output is finite.
 #[test]
 fn sample_weights_uniform_simd_and_tiles() {
     let set = GuideSet::NORMAL_DEPTH_AO;
@@ -519,17 +520,27 @@ fn sample_weights_uniform_simd_and_tiles() {
         let f = Owned::synthetic(w, h, 77, 0.7);
         let uniform = vec![4.0f32; w * h];
         let mut seed = 5u32;
-        let random: Vec<f32> = (0..w * h).map(|_| 0.1 + 2.0 * lrdenoise_test_uniform(&mut seed)).collect();
+        let random: Vec<f32> = (0..w * h)
+            .map(|i| match i % 13 {
+                0 => 0.0,
+                4 => f32::NAN,
+                9 => f32::INFINITY,
+                _ => 0.1 + 2.0 * lrdenoise_test_uniform(&mut seed),
+            })
+            .collect();
         for b in [8, 16] {
             let (plain, _) = run(cfg(set, b), &f);
             let weighted = |weights: &[f32], kernel: Kernel| {
                 let mut frame = f.frame(set);
-                frame.weights = Some(ImageView::interleaved(weights, w, h, 1).unwrap());
+                frame.sample_weights = Some(ImageView::interleaved(weights, w, h, 1).unwrap());
                 run_frame(FlrConfig { kernel, ..cfg(set, b) }, w, h, &frame).0
             };
-            let rel = |a: &[f32], c: &[f32]| a.iter().zip(c).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max);
+            let rel = |a: &[f32], c: &[f32]| {
+                assert!(a.iter().chain(c).all(|v| v.is_finite()), "{w}x{h} B{b}: an output is not finite");
+                a.iter().zip(c).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max)
+            };
             let u = weighted(&uniform, Kernel::Simd);
-            assert!(rel(&u, &plain) < 1e-3, "{w}x{h} B{b}: uniform weights moved the output by {}", rel(&u, &plain));
+            assert!(u.iter().zip(&plain).all(|(a, b)| a.to_bits() == b.to_bits()), "{w}x{h} B{b}: uniform weights moved the output");
             let (simd, scalar) = (weighted(&random, Kernel::Simd), weighted(&random, Kernel::Scalar));
             assert!(rel(&simd, &scalar) < 1e-3, "{w}x{h} B{b}: SIMD vs scalar {}", rel(&simd, &scalar));
             // tiles over two threads, bit for bit
@@ -538,7 +549,7 @@ fn sample_weights_uniform_simd_and_tiles() {
             let mut scratch = vec![0f64; flr.tiled_scratch_len(2).unwrap()];
             let mut out = vec![f32::NAN; w * h * 3];
             let mut frame = f.frame(set);
-            frame.weights = Some(ImageView::interleaved(&random, w, h, 1).unwrap());
+            frame.sample_weights = Some(ImageView::interleaved(&random, w, h, 1).unwrap());
             let exec = |n: usize, job: &(dyn Fn(usize, usize) + Sync)| {
                 std::thread::scope(|s| {
                     for worker in 0..2 {
@@ -554,7 +565,7 @@ fn sample_weights_uniform_simd_and_tiles() {
     let f = Owned::synthetic(16, 8, 1, 0.5);
     let small = vec![1.0f32; 8 * 8];
     let mut frame = f.frame(set);
-    frame.weights = Some(ImageView::interleaved(&small, 8, 8, 1).unwrap());
+    frame.sample_weights = Some(ImageView::interleaved(&small, 8, 8, 1).unwrap());
     let flr = Flr::new(cfg(set, 8), 16, 8).unwrap();
     let mut scratch = vec![0f64; flr.scratch_len()];
     let mut out = vec![0f32; 16 * 8 * 3];
@@ -566,7 +577,7 @@ fn sample_weights_uniform_simd_and_tiles() {
 /// what the unrendered pixels hold (huge values, NaN) changes no output bit,
 /// and every pixel, the unrendered ones included, gets a finite prediction.
 /// (Without the firefly clamp, whose statistics take every finite pixel
-/// whatever its weight: `Frame::weights`.)
+/// whatever its weight: `Frame::sample_weights`.)
 #[test]
 fn weight_zero_pixels_do_not_reach_the_fit() {
     let set = GuideSet::NORMAL_DEPTH_AO;
@@ -577,7 +588,7 @@ fn weight_zero_pixels_do_not_reach_the_fit() {
             let mut g = f.clone();
             g.noisy = noisy.to_vec();
             let mut frame = g.frame(set);
-            frame.weights = Some(ImageView::interleaved(&board, w, h, 1).unwrap());
+            frame.sample_weights = Some(ImageView::interleaved(&board, w, h, 1).unwrap());
             run_frame(FlrConfig { block: b, fireflies: None, ..FlrConfig::with_guides(set) }, w, h, &frame)
         };
         let (want, _) = run_with(&f.noisy);

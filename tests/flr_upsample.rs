@@ -48,7 +48,7 @@ fn upsampled_denoise_is_close_to_full_resolution() {
                 noisy: ImageView::interleaved(&noisy, lw, lh, 3).unwrap(),
                 guides: f.guides(set),
                 guides_low: Some(low),
-                weights: None,
+                sample_weights: None,
             };
             let c = FlrConfig { upsample: u, ..cfg(set, 8) };
             let flr = Flr::new(c, w, h).unwrap();

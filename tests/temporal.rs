@@ -163,7 +163,7 @@ fn disoccluded_pixels_restart_from_their_own_sample() {
 /// where every pixel has the same history (a static camera) it equals the
 /// unweighted fit to rounding (without the firefly clamp); after a disocclusion (left columns restart at
 /// 1, the rest hold 2, as `Reprojection::history_lengths` says) it differs;
-/// and a frame that brings its own `Frame::weights` is refused.
+/// and a frame that brings its own `Frame::sample_weights` is refused.
 #[test]
 fn history_weights_weigh_the_fit_by_history_length() {
     let (w, h) = (40, 24);
@@ -176,6 +176,7 @@ fn history_weights_weigh_the_fit_by_history_length() {
         assert_eq!(seq.plan.history_weights(), weights);
         (0..3).map(|t| seq.next(&f[t], if t == 0 { None } else { motion }, 1).0).last().unwrap()
     };
+    // (Seq::next asserts every output finite)
     let rel = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs() / (1e-3 + y.abs())).fold(0f32, f32::max);
     let (plain, weighed) = (run(false, None), run(true, None));
     assert!(rel(&weighed, &plain) < 1e-3, "static: {}", rel(&weighed, &plain));
@@ -217,7 +218,7 @@ fn history_weights_weigh_the_fit_by_history_length() {
         (vec![0f32; plan.history_len()], vec![0f32; plan.scratch_len()], vec![0f64; plan.flr_scratch_len()]);
     let ones = vec![1f32; w * h];
     let mut frame = f[0].frame(SET);
-    frame.weights = Some(ImageView::interleaved(&ones, w, h, 1).unwrap());
+    frame.sample_weights = Some(ImageView::interleaved(&ones, w, h, 1).unwrap());
     let mut out = vec![0f32; 3 * w * h];
     let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
     let err = plan.denoise(&frame, None, &mut History::new(&mut hist), &mut scratch, &mut flr_scratch, &mut ov).unwrap_err();

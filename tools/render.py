@@ -414,7 +414,7 @@ def main():
     ap.add_argument(
         "--second-reference",
         action="store_true",
-        help="also render reference_b, the reference from other samples (lrd eval then reports the flicker the reference's noise adds)",
+        help="sequences: also render reference_b, the reference from other samples (lrd eval then reports the flicker the reference's noise adds)",
     )
     ap.add_argument("--sample", action="store_true", help="render the committed data/ sample set")
     ap.add_argument("--noisy-guides", action="store_true", help="guides as a 1-spp renderer has them: a random point of each pixel, AO from 4 rays")

@@ -758,7 +758,7 @@ impl Method {
                     None => (inputs, None),
                 };
                 let noisy = src.noisy_view().map_err(err)?;
-                let frame = lrdenoise::Frame { noisy, guides: inputs.guides(&set).map_err(err)?, guides_low, weights: None };
+                let frame = lrdenoise::Frame { noisy, guides: inputs.guides(&set).map_err(err)?, guides_low, sample_weights: None };
                 let mut ov = lrdenoise::ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(err)?;
                 gpu.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
             }

@@ -258,7 +258,7 @@ impl FlrRunner {
             None => (full, None),
         };
         let noisy = noisy_src.noisy_view().map_err(|e| e.to_string())?;
-        let frame = Frame { noisy, guides: full.guides(&set).map_err(|e| e.to_string())?, guides_low, weights: None };
+        let frame = Frame { noisy, guides: full.guides(&set).map_err(|e| e.to_string())?, guides_low, sample_weights: None };
         let mut ov = ImageViewMut::interleaved(out, full.w, full.h, 3).map_err(|e| e.to_string())?;
         let r = match &self.pool {
             None => self.flr.denoise(&frame, &mut self.scratch, &mut ov),

@@ -221,7 +221,7 @@ int main(int argc, char **argv) {
         LrdFlrConfig plain = cfg;
         plain.fireflies = 0.0f;
         LrdFrame weighted = frame;
-        weighted.weights = image(weights, 1);
+        weighted.sample_weights = image(weights, 1);
         LrdImageMut wout = out;
         wout.data = a;
         CHECK(lrd_flr_denoise(&plain, &weighted, &wout, scratch, bytes, NULL));
@@ -231,7 +231,7 @@ int main(int argc, char **argv) {
         for (int i = 0; i < 3 * W * H; i++)
             if (a[i] != b[i] || !(a[i] == a[i])) return 4;
         /* weights that share memory with the output are refused */
-        weighted.weights = image(b, 1);
+        weighted.sample_weights = image(b, 1);
         if (lrd_flr_denoise(&plain, &weighted, &wout, scratch, bytes, NULL) != LRD_STATUS_INVALID_ARGUMENT) return 3;
         free(weights); free(garbage); free(a); free(b);
     }

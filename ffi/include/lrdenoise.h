@@ -472,16 +472,16 @@ typedef struct LrdFrame {
    */
   struct LrdGuides guides_low;
   /**
-   * FLR and FLNR: per-pixel sample weights of the fit, 1 channel at the
-   * noisy image's size, or `data` NULL for none. Each pixel counts `w`
-   * times in its windows: a pixel's sample count under adaptive sampling,
-   * or 0 for a pixel without a sample this frame (it is then predicted
-   * from its neighbours through its guides). A weight that is not finite
-   * and positive excludes its pixel; only ratios matter. The firefly
-   * clamp still measures every finite pixel. BMFR, WALR and the temporal
-   * pipelines return LRD_STATUS_UNSUPPORTED when it is set.
+   * Single-frame FLR only: per-pixel sample weights of the fit, 1 channel
+   * at the noisy image's size, or `data` NULL for none. Each pixel counts
+   * `w` times in its windows: a pixel's sample count under adaptive
+   * sampling, or 0 for a pixel without a sample this frame (it is then
+   * predicted from its neighbours through its guides). A weight that is
+   * not finite and positive excludes its pixel; only ratios matter. The
+   * firefly clamp still measures every finite pixel. FLNR, BMFR, WALR and
+   * the temporal pipelines return LRD_STATUS_UNSUPPORTED when it is set.
    */
-  struct LrdImage weights;
+  struct LrdImage sample_weights;
 } LrdFrame;
 
 /**

@@ -112,15 +112,15 @@ pub struct LrdFrame {
     /// NULL otherwise (BMFR, WALR and FLNR return LRD_STATUS_UNSUPPORTED if
     /// any is set).
     pub guides_low: LrdGuides,
-    /// FLR and FLNR: per-pixel sample weights of the fit, 1 channel at the
-    /// noisy image's size, or `data` NULL for none. Each pixel counts `w`
-    /// times in its windows: a pixel's sample count under adaptive sampling,
-    /// or 0 for a pixel without a sample this frame (it is then predicted
-    /// from its neighbours through its guides). A weight that is not finite
-    /// and positive excludes its pixel; only ratios matter. The firefly
-    /// clamp still measures every finite pixel. BMFR, WALR and the temporal
-    /// pipelines return LRD_STATUS_UNSUPPORTED when it is set.
-    pub weights: LrdImage,
+    /// Single-frame FLR only: per-pixel sample weights of the fit, 1 channel
+    /// at the noisy image's size, or `data` NULL for none. Each pixel counts
+    /// `w` times in its windows: a pixel's sample count under adaptive
+    /// sampling, or 0 for a pixel without a sample this frame (it is then
+    /// predicted from its neighbours through its guides). A weight that is
+    /// not finite and positive excludes its pixel; only ratios matter. The
+    /// firefly clamp still measures every finite pixel. FLNR, BMFR, WALR and
+    /// the temporal pipelines return LRD_STATUS_UNSUPPORTED when it is set.
+    pub sample_weights: LrdImage,
 }
 
 /// Guide bits for [`LrdFlrConfig::guides`] and the `guides` of LrdBmfrConfig
@@ -268,7 +268,7 @@ pub(crate) unsafe fn frame_views<'a>(frame: &LrdFrame, low_ok: bool) -> Result<F
             noisy: view(&frame.noisy, 3)?.ok_or(LRD_STATUS_NULL_POINTER)?,
             guides: guides(&frame.guides)?,
             guides_low: if low { None } else { Some(guides(&frame.guides_low)?) },
-            weights: view(&frame.weights, 1)?,
+            sample_weights: view(&frame.sample_weights, 1)?,
         })
     }
 }
@@ -305,7 +305,7 @@ pub(crate) fn images(frame: &LrdFrame) -> impl Iterator<Item = (&LrdImage, usize
     core::iter::once((&frame.noisy, 3))
         .chain(guides(&frame.guides))
         .chain(guides(&frame.guides_low))
-        .chain(core::iter::once((&frame.weights, 1)))
+        .chain(core::iter::once((&frame.sample_weights, 1)))
 }
 
 /// Bytes `[start, end)` an image spans (None for an absent or invalid image:

@@ -17,7 +17,8 @@ fn guides_none() -> LrdGuides {
 
 /// A frame of packed RGB noise and a depth guide (the views borrow the vectors).
 fn depth_frame(noisy: &[f32], depth: &[f32], w: u32, h: u32) -> LrdFrame {
-    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), weights: none() };
+    let mut frame =
+        LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
     frame.guides.depth = img(depth.as_ptr(), w, h, 1);
     frame
 }
@@ -250,7 +251,7 @@ fn flr_temporal_matches_the_rust_api() {
         for k in 0..3usize {
             let noisy: Vec<f32> = (0..3 * n).map(|i| (((i + 977 * k) * 7919) % 1000) as f32 / 500.0).collect();
             let mut frame =
-                LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), weights: none() };
+                LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
             frame.guides.normal = img(normal.as_ptr(), w, h, 3);
             frame.guides.depth = img(depth.as_ptr(), w, h, 1);
             frame.guides.ao = img(ao.as_ptr(), w, h, 1);
@@ -318,7 +319,8 @@ fn bmfr_matches_the_rust_api() {
     let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { 0.5 } else { -0.25 }).collect();
     let cfg = lrd_bmfr_config_default();
     assert_eq!(cfg.guides, LRD_GUIDE_NORMAL | LRD_GUIDE_POSITION);
-    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), weights: none() };
+    let mut frame =
+        LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
     frame.guides.normal = img(normal.as_ptr(), w, h, 3);
     frame.guides.position = img(position.as_ptr(), w, h, 3);
     let mv = img(motion.as_ptr(), w, h, 2);
@@ -430,7 +432,8 @@ fn walr_matches_the_rust_api() {
     let position: Vec<f32> = (0..3 * n).map(|i| ((i / 3) % wu) as f32 * 0.1 + (i % 3) as f32 + ((i / 3) / wu) as f32 * 0.05).collect();
     let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { 0.5 } else { -0.25 }).collect();
     let cfg = lrd_walr_config_default();
-    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), weights: none() };
+    let mut frame =
+        LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
     frame.guides.normal = img(normal.as_ptr(), w, h, 3);
     frame.guides.depth = img(depth.as_ptr(), w, h, 1);
     frame.guides.position = img(position.as_ptr(), w, h, 3);

@@ -46,7 +46,7 @@ impl Scene {
             position: img(self.position.as_ptr(), w, h, 3),
             ..empty
         };
-        LrdFrame { noisy: img(self.noisy.as_ptr(), w, h, 3), guides, guides_low: empty, weights: none() }
+        LrdFrame { noisy: img(self.noisy.as_ptr(), w, h, 3), guides, guides_low: empty, sample_weights: none() }
     }
     /// The same frame for the Rust API.
     fn rust_frame(&self, depth: bool) -> Frame<'_> {

@@ -49,7 +49,7 @@ impl Case {
             noisy: img(self.noisy.as_ptr(), self.w, self.h, 3),
             guides: guides_none(),
             guides_low: guides_none(),
-            weights: none(),
+            sample_weights: none(),
         };
         f.guides.depth = img(self.depth.as_ptr(), self.w, self.h, 1);
         f.guides.ao = img(self.ao.as_ptr(), self.w, self.h, 1);
@@ -225,7 +225,8 @@ fn temporal_outputs_that_overlap_are_refused() {
     let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == 2 { 1.0 } else { 0.0 }).collect();
     let position: Vec<f32> = (0..3 * n).map(|i| (i % 97) as f32 * 0.01).collect();
     let cfg = lrd_bmfr_config_default();
-    let mut frame = LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), weights: none() };
+    let mut frame =
+        LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
     frame.guides.normal = img(normal.as_ptr(), w, h, 3);
     frame.guides.position = img(position.as_ptr(), w, h, 3);
     let (mut sb, mut hb) = (0, 0);

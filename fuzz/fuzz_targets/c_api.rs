@@ -82,8 +82,8 @@ fuzz_target!(|d: &[u8]| {
         gl.depth = image(d, 18, 1, lw, lh, next());
     }
     // sample weights at the noisy size (any layout and values) in one case of three
-    let weights = if d[21] % 3 == 0 { image(d, 21, 1, lw, lh, next()) } else { none };
-    let frame = LrdFrame { noisy: if d[19] == 0 { none } else { noisy }, guides: gs, guides_low: gl, weights };
+    let sample_weights = if d[22] % 3 == 0 { image(d, 21, 1, lw, lh, next()) } else { none };
+    let frame = LrdFrame { noisy: if d[19] == 0 { none } else { noisy }, guides: gs, guides_low: gl, sample_weights };
     let mut out = vec![0f32; (w * h * 4) as usize];
     let o = LrdImageMut {
         data: out.as_mut_ptr() as *mut _,

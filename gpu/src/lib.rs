@@ -316,8 +316,8 @@ impl GpuFlr {
         if out.width() != w || out.height() != h || out.channel_count() < 3 {
             return Err(Error::SizeMismatch { arg: Arg::Output, expected: (w, h), got: (out.width(), out.height()) }.into());
         }
-        if frame.weights.is_some() {
-            return Err(Error::Unsupported("FLR on the GPU has no per-pixel sample weights (Frame::weights given)").into());
+        if frame.sample_weights.is_some() {
+            return Err(Error::Unsupported("FLR on the GPU has no per-pixel sample weights (Frame::sample_weights given)").into());
         }
         let set = self.plan.config().guides;
         let q = self.plan.guide_channels();

@@ -353,7 +353,7 @@ fn upsampling_and_separate_fit_guides() {
             ao: Some(iv(&ao, lw, lh, 1)),
             ..Default::default()
         };
-        let frame = Frame { noisy: iv(&noisy, lw, lh, 3), guides: f.guides(set), guides_low: Some(low), weights: None };
+        let frame = Frame { noisy: iv(&noisy, lw, lh, 3), guides: f.guides(set), guides_low: Some(low), sample_weights: None };
         let c = FlrConfig { upsample: u, ..cfg(set, 8) };
         for c in [adaptive(c), c] {
             let (cpu, _) = run_frame(c, w, h, &frame);
@@ -490,7 +490,7 @@ fn firefly_clamp() {
             ao: Some(iv(&ao, lw, lh, 1)),
             ..Default::default()
         };
-        let frame = Frame { noisy: iv(&noisy, lw, lh, 3), guides: f.guides(set), guides_low: Some(low), weights: None };
+        let frame = Frame { noisy: iv(&noisy, lw, lh, 3), guides: f.guides(set), guides_low: Some(low), sample_weights: None };
         for c in [on(cfg(set, 8)), on(adaptive(cfg(set, 8)))] {
             let c = FlrConfig { upsample: u, ..c };
             let (cpu, rc) = run_frame(c, w, h, &frame);

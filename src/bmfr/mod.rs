@@ -303,8 +303,8 @@ impl Bmfr {
         if frame.guides_low.is_some() {
             return Err(Error::Unsupported("BMFR has no joint upsampling (guides_low given)"));
         }
-        if frame.weights.is_some() {
-            return Err(Error::Unsupported("BMFR has no per-pixel sample weights (Frame::weights given)"));
+        if frame.sample_weights.is_some() {
+            return Err(Error::Unsupported("BMFR has no per-pixel sample weights (Frame::sample_weights given)"));
         }
         let guides = frame.guides.channel_views(&self.cfg.guides, self.width, self.height, Arg::Guide)?;
         Ok(CheckedFrame { noisy: frame.noisy, guides })

@@ -109,27 +109,40 @@ fn centre_and_mask_in_place(m: f32, dst: &mut [f32], mask: &mut [f32]) {
 }
 
 /// 1 / the mean of the weights in `weights` (channel 0) that are finite and
-/// positive, summed in f64 row by row; 1 if there is none.
-fn weight_scale(weights: &ImageView<'_>) -> f32 {
+/// positive; 1 if there is none. Each run of up to 256 values is summed in 8
+/// independent f32 lanes (so it vectorises), the runs in f64.
+fn weight_scale(weights: &ImageView<'_>) -> f64 {
     let (mut sum, mut n) = (0f64, 0usize);
     let mut row = [0f32; 256];
     for y in 0..weights.height() {
         for x0 in (0..weights.width()).step_by(row.len()) {
             let len = row.len().min(weights.width() - x0);
-            if weights.read_row(y, 0, x0, &mut row[..len]).is_none() {
+            let run = &mut row[..len];
+            if weights.read_row(y, 0, x0, run).is_none() {
                 return 1.0;
             }
-            for &w in &row[..len] {
-                if w > 0.0 && w <= f32::MAX {
-                    sum += w as f64;
-                    n += 1;
+            let (mut lanes, mut count) = ([0f32; 8], [0u32; 8]);
+            let mut add = |l: usize, w: f32| {
+                let ok = w > 0.0 && w <= f32::MAX;
+                lanes[l] += if ok { w } else { 0.0 };
+                count[l] += ok as u32;
+            };
+            let mut eights = run.chunks_exact(8);
+            for e in &mut eights {
+                for (l, &w) in e.iter().enumerate() {
+                    add(l, w);
                 }
             }
+            for (l, &w) in eights.remainder().iter().enumerate() {
+                add(l, w);
+            }
+            sum += lanes.iter().map(|&v| v as f64).sum::<f64>();
+            n += count.iter().sum::<u32>() as usize;
         }
     }
     let scale = n as f64 / sum;
     if n > 0 && scale.is_finite() && scale > 0.0 {
-        scale as f32
+        scale
     } else {
         1.0
     }
@@ -152,12 +165,12 @@ pub struct Stats {
     pub mean: [f64; MAX_GUIDES],
     /// Per guide channel: the frame standard deviation (1 for constants).
     pub scale: [f64; MAX_GUIDES],
-    /// With [`Frame::weights`]: 1 / the mean of the frame's weights that are
+    /// With [`Frame::sample_weights`]: 1 / the mean of the frame's weights that are
     /// finite and positive (1 without weights, or without such a weight). The
-    /// moments weigh pixels by `w · weight_scale`, whose mean is 1, so that
-    /// the adaptive window's sample counts stay counts of pixels and only the
-    /// weights' ratios matter.
-    pub weight_scale: f32,
+    /// moments weigh pixels by `w · weight_scale`, whose frame mean is 1, so
+    /// that only the weights' ratios matter and the adaptive window's sample
+    /// counts are pixel counts over the frame (not in each window).
+    pub weight_scale: f64,
 }
 
 /// Sums over the cells of their weights, guide sums and guide squares,
@@ -183,7 +196,7 @@ pub struct CheckedFrame<'a> {
     fit: [Option<ImageView<'a>>; MAX_GUIDES],
     /// Guides the model is applied to (output resolution).
     map: [Option<ImageView<'a>>; MAX_GUIDES],
-    /// Per-pixel weights of the fit ([`Frame::weights`]).
+    /// Per-pixel weights of the fit ([`Frame::sample_weights`]).
     weights: Option<ImageView<'a>>,
 }
 
@@ -597,16 +610,17 @@ impl Flr {
             (_, None) if self.q == 0 => map,
             (_, None) => return Err(Error::Unsupported("upsampling needs guides_low at the noisy resolution")),
         };
-        if let Some(wv) = frame.weights {
+        if let Some(wv) = frame.sample_weights {
             if (wv.width(), wv.height()) != (self.in_w, self.in_h) {
                 return Err(Error::SizeMismatch { arg: Arg::Weights, expected: (self.in_w, self.in_h), got: (wv.width(), wv.height()) });
             }
         }
-        Ok(CheckedFrame { noisy: frame.noisy, fit, map, weights: frame.weights })
+        Ok(CheckedFrame { noisy: frame.noisy, fit, map, weights: frame.sample_weights })
     }
 
     /// Stage 0: picks the per-guide reference (the first finite value among
-    /// 16 fixed sample positions), so moments are accumulated near zero.
+    /// 16 fixed sample positions), so moments are accumulated near zero; with
+    /// sample weights, their scale ([`Stats::weight_scale`], one pass over them).
     #[cfg_attr(feature = "internals", visibility::make(pub))]
     #[doc(hidden)]
     pub(crate) fn prepare(&self, frame: &CheckedFrame<'_>) -> Stats {
@@ -843,8 +857,8 @@ impl Flr {
                 Some(wv) => {
                     wv.read_row(y, 0, x0, wrow).ok_or(bad)?;
                     for v in wrow.iter_mut() {
-                        let w = *v * stats.weight_scale;
-                        *v = if *v > 0.0 && w <= f32::MAX { libm::sqrtf(w) } else { 0.0 };
+                        let w = *v as f64 * stats.weight_scale;
+                        *v = if *v > 0.0 && w <= f32::MAX as f64 { libm::sqrt(w) as f32 } else { 0.0 };
                     }
                 }
                 None => wrow.fill(1.0),

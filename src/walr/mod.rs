@@ -414,8 +414,8 @@ impl Walr {
         if frame.guides_low.is_some() {
             return Err(Error::Unsupported("WALR has no joint upsampling (guides_low given)"));
         }
-        if frame.weights.is_some() {
-            return Err(Error::Unsupported("WALR has no per-pixel sample weights (Frame::weights given)"));
+        if frame.sample_weights.is_some() {
+            return Err(Error::Unsupported("WALR has no per-pixel sample weights (Frame::sample_weights given)"));
         }
         let guides = frame.guides.channel_views(&self.cfg.guides, self.width, self.height, Arg::Guide)?;
         Ok(CheckedFrame { noisy: frame.noisy, guides })

@@ -317,7 +317,7 @@ pub fn reference(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[
     reference_weighted(cfg, w, h, guides, y, None)
 }
 
-/// [`reference`] with per-pixel sample weights (`Frame::weights`): each
+/// [`reference`] with per-pixel sample weights (`Frame::sample_weights`): each
 /// pixel's window taps and its share of the frame statistics are multiplied
 /// by its weight; a weight that is not finite and positive excludes it.
 pub fn reference_weighted(cfg: &FlrConfig, w: usize, h: usize, guides: &[Vec<f64>], y: &[f32], weights: Option<&[f64]>) -> Vec<f64> {

@@ -2,9 +2,9 @@
 //!
 //! Two ways in: [`moments_rows`] reads one band of `B` rows in place (row
 //! slices of the caller's images, no copy; the fast path for whole blocks) and
-//! [`moments_band`] reads a band already gathered into planes with validity
-//! weights ([`BandPlanes`]; edges, odd block sizes, the scalar oracle). Both
-//! give bit-identical cells. Each block is accumulated *relative to its first
+//! [`moments_band`] reads a band already gathered into planes with a weight
+//! per pixel ([`BandPlanes`]; edges, odd block sizes, sample weights, the
+//! scalar oracle). With 0/1 weights both give bit-identical cells. Each block is accumulated *relative to its first
 //! valid pixel* in f32 (so large guide offsets do not cancel), then shifted
 //! to the frame reference in f64 and stored. With B a multiple of 8 one block
 //! row maps onto `f32x8` lanes.
@@ -49,7 +49,7 @@ impl BandPlanes<'_> {
     }
 }
 
-/// Register-sized working space of the SIMD block accumulation (15 KB); make one
+/// Register-sized working space of the SIMD block accumulation (21 KB); make one
 /// per thread and reuse it for many bands.
 #[derive(Clone, Debug)]
 pub struct BlockScratch {
@@ -429,7 +429,8 @@ const VW: usize = MAX_GUIDES + 3;
 
 /// SIMD block accumulation from gathered planes: every 8-pixel group of the
 /// block is turned into vectors `v = [e_0..e_Q, y_0, y_1, y_2]`
-/// (e = (g − r)·w), then [`accumulate`]d.
+/// (e = (g − r)·s and y scaled by s, with s = √w), then [`accumulate`]d with
+/// the plain sums weighted by s.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn block_simd<const Q: usize>(
@@ -700,7 +701,7 @@ mod tests {
         for w in weights.iter_mut() {
             *w = f32x8::from(core::array::from_fn::<f32, 8, _>(|_| 2.0 * crate::hash::uniform(&mut wseed) as f32));
         }
-        let compare = |groups: &[[f32x8; VW]], q: usize| {
+        let compare_q = |groups: &[[f32x8; VW]], q: usize| {
             let w = Some(&weights[..groups.len()]);
             match q {
                 0 => compare::<0>(groups, w),
@@ -742,14 +743,14 @@ mod tests {
                 }
             }
             for q in [0, 1, 5, 8, MAX_GUIDES] {
-                compare(&groups[..ng], q);
+                compare_q(&groups[..ng], q);
             }
             // a NaN in a colour plane: both refuse the block with `check`
             let mut bad = groups;
             let mut lanes = bad[ng - 1][5 + 1].to_array();
             lanes[3] = f32::NAN;
             bad[ng - 1][5 + 1] = f32x8::from(lanes);
-            compare(&bad[..ng], 5);
+            compare_q(&bad[..ng], 5);
         }
     }
 
