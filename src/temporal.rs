@@ -275,6 +275,10 @@ impl Reprojection {
     fn with_isa(self, isa: Isa) -> Option<Self> {
         isa.available().then_some(Reprojection { lanes: Some(isa), ..self })
     }
+    /// The guides history taps are tested against (normal, position, depth).
+    pub fn rejection_guides(&self) -> GuideSet {
+        GuideSet { normal: self.normal, position: self.position, depth: self.depth, ..GuideSet::NONE }
+    }
     /// The settings.
     pub fn config(&self) -> &TemporalConfig {
         &self.cfg

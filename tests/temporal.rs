@@ -225,6 +225,39 @@ fn history_weights_weigh_the_fit_by_history_length() {
     assert!(matches!(err, Error::Unsupported(_)), "{err:?}");
 }
 
+/// History taps judged by world position (`TemporalFlr::with_rejection_guides`):
+/// a camera that moves towards the scene changes every depth by 10 % while
+/// the positions stay: with depth every tap is rejected (a cut), with positions
+/// none is, and the fit is FLR's on the same guides either way; a frame
+/// without the positions is refused.
+#[test]
+fn positions_keep_the_history_of_a_camera_moving_closer() {
+    let (w, h) = (40, 24);
+    let f0 = frame_at(w, h, 0);
+    let mut f1 = frame_at(w, h, 1);
+    f1.depth.iter_mut().for_each(|d| *d *= 0.9);
+    let with_positions = GuideSet { position: true, ..SET };
+    let run = |reject: GuideSet, set: GuideSet| {
+        let plan = TemporalFlr::new(cfg(), TemporalConfig::default(), w, h).unwrap().with_rejection_guides(reject).unwrap();
+        assert_eq!(plan.stage().rejection_guides(), GuideSet { ao: false, ..reject });
+        let (mut hist, mut scratch, mut flr_scratch) =
+            (vec![0f32; plan.history_len()], vec![0f32; plan.scratch_len()], vec![0f64; plan.flr_scratch_len()]);
+        let mut history = History::new(&mut hist);
+        let mut out = vec![0f32; 3 * w * h];
+        let mut last = Report::default();
+        for f in [&f0, &f1] {
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            last = plan.denoise(&f.frame(set), None, &mut history, &mut scratch, &mut flr_scratch, &mut ov)?;
+        }
+        Ok::<_, Error>(last)
+    };
+    let by_depth = run(SET, SET).unwrap();
+    assert_eq!(by_depth.history_resets, 1, "{by_depth:?}");
+    let by_position = run(with_positions, with_positions).unwrap();
+    assert_eq!((by_position.history_rejected, by_position.history_resets), (0, 0), "{by_position:?}");
+    assert!(matches!(run(with_positions, SET), Err(Error::GuideMismatch)));
+}
+
 /// Frame 0 then frame 1 of a static sequence through the stage alone, with
 /// the firefly clamp; returns frame 1's counts and accumulated light.
 fn two_frames(cfg: TemporalConfig, f0: &Owned, f1: &Owned) -> (temporal::Counts, Vec<f32>) {

@@ -669,7 +669,13 @@ impl Method {
                     label += " hw";
                     flags += " --history-weights";
                 }
-                let runner = TemporalRunner::flr(cfg, temporal, a.history_weights, w, h, threads)?;
+                // history taps are judged by world position where the frames have it (camera-invariant)
+                let mut reject = cfg.guides;
+                reject.position |= inputs.missing(&GuideSet { position: true, ..GuideSet::NONE }).is_none();
+                if reject.position && !cfg.guides.position {
+                    label += " rp";
+                }
+                let runner = TemporalRunner::flr(cfg, temporal, a.history_weights, reject, w, h, threads)?;
                 let min_bytes = Some(temporal_bytes(w, h, cfg.guides.channels(), &runner));
                 Ok(Built { method: Method::Temporal(Box::new(runner)), label, flags, min_bytes })
             }

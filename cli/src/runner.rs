@@ -459,11 +459,17 @@ impl TemporalRunner {
         cfg: FlrConfig,
         temporal: TemporalConfig,
         history_weights: bool,
+        reject: GuideSet,
         w: usize,
         h: usize,
         threads: usize,
     ) -> Result<Self, String> {
-        let plan = TemporalFlr::new(cfg, temporal, w, h).map_err(|e| format!("flr-temporal: {e}"))?.with_history_weights(history_weights);
+        let err = |e: Error| format!("flr-temporal: {e}");
+        let plan = TemporalFlr::new(cfg, temporal, w, h)
+            .map_err(err)?
+            .with_history_weights(history_weights)
+            .with_rejection_guides(reject)
+            .map_err(err)?;
         let threads = threads.max(1);
         let flr_scratch = vec![0f64; plan.parallel_flr_scratch_len(threads)];
         let (scratch, history) = (plan.parallel_scratch_len(threads).max(plan.scratch_len()), plan.history_len());
@@ -490,7 +496,16 @@ impl TemporalRunner {
         let set = match &self.pipeline {
             Pipeline::Bmfr(b) => b.config().guides,
             Pipeline::Walr(w) => w.config().guides,
-            Pipeline::Flr { plan, .. } => plan.flr().config().guides,
+            Pipeline::Flr { plan, .. } => {
+                // FLR's guides and those the stage rejects history taps with
+                let (fit, reject) = (plan.flr().config().guides, plan.stage().rejection_guides());
+                GuideSet {
+                    normal: fit.normal | reject.normal,
+                    position: fit.position | reject.position,
+                    depth: fit.depth | reject.depth,
+                    ..fit
+                }
+            }
         };
         let (w, h) = (inputs.w, inputs.h);
         let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;

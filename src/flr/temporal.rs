@@ -39,7 +39,7 @@
 use super::config::FlrConfig;
 use super::{CheckedFrame, Flr};
 use crate::error::Error;
-use crate::guides::Frame;
+use crate::guides::{Frame, GuideSet};
 use crate::image::{ImageView, ImageViewMut};
 use crate::parallel::Executor;
 use crate::report::Report;
@@ -81,6 +81,18 @@ impl TemporalFlr {
     pub fn with_history_weights(mut self, on: bool) -> Self {
         self.history_weights = on;
         self
+    }
+    /// The same plan with history taps rejected by the guides of `guides`
+    /// (normal, position, depth; [`Reprojection::new`]) rather than those of
+    /// FLR's fit: world positions, where a frame has them, judge a tap by
+    /// where it is, whatever the camera did, while depth changes as the
+    /// camera moves towards or away from a surface (`lrd` rejects with
+    /// positions when the frames have them). The frames then carry FLR's
+    /// guides and these; the history's size follows.
+    pub fn with_rejection_guides(mut self, guides: GuideSet) -> Result<Self, Error> {
+        let (w, h) = self.single.size();
+        self.stage = Reprojection::new(*self.stage.config(), guides, w, h)?;
+        Ok(self)
     }
     /// Whether the fit weighs pixels by their history length ([`TemporalFlr::with_history_weights`]).
     pub fn history_weights(&self) -> bool {
@@ -166,7 +178,19 @@ impl TemporalFlr {
         fit: impl FnOnce(&Flr, &CheckedFrame<'_>, &mut ImageViewMut<'_>) -> Result<Report, Error>,
     ) -> Result<Report, Error> {
         self.flr.check_output(out)?;
-        self.flr.check_frame(frame)?;
+        // the guides only the stage reads (rejection guides beyond FLR's set) are not FLR's
+        let (fit_set, reject) = (self.flr.config().guides, self.stage.rejection_guides());
+        let mut fit_guides = frame.guides;
+        if reject.normal && !fit_set.normal {
+            fit_guides.normal = None;
+        }
+        if reject.position && !fit_set.position {
+            fit_guides.position = None;
+        }
+        if reject.depth && !fit_set.depth {
+            fit_guides.depth = None;
+        }
+        self.flr.check_frame(&Frame { guides: fit_guides, ..*frame })?;
         if frame.guides_low.is_some() {
             return Err(Error::Unsupported("temporal FLR with a second (low-resolution) guide set"));
         }
@@ -187,7 +211,7 @@ impl TemporalFlr {
             out,
             |acc, lengths, _, o| {
                 let sample_weights = self.history_weights.then_some(lengths);
-                fit(&self.flr, &self.flr.check_frame(&Frame { noisy: acc, guides, guides_low: None, sample_weights })?, o)
+                fit(&self.flr, &self.flr.check_frame(&Frame { noisy: acc, guides: fit_guides, guides_low: None, sample_weights })?, o)
             },
         )
     }
