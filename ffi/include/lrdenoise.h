@@ -615,6 +615,15 @@ typedef struct LrdTemporalConfig {
    * finite ≥ 1 (default 2; 0 turns it off).
    */
   float firefly_history;
+  /**
+   * Temporal FLR: the bit set of LRD_GUIDE_NORMAL, LRD_GUIDE_DEPTH and
+   * LRD_GUIDE_POSITION that judges history taps, which the frames must then
+   * carry too; 0 (the default): FLR's own guides. Positions keep the
+   * history of surfaces the camera moves towards, which depth rejects. Any
+   * other bit: LRD_STATUS_INVALID_CONFIG. BMFR and WALR judge by their own
+   * guides and need 0 (else LRD_STATUS_UNSUPPORTED).
+   */
+  uint32_t rejection_guides;
 } LrdTemporalConfig;
 
 /**

@@ -6,7 +6,7 @@ use crate::images::{
     LRD_GUIDE_AO, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL,
 };
 use crate::status::{guard, status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
-use crate::temporal::{denoise_temporal, temporal_config, temporal_sizes, LrdHistory, LrdTemporalConfig};
+use crate::temporal::{denoise_temporal, temporal_config_and_rejection, temporal_sizes, LrdHistory, LrdTemporalConfig};
 use core::ffi::c_void;
 use lrdenoise_core::flr::temporal::TemporalFlr;
 use lrdenoise_core::{Blur, Flr, FlrConfig, Kernel, Regularization};
@@ -405,7 +405,12 @@ fn call_key(frame: &LrdFrame, out: &LrdImageMut, scratch: *mut c_void) -> u64 {
 fn temporal_plan(c: *const LrdFlrConfig, t: *const LrdTemporalConfig, width: u32, height: u32) -> Result<TemporalFlr, LrdStatus> {
     // SAFETY: checked for NULL; the caller passes a valid config pointer.
     let c = unsafe { c.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
-    TemporalFlr::new(config(c)?, temporal_config(t)?, width as usize, height as usize).map_err(status_of)
+    let (t, reject) = temporal_config_and_rejection(t)?;
+    let plan = TemporalFlr::new(config(c)?, t, width as usize, height as usize).map_err(status_of)?;
+    match reject {
+        Some(guides) => plan.with_rejection_guides(guides).map_err(status_of),
+        None => Ok(plan),
+    }
 }
 
 /// Scratch and history bytes of temporal FLR (`lrd_flr_denoise_temporal`)

@@ -4,11 +4,12 @@
 //! over the core's [`TemporalDenoiser`].
 
 use crate::images::{
-    byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, view, view_mut, LrdFrame, LrdImage, LrdImageMut,
+    byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, view, view_mut, LrdFrame, LrdImage,
+    LrdImageMut, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL, LRD_GUIDE_POSITION,
 };
 use crate::status::{status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
 use core::ffi::c_void;
-use lrdenoise_core::{Denoiser, Error, Frame, ImageViewMut, Report, TemporalDenoiser};
+use lrdenoise_core::{Denoiser, Error, Frame, GuideSet, ImageViewMut, Report, TemporalDenoiser};
 
 /// The caller-owned state of a temporal pipeline (FLR, BMFR or WALR): `data`
 /// (4-byte aligned, at least the history size from `lrd_flr_temporal_sizes`,
@@ -58,6 +59,13 @@ pub struct LrdTemporalConfig {
     /// brightest luminance the previous frame kept around the cell; 0 or
     /// finite ≥ 1 (default 2; 0 turns it off).
     pub firefly_history: f32,
+    /// Temporal FLR: the bit set of LRD_GUIDE_NORMAL, LRD_GUIDE_DEPTH and
+    /// LRD_GUIDE_POSITION that judges history taps, which the frames must then
+    /// carry too; 0 (the default): FLR's own guides. Positions keep the
+    /// history of surfaces the camera moves towards, which depth rejects. Any
+    /// other bit: LRD_STATUS_INVALID_CONFIG. BMFR and WALR judge by their own
+    /// guides and need 0 (else LRD_STATUS_UNSUPPORTED).
+    pub rejection_guides: u32,
 }
 
 /// The temporal stage's defaults (temporal FLR's and WALR's; BMFR's differ:
@@ -78,13 +86,34 @@ pub(crate) fn lrd_temporal_config(d: &lrdenoise_core::temporal::TemporalConfig) 
         output_alpha: d.output_alpha,
         cut_fraction: d.cut_fraction,
         firefly_history: d.firefly_history,
+        rejection_guides: 0,
     }
 }
 
-/// The core's settings from `c` (NULL: LRD_STATUS_NULL_POINTER; out of range: LRD_STATUS_INVALID_CONFIG).
+/// The core's settings from `c` (NULL: LRD_STATUS_NULL_POINTER; out of
+/// range: LRD_STATUS_INVALID_CONFIG), for a method that judges history by its
+/// own guides (`rejection_guides` other than 0: LRD_STATUS_UNSUPPORTED).
 pub(crate) fn temporal_config(c: *const LrdTemporalConfig) -> Result<lrdenoise_core::temporal::TemporalConfig, LrdStatus> {
+    let (t, reject) = temporal_config_and_rejection(c)?;
+    if reject.is_some() {
+        return Err(LRD_STATUS_UNSUPPORTED);
+    }
+    Ok(t)
+}
+
+/// The core's settings from `c` and its rejection guides (`None`: 0, the
+/// method's own); errors as [`temporal_config`]'s, except that any set of
+/// normal, depth and position is taken.
+pub(crate) fn temporal_config_and_rejection(
+    c: *const LrdTemporalConfig,
+) -> Result<(lrdenoise_core::temporal::TemporalConfig, Option<GuideSet>), LrdStatus> {
     // SAFETY: checked for NULL; the caller passes a valid pointer.
     let c = unsafe { c.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    let reject = match c.rejection_guides {
+        0 => None,
+        bits if bits & !(LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION) != 0 => return Err(LRD_STATUS_INVALID_CONFIG),
+        bits => Some(guide_set(bits, 0)?),
+    };
     let t = lrdenoise_core::temporal::TemporalConfig {
         max_history: c.max_history,
         normal_limit: c.normal_limit,
@@ -96,7 +125,7 @@ pub(crate) fn temporal_config(c: *const LrdTemporalConfig) -> Result<lrdenoise_c
         firefly_history: c.firefly_history,
     };
     t.validate().map_err(status_of)?;
-    Ok(t)
+    Ok((t, reject))
 }
 
 fn f32_bytes(len: usize) -> Result<usize, LrdStatus> {

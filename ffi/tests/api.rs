@@ -305,6 +305,89 @@ fn flr_temporal_matches_the_rust_api() {
     }
 }
 
+/// Temporal FLR with `rejection_guides` (normal + position) gives exactly the
+/// Rust API's `with_rejection_guides` output, the history size follows, and
+/// the field refuses AO or user bits, a frame without the positions, and
+/// BMFR's pipeline.
+#[test]
+fn flr_temporal_rejection_guides_match_the_rust_api() {
+    use lrdenoise_core::flr::temporal::TemporalFlr;
+    use lrdenoise_core::temporal::{History, TemporalConfig};
+    use lrdenoise_core::{FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut};
+    let (w, h) = (41u32, 23u32);
+    let (wu, hu, n) = (w as usize, h as usize, (w * h) as usize);
+    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == 2 { 1.0 } else { 0.0 }).collect();
+    let depth: Vec<f32> = (0..n).map(|i| 2.0 + (i % wu) as f32 * 0.05).collect();
+    let ao: Vec<f32> = (0..n).map(|i| 0.4 + ((i * 13) % 60) as f32 / 100.0).collect();
+    let position: Vec<f32> = (0..3 * n).map(|i| [(i / 3 % wu) as f32 * 0.1, (i / 3 / wu) as f32 * 0.1, 2.0][i % 3]).collect();
+    let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { -0.6 } else { 0.2 }).collect();
+    let cfg = lrd_flr_config_default();
+    let mut tc = lrd_temporal_config_default();
+    assert_eq!(tc.rejection_guides, 0);
+    tc.rejection_guides = LRD_GUIDE_NORMAL | LRD_GUIDE_POSITION;
+    let reject = GuideSet { normal: true, position: true, ..GuideSet::default() };
+    let plan = TemporalFlr::new(FlrConfig::default(), TemporalConfig::default(), wu, hu).unwrap().with_rejection_guides(reject).unwrap();
+    let mut rhd = vec![0f32; plan.history_len()];
+    let mut rh = History::new(&mut rhd);
+    let (mut rs, mut rfs) = (vec![0f32; plan.scratch_len()], vec![0f64; plan.flr_scratch_len()]);
+    let (mut sb, mut hb) = (0usize, 0usize);
+    unsafe {
+        assert_eq!(lrd_flr_temporal_sizes(&cfg, &tc, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_OK);
+        assert_eq!(hb, 4 * plan.history_len());
+        let mut ts = vec![0f64; sb / 8];
+        let mut hd = vec![0f32; hb / 4];
+        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let (mut out, mut want) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
+        let o = LrdImageMut {
+            data: out.as_mut_ptr() as *mut _,
+            format: 0,
+            width: w,
+            height: h,
+            pixel_stride: 0,
+            row_stride: 0,
+            channel_stride: 0,
+        };
+        for k in 0..3usize {
+            let noisy: Vec<f32> = (0..3 * n).map(|i| (((i + 613 * k) * 7919) % 1000) as f32 / 400.0).collect();
+            let mut frame =
+                LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
+            frame.guides.normal = img(normal.as_ptr(), w, h, 3);
+            frame.guides.depth = img(depth.as_ptr(), w, h, 1);
+            frame.guides.ao = img(ao.as_ptr(), w, h, 1);
+            let mv = img(motion.as_ptr(), w, h, 2);
+            let m = if k == 0 { null() } else { &mv as *const LrdImage };
+            let sp = ts.as_mut_ptr() as *mut _;
+            // without the positions the frame does not carry the rejection guides
+            assert_eq!(
+                lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb, null_mut()),
+                LrdStatus::LRD_STATUS_GUIDE_MISMATCH
+            );
+            frame.guides.position = img(position.as_ptr(), w, h, 3);
+            assert_eq!(lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb, null_mut()), LrdStatus::LRD_STATUS_OK);
+            let g = Guides {
+                normal: Some(ImageView::interleaved(&normal, wu, hu, 3).unwrap()),
+                depth: Some(ImageView::interleaved(&depth, wu, hu, 1).unwrap()),
+                ao: Some(ImageView::interleaved(&ao, wu, hu, 1).unwrap()),
+                position: Some(ImageView::interleaved(&position, wu, hu, 3).unwrap()),
+                ..Default::default()
+            };
+            let rframe = Frame::new(ImageView::interleaved(&noisy, wu, hu, 3).unwrap(), g);
+            let rmv = ImageView::interleaved(&motion, wu, hu, 2).unwrap();
+            let mut ov = ImageViewMut::interleaved(&mut want, wu, hu, 3).unwrap();
+            plan.denoise(&rframe, (k > 0).then_some(&rmv), &mut rh, &mut rs, &mut rfs, &mut ov).unwrap();
+            assert_eq!(out, want, "frame {k}");
+        }
+        for bits in [LRD_GUIDE_AO, LRD_GUIDE_POSITION | 16, 1 << 31] {
+            let mut bad = tc;
+            bad.rejection_guides = bits;
+            assert_eq!(lrd_flr_temporal_sizes(&cfg, &bad, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_INVALID_CONFIG, "{bits}");
+        }
+        let mut bmfr = lrd_bmfr_config_default();
+        bmfr.temporal.rejection_guides = LRD_GUIDE_POSITION;
+        assert_eq!(lrd_bmfr_temporal_sizes(&bmfr, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_UNSUPPORTED);
+    }
+}
+
 /// BMFR through the C ABI gives exactly the Rust API's output, single frame and
 /// temporal (history advanced by the call), and validates its arguments.
 #[test]
