@@ -159,8 +159,8 @@ impl<'w> Flnr<'w> {
             block: 8,
             blur,
             regularization: Regularization::Normalized { eps_mul: eps_mul as f64, eps_add: eps_add as f64 },
-            // the network was trained through FLR without it (train/flnr.py)
-            ao_demodulation: None,
+            // as the network was trained (train/flnr.py)
+            ao_demodulation: net.flr_ao_demodulation(),
             fireflies: config.fireflies,
             ..FlrConfig::default()
         };

@@ -139,6 +139,46 @@ fn as_v2(b: &[u8], levels: usize, sigmas: &[f32], eps: [f32; 2]) -> Vec<u8> {
     v
 }
 
+/// `b` (a version-1 blob with `levels`) rewritten as version 3: version 2's
+/// fields and the AO demodulation's offset.
+fn as_v3(b: &[u8], levels: usize, sigmas: &[f32], eps: [f32; 2], ao_offset: f32) -> Vec<u8> {
+    let v2 = as_v2(b, levels, sigmas, eps);
+    let at = 20 + 4 * (levels + 1) + 4 + 4 * (sigmas.len() + 2);
+    let mut v = v2[..at].to_vec();
+    v[4] = 3;
+    v.extend_from_slice(&ao_offset.to_le_bytes());
+    v.extend_from_slice(&v2[at..]);
+    v
+}
+
+#[test]
+fn version_3_blobs_carry_the_ao_demodulation() {
+    let v1 = blob(8, 8, &[3, 5], 12.0, 1);
+    assert_eq!(UNet::parse(&v1).unwrap().flr_ao_demodulation(), None);
+    let v2 = as_v2(&v1, 1, &[6.0, 12.0, 20.0], [2e-3, 3e-2]);
+    assert_eq!(UNet::parse(&v2).unwrap().flr_ao_demodulation(), None);
+    let v3 = as_v3(&v1, 1, &[6.0, 12.0, 20.0], [2e-3, 3e-2], 0.1);
+    let net = UNet::parse(&v3).unwrap();
+    assert_eq!((net.flr_sigmas(), net.flr_eps(), net.flr_ao_demodulation()), (&[6f32, 12.0, 20.0][..], [2e-3, 3e-2], Some(0.1)));
+    // FLNR plans the FLR it was trained with, AO demodulation included
+    let fl = lrdenoise::flnr::Flnr::new(lrdenoise::FlnrConfig::new(&v3), 40, 30).unwrap();
+    assert_eq!(fl.flr().config().ao_demodulation, Some(0.1));
+    let off = as_v3(&v1, 1, &[12.0], [1e-3, 1e-2], 0.0);
+    let fl = lrdenoise::flnr::Flnr::new(lrdenoise::FlnrConfig::new(&off), 40, 30).unwrap();
+    assert_eq!(fl.flr().config().ao_demodulation, None);
+    for c in [-0.1, f32::NAN, f32::INFINITY] {
+        let b = as_v3(&v1, 1, &[12.0], [1e-3, 1e-2], c);
+        assert!(matches!(UNet::parse(&b), Err(Error::InvalidConfig(_))), "{c}");
+    }
+    // the v2 layout labelled version 3 lacks four bytes: a typed error, never a panic
+    let mut short = v2.clone();
+    short[4] = 3;
+    assert!(matches!(UNet::parse(&short), Err(Error::InvalidConfig(_))));
+    for n in 0..v3.len() {
+        let _ = UNet::parse(&v3[..n]);
+    }
+}
+
 #[test]
 fn version_2_blobs_carry_the_adaptive_window() {
     let v1 = blob(8, 8, &[3, 5], 12.0, 1);

@@ -26,7 +26,9 @@ end (plain FLR and FLNR PSNR), to choose between runs without touching the test 
 """
 import argparse
 import math
+import os
 import random
+import re
 import time
 
 import numpy as np
@@ -145,10 +147,15 @@ def gap(s, first):
     return at_mean * at_mean + spread
 
 
-def flr(y, gm, gmap, sigmas, eps_mul, eps_add):
+def flr(y, gm, gmap, sigmas, eps_mul, eps_add, ao=None, ao_offset=0.0):
     """Differentiable FLR. y: (N,3,H,W), gm/gmap: (N,Q,H,W), H, W multiples of B.
     `sigmas`: one σ (one Gaussian window) or three (the adaptive window, the larger
-    windows with σ ≥ 1.5 B on the 2×2-pooled grid, as the library fits them)."""
+    windows with σ ≥ 1.5 B on the 2×2-pooled grid, as the library fits them).
+    `ao` (N,1,H,W) with `ao_offset` c > 0: the AO demodulation (src/kernels/demodulation.rs):
+    y is divided by s = √(clamp(ao, 0, 1) + c) before the fit and the output multiplied by s."""
+    if ao is not None and ao_offset > 0:
+        s = torch.sqrt(torch.nan_to_num(ao, nan=1.0, posinf=1.0, neginf=1.0).clamp(0.0, 1.0) + ao_offset)
+        return flr(y / s, gm, gmap, sigmas, eps_mul, eps_add) * s
     n_, q, h, w = gm.shape
     # standardise the model guides by their frame mean / std (the library's normalized mode)
     mean = gm.mean(dim=(2, 3), keepdim=True)
@@ -201,10 +208,20 @@ def smape(a, b):
 
 
 class Flnr(torch.nn.Module):
-    def __init__(self, widths, sigmas):
+    def __init__(self, widths, sigmas, ao_offset):
         super().__init__()
         self.net = UNet(8, 2 * QP, widths)
+        # the map guides start equal to the model guides, so that an untrained FLNR is FLR with
+        # QP more (random, smooth) guides rather than FLR applied to guides it never fitted; the
+        # last layer's weights are scaled up so that those guides vary (a spread of ~1e-4 would
+        # make the first optimiser steps, which move them apart, blow up FLR's standardisation)
+        last = list(self.net.convs())[-1]
+        with torch.no_grad():
+            last.weight.mul_(10.0)
+            last.weight[QP:] = last.weight[:QP]
+            last.bias[QP:] = last.bias[:QP]
         self.sigmas = tuple(sigmas)
+        self.ao_offset = ao_offset
         self.log_eps_mul = torch.nn.Parameter(torch.tensor(math.log(1e-3)))
         self.log_eps_add = torch.nn.Parameter(torch.tensor(math.log(1e-2)))
 
@@ -213,7 +230,7 @@ class Flnr(torch.nn.Module):
         base = x[:, :5]  # normal, depth, AO: FLR's own guides stay in both sets
         gm = torch.cat([base, g[:, :QP]], 1)
         gmap = torch.cat([base, g[:, QP:]], 1)
-        return flr(y, gm, gmap, self.sigmas, self.log_eps_mul.exp(), self.log_eps_add.exp())
+        return flr(y, gm, gmap, self.sigmas, self.log_eps_mul.exp(), self.log_eps_add.exp(), x[:, 4:5], self.ao_offset)
 
 
 def psnr(est, fr):
@@ -225,38 +242,108 @@ def psnr(est, fr):
     return -10 * np.log10(np.mean((np.clip(tm(i), 0, 1) - np.clip(tm(r), 0, 1)) ** 2))
 
 
-def full_frame(model, fr, plain=False):
+def full_frame(model, fr, plain=False, sigmas=None):
     """Denoises a whole frame (H, W multiples of B) with the network, or with FLR's own
-    guides only (`plain`: the library's FLR, to check this module against it)."""
+    guides only (`plain`: the library's FLR defaults, to check this module against it;
+    `sigmas` another window set for it, e.g. one σ = 12 window)."""
     x = torch.from_numpy(fr["x"])[None]
     y = torch.from_numpy(fr["y"])[None]
     with torch.no_grad():
         if plain:
             base = x[:, :5]
-            out = flr(y, base, base, model.sigmas, 1e-3, 1e-2)
+            out = flr(y, base, base, sigmas or model.sigmas, 1e-3, 1e-2, x[:, 4:5], model.ao_offset)
         else:
             out = model(x, y)
     return out[0].clamp_min(0).numpy()
 
 
-def crops(frames, size, batch):
+def random_rotation():
+    """A uniformly random 3D rotation (QR of a Gaussian matrix, signs fixed)."""
+    q, r = np.linalg.qr(np.random.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def crops(frames, size, batch, augment=True):
+    """A batch of random crops, augmented so that the network cannot learn one renderer's
+    conventions: a random rotation of the normals (world, view or any other frame: FLR's
+    regression does not care, the network must not either), a random AO exponent (AO from
+    other distances and ray counts), a random light colour, flips and 90° rotations.
+    Exposure needs no augmentation: the network's input is divided by the frame's mean
+    light and FLR is linear in the light. `augment=False`: crops and flips only."""
     xs, ys, rs = [], [], []
     for _ in range(batch):
         fr = random.choice(frames)
         _, h, w = fr["x"].shape
         oy, ox = random.randrange(0, h - size + 1), random.randrange(0, w - size + 1)
         sl = (slice(None), slice(oy, oy + size), slice(ox, ox + size))
-        x, y, r = fr["x"][sl], fr["y"][sl], fr["r"][sl]
+        x, y, r = fr["x"][sl].copy(), fr["y"][sl], fr["r"][sl]
+        if augment:
+            x, y, r = recolour(x, y, r, fr["m"])
         if random.random() < 0.5:
             x, y, r = x[:, :, ::-1], y[:, :, ::-1], r[:, :, ::-1]
-            x = x.copy()
-            x[0] = -x[0]  # a horizontal flip mirrors the normal's x (world axes: approximately)
         if random.random() < 0.5:
             x, y, r = x[:, ::-1], y[:, ::-1], r[:, ::-1]
+        if augment and random.random() < 0.5:
+            x, y, r = x.transpose(0, 2, 1), y.transpose(0, 2, 1), r.transpose(0, 2, 1)
         xs.append(np.ascontiguousarray(x))
         ys.append(np.ascontiguousarray(y))
         rs.append(np.ascontiguousarray(r))
     return torch.from_numpy(np.stack(xs)), torch.from_numpy(np.stack(ys)), torch.from_numpy(np.stack(rs))
+
+
+def recolour(x, y, r, means):
+    """`crops`' augmentation of one crop: normals rotated, AO raised to a power, light tinted."""
+    x[0:3] = np.einsum("ij,jhw->ihw", random_rotation(), x[0:3]).astype(np.float32)
+    x[4] = np.clip(x[4], 0.0, 1.0) ** math.exp(random.uniform(-0.7, 0.7))
+    col = np.exp(np.random.uniform(-0.4, 0.4, size=(3, 1, 1))).astype(np.float32)
+    y, r = y * col, r * col
+    scale = max(float((col[:, 0, 0] * means).mean()), 1e-6)
+    x[5:8] = np.log1p(np.maximum(y, 0) / scale)
+    return x, y, r
+
+
+def family(path):
+    """`DIR/FAMILY`: a frame's folder and the name of its scene family (`gallery_31.exr`: gallery)."""
+    d = os.path.basename(os.path.dirname(os.path.abspath(path)))
+    return f"{d}/{re.sub(r'_[0-9]+$', '', os.path.splitext(os.path.basename(path))[0])}"
+
+
+def oidn_psnr(fr):
+    """OIDN 2 (pyoidn, RT filter, quality high; as tools/peers.py) on the frame, or None without pyoidn."""
+    try:
+        import pyoidn
+    except ImportError:
+        return None
+    alb = fr["albedo"].transpose(1, 2, 0).astype(np.float32)
+    col = (alb * fr["y"].transpose(1, 2, 0)).astype(np.float32)
+    nrm = fr["normal"].transpose(1, 2, 0).astype(np.float32)
+    out = np.asarray(pyoidn.denoise(col, alb, nrm, hdr=True, clean_aux=True, quality="high"), dtype=np.float64)
+    est = np.where(alb > 0, out / np.maximum(alb, 1e-8), 0.0).transpose(2, 0, 1)
+    return psnr(est, fr)
+
+
+def family_table(model, group, title):
+    """Prints mean PSNR per family: FLR defaults, FLR with one σ = 12 window, OIDN, FLNR."""
+    rows = {}
+    for fr in group:
+        scores = (
+            psnr(full_frame(model, fr, plain=True), fr),
+            psnr(full_frame(model, fr, plain=True, sigmas=(12.0,)), fr),
+            oidn_psnr(fr),
+            psnr(full_frame(model, fr), fr),
+        )
+        rows.setdefault(family(fr["name"]), []).append(scores)
+        print(f"{fr['name']}: " + ", ".join("–" if v is None else f"{v:.2f}" for v in scores), flush=True)
+    everything = [sc for v in rows.values() for sc in v]
+    mean = lambda sc, k: "–" if any(v[k] is None for v in sc) else f"{np.mean([v[k] for v in sc]):.2f}"
+    print(f"\n{title}: mean PSNR (dB) per family\n")
+    print("| family | frames | FLR defaults | FLR σ = 12 | OIDN 2 | FLNR | FLNR − FLR |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for name, sc in sorted(rows.items()) + [("**mean**", everything)]:
+        d = np.mean([v[3] - v[0] for v in sc])
+        print(f"| {name} | {len(sc)} | {mean(sc, 0)} | {mean(sc, 1)} | {mean(sc, 2)} | {mean(sc, 3)} | {d:+.2f} |")
+    print(flush=True)
 
 
 def main():
@@ -271,29 +358,35 @@ def main():
     ap.add_argument("--log", default=None, help="write the loss curve (step, loss) here")
     ap.add_argument("--sigmas", default="6,12,20", help="FLR windows: one σ, or three (the adaptive window, the library's default)")
     ap.add_argument("--init", default=None, help="start from this blob's network weights and eps (same widths)")
-    ap.add_argument("--val", nargs="*", default=[], help="frames only scored (plain FLR and FLNR PSNR) at the end, never trained on")
+    ap.add_argument("--ao-demodulation", type=float, default=0.1, help="offset c of FLR's AO demodulation (the library's default 0.1; 0: off)")
+    ap.add_argument("--no-augment", action="store_true", help="train on plain crops and flips (no normal rotation, AO exponent or light colour)")
+    ap.add_argument("--val", nargs="*", default=[], help="frames only scored (per family) at the end, to choose between runs; never trained on")
+    ap.add_argument("--heldout", nargs="*", default=[], help="held-out families: scored once at the end (per family, with OIDN), never trained or chosen on")
     ap.add_argument("--check", action="store_true", help="only print plain FLR's PSNR per frame (compare with `lrd eval`)")
     args = ap.parse_args()
     torch.manual_seed(0)
     random.seed(0)
+    np.random.seed(0)
     torch.set_num_threads(2)
     def prepare(p):
         fr = load(p)
         y = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
-        return {"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "reference": fr["reference"], "name": p}
+        m = np.maximum(y, 0).reshape(3, -1).mean(1)  # per-channel means: the light-colour augmentation rescales the input
+        return {"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "normal": fr["normal"], "reference": fr["reference"], "m": m, "name": p}
 
     frames = [prepare(p) for p in args.frames]
     val = [prepare(p) for p in args.val]
+    heldout = [prepare(p) for p in args.heldout]
     sigmas = [float(v) for v in args.sigmas.split(",")]
-    print(f"{len(frames)} frames; widths {args.widths}; FLR windows {sigmas}")
-    model = Flnr([int(v) for v in args.widths.split(",")], sigmas)
+    print(f"{len(frames)} frames; widths {args.widths}; FLR windows {sigmas}; AO demodulation {args.ao_demodulation or 'off'}")
+    model = Flnr([int(v) for v in args.widths.split(",")], sigmas, args.ao_demodulation)
     if args.check:
         for fr in frames:
             print(f"{fr['name']}: plain FLR {psnr(full_frame(model, fr, plain=True), fr):.2f} dB")
         return
     if args.init:
         # the network and the ε, ϵ it was trained with
-        _, (eps_mul, eps_add) = load_blob(model.net, args.init)
+        _, (eps_mul, eps_add), _ = load_blob(model.net, args.init)
         with torch.no_grad():
             model.log_eps_mul.fill_(math.log(eps_mul))
             model.log_eps_add.fill_(math.log(eps_add))
@@ -302,7 +395,7 @@ def main():
     curve = []
     t0 = time.time()
     for step in range(1, args.steps + 1):
-        x, y, r = crops(frames, args.crop, args.batch)
+        x, y, r = crops(frames, args.crop, args.batch, not args.no_augment)
         out = model(x, y)
         loss = smape(out, r)
         opt.zero_grad()
@@ -315,18 +408,17 @@ def main():
                   f"eps {float(model.log_eps_mul.exp()):.2e},{float(model.log_eps_add.exp()):.2e} {time.time() - t0:.0f}s", flush=True)
     model.net.round_to_f16()
     eps = (float(model.log_eps_mul.exp()), float(model.log_eps_add.exp()))
-    export(model.net, args.out, sigmas, eps)
+    export(model.net, args.out, sigmas, eps, args.ao_demodulation)
     if args.log:
         with open(args.log, "w") as f:
             f.write("step,loss\n" + "".join(f"{s},{l:.5f}\n" for s, l in curve))
     print(f"wrote {args.out}; FLR windows {sigmas} eps_mul {eps[0]:.2e} eps_add {eps[1]:.2e}")
-    for name, group in (("train", frames), ("val", val)):
-        pairs = [(psnr(full_frame(model, fr, plain=True), fr), psnr(full_frame(model, fr), fr)) for fr in group]
-        for fr, (a, b) in zip(group, pairs):
-            print(f"{fr['name']}: plain FLR {a:.2f} dB, FLNR {b:.2f} dB")
-        if pairs:
-            print(f"{name} mean ({len(pairs)} frames): plain FLR {np.mean([a for a, _ in pairs]):.3f} dB, "
-                  f"FLNR {np.mean([b for _, b in pairs]):.3f} dB")
+    pairs = [(psnr(full_frame(model, fr, plain=True), fr), psnr(full_frame(model, fr), fr)) for fr in frames]
+    print(f"train mean ({len(pairs)} frames): FLR defaults {np.mean([a for a, _ in pairs]):.3f} dB, FLNR {np.mean([b for _, b in pairs]):.3f} dB")
+    if val:
+        family_table(model, val, "validation (choose between runs on this)")
+    if heldout:
+        family_table(model, heldout, "held-out families (never trained or chosen on)")
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-MAGIC, VERSION = b"LRDN", 2
+MAGIC, VERSION = b"LRDN", 3
 LEAKY = 0.01
 
 
@@ -65,9 +65,10 @@ class UNet(nn.Module):
                 p.copy_(p.half().float())
 
 
-def export(model, path, sigmas=(12.0,), eps=(1e-3, 1e-2)):
-    """Writes the blob (version 2): the FLR trained with the network is one
-    Gaussian window (one σ) or the adaptive window (three σ), plus ε, ϵ."""
+def export(model, path, sigmas=(12.0,), eps=(1e-3, 1e-2), ao_offset=0.0):
+    """Writes the blob (version 3): the FLR trained with the network is one
+    Gaussian window (one σ) or the adaptive window (three σ), plus ε, ϵ and the
+    AO demodulation's offset c (0: off)."""
     assert len(sigmas) in (1, 3) and list(sigmas) == sorted(sigmas)
     payload = []
     for conv in model.convs():
@@ -76,14 +77,14 @@ def export(model, path, sigmas=(12.0,), eps=(1e-3, 1e-2)):
     payload = np.concatenate(payload)
     c = model.widths
     head = MAGIC + struct.pack("<4I", VERSION, model.cin, model.cout, len(c) - 1)
-    head += struct.pack(f"<{len(c)}I", *c) + struct.pack("<I", len(sigmas)) + struct.pack(f"<{len(sigmas)}f", *sigmas) + struct.pack("<2f", *eps) + struct.pack("<I", payload.size)
+    head += struct.pack(f"<{len(c)}I", *c) + struct.pack("<I", len(sigmas)) + struct.pack(f"<{len(sigmas)}f", *sigmas) + struct.pack("<2f", *eps) + struct.pack("<f", ao_offset) + struct.pack("<I", payload.size)
     with open(path, "wb") as f:
         f.write(head + payload.astype("<f2").tobytes())
 
 
 def load_blob(model, path):
-    """Loads a blob's weights (version 1 or 2) into `model` (same shapes); returns
-    the FLR it was trained with as (sigmas, eps)."""
+    """Loads a blob's weights (version 1, 2 or 3) into `model` (same shapes); returns
+    the FLR it was trained with as (sigmas, eps, ao_offset)."""
     b = open(path, "rb").read()
     assert b[:4] == MAGIC, "not an lrdenoise network"
     version, cin, cout, levels = struct.unpack_from("<4I", b, 4)
@@ -95,6 +96,9 @@ def load_blob(model, path):
         (k,) = struct.unpack_from("<I", b, pos)
         sigmas, pos = struct.unpack_from(f"<{k}f", b, pos + 4), pos + 4 + 4 * k
     eps, pos = struct.unpack_from("<2f", b, pos), pos + 8
+    ao_offset = 0.0
+    if version >= 3:
+        (ao_offset,), pos = struct.unpack_from("<f", b, pos), pos + 4
     (n,) = struct.unpack_from("<I", b, pos)
     payload = np.frombuffer(b, dtype="<f2", count=n, offset=pos + 4).astype(np.float32)
     at = 0
@@ -104,7 +108,7 @@ def load_blob(model, path):
                 t.copy_(torch.from_numpy(payload[at : at + t.numel()].reshape(t.shape)))
                 at += t.numel()
     assert at == n, "payload size differs"
-    return sigmas, eps
+    return sigmas, eps, ao_offset
 
 
 def write_vector(path, x, y):

@@ -34,11 +34,11 @@ pub fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: us
         return Err(format!("{}: advise measures quality and needs a 'reference' layer", frame.display()));
     }
     let methods: Vec<&str> = methods.split(',').map(str::trim).filter(|m| !m.is_empty()).collect();
-    if let Some(m) = methods.iter().find(|m| !["flr", "bmfr", "walr"].contains(m)) {
-        return Err(format!("--methods: '{m}' is not flr, bmfr or walr"));
+    if let Some(m) = methods.iter().find(|m| !["flr", "flnr", "bmfr", "walr"].contains(m)) {
+        return Err(format!("--methods: '{m}' is not flr, flnr, bmfr or walr"));
     }
     if !methods.contains(&"flr") {
-        return Err("--methods: flr is always weighed (the guide verdicts are FLR's); add bmfr and/or walr to it".into());
+        return Err("--methods: flr is always weighed (the guide verdicts are FLR's); add flnr, bmfr and/or walr to it".into());
     }
     // Every subset of the available guides x block sizes x window sizes.
     let avail: Vec<&str> = [
@@ -80,6 +80,11 @@ pub fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: us
     // Other methods with what the frame has (BMFR wants normals; WALR normals and positions),
     // and WALR's optional stages one at a time.
     let has = |g: &str| avail.contains(&g);
+    // FLNR (the bundled network) is measured on the frame like the rest, so it is recommended
+    // only where it beats FLR on frames like this one, never by the family it was trained on
+    if methods.contains(&"flnr") && has("normal") && has("depth") && has("ao") {
+        variants.push(Variant::method("flnr", FlrArgs::default()));
+    }
     if methods.contains(&"bmfr") && has("normal") {
         for block in [32, 64] {
             variants.push(Variant::method("bmfr", FlrArgs { block: Some(block), ..Default::default() }));
@@ -193,6 +198,9 @@ pub fn advise(frame: &Path, max_loss: Option<f64>, budget: Option<f64>, runs: us
             one.psnr,
             d.psnr - f.psnr
         );
+    }
+    if let (Some(f), Some(n)) = (best_flr(&|_| true), records.iter().find(|r| r.method == "flnr")) {
+        print_option("flnr", ("best FLR", f), ("FLNR", n), ["FLNR wins on this frame", "FLR: FLNR does not pay here"]);
     }
     let bmfr_default = bmfr(&|c| c.block == 32 && c.shrinkage == BmfrConfig::default().shrinkage);
     if let (Some(b32), Some(b64)) = (bmfr_default, bmfr(&|c| c.block == 64)) {

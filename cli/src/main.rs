@@ -119,9 +119,10 @@ enum Cmd {
         /// Threads (default: all cores)
         #[arg(long)]
         threads: Option<usize>,
-        /// Methods to weigh, comma separated from flr,bmfr,walr: besides FLR's guides × block × window
-        /// grid, BMFR at 32×32 and 64×64 blocks and WALR's stages (tracing, blend) with the frame's
-        /// guides; the choice is then made over all of them
+        /// Methods to weigh, comma separated from flr,flnr,bmfr,walr: besides FLR's guides × block ×
+        /// window grid, FLNR with the bundled network (frames with normal, depth and AO), BMFR at
+        /// 32×32 and 64×64 blocks and WALR's stages (tracing, blend) with the frame's guides; the
+        /// choice is then made over all of them, so FLNR is chosen only where it wins on the frame
         #[arg(long, default_value = "flr")]
         methods: String,
     },

@@ -183,13 +183,13 @@ fn advise_bench_and_sequences() {
     }
     assert!(so.contains("guide albedo"), "{so}");
     // with the other methods: WALR's stages and BMFR's blocks weighed too, the choice over all
-    let (ok, so, e) = lrd(&["advise", &data("poles_7.exr"), "--runs", "5", "--budget-ms", "1000", "--methods", "flr,bmfr,walr"]);
+    let (ok, so, e) = lrd(&["advise", &data("poles_7.exr"), "--runs", "5", "--budget-ms", "1000", "--methods", "flr,flnr,bmfr,walr"]);
     assert!(ok && so.contains("chosen"), "{e}");
-    for l in ["walr tracing", "walr blend", "bmfr blocks", "bmfr shrinkage"] {
+    for l in ["walr tracing", "walr blend", "bmfr blocks", "bmfr shrinkage", ": best FLR "] {
         assert!(so.contains(l), "{l}: {so}");
     }
     fails_with(&["advise", &data("poles_7.exr"), "--methods", "walr"], &["flr is always weighed"]);
-    fails_with(&["advise", &data("poles_7.exr"), "--methods", "flr,oidn"], &["'oidn' is not flr, bmfr or walr"]);
+    fails_with(&["advise", &data("poles_7.exr"), "--methods", "flr,oidn"], &["'oidn' is not flr, flnr, bmfr or walr"]);
     let (ok, so, e) = lrd(&["bench", "--size", "320x200", "--runs", "5"]);
     assert!(ok, "{e}");
     assert!(so.contains("median") && so.contains("ms") && so.contains("simd"), "{so}");

@@ -4,7 +4,7 @@
 //! ```text
 //! offset  field
 //! 0       magic  "LRDN"
-//! 4       u32    version (1 or 2)
+//! 4       u32    version (1, 2 or 3)
 //! 8       u32    input channels   (1..=128)
 //! 12      u32    output channels  (1..=128)
 //! 16      u32    levels L         (0..=4)
@@ -12,7 +12,9 @@
 //! ..             the FLR the network was trained with:
 //!                version 1: f32 σ (pixels), ε, ϵ (one Gaussian window);
 //!                version 2: u32 windows W (1 or 3), f32 σ_1..σ_W (pixels,
-//!                increasing; 3 = the adaptive window), f32 ε, ϵ
+//!                increasing; 3 = the adaptive window), f32 ε, ϵ;
+//!                version 3: as version 2, then f32 c, the AO demodulation's
+//!                offset (0: off; see `FlrConfig::ao_demodulation`)
 //! ..      u32    payload length in f16 values
 //! ..      f16    payload: for every layer in the order of [`crate::nn`], the
 //!                weights [out][in][k][k] then the biases [out]
@@ -28,8 +30,8 @@ use half::f16;
 /// Most U-Net levels a blob may have.
 pub const MAX_LEVELS: usize = 4;
 const MAGIC: &[u8; 4] = b"LRDN";
-/// The newest version written (version 1 is still read).
-const VERSION: u32 = 2;
+/// The newest version written (versions 1 and 2 are still read).
+const VERSION: u32 = 3;
 const MAX_LAYERS: usize = 4 * MAX_LEVELS + 4;
 
 /// A parsed network: shapes and views into the blob's payload.
@@ -44,6 +46,8 @@ pub struct UNet<'b> {
     windows: usize,
     /// ε (multiplicative), ϵ (additive).
     eps: [f32; 2],
+    /// The AO demodulation's offset c (0: off).
+    ao_offset: f32,
     layers: [ConvDesc<'b>; MAX_LAYERS],
     count: usize,
 }
@@ -108,6 +112,10 @@ impl<'b> UNet<'b> {
         if sigmas[..windows].windows(2).any(|p| p[0] >= p[1]) {
             return Err(Error::InvalidConfig("weights: FLR window sizes must increase"));
         }
+        let ao_offset = if version >= 3 { r.f32()? } else { 0.0 };
+        if !(ao_offset.is_finite() && ao_offset >= 0.0) {
+            return Err(Error::InvalidConfig("weights: AO demodulation offset must be finite and ≥ 0"));
+        }
         let payload_len = r.u32()? as usize;
         let payload = r.take(payload_len.checked_mul(2).ok_or(Error::InvalidConfig("weights: payload length overflows"))?)?;
         if r.pos != blob.len() {
@@ -147,7 +155,7 @@ impl<'b> UNet<'b> {
         if payload.chunks_exact(2).any(|p| !f16::from_le_bytes([p[0], p[1]]).is_finite()) {
             return Err(Error::InvalidConfig("weights: non-finite weight"));
         }
-        Ok(UNet { in_ch, out_ch, levels, widths, sigmas, windows, eps, layers, count: n })
+        Ok(UNet { in_ch, out_ch, levels, widths, sigmas, windows, eps, ao_offset, layers, count: n })
     }
 
     /// Input channels (1..=128).
@@ -174,6 +182,11 @@ impl<'b> UNet<'b> {
     /// The regularisation trained with the network: ε (multiplicative), ϵ (additive).
     pub fn flr_eps(&self) -> [f32; 2] {
         self.eps
+    }
+    /// The AO demodulation trained with the network: its offset c, or `None`
+    /// (off; always off before version 3).
+    pub fn flr_ao_demodulation(&self) -> Option<f32> {
+        (self.ao_offset > 0.0).then_some(self.ao_offset)
     }
     /// Number of convolutions.
     pub fn layer_count(&self) -> usize {
