@@ -40,8 +40,10 @@ use crate::flr::{Flr, Report};
 use crate::guides::{Frame, GuideSet, MAX_USER_GUIDES};
 use crate::image::{ImageView, ImageViewMut, Layout};
 use crate::kernels::solve::Regularization;
-use crate::nn::UNet;
+use crate::nn::conv::Planes;
+use crate::nn::{for_rows, Isa, UNet};
 use crate::parallel::{run_tiles, Executor, TileRun};
+use core::sync::atomic::{AtomicBool, Ordering};
 
 /// Guides the network reads.
 pub const INPUT_GUIDES: GuideSet = GuideSet::NORMAL_DEPTH_AO;
@@ -52,12 +54,12 @@ const IN_CHANNELS: usize = 8;
 /// f32, 91 MB, for the bundled network) are a tenth of the whole frame's, and
 /// a 1080p frame still has 12 tiles to spread over threads.
 pub const DEFAULT_TILE: usize = 512;
-/// Smallest tile edge a parallel run splits the network into when the plan's
-/// tiles are fewer than the workers (256: the halo then adds about a third
-/// of the network's arithmetic, which two or more workers more than repay;
-/// its coarsest level stays wide enough for the vectorised paths at every
-/// depth a blob may have, see [`MIN_TILE`]).
-pub const PARALLEL_MIN_TILE: usize = 256;
+/// Fewest network tiles per worker at which [`Flnr::denoise_parallel`]
+/// spreads whole tiles over the workers; with fewer (a 512×384 frame is one
+/// tile), the tiles run one after another with each layer's rows split over
+/// the workers ([`UNet::forward_parallel`]), which adds no halo arithmetic
+/// and leaves no worker idle for want of a tile.
+pub const TILES_PER_WORKER: usize = 2;
 
 /// Smallest tile edge ([`FlnrConfig::tile`]) a plan accepts: for networks of up to 3
 /// levels (tested; the bundled one has 2) every level of a tile's input stays
@@ -303,33 +305,30 @@ impl<'w> Flnr<'w> {
     }
 
     /// Builds the network's input planes for the pixels `r` (row stride
-    /// `r.width()`) into `x`.
-    fn input(&self, views: &[ImageView<'_>; 5], noisy: &ImageView<'_>, sc: InputScale, r: Rect, x: &mut [f32]) -> Result<(), Error> {
-        let (w, np) = (r.width(), r.width() * r.height());
-        let bad = Error::InvalidTile { index: 0, count: self.height };
-        for (c, v) in views.iter().enumerate() {
-            for y in r.y0..r.y1 {
-                let o = c * np + (y - r.y0) * w;
-                v.read_row(y, 0, r.x0, &mut x[o..o + w]).ok_or(bad)?;
+    /// `r.width()`) into `x`, its rows on this thread or in bands over `threads`.
+    #[allow(clippy::too_many_arguments)]
+    fn input(
+        &self,
+        views: &[ImageView<'_>; 5],
+        noisy: &ImageView<'_>,
+        sc: InputScale,
+        r: Rect,
+        x: &mut [f32],
+        threads: Threads<'_>,
+    ) -> Result<(), Error> {
+        let (w, h) = (r.width(), r.height());
+        let planes = Planes::new(x, IN_CHANNELS, w * h, w, h)?;
+        let failed = AtomicBool::new(false);
+        for_rows(threads, h, &|y0, y1| {
+            for y in y0..y1 {
+                // SAFETY: each band writes only its own rows of `planes`, which borrows `x` exclusively.
+                if unsafe { !input_row(views, noisy, sc, r, &planes, y) } {
+                    failed.store(true, Ordering::Relaxed);
+                }
             }
-        }
-        for y in r.y0..r.y1 {
-            let (a, rest) = x[5 * np..8 * np].split_at_mut(np);
-            let (b, c) = rest.split_at_mut(np);
-            let o = (y - r.y0) * w;
-            noisy.read_row_n(y, r.x0, [&mut a[o..o + w], &mut b[o..o + w], &mut c[o..o + w]]).ok_or(bad)?;
-        }
-        for v in &mut x[..3 * np] {
-            *v = clean(*v);
-        }
-        for d in &mut x[3 * np..4 * np] {
-            *d = clean(*d / sc.depth);
-        }
-        for v in &mut x[4 * np..5 * np] {
-            *v = clean(*v);
-        }
-        for v in &mut x[5 * np..8 * np] {
-            *v = libm::log1pf(clean(*v).max(0.0) / sc.light);
+        })?;
+        if failed.load(Ordering::Relaxed) {
+            return Err(Error::InvalidTile { index: 0, count: self.height });
         }
         Ok(())
     }
@@ -379,11 +378,16 @@ impl<'w> Flnr<'w> {
         x: &mut [f32],
         net_scratch: &mut [f32],
         o: &mut [f32],
+        threads: Threads<'_>,
     ) -> Result<(), Error> {
         let rn = reg.width() * reg.height();
         let x = &mut x[..IN_CHANNELS * rn];
-        self.input(views, noisy, sc, reg, x)?;
-        self.net.forward(x, reg.width(), reg.height(), net_scratch, &mut o[..2 * self.q * rn])
+        self.input(views, noisy, sc, reg, x, threads)?;
+        let (w, h, o) = (reg.width(), reg.height(), &mut o[..2 * self.q * rn]);
+        match threads {
+            Some((workers, for_each)) => self.net.forward_parallel(Isa::detect(), x, w, h, net_scratch, o, workers, for_each),
+            None => self.net.forward(x, w, h, net_scratch, o),
+        }
     }
 
     /// Step 2: the network on tile `t` (row-major over [`Flnr::tile_grid`];
@@ -400,7 +404,7 @@ impl<'w> Flnr<'w> {
         tile_scratch: &'s mut [f32],
     ) -> Result<TileGuides<'s>, Error> {
         let views = self.views(frame)?;
-        self.run_tile(&views, &frame.noisy, scale, t, tile_scratch)
+        self.run_tile(&views, &frame.noisy, scale, t, tile_scratch, None)
     }
 
     /// [`Flnr::network_tile`] on views already checked.
@@ -411,6 +415,7 @@ impl<'w> Flnr<'w> {
         scale: InputScale,
         t: usize,
         tile_scratch: &'s mut [f32],
+        threads: Threads<'_>,
     ) -> Result<TileGuides<'s>, Error> {
         if tile_scratch.len() < self.tile_scratch_len() {
             return Err(Error::ScratchTooSmall { needed: self.tile_scratch_len(), got: tile_scratch.len() });
@@ -420,7 +425,7 @@ impl<'w> Flnr<'w> {
         let rl = self.region_len();
         let (x, rest) = tile_scratch.split_at_mut(IN_CHANNELS * rl);
         let (o, net_scratch) = rest.split_at_mut(2 * self.q * rl);
-        self.forward_region(views, noisy, scale, reg, x, net_scratch, o)?;
+        self.forward_region(views, noisy, scale, reg, x, net_scratch, o, threads)?;
         let len = 2 * self.q * reg.width() * reg.height();
         Ok(TileGuides { rect, region: reg, planes: 2 * self.q, frame: (self.width, self.height), data: &o[..len] })
     }
@@ -471,19 +476,41 @@ impl<'w> Flnr<'w> {
         let views = self.views(frame)?;
         let sc = self.scale_of(&views[3], &frame.noisy)?;
         let (g, work) = scratch.split_at_mut(self.guide_planes_len());
+        self.network_planes(&views, &frame.noisy, sc, g, work, None)?;
+        let f = self.learned_frame(frame, g)?;
+        self.flr.denoise(&f, flr_scratch, out)
+    }
+
+    /// The network on every tile, one after another, into the learned guide
+    /// planes `g`; `work`: [`Flnr::scratch_len`]'s share after the planes.
+    fn network_planes(
+        &self,
+        views: &[ImageView<'_>; 5],
+        noisy: &ImageView<'_>,
+        sc: InputScale,
+        g: &mut [f32],
+        work: &mut [f32],
+        threads: Threads<'_>,
+    ) -> Result<(), Error> {
         if self.single_tile() {
             // the whole frame in one piece, straight into the planes
             let reg = Rect { x0: 0, y0: 0, x1: self.width, y1: self.height };
             let (x, net_scratch) = work.split_at_mut(IN_CHANNELS * self.region_len());
-            self.forward_region(&views, &frame.noisy, sc, reg, x, net_scratch, g)?;
+            self.forward_region(views, noisy, sc, reg, x, net_scratch, g, threads)
         } else {
             let (nx, ny) = self.tile_grid();
             for t in 0..nx * ny {
-                self.run_tile(&views, &frame.noisy, sc, t, work)?.scatter(g)?;
+                self.run_tile(views, noisy, sc, t, work, threads)?.scatter(g)?;
             }
+            Ok(())
         }
-        let f = self.learned_frame(frame, g)?;
-        self.flr.denoise(&f, flr_scratch, out)
+    }
+
+    /// Whether a parallel run on `workers` splits each layer's rows over
+    /// them (too few tiles, see [`TILES_PER_WORKER`]) rather than whole tiles.
+    fn layer_threads(&self, workers: usize) -> bool {
+        let (nx, ny) = self.tile_grid();
+        workers > 1 && nx * ny < TILES_PER_WORKER.saturating_mul(workers)
     }
 
     /// The guide planes' share of a parallel scratch (rounded up to whole
@@ -493,33 +520,23 @@ impl<'w> Flnr<'w> {
     }
 
     /// f32 values of the network scratch [`Flnr::denoise_parallel`] needs for
-    /// `workers` workers: the guide planes, then one tile scratch per worker
-    /// (`None` if it overflows). Its FLR part needs
+    /// `workers` workers (`None` if it overflows): [`Flnr::scratch_len`] where
+    /// the layers' rows are split over the workers, otherwise the guide planes
+    /// and one tile scratch per worker. Its FLR part needs
     /// `flr().tiled_scratch_len(workers)` f64.
     pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
-        let p = self.for_workers(workers);
-        let (nx, ny) = p.tile_grid();
-        TileRun::scratch_len(nx * ny, workers.max(1), p.tile_scratch_len())?.checked_add(p.padded_planes_len())
-    }
-
-    /// The plan a parallel run on `workers` uses: this one, or, where it has
-    /// fewer network tiles than workers, the same network in tiles of half
-    /// the edge (repeatedly, down to [`PARALLEL_MIN_TILE`]) so that the
-    /// workers share the network. Every tile size gives the same bits.
-    fn for_workers(&self, workers: usize) -> Flnr<'w> {
-        let mut p = *self;
-        let tiles = |p: &Flnr<'_>| p.tile_grid().0 * p.tile_grid().1;
-        while tiles(&p) < workers && p.tile / 2 >= PARALLEL_MIN_TILE {
-            match p.with_tile(p.tile / 2) {
-                Ok(q) => p = q,
-                Err(_) => break,
-            }
+        if self.layer_threads(workers) {
+            return Some(self.scratch_len());
         }
-        p
+        let (nx, ny) = self.tile_grid();
+        TileRun::scratch_len(nx * ny, workers.max(1), self.tile_scratch_len())?.checked_add(self.padded_planes_len())
     }
 
-    /// [`Flnr::denoise`] with the network's tiles, then FLR's, spread by the
-    /// caller's executor ([`Executor`]); bit-identical to it. `scratch`: at
+    /// [`Flnr::denoise`] with the network, then FLR's tiles, spread by the
+    /// caller's executor ([`Executor`]); bit-identical to it. The network
+    /// runs whole tiles on the workers where there are at least
+    /// [`TILES_PER_WORKER`] per worker, and otherwise each layer's rows in
+    /// bands over them. `scratch`: at
     /// least [`Flnr::parallel_scratch_len`] f32; `flr_scratch`: at least
     /// `flr().tiled_scratch_len(workers)` f64; `out` must have rows that do
     /// not overlap in memory. Allocates nothing.
@@ -532,21 +549,17 @@ impl<'w> Flnr<'w> {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
-        self.for_workers(workers).run_parallel(frame, scratch, flr_scratch, out, workers, for_each)
-    }
-
-    /// [`Flnr::denoise_parallel`] on this plan's tiles.
-    fn run_parallel(
-        &self,
-        frame: &Frame<'_>,
-        scratch: &mut [f32],
-        flr_scratch: &mut [f64],
-        out: &mut ImageViewMut<'_>,
-        workers: usize,
-        for_each: Executor<'_>,
-    ) -> Result<Report, Error> {
         let views = self.views(frame)?;
         let sc = self.scale_of(&views[3], &frame.noisy)?;
+        if self.layer_threads(workers) {
+            if scratch.len() < self.scratch_len() {
+                return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
+            }
+            let (g, work) = scratch.split_at_mut(self.guide_planes_len());
+            self.network_planes(&views, &frame.noisy, sc, g, work, Some((workers, for_each)))?;
+            let f = self.learned_frame(frame, g)?;
+            return self.flr.denoise_parallel(&f, flr_scratch, out, workers, for_each);
+        }
         let np = self.padded_planes_len();
         if scratch.len() < np {
             return Err(Error::ScratchTooSmall { needed: np, got: scratch.len() });
@@ -555,7 +568,7 @@ impl<'w> Flnr<'w> {
         let (nx, ny) = self.tile_grid();
         let shared = PlanesPtr(planes.as_mut_ptr());
         run_tiles(rest, nx * ny, workers, self.tile_scratch_len(), for_each, &|t, buf| {
-            let tile = self.run_tile(&views, &frame.noisy, sc, t, buf)?;
+            let tile = self.run_tile(&views, &frame.noisy, sc, t, buf, None)?;
             // SAFETY: the planes hold `guide_planes_len` f32 (checked above)
             // and are not otherwise used until every tile has returned; each
             // tile runs once (`run_tiles`) and writes only the pixels of its
@@ -567,6 +580,10 @@ impl<'w> Flnr<'w> {
         self.flr.denoise_parallel(&f, flr_scratch, out, workers, for_each)
     }
 }
+
+/// How the network's layers run: on the calling thread (`None`), or with
+/// their rows in bands over `(workers, executor)`.
+type Threads<'e> = Option<(usize, Executor<'e>)>;
 
 /// The guide planes, written by concurrent tiles at disjoint pixels.
 struct PlanesPtr(*mut f32);
@@ -659,6 +676,38 @@ impl TileGuides<'_> {
         }
         Ok(())
     }
+}
+
+/// Row `y` of the network input planes of the pixels `r` (see
+/// [`Flnr::input`]); `false` if a view has no such row.
+///
+/// # Safety
+/// No other live slice covers row `y` of `planes`.
+unsafe fn input_row(views: &[ImageView<'_>; 5], noisy: &ImageView<'_>, sc: InputScale, r: Rect, planes: &Planes<'_>, y: usize) -> bool {
+    let fy = r.y0 + y;
+    for (c, v) in views.iter().enumerate() {
+        // SAFETY: the caller keeps row y to this call (and below).
+        let row = unsafe { planes.row(c, y) };
+        if v.read_row(fy, 0, r.x0, row).is_none() {
+            return false;
+        }
+        let scale = if c == 3 { sc.depth } else { 1.0 };
+        for v in row.iter_mut() {
+            *v = clean(if c == 3 { *v / scale } else { *v });
+        }
+    }
+    // SAFETY: as above.
+    let light = unsafe { [planes.row(5, y), planes.row(6, y), planes.row(7, y)] };
+    if noisy.read_row_n(fy, r.x0, light).is_none() {
+        return false;
+    }
+    for c in 5..8 {
+        // SAFETY: as above.
+        for v in unsafe { planes.row(c, y) }.iter_mut() {
+            *v = libm::log1pf(clean(*v).max(0.0) / sc.light);
+        }
+    }
+    true
 }
 
 /// NaN/Inf → 0.

@@ -3,7 +3,7 @@
 //! per-worker buffers handed out by worker index. No thread library: the
 //! caller brings the threads (rayon, a job system, `std::thread::scope`).
 
-#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
+#[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 use core::sync::atomic::AtomicU32;
 #[cfg(any(feature = "flr", feature = "bmfr", feature = "walr", feature = "flnr"))]
 use core::sync::atomic::Ordering;
@@ -171,6 +171,48 @@ pub(crate) fn run_tiles(
         return Err(Error::Unsupported("the executor skipped tiles"));
     }
     Ok(result.report())
+}
+
+/// Most bands one [`run_bands`] call takes.
+#[cfg(feature = "flnr")]
+pub(crate) const MAX_BANDS: usize = 64;
+
+/// Runs `body(band)` once for every `band < bands` (at most [`MAX_BANDS`])
+/// on the caller's executor, for work that needs no buffer of its own (the
+/// network's layer rows). An executor that runs a band twice (the second
+/// call is not run) or skips one gets an error.
+#[cfg(feature = "flnr")]
+pub(crate) fn run_bands(bands: usize, for_each: Executor<'_>, body: &(dyn Fn(usize) + Sync)) -> Result<(), Error> {
+    use core::sync::atomic::AtomicBool;
+    if bands > MAX_BANDS {
+        return Err(Error::InvalidConfig("more bands than run_bands takes"));
+    }
+    // one bit per band (32-bit atomics: every target has them)
+    let ran = [AtomicU32::new(0), AtomicU32::new(0)];
+    let bit = |b: usize| (&ran[b / 32], 1u32 << (b % 32));
+    let broken = AtomicBool::new(false);
+    for_each(bands, &|b, _worker| {
+        if b >= bands {
+            broken.store(true, Ordering::Relaxed);
+            return;
+        }
+        let (word, m) = bit(b);
+        if word.fetch_or(m, Ordering::AcqRel) & m != 0 {
+            broken.store(true, Ordering::Relaxed);
+            return;
+        }
+        body(b);
+    });
+    if broken.load(Ordering::Relaxed) {
+        return Err(Error::Unsupported("the executor ran a tile twice"));
+    }
+    if (0..bands).any(|b| {
+        let (word, m) = bit(b);
+        word.load(Ordering::Acquire) & m == 0
+    }) {
+        return Err(Error::Unsupported("the executor skipped tiles"));
+    }
+    Ok(())
 }
 
 /// A slice cut into bands of `band` elements (the last may be shorter), for

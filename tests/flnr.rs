@@ -6,7 +6,7 @@ mod common;
 #[path = "common/oracles.rs"]
 mod oracles;
 use common::*;
-use lrdenoise::flnr::{Flnr, INPUT_GUIDES};
+use lrdenoise::flnr::{self, Flnr, INPUT_GUIDES};
 use lrdenoise::*;
 
 #[test]
@@ -155,6 +155,45 @@ fn split_steps_in_any_tile_order_equal_denoise_bit_for_bit() {
         assert!(matches!(tg.scatter(&mut planes[..1]), Err(Error::ScratchTooSmall { .. })));
         assert!(matches!(fl.flr_frame(&frame, &planes[..1]), Err(Error::ScratchTooSmall { .. })));
         assert!(matches!(fl.input_scale(&f.frame(GuideSet::NORMAL_DEPTH)), Err(Error::GuideMismatch)));
+    }
+}
+
+/// A `for_each` executor on `workers` scoped std threads, worker `w` taking
+/// the indices `w, w + workers, ...`.
+fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
+    move |count, f| {
+        std::thread::scope(|s| {
+            for w in 0..workers {
+                s.spawn(move || (w..count).step_by(workers).for_each(|i| f(i, w)));
+            }
+        });
+    }
+}
+
+/// A parallel run with fewer tiles than `TILES_PER_WORKER` per worker splits
+/// each layer's rows over the workers (one tile, or tiles one after another);
+/// with enough tiles it spreads whole tiles. Both equal `denoise` bit for bit
+/// on real threads.
+#[test]
+fn layer_threads_and_tile_threads_equal_denoise_bit_for_bit() {
+    let blob = random_blob(2, &[4, 6, 8]);
+    // (w, h, tile): one tile and three (layer threads), fifteen (tile threads)
+    for &(w, h, tile) in &[(150usize, 97usize, 512usize), (150, 60, 64), (257, 131, 64)] {
+        let mut f = Owned::synthetic(w, h, 17, 0.5);
+        f.noisy[9] = f32::NAN;
+        let (whole, count) = run_tiled(&blob, &f, tile);
+        let fl = Flnr::new(FlnrConfig { tile, ..FlnrConfig::new(&blob) }, w, h).unwrap();
+        for workers in [2, 3] {
+            let layers = count < flnr::TILES_PER_WORKER * workers;
+            assert_eq!(layers, count <= 3, "{w}x{h} tile {tile}: {count} tiles");
+            let mut scratch = vec![f32::NAN; fl.parallel_scratch_len(workers).unwrap()];
+            let mut fs = vec![0f64; fl.flr().tiled_scratch_len(workers).unwrap()];
+            let mut out = vec![f32::NAN; 3 * w * h];
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            fl.denoise_parallel(&f.frame(INPUT_GUIDES), &mut scratch, &mut fs, &mut ov, workers, &threads(workers)).unwrap();
+            let bad = whole.iter().zip(&out).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+            assert_eq!(bad, 0, "{w}x{h} tile {tile} ({count} tiles, layer threads {layers}) workers {workers}: {bad} values differ");
+        }
     }
 }
 

@@ -54,6 +54,60 @@ fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
     assert_eq!(level_size(7, 3, 2), (2, 1));
 }
 
+/// A `for_each` executor on `workers` scoped std threads, worker `w` taking
+/// the indices `w, w + workers, ...`.
+fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
+    move |count, f| {
+        std::thread::scope(|s| {
+            for w in 0..workers {
+                s.spawn(move || (w..count).step_by(workers).for_each(|i| f(i, w)));
+            }
+        });
+    }
+}
+
+/// Each layer's rows in bands over real threads give the one-thread output
+/// bit for bit, for every instruction set, at sizes from one row to levels
+/// narrower than the lanes; executors that skip or repeat a band are refused.
+#[test]
+fn layer_rows_over_threads_equal_one_thread_bit_for_bit() {
+    for (k, &(w, h)) in [(1, 1), (7, 3), (19, 9), (33, 17), (48, 20), (130, 97), (257, 41)].iter().enumerate() {
+        for widths in [vec![3], vec![3, 5], vec![4, 6, 8]] {
+            let b = blob(8, 4, &widths, 12.0, k as u64 + 3);
+            let net = UNet::parse(&b).unwrap();
+            let mut rng = Rng(5 + k as u64);
+            let input: Vec<f32> = (0..8 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
+            let mut scratch = vec![0f32; net.scratch_len(w, h)];
+            for isa in isas() {
+                let mut want = vec![0f32; 4 * w * h];
+                net.forward_with(isa, &input, w, h, &mut scratch, &mut want).unwrap();
+                for workers in [2, 3, 5] {
+                    let mut out = vec![f32::NAN; 4 * w * h];
+                    scratch.fill(f32::NAN);
+                    net.forward_parallel(isa, &input, w, h, &mut scratch, &mut out, workers, &threads(workers)).unwrap();
+                    let bad = want.iter().zip(&out).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+                    assert_eq!(bad, 0, "{isa:?} {w}x{h} {widths:?} workers {workers}: {bad} values differ");
+                }
+            }
+        }
+    }
+    let b = blob(8, 4, &[4, 6], 12.0, 1);
+    let net = UNet::parse(&b).unwrap();
+    let (w, h) = (64, 48);
+    let input = vec![0.5f32; 8 * w * h];
+    let mut scratch = vec![0f32; net.scratch_len(w, h)];
+    let mut out = vec![0f32; 4 * w * h];
+    let skips = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| (1..n).for_each(|i| f(i, 0));
+    let twice = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| (0..n).chain(0..1).for_each(|i| f(i, 0));
+    let past = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| (0..=n).for_each(|i| f(i, 0));
+    for (e, what) in [(&skips as lrdenoise::Executor<'_>, "skips"), (&twice, "twice"), (&past, "past the end")] {
+        let r = net.forward_parallel(Isa::detect(), &input, w, h, &mut scratch, &mut out, 2, e);
+        assert!(matches!(r, Err(Error::Unsupported(_))), "an executor that runs bands {what}: {r:?}");
+    }
+    let r = net.forward_parallel(Isa::detect(), &input, w, h, &mut scratch, &mut out, 0, &threads(1));
+    assert!(matches!(r, Err(Error::InvalidConfig(_))), "{r:?}");
+}
+
 /// The instruction sets this build can run here (the AVX2 one needs a CPU with
 /// AVX2 and FMA; it is detected at run time in every build).
 fn isas() -> Vec<Isa> {

@@ -125,5 +125,13 @@ fn flnr_allocates_nothing() {
             fl.denoise(&frame, &mut scratch, &mut fs, &mut ov).unwrap();
         }
         assert_eq!(mine() - before, 0, "tile {tile}");
+        // two workers: each layer's rows in bands (one tile), or whole tiles
+        let mut scratch = vec![0f32; fl.parallel_scratch_len(2).unwrap()];
+        let mut fs = vec![0f64; fl.flr().tiled_scratch_len(2).unwrap()];
+        let two = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| (0..n).for_each(|i| f(i, i % 2));
+        let before = mine();
+        let mut ov = ImageViewMut::interleaved(&mut out, f.w, f.h, 3).unwrap();
+        fl.denoise_parallel(&frame, &mut scratch, &mut fs, &mut ov, 2, &two).unwrap();
+        assert_eq!(mine() - before, 0, "tile {tile}, two workers");
     }
 }

@@ -23,9 +23,10 @@ pub mod blob;
 pub mod conv;
 
 use crate::error::{Arg, Error};
+use crate::parallel::{run_bands, Executor, MAX_BANDS};
 pub use blob::{UNet, MAX_LEVELS};
 pub use conv::Isa;
-use conv::{concat_upsampled, conv, Act};
+use conv::{split_rows, splits, Act, Concat, ConvDesc, Layer, Planes};
 
 /// Distance (in f32) between two channel planes of a `w × h` tensor inside
 /// the network: `w·h` rounded up to whole 64-byte cache lines, and to an
@@ -119,6 +120,45 @@ impl UNet<'_> {
     /// [`UNet::forward`] with the 3×3 layers' instruction set chosen by the
     /// caller (tests compare them; one that is not available runs portable).
     pub fn forward_with(&self, isa: Isa, input: &[f32], w: usize, h: usize, scratch: &mut [f32], out: &mut [f32]) -> Result<(), Error> {
+        self.forward_on(isa, input, w, h, scratch, out, None)
+    }
+
+    /// [`UNet::forward`] with each layer's output rows split into bands over
+    /// the caller's executor (up to `4 · workers` bands per layer; the layers
+    /// still run one after another). Bit-identical to [`UNet::forward`]: a
+    /// band computes its rows exactly as the whole layer would. For one input
+    /// too small to split into tiles for every thread.
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward_parallel(
+        &self,
+        isa: Isa,
+        input: &[f32],
+        w: usize,
+        h: usize,
+        scratch: &mut [f32],
+        out: &mut [f32],
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<(), Error> {
+        if workers == 0 {
+            return Err(Error::InvalidConfig("workers must be at least 1"));
+        }
+        self.forward_on(isa, input, w, h, scratch, out, Some((workers, for_each)))
+    }
+
+    /// The forward pass, each layer's rows on this thread (`threads` = `None`)
+    /// or in bands over `(workers, executor)`.
+    #[allow(clippy::too_many_arguments)]
+    fn forward_on(
+        &self,
+        isa: Isa,
+        input: &[f32],
+        w: usize,
+        h: usize,
+        scratch: &mut [f32],
+        out: &mut [f32],
+        threads: Option<(usize, Executor<'_>)>,
+    ) -> Result<(), Error> {
         if w == 0 || h == 0 {
             return Err(Error::InvalidSize { arg: Arg::Noisy, width: w, height: h });
         }
@@ -153,19 +193,19 @@ impl UNet<'_> {
         let mut layer = 0;
         // input block → s_0 (the caller's input has planes `n` apart)
         let p0 = plane(0);
-        conv(isa, self.conv(layer)?, input, n, w, h, wa, p0, Act::Leaky, wts, &mut [])?;
+        run_layer(threads, isa, self.conv(layer)?, input, n, w, h, wa, p0, Act::Leaky, wts, &mut [])?;
         layer += 1;
-        conv(isa, self.conv(layer)?, &wa[..c[0] * p0], p0, w, h, skip_store[0], p0, Act::Leaky, wts, &mut [])?;
+        run_layer(threads, isa, self.conv(layer)?, &wa[..c[0] * p0], p0, w, h, skip_store[0], p0, Act::Leaky, wts, &mut [])?;
         layer += 1;
         // encoder
         for l in 1..=levels {
             let (pw, ph) = level_size(w, h, l - 1);
             let (pp, pl) = (plane(l - 1), plane(l));
             let (prev, cur) = skip_store.split_at_mut(l);
-            conv(isa, self.conv(layer)?, prev[l - 1], pp, pw, ph, wa, pp, Act::Leaky, wts, &mut [])?;
+            run_layer(threads, isa, self.conv(layer)?, prev[l - 1], pp, pw, ph, wa, pp, Act::Leaky, wts, &mut [])?;
             layer += 1;
             // stride 2: `wb` (free until the decoder) holds the even/odd split rows
-            conv(isa, self.conv(layer)?, &wa[..c[l] * pp], pp, pw, ph, cur[0], pl, Act::Leaky, wts, wb)?;
+            run_layer(threads, isa, self.conv(layer)?, &wa[..c[l] * pp], pp, pw, ph, cur[0], pl, Act::Leaky, wts, wb)?;
             layer += 1;
         }
         // decoder: the current tensor lives in `y` (or s_L at first); each
@@ -179,19 +219,77 @@ impl UNet<'_> {
             let cur_c = c[l];
             {
                 let low: &[f32] = if l == levels { &*skip_store[l] } else { &y[..cur_c * lp] };
-                concat_upsampled(low, cur_c, (lw, lh, lp), skip_store[l - 1], c[l - 1], (sw, sh, sp), x)?;
+                let out = Planes::new(x, cur_c + c[l - 1], sp, sw, sh)?;
+                let cat = Concat::new(low, cur_c, (lw, lh, lp), skip_store[l - 1], c[l - 1], sp, &out)?;
+                // SAFETY: `out` borrows `x` exclusively; each band writes its own rows.
+                for_rows(threads, sh, &|y0, y1| unsafe { cat.rows(&out, y0, y1) })?;
             }
-            conv(isa, self.conv(layer)?, &x[..(cur_c + c[l - 1]) * sp], sp, sw, sh, y, sp, Act::Leaky, wts, &mut [])?;
+            run_layer(threads, isa, self.conv(layer)?, &x[..(cur_c + c[l - 1]) * sp], sp, sw, sh, y, sp, Act::Leaky, wts, &mut [])?;
             layer += 1;
-            conv(isa, self.conv(layer)?, &y[..c[l - 1] * sp], sp, sw, sh, x, sp, Act::Leaky, wts, &mut [])?;
+            run_layer(threads, isa, self.conv(layer)?, &y[..c[l - 1] * sp], sp, sw, sh, x, sp, Act::Leaky, wts, &mut [])?;
             layer += 1;
             core::mem::swap(&mut x, &mut y);
         }
         let cur: &[f32] = if levels == 0 { &*skip_store[0] } else { &y[..c[0] * p0] };
-        conv(isa, self.conv(layer)?, cur, p0, w, h, x, p0, Act::Leaky, wts, &mut [])?;
+        run_layer(threads, isa, self.conv(layer)?, cur, p0, w, h, x, p0, Act::Leaky, wts, &mut [])?;
         layer += 1;
         // the output has planes `n` apart, as the caller's input
-        conv(isa, self.conv(layer)?, &x[..c[0] * p0], p0, w, h, out, n, Act::Sigmoid, wts, &mut [])?;
+        run_layer(threads, isa, self.conv(layer)?, &x[..c[0] * p0], p0, w, h, out, n, Act::Sigmoid, wts, &mut [])?;
         Ok(())
     }
+}
+
+/// Rows a band of [`run_layer`] holds at least (fewer bands than `4 ·
+/// workers` on small levels, so that a band is not mostly its call's overhead).
+const MIN_BAND_ROWS: usize = 4;
+
+/// Runs `body(y0, y1)` over bands of rows covering `0..rows`: one band on
+/// this thread (`threads` = `None` or one worker), or up to `4 · workers`
+/// bands over the executor. Bands may run concurrently, so `body` writes
+/// only its own rows.
+pub(crate) fn for_rows(threads: Option<(usize, Executor<'_>)>, rows: usize, body: &(dyn Fn(usize, usize) + Sync)) -> Result<(), Error> {
+    match threads {
+        Some((workers, for_each)) if workers > 1 && rows > MIN_BAND_ROWS => {
+            let bands = workers.saturating_mul(4).min(rows.div_ceil(MIN_BAND_ROWS)).clamp(1, MAX_BANDS);
+            let per = rows.div_ceil(bands).max(1);
+            run_bands(rows.div_ceil(per), for_each, &|b| body(b * per, ((b + 1) * per).min(rows)))
+        }
+        _ => {
+            body(0, rows);
+            Ok(())
+        }
+    }
+}
+
+/// Runs one layer (`out = act(conv(input))`, as [`conv::conv`]) with its
+/// rows (and a stride-2 layer's split input rows) on this thread or in
+/// bands over `threads`' executor.
+#[allow(clippy::too_many_arguments)]
+fn run_layer(
+    threads: Option<(usize, Executor<'_>)>,
+    isa: Isa,
+    d: ConvDesc<'_>,
+    input: &[f32],
+    in_plane: usize,
+    w: usize,
+    h: usize,
+    out: &mut [f32],
+    out_plane: usize,
+    act: Act,
+    weights: &mut [f32],
+    split: &mut [f32],
+) -> Result<(), Error> {
+    let split = if splits(d, w, h, in_plane, split.len()) {
+        let planes = Planes::new(split, d.cin, in_plane, w, h)?;
+        // SAFETY: `planes` borrows `split` exclusively; each band writes its own rows.
+        for_rows(threads, h, &|y0, y1| unsafe { split_rows(input, in_plane, &planes, y0, y1) })?;
+        Some(&*split)
+    } else {
+        None
+    };
+    let layer = Layer::new(isa, d, input, in_plane, w, h, act, weights, split)?;
+    let (ow, oh) = d.out_size(w, h);
+    let out = Planes::new(out, d.cout, out_plane, ow, oh)?;
+    // SAFETY: `out` borrows the caller's tensor exclusively; each band writes its own rows.
+    for_rows(threads, oh, &|y0, y1| unsafe { layer.rows(&out, y0, y1) })
 }

@@ -96,124 +96,266 @@ pub fn conv(
     weights: &mut [f32],
     split: &mut [f32],
 ) -> Result<(), Error> {
-    let isa = if isa.available() { isa } else { Isa::Portable };
-    let (ow, oh) = d.out_size(w, h);
-    let taps = d.cin * d.k * d.k;
-    let (ip, op) = (in_plane, out_plane);
-    if ip < w * h || op < ow * oh || input.len() < d.cin * ip || out.len() < d.cout * op || d.params.len() != 2 * (d.cout * taps + d.cout) {
-        return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: d.cout * op, len: out.len() });
-    }
-    if weights.len() < d.weights_len() {
-        return Err(Error::ScratchTooSmall { needed: d.weights_len(), got: weights.len() });
-    }
-    let wts = &mut weights[..d.weights_len()];
-    for (i, v) in wts.iter_mut().enumerate() {
-        *v = d.param(i);
-    }
-    let wts = &*wts;
-    // Stride 2: the blocked lanes below run on the even/odd split rows.
-    let s2 = d.k == 3 && d.stride == 2 && w / 2 >= 9 && split.len() >= d.cin * ip;
-    let (lanes_input, stride): (&[f32], usize) = if s2 {
-        let ew = w.div_ceil(2);
-        for (sp, dp) in input[..d.cin * ip].chunks_exact(ip).zip(split.chunks_exact_mut(ip)) {
-            for (src, dst) in sp[..w * h].chunks_exact(w).zip(dp[..w * h].chunks_exact_mut(w)) {
-                let (even, odd) = dst.split_at_mut(ew);
-                for (pair, (e, o)) in src.chunks_exact(2).zip(even.iter_mut().zip(odd.iter_mut())) {
-                    *e = pair[0];
-                    *o = pair[1];
-                }
-                if w % 2 == 1 {
-                    even[ew - 1] = src[w - 1];
-                }
-            }
-        }
-        (&split[..d.cin * ip], 2)
+    let split = if splits(d, w, h, in_plane, split.len()) {
+        let planes = Planes::new(split, d.cin, in_plane, w, h)?;
+        // SAFETY: `planes` borrows `split` exclusively; this is its only user.
+        unsafe { split_rows(input, in_plane, &planes, 0, h) };
+        Some(&*split)
     } else {
-        (input, 1)
+        None
     };
-    // blocks of OB output channels in lanes (3×3 on rows wide enough), the
-    // rest one channel at a time
-    let blocks = if d.k == 3 && ((d.stride == 1 && w >= 18) || s2) { d.cout / OB } else { 0 };
-    let (blocked, rest) = out[..d.cout * op].split_at_mut(blocks * OB * op);
-    for y in 0..oh {
-        for (k, block) in blocked.chunks_exact_mut(OB * op).enumerate() {
-            let mut rows: [&mut [f32]; OB] = Default::default();
-            let mut bias = [0f32; OB];
-            let mut wb: [&[f32]; OB] = [&[]; OB];
-            for (b, (r, p)) in rows.iter_mut().zip(block.chunks_exact_mut(op)).enumerate() {
-                let o = k * OB + b;
-                bias[b] = d.bias(o);
-                wb[b] = &wts[o * taps..(o + 1) * taps];
-                *r = &mut p[y * ow..(y + 1) * ow];
-                r.fill(bias[b]);
+    let layer = Layer::new(isa, d, input, in_plane, w, h, act, weights, split)?;
+    let (ow, oh) = d.out_size(w, h);
+    let out = Planes::new(out, d.cout, out_plane, ow, oh)?;
+    // SAFETY: `out` borrows the caller's tensor exclusively; this is its only user.
+    unsafe { layer.rows(&out, 0, oh) };
+    Ok(())
+}
+
+/// Whether a layer with `split_len` f32 of split room runs its stride-2
+/// taps on even/odd split rows ([`split_rows`]; otherwise per pixel).
+pub fn splits(d: ConvDesc<'_>, w: usize, h: usize, in_plane: usize, split_len: usize) -> bool {
+    d.k == 3 && d.stride == 2 && w / 2 >= 9 && in_plane >= w * h && split_len >= d.cin * in_plane
+}
+
+/// Rows `y0..y1` (clamped to `split`'s height) of every plane of `input`
+/// (planes `in_plane` apart, `split`'s width) rearranged into `split` as
+/// [even columns | odd columns], where a stride-2 layer's taps are
+/// contiguous 8-pixel loads.
+///
+/// # Safety
+/// No other live slice covers these rows of `split`'s planes.
+pub unsafe fn split_rows(input: &[f32], in_plane: usize, split: &Planes<'_>, y0: usize, y1: usize) {
+    let w = split.width;
+    let ew = w.div_ceil(2);
+    for c in 0..split.count {
+        for y in y0..y1.min(split.height) {
+            let Some(src) = input.get(c * in_plane + y * w..c * in_plane + (y + 1) * w) else { return };
+            // SAFETY: the caller keeps these rows to this call.
+            let dst = unsafe { split.row(c, y) };
+            if dst.len() != w {
+                return;
             }
-            conv3_rows_block(isa, &wb, d.cin, lanes_input, input, (w, h, ip), y, stride, bias, &mut rows);
-            for r in rows.iter_mut() {
-                activate(r, act);
+            let (even, odd) = dst.split_at_mut(ew);
+            for (pair, (e, o)) in src.chunks_exact(2).zip(even.iter_mut().zip(odd.iter_mut())) {
+                *e = pair[0];
+                *o = pair[1];
+            }
+            if w % 2 == 1 {
+                even[ew - 1] = src[w - 1];
             }
         }
-        for (j, plane_o) in rest.chunks_exact_mut(op).enumerate() {
-            let o = blocks * OB + j;
-            let wts = &wts[o * taps..(o + 1) * taps];
-            let prow = &mut plane_o[y * ow..(y + 1) * ow];
-            prow.fill(d.bias(o));
-            for i in 0..d.cin {
-                let src = &input[i * ip..i * ip + w * h];
-                match (d.k, d.stride) {
-                    (1, _) => {
-                        let wt = wts[i];
-                        for (p, v) in prow.iter_mut().zip(&src[y * w..(y + 1) * w]) {
-                            *p += wt * v;
-                        }
-                    }
-                    (_, 1) if w >= 18 => {} // the interior is done in lanes below
-                    (_, 1) => {
-                        for ky in 0..3 {
-                            let sy = y as isize + ky as isize - 1;
-                            if sy < 0 || sy >= h as isize {
-                                continue;
+    }
+}
+
+/// A convolution ready to run row by row ([`Layer::rows`]): its weights in
+/// f32 and the input it reads (for stride 2, rearranged into even/odd
+/// columns). Its output rows are independent, so bands of them may run on
+/// different threads ([`crate::nn::UNet::forward_parallel`]).
+#[derive(Debug)]
+pub struct Layer<'a> {
+    isa: Isa,
+    d: ConvDesc<'a>,
+    input: &'a [f32],
+    /// What the lanes read: `input`, or its even/odd split rows.
+    lanes_input: &'a [f32],
+    stride: usize,
+    w: usize,
+    h: usize,
+    in_plane: usize,
+    act: Act,
+    wts: &'a [f32],
+    /// Output channels computed in blocks of `OB` lanes.
+    blocks: usize,
+}
+
+impl<'a> Layer<'a> {
+    /// Checks the shapes and converts the weights into `weights`. `split`:
+    /// for a stride-2 layer where [`splits`] holds, the input's rows split by
+    /// [`split_rows`] (`None`: stride 2 runs per pixel).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        isa: Isa,
+        d: ConvDesc<'a>,
+        input: &'a [f32],
+        in_plane: usize,
+        w: usize,
+        h: usize,
+        act: Act,
+        weights: &'a mut [f32],
+        split: Option<&'a [f32]>,
+    ) -> Result<Self, Error> {
+        let isa = if isa.available() { isa } else { Isa::Portable };
+        let taps = d.cin * d.k * d.k;
+        let ip = in_plane;
+        if ip < w * h || input.len() < d.cin * ip || d.params.len() != 2 * (d.cout * taps + d.cout) {
+            return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: d.cin * ip, len: input.len() });
+        }
+        if weights.len() < d.weights_len() {
+            return Err(Error::ScratchTooSmall { needed: d.weights_len(), got: weights.len() });
+        }
+        let wts = &mut weights[..d.weights_len()];
+        for (i, v) in wts.iter_mut().enumerate() {
+            *v = d.param(i);
+        }
+        let split = split.filter(|s| splits(d, w, h, ip, s.len()));
+        let (lanes_input, stride) = match split {
+            Some(s) => (&s[..d.cin * ip], 2),
+            None => (input, 1),
+        };
+        // blocks of OB output channels in lanes (3×3 on rows wide enough), the
+        // rest one channel at a time
+        let blocks = if d.k == 3 && ((d.stride == 1 && w >= 18) || split.is_some()) { d.cout / OB } else { 0 };
+        Ok(Layer { isa, d, input, lanes_input, stride, w, h, in_plane: ip, act, wts, blocks })
+    }
+
+    /// Output rows.
+    pub fn out_height(&self) -> usize {
+        self.d.out_size(self.w, self.h).1
+    }
+
+    /// Computes output rows `y0..y1` (clamped to the output) into `out`.
+    ///
+    /// # Safety
+    /// No other live slice, on this thread or another, covers rows `y0..y1`
+    /// of `out`'s planes while this runs.
+    pub unsafe fn rows(&self, out: &Planes<'_>, y0: usize, y1: usize) {
+        let d = &self.d;
+        let (w, h, ip, wts) = (self.w, self.h, self.in_plane, self.wts);
+        let oh = d.out_size(w, h).1;
+        let taps = d.cin * d.k * d.k;
+        let input = self.input;
+        for y in y0..y1.min(oh) {
+            for k in 0..self.blocks {
+                let mut rows: [&mut [f32]; OB] = Default::default();
+                let mut bias = [0f32; OB];
+                let mut wb: [&[f32]; OB] = [&[]; OB];
+                for (b, r) in rows.iter_mut().enumerate() {
+                    let o = k * OB + b;
+                    bias[b] = d.bias(o);
+                    wb[b] = &wts[o * taps..(o + 1) * taps];
+                    // SAFETY: row y of plane o is this call's alone (the caller's contract).
+                    *r = unsafe { out.row(o, y) };
+                    r.fill(bias[b]);
+                }
+                conv3_rows_block(self.isa, &wb, d.cin, self.lanes_input, input, (w, h, ip), y, self.stride, bias, &mut rows);
+                for r in rows.iter_mut() {
+                    activate(r, self.act);
+                }
+            }
+            for o in self.blocks * OB..d.cout {
+                let wts = &wts[o * taps..(o + 1) * taps];
+                // SAFETY: as above.
+                let prow = unsafe { out.row(o, y) };
+                prow.fill(d.bias(o));
+                for i in 0..d.cin {
+                    let src = &input[i * ip..i * ip + w * h];
+                    match (d.k, d.stride) {
+                        (1, _) => {
+                            let wt = wts[i];
+                            for (p, v) in prow.iter_mut().zip(&src[y * w..(y + 1) * w]) {
+                                *p += wt * v;
                             }
-                            let srow = &src[sy as usize * w..(sy as usize + 1) * w];
-                            for kx in 0..3 {
-                                let wt = wts[(i * 3 + ky) * 3 + kx];
-                                // x + kx − 1 inside the row
-                                let (x0, x1) = (if kx == 0 { 1 } else { 0 }, if kx == 2 { w - 1 } else { w });
-                                if x0 >= x1 {
+                        }
+                        (_, 1) if w >= 18 => {} // the interior is done in lanes below
+                        (_, 1) => {
+                            for ky in 0..3 {
+                                let sy = y as isize + ky as isize - 1;
+                                if sy < 0 || sy >= h as isize {
                                     continue;
                                 }
-                                for (p, v) in prow[x0..x1].iter_mut().zip(&srow[x0 + kx - 1..x1 + kx - 1]) {
-                                    *p += wt * v;
+                                let srow = &src[sy as usize * w..(sy as usize + 1) * w];
+                                for kx in 0..3 {
+                                    let wt = wts[(i * 3 + ky) * 3 + kx];
+                                    // x + kx − 1 inside the row
+                                    let (x0, x1) = (if kx == 0 { 1 } else { 0 }, if kx == 2 { w - 1 } else { w });
+                                    if x0 >= x1 {
+                                        continue;
+                                    }
+                                    for (p, v) in prow[x0..x1].iter_mut().zip(&srow[x0 + kx - 1..x1 + kx - 1]) {
+                                        *p += wt * v;
+                                    }
                                 }
                             }
                         }
-                    }
-                    _ => {
-                        for ky in 0..3 {
-                            let sy = 2 * y as isize + ky as isize - 1;
-                            if sy < 0 || sy >= h as isize {
-                                continue;
-                            }
-                            let srow = &src[sy as usize * w..(sy as usize + 1) * w];
-                            for kx in 0..3 {
-                                let wt = wts[(i * 3 + ky) * 3 + kx];
-                                for (x, p) in prow.iter_mut().enumerate() {
-                                    let sx = 2 * x as isize + kx as isize - 1;
-                                    if sx >= 0 && (sx as usize) < w {
-                                        *p += wt * srow[sx as usize];
+                        _ => {
+                            for ky in 0..3 {
+                                let sy = 2 * y as isize + ky as isize - 1;
+                                if sy < 0 || sy >= h as isize {
+                                    continue;
+                                }
+                                let srow = &src[sy as usize * w..(sy as usize + 1) * w];
+                                for kx in 0..3 {
+                                    let wt = wts[(i * 3 + ky) * 3 + kx];
+                                    for (x, p) in prow.iter_mut().enumerate() {
+                                        let sx = 2 * x as isize + kx as isize - 1;
+                                        if sx >= 0 && (sx as usize) < w {
+                                            *p += wt * srow[sx as usize];
+                                        }
                                     }
                                 }
                             }
                         }
                     }
                 }
+                if d.k == 3 && d.stride == 1 && w >= 18 {
+                    conv3_row_lanes(wts, d.cin, input, (w, h, ip), y, prow);
+                }
+                activate(prow, self.act);
             }
-            if d.k == 3 && d.stride == 1 && w >= 18 {
-                conv3_row_lanes(wts, d.cin, input, (w, h, ip), y, prow);
-            }
-            activate(prow, act);
         }
     }
-    Ok(())
+}
+
+/// A planar tensor (`count` planes of `width × height`, `plane` values
+/// apart) written row by row, possibly by several threads at once at
+/// disjoint rows (a layer's output in [`Layer::rows`], the split rows of
+/// [`split_rows`], a concatenation in [`concat_rows`]).
+#[derive(Debug)]
+pub struct Planes<'o> {
+    ptr: *mut f32,
+    len: usize,
+    count: usize,
+    plane: usize,
+    width: usize,
+    height: usize,
+    _out: core::marker::PhantomData<&'o mut [f32]>,
+}
+
+// SAFETY: rows are handed out only through the unsafe `row`, whose callers
+// keep concurrent calls at disjoint rows; the tensor is borrowed mutably for 'o.
+unsafe impl Sync for Planes<'_> {}
+
+impl<'o> Planes<'o> {
+    /// `buf` as `count` planes of `width × height`, `plane` values apart.
+    pub fn new(buf: &'o mut [f32], count: usize, plane: usize, width: usize, height: usize) -> Result<Self, Error> {
+        let needed = count.saturating_mul(plane);
+        if plane < width.saturating_mul(height) || buf.len() < needed {
+            return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed, len: buf.len() });
+        }
+        Ok(Planes { ptr: buf.as_mut_ptr(), len: buf.len(), count, plane, width, height, _out: core::marker::PhantomData })
+    }
+
+    /// Rows.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// Row `y` of plane `c` (empty outside the tensor).
+    ///
+    /// # Safety
+    /// No other live slice covers this row.
+    #[allow(clippy::mut_from_ref)]
+    pub unsafe fn row(&self, c: usize, y: usize) -> &mut [f32] {
+        if c >= self.count || y >= self.height {
+            return &mut [];
+        }
+        let at = c * self.plane + y * self.width;
+        // SAFETY: `at..at + width` lies inside plane c (new checked plane ≥
+        // width · height and count · plane ≤ len), borrowed for 'o; the
+        // caller keeps this row to one user.
+        unsafe { core::slice::from_raw_parts_mut(self.ptr.add(at), self.width) }
+    }
 }
 
 fn activate(row: &mut [f32], act: Act) {
@@ -433,27 +575,69 @@ pub fn concat_upsampled(
     (sw, sh, sp): (usize, usize, usize),
     out: &mut [f32],
 ) -> Result<(), Error> {
-    let n = sw * sh;
-    if lp < lw * lh
-        || sp < n
-        || low.len() < cl * lp
-        || skip.len() < cs * sp
-        || out.len() < (cl + cs) * sp
-        || lw < sw.div_ceil(2)
-        || lh < sh.div_ceil(2)
-    {
-        return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: (cl + cs) * sp, len: out.len() });
+    let out = Planes::new(out, cl + cs, sp, sw, sh)?;
+    let cat = Concat::new(low, cl, (lw, lh, lp), skip, cs, sp, &out)?;
+    // SAFETY: `out` borrows the caller's tensor exclusively; this is its only user.
+    unsafe { cat.rows(&out, 0, sh) };
+    Ok(())
+}
+
+/// The inputs of a [`concat_upsampled`], checked, to write row by row.
+#[derive(Clone, Copy, Debug)]
+pub struct Concat<'a> {
+    low: &'a [f32],
+    cl: usize,
+    lw: usize,
+    lp: usize,
+    skip: &'a [f32],
+    cs: usize,
+    sp: usize,
+}
+
+impl<'a> Concat<'a> {
+    /// Checks the shapes against `out` (`cl + cs` planes of `sw × sh`).
+    pub fn new(
+        low: &'a [f32],
+        cl: usize,
+        (lw, lh, lp): (usize, usize, usize),
+        skip: &'a [f32],
+        cs: usize,
+        sp: usize,
+        out: &Planes<'_>,
+    ) -> Result<Self, Error> {
+        let (sw, sh) = (out.width, out.height);
+        if lp < lw * lh
+            || sp < sw * sh
+            || low.len() < cl * lp
+            || skip.len() < cs * sp
+            || out.count < cl + cs
+            || lw < sw.div_ceil(2)
+            || lh < sh.div_ceil(2)
+        {
+            return Err(Error::BufferTooSmall { arg: crate::error::Arg::Scratch, needed: (cl + cs) * sp, len: out.len });
+        }
+        Ok(Concat { low, cl, lw, lp, skip, cs, sp })
     }
-    for c in 0..cl {
-        let src = &low[c * lp..c * lp + lw * lh];
-        let dst = &mut out[c * sp..c * sp + n];
-        for y in 0..sh {
-            let srow = &src[(y / 2) * lw..(y / 2) * lw + lw];
-            for (x, d) in dst[y * sw..(y + 1) * sw].iter_mut().enumerate() {
-                *d = srow[x / 2];
+
+    /// Rows `y0..y1` (clamped to `out`'s height) of every output plane.
+    ///
+    /// # Safety
+    /// No other live slice covers these rows of `out`'s planes.
+    pub unsafe fn rows(&self, out: &Planes<'_>, y0: usize, y1: usize) {
+        let sw = out.width;
+        for y in y0..y1.min(out.height) {
+            for c in 0..self.cl {
+                let srow = &self.low[c * self.lp + (y / 2) * self.lw..c * self.lp + (y / 2 + 1) * self.lw];
+                // SAFETY: the caller keeps this row to this call.
+                for (x, d) in unsafe { out.row(c, y) }.iter_mut().enumerate() {
+                    *d = srow[x / 2];
+                }
+            }
+            for c in 0..self.cs {
+                let at = c * self.sp + y * sw;
+                // SAFETY: as above.
+                unsafe { out.row(self.cl + c, y) }.copy_from_slice(&self.skip[at..at + sw]);
             }
         }
     }
-    out[cl * sp..(cl + cs) * sp].copy_from_slice(&skip[..cs * sp]);
-    Ok(())
 }
