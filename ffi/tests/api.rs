@@ -42,6 +42,48 @@ fn packed_out(out: &mut [f32], w: u32, h: u32) -> LrdImageMut {
     LrdImageMut { data: out.as_mut_ptr() as *mut _, format: 0, width: w, height: h, pixel_stride: 0, row_stride: 0, channel_stride: 0 }
 }
 
+/// Packed f32 guide planes of one frame size, handed to the C API
+/// ([`GuidePlanes::c_frame`]) and to the Rust API
+/// ([`GuidePlanes::rust_frame`]) from the same memory.
+struct GuidePlanes {
+    w: u32,
+    h: u32,
+    normal: Vec<f32>,
+    depth: Vec<f32>,
+    ao: Vec<f32>,
+    position: Option<Vec<f32>>,
+}
+
+impl GuidePlanes {
+    /// A C frame of `noisy` (packed RGB) and these guides (positions only with `position`).
+    fn c_frame(&self, noisy: &[f32], position: bool) -> LrdFrame {
+        let (w, h) = (self.w, self.h);
+        let mut frame =
+            LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
+        frame.guides.normal = img(self.normal.as_ptr(), w, h, 3);
+        frame.guides.depth = img(self.depth.as_ptr(), w, h, 1);
+        frame.guides.ao = img(self.ao.as_ptr(), w, h, 1);
+        if let Some(p) = self.position.as_ref().filter(|_| position) {
+            frame.guides.position = img(p.as_ptr(), w, h, 3);
+        }
+        frame
+    }
+
+    /// The Rust frame of [`GuidePlanes::c_frame`] (with the positions where there are some).
+    fn rust_frame<'a>(&'a self, noisy: &'a [f32]) -> lrdenoise_core::Frame<'a> {
+        use lrdenoise_core::{Frame, Guides, ImageView};
+        let (w, h) = (self.w as usize, self.h as usize);
+        let g = Guides {
+            normal: Some(ImageView::interleaved(&self.normal, w, h, 3).unwrap()),
+            depth: Some(ImageView::interleaved(&self.depth, w, h, 1).unwrap()),
+            ao: Some(ImageView::interleaved(&self.ao, w, h, 1).unwrap()),
+            position: self.position.as_ref().map(|p| ImageView::interleaved(p, w, h, 3).unwrap()),
+            ..Default::default()
+        };
+        Frame::new(ImageView::interleaved(noisy, w, h, 3).unwrap(), g)
+    }
+}
+
 #[test]
 fn entry_points_validate_everything() {
     let (w, h) = (37u32, 21u32);
@@ -217,12 +259,17 @@ fn gpu_dispatch_description() {
 fn flr_temporal_matches_the_rust_api() {
     use lrdenoise_core::flr::temporal::TemporalFlr;
     use lrdenoise_core::temporal::{History, TemporalConfig};
-    use lrdenoise_core::{FlrConfig, Frame, Guides, ImageView, ImageViewMut};
+    use lrdenoise_core::{FlrConfig, ImageView, ImageViewMut};
     let (w, h) = (67u32, 38u32);
     let (wu, hu, n) = (w as usize, h as usize, (w * h) as usize);
-    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == (i / 3 / 500) % 3 { 1.0 } else { 0.0 }).collect();
-    let depth: Vec<f32> = (0..n).map(|i| 2.0 + (i / wu) as f32 * 0.02).collect();
-    let ao: Vec<f32> = (0..n).map(|i| 0.5 + ((i * 31) % 50) as f32 / 100.0).collect();
+    let planes = GuidePlanes {
+        w,
+        h,
+        normal: (0..3 * n).map(|i| if i % 3 == (i / 3 / 500) % 3 { 1.0 } else { 0.0 }).collect(),
+        depth: (0..n).map(|i| 2.0 + (i / wu) as f32 * 0.02).collect(),
+        ao: (0..n).map(|i| 0.5 + ((i * 31) % 50) as f32 / 100.0).collect(),
+        position: None,
+    };
     let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { 0.4 } else { -0.3 }).collect();
     let cfg = lrd_flr_config_default();
     let tc = lrd_temporal_config_default();
@@ -238,34 +285,16 @@ fn flr_temporal_matches_the_rust_api() {
         let mut hd = vec![0f32; hb / 4];
         let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
         let (mut out, mut want) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
-        let o = LrdImageMut {
-            data: out.as_mut_ptr() as *mut _,
-            format: 0,
-            width: w,
-            height: h,
-            pixel_stride: 0,
-            row_stride: 0,
-            channel_stride: 0,
-        };
+        let o = packed_out(&mut out, w, h);
         let (mut rep, mut rrep) = (LrdReport::default(), lrdenoise_core::Report::default());
         for k in 0..3usize {
             let noisy: Vec<f32> = (0..3 * n).map(|i| (((i + 977 * k) * 7919) % 1000) as f32 / 500.0).collect();
-            let mut frame =
-                LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
-            frame.guides.normal = img(normal.as_ptr(), w, h, 3);
-            frame.guides.depth = img(depth.as_ptr(), w, h, 1);
-            frame.guides.ao = img(ao.as_ptr(), w, h, 1);
+            let frame = planes.c_frame(&noisy, false);
             let mv = img(motion.as_ptr(), w, h, 2);
             let m = if k == 0 { null() } else { &mv as *const LrdImage };
             let sp = ts.as_mut_ptr() as *mut _;
             assert_eq!(lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb, &mut rep), LrdStatus::LRD_STATUS_OK);
-            let g = Guides {
-                normal: Some(ImageView::interleaved(&normal, wu, hu, 3).unwrap()),
-                depth: Some(ImageView::interleaved(&depth, wu, hu, 1).unwrap()),
-                ao: Some(ImageView::interleaved(&ao, wu, hu, 1).unwrap()),
-                ..Default::default()
-            };
-            let rframe = Frame::new(ImageView::interleaved(&noisy, wu, hu, 3).unwrap(), g);
+            let rframe = planes.rust_frame(&noisy);
             let rmv = ImageView::interleaved(&motion, wu, hu, 2).unwrap();
             let mut ov = ImageViewMut::interleaved(&mut want, wu, hu, 3).unwrap();
             rrep += plan.denoise(&rframe, (k > 0).then_some(&rmv), &mut rh, &mut rs, &mut rfs, &mut ov).unwrap();
@@ -313,13 +342,17 @@ fn flr_temporal_matches_the_rust_api() {
 fn flr_temporal_rejection_guides_match_the_rust_api() {
     use lrdenoise_core::flr::temporal::TemporalFlr;
     use lrdenoise_core::temporal::{History, TemporalConfig};
-    use lrdenoise_core::{FlrConfig, Frame, GuideSet, Guides, ImageView, ImageViewMut};
+    use lrdenoise_core::{FlrConfig, GuideSet, ImageView, ImageViewMut};
     let (w, h) = (41u32, 23u32);
     let (wu, hu, n) = (w as usize, h as usize, (w * h) as usize);
-    let normal: Vec<f32> = (0..3 * n).map(|i| if i % 3 == 2 { 1.0 } else { 0.0 }).collect();
-    let depth: Vec<f32> = (0..n).map(|i| 2.0 + (i % wu) as f32 * 0.05).collect();
-    let ao: Vec<f32> = (0..n).map(|i| 0.4 + ((i * 13) % 60) as f32 / 100.0).collect();
-    let position: Vec<f32> = (0..3 * n).map(|i| [(i / 3 % wu) as f32 * 0.1, (i / 3 / wu) as f32 * 0.1, 2.0][i % 3]).collect();
+    let planes = GuidePlanes {
+        w,
+        h,
+        normal: (0..3 * n).map(|i| if i % 3 == 2 { 1.0 } else { 0.0 }).collect(),
+        depth: (0..n).map(|i| 2.0 + (i % wu) as f32 * 0.05).collect(),
+        ao: (0..n).map(|i| 0.4 + ((i * 13) % 60) as f32 / 100.0).collect(),
+        position: Some((0..3 * n).map(|i| [(i / 3 % wu) as f32 * 0.1, (i / 3 / wu) as f32 * 0.1, 2.0][i % 3]).collect()),
+    };
     let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { -0.6 } else { 0.2 }).collect();
     let cfg = lrd_flr_config_default();
     let mut tc = lrd_temporal_config_default();
@@ -338,22 +371,10 @@ fn flr_temporal_rejection_guides_match_the_rust_api() {
         let mut hd = vec![0f32; hb / 4];
         let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
         let (mut out, mut want) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
-        let o = LrdImageMut {
-            data: out.as_mut_ptr() as *mut _,
-            format: 0,
-            width: w,
-            height: h,
-            pixel_stride: 0,
-            row_stride: 0,
-            channel_stride: 0,
-        };
+        let o = packed_out(&mut out, w, h);
         for k in 0..3usize {
             let noisy: Vec<f32> = (0..3 * n).map(|i| (((i + 613 * k) * 7919) % 1000) as f32 / 400.0).collect();
-            let mut frame =
-                LrdFrame { noisy: img(noisy.as_ptr(), w, h, 3), guides: guides_none(), guides_low: guides_none(), sample_weights: none() };
-            frame.guides.normal = img(normal.as_ptr(), w, h, 3);
-            frame.guides.depth = img(depth.as_ptr(), w, h, 1);
-            frame.guides.ao = img(ao.as_ptr(), w, h, 1);
+            let frame = planes.c_frame(&noisy, false);
             let mv = img(motion.as_ptr(), w, h, 2);
             let m = if k == 0 { null() } else { &mv as *const LrdImage };
             let sp = ts.as_mut_ptr() as *mut _;
@@ -362,16 +383,9 @@ fn flr_temporal_rejection_guides_match_the_rust_api() {
                 lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb, null_mut()),
                 LrdStatus::LRD_STATUS_GUIDE_MISMATCH
             );
-            frame.guides.position = img(position.as_ptr(), w, h, 3);
+            let frame = planes.c_frame(&noisy, true);
             assert_eq!(lrd_flr_denoise_temporal(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb, null_mut()), LrdStatus::LRD_STATUS_OK);
-            let g = Guides {
-                normal: Some(ImageView::interleaved(&normal, wu, hu, 3).unwrap()),
-                depth: Some(ImageView::interleaved(&depth, wu, hu, 1).unwrap()),
-                ao: Some(ImageView::interleaved(&ao, wu, hu, 1).unwrap()),
-                position: Some(ImageView::interleaved(&position, wu, hu, 3).unwrap()),
-                ..Default::default()
-            };
-            let rframe = Frame::new(ImageView::interleaved(&noisy, wu, hu, 3).unwrap(), g);
+            let rframe = planes.rust_frame(&noisy);
             let rmv = ImageView::interleaved(&motion, wu, hu, 2).unwrap();
             let mut ov = ImageViewMut::interleaved(&mut want, wu, hu, 3).unwrap();
             plan.denoise(&rframe, (k > 0).then_some(&rmv), &mut rh, &mut rs, &mut rfs, &mut ov).unwrap();
