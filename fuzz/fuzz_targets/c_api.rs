@@ -184,9 +184,7 @@ fuzz_target!(|d: &[u8]| {
             if unsafe { lrd_flnr_tiled_scratch_size(&cfg, w, h, 1, &mut tb) } == LrdStatus::LRD_STATUS_OK {
                 let mut ts = vec![0f64; tb / 8 + 1];
                 for (stage, t) in [(d[17] as u32 % 4, d[18] as u32 % 3), (0, 0), (1, 0), (2, 0)] {
-                    let r = unsafe {
-                        lrd_flnr_run_tile(&cfg, &frame, &o, ts.as_mut_ptr() as *mut _, tb, 1, stage, t, 0, null_mut())
-                    };
+                    let r = unsafe { lrd_flnr_run_tile(&cfg, &frame, &o, ts.as_mut_ptr() as *mut _, tb, 1, stage, t, 0, null_mut()) };
                     assert_ne!(r, LrdStatus::LRD_STATUS_PANIC);
                 }
             }
