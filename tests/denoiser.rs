@@ -100,18 +100,6 @@ fn flnr_through_the_trait() {
     assert!(matches!(Flnr::new(FlnrConfig { tile: flnr::MIN_TILE - 1, ..FlnrConfig::new(&blob) }, w, h), Err(Error::InvalidConfig(_))));
 }
 
-/// A `for_each` executor on `workers` scoped std threads, worker `w` taking
-/// the indices `w, w + workers, ...`.
-fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
-    move |count, f| {
-        std::thread::scope(|s| {
-            for w in 0..workers {
-                s.spawn(move || (w..count).step_by(workers).for_each(|i| f(i, w)));
-            }
-        });
-    }
-}
-
 /// `denoise_parallel` through the trait equals `denoise` bit for bit for
 /// every method, on real threads, at awkward sizes; an executor that breaks
 /// its contract (skips a tile, runs one twice) gets an error, not a wrong or

@@ -158,18 +158,6 @@ fn split_steps_in_any_tile_order_equal_denoise_bit_for_bit() {
     }
 }
 
-/// A `for_each` executor on `workers` scoped std threads, worker `w` taking
-/// the indices `w, w + workers, ...`.
-fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
-    move |count, f| {
-        std::thread::scope(|s| {
-            for w in 0..workers {
-                s.spawn(move || (w..count).step_by(workers).for_each(|i| f(i, w)));
-            }
-        });
-    }
-}
-
 /// A parallel run with fewer tiles than `TILES_PER_WORKER` per worker splits
 /// each layer's rows over the workers (one tile, or tiles one after another);
 /// with enough tiles it spreads whole tiles. Both equal `denoise` bit for bit

@@ -5,7 +5,7 @@
 mod common;
 #[path = "common/oracles.rs"]
 mod oracles;
-use common::Rng;
+use common::{threads, Rng};
 use lrdenoise::nn::{level_size, Isa, UNet};
 use lrdenoise::{Blur, Error};
 use oracles::{blob, reference as network_reference, u32_at};
@@ -52,18 +52,6 @@ fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
         }
     }
     assert_eq!(level_size(7, 3, 2), (2, 1));
-}
-
-/// A `for_each` executor on `workers` scoped std threads, worker `w` taking
-/// the indices `w, w + workers, ...`.
-fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
-    move |count, f| {
-        std::thread::scope(|s| {
-            for w in 0..workers {
-                s.spawn(move || (w..count).step_by(workers).for_each(|i| f(i, w)));
-            }
-        });
-    }
 }
 
 /// Each layer's rows in bands over real threads give the one-thread output

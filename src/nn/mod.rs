@@ -261,11 +261,11 @@ pub(crate) fn for_rows(threads: Option<(usize, Executor<'_>)>, rows: usize, body
     }
 }
 
-/// Runs one layer (`out = act(conv(input))`, as [`conv::conv`]) with its
+/// Runs one layer (`out = act(conv(input))`, see [`conv::conv`]) with its
 /// rows (and a stride-2 layer's split input rows) on this thread or in
 /// bands over `threads`' executor.
 #[allow(clippy::too_many_arguments)]
-fn run_layer(
+pub(crate) fn run_layer(
     threads: Option<(usize, Executor<'_>)>,
     isa: Isa,
     d: ConvDesc<'_>,

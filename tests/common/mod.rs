@@ -540,3 +540,15 @@ pub fn pre_clamp(noisy: &mut [f32], w: usize, h: usize, k: f32) -> u64 {
     }
     clamped as u64
 }
+
+/// A `for_each` executor on `workers` scoped std threads, worker `w` taking
+/// the indices `w, w + workers, ...`.
+pub fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
+    move |count, f| {
+        std::thread::scope(|s| {
+            for w in 0..workers {
+                s.spawn(move || (w..count).step_by(workers).for_each(|i| f(i, w)));
+            }
+        });
+    }
+}

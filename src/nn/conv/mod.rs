@@ -96,20 +96,7 @@ pub fn conv(
     weights: &mut [f32],
     split: &mut [f32],
 ) -> Result<(), Error> {
-    let split = if splits(d, w, h, in_plane, split.len()) {
-        let planes = Planes::new(split, d.cin, in_plane, w, h)?;
-        // SAFETY: `planes` borrows `split` exclusively; this is its only user.
-        unsafe { split_rows(input, in_plane, &planes, 0, h) };
-        Some(&*split)
-    } else {
-        None
-    };
-    let layer = Layer::new(isa, d, input, in_plane, w, h, act, weights, split)?;
-    let (ow, oh) = d.out_size(w, h);
-    let out = Planes::new(out, d.cout, out_plane, ow, oh)?;
-    // SAFETY: `out` borrows the caller's tensor exclusively; this is its only user.
-    unsafe { layer.rows(&out, 0, oh) };
-    Ok(())
+    super::run_layer(None, isa, d, input, in_plane, w, h, out, out_plane, act, weights, split)
 }
 
 /// Whether a layer with `split_len` f32 of split room runs its stride-2
