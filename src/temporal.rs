@@ -43,6 +43,8 @@ use crate::reproject::{bilinear_taps, rgb, ycocg};
 
 pub use crate::history::History;
 
+#[cfg(feature = "flr")]
+pub mod gpu;
 mod lanes;
 
 /// Settings of the temporal stage.

@@ -39,7 +39,10 @@ pub fn bench(
         println!("GPU adapter: {}; times include upload and readback", gpu.adapter_name());
     }
     let mut out = vec![0f32; w * h * 3];
-    if let Method::Temporal(_) = &b.method {
+    if let Method::FlrTemporalGpu { gpu, .. } = &b.method {
+        println!("GPU adapter: {}; times include upload and readback", gpu.flr().adapter_name());
+    }
+    if b.method.is_temporal() {
         // time a frame with a history (the first frame of a sequence has none
         // and skips the reprojection): every timed run restarts from here
         for _ in 0..2 {
@@ -67,7 +70,7 @@ pub fn bench(
         println!(
             "baseline, same run: memcpy of the {:.1} MB one call must at least move (each input layer read once, the RGB output written once{}; one thread): median {copy:.3} ms; {method} takes {:.1}x that",
             bytes as f64 / 1e6,
-            if let Method::Temporal(_) = &b.method { ", the history read and written" } else { "" },
+            if b.method.is_temporal() { ", the history read and written" } else { "" },
             med / copy
         );
     }

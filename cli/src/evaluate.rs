@@ -358,7 +358,7 @@ pub fn evaluate(frames: &[PathBuf], variants: &[Variant], opt: &EvalOptions) -> 
                 variant: Some(vi),
             });
             if let Some(sq) = &seq {
-                let temporal = matches!(built.method, Method::Temporal(_));
+                let temporal = built.method.is_temporal();
                 carry[vi] = Some(Carry { seq: sq.clone(), built: temporal.then_some(built), prev: (out_tm, ref_tm.clone()) });
             }
         }

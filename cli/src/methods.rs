@@ -84,7 +84,7 @@ pub struct FlrArgs {
     /// Every method: firefly clamp factor K: a noisy sample brighter than K times the larger of the third brightest 8x8 cell of its 104x8 neighbourhood and that neighbourhood's mean (without its brightest cell) is scaled down to that level (default 1.5), or "off"
     #[arg(long, value_name = "K|off")]
     pub fireflies: Option<String>,
-    /// FLR: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
+    /// flr, flr-temporal: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
     #[arg(long)]
     pub device: Option<String>,
     /// flr-temporal: longest per-pixel history in frames (default 16)
@@ -131,7 +131,7 @@ impl FlrArgs {
             ("--upsample", self.upsample.is_some(), &[Flr]),
             ("--without-ao", self.without_ao, &[Flr]),
             ("--ao-demodulation", self.ao_demodulation.is_some(), &[Flr]),
-            // (only flr runs on the GPU: Method::build says so for the others)
+            // (only flr and flr-temporal run on the GPU: Method::build says so for the others)
             ("--device", self.device.is_some(), &[Flr, Bmfr, Walr, Flnr]),
             ("--shrinkage", self.shrinkage.is_some(), &[Bmfr]),
             ("--iterations", self.iterations.is_some(), &[Walr]),
@@ -184,7 +184,7 @@ impl FlrArgs {
             1 => format!(" (so is {})", also[0]),
             _ => format!(" (so are {})", also.join(", ")),
         };
-        // (--device cpu is accepted everywhere; only flr takes --device gpu)
+        // (--device cpu is accepted everywhere; only flr and flr-temporal take --device gpu)
         let takes: Vec<&str> = flags
             .iter()
             .filter(|(f, _, o)| o.contains(&family) && (*f != "--device" || family == Family::Flr))
@@ -601,6 +601,12 @@ pub enum Method {
         gpu: Box<lrdenoise_gpu::GpuFlr>,
         low: Option<Box<Inputs>>,
     },
+    /// Temporal FLR on the GPU (`flr-temporal --device gpu`): every `run` is
+    /// the next frame of a sequence; `saved`, the history [`Method::save`] kept.
+    FlrTemporalGpu {
+        gpu: Box<lrdenoise_gpu::GpuTemporalFlr>,
+        saved: Option<(Vec<f32>, u32)>,
+    },
 }
 
 /// A method built for one frame: the runner, its table label and the flags
@@ -614,6 +620,18 @@ pub struct Built {
     /// the motion and one history slot and write the other (`lrd bench`'s
     /// memory-copy baseline). `None` for the GPU path (upload and readback).
     pub min_bytes: Option<usize>,
+}
+
+/// Table label and flags of temporal FLR with `cfg` and `temporal`.
+fn temporal_label(cfg: &FlrConfig, temporal: &lrdenoise::temporal::TemporalConfig) -> (String, String) {
+    let mut label = format!("{} temporal", label(cfg));
+    let mut flags = flag_line(cfg).replacen("--method flr", "--method flr-temporal", 1);
+    if *temporal != lrdenoise::temporal::TemporalConfig::default() {
+        let t = temporal;
+        label += &format!(" h{} o{} g{}", t.max_history, t.output_alpha, t.clip_gamma);
+        flags += &format!(" --history {} --output-alpha {} --clip-gamma {}", t.max_history, t.output_alpha, t.clip_gamma);
+    }
+    firefly_history_label(label, flags, temporal.firefly_history)
 }
 
 /// [`Built::min_bytes`] of a single-frame method reading the noisy RGB at
@@ -653,18 +671,22 @@ impl Method {
                 let min_bytes = Some(one_pass_bytes(w, h, w.div_ceil(u) * h.div_ceil(u), cfg.guides.channels()));
                 Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg), min_bytes })
             }
-            _ if a.gpu()? => Err(format!("--device gpu: only flr runs on the GPU, not {name}")),
+            "flr-temporal" if a.gpu()? => {
+                let cfg = a.config(inputs)?;
+                let temporal = a.temporal_config()?;
+                if a.history_weights {
+                    return Err("flr-temporal --device gpu: --history-weights runs on the CPU only".into());
+                }
+                let (label, flags) = temporal_label(&cfg, &temporal);
+                let gpu = lrdenoise_gpu::GpuTemporalFlr::new(cfg, temporal, w, h).map_err(|e| format!("flr-temporal --device gpu: {e}"))?;
+                let method = Method::FlrTemporalGpu { gpu: Box::new(gpu), saved: None };
+                Ok(Built { method, label: label + " gpu", flags: flags + " --device gpu", min_bytes: None })
+            }
+            _ if a.gpu()? => Err(format!("--device gpu: only flr and flr-temporal run on the GPU, not {name}")),
             "flr-temporal" => {
                 let cfg = a.config(inputs)?;
                 let temporal = a.temporal_config()?;
-                let mut label = format!("{} temporal", label(&cfg));
-                let mut flags = flag_line(&cfg).replacen("--method flr", "--method flr-temporal", 1);
-                if temporal != lrdenoise::temporal::TemporalConfig::default() {
-                    let t = temporal;
-                    label += &format!(" h{} o{} g{}", t.max_history, t.output_alpha, t.clip_gamma);
-                    flags += &format!(" --history {} --output-alpha {} --clip-gamma {}", t.max_history, t.output_alpha, t.clip_gamma);
-                }
-                (label, flags) = firefly_history_label(label, flags, temporal.firefly_history);
+                let (mut label, mut flags) = temporal_label(&cfg, &temporal);
                 if a.history_weights {
                     label += " hw";
                     flags += " --history-weights";
@@ -768,20 +790,44 @@ impl Method {
                 let mut ov = lrdenoise::ImageViewMut::interleaved(out, inputs.w, inputs.h, 3).map_err(err)?;
                 gpu.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
             }
+            Method::FlrTemporalGpu { gpu, .. } => {
+                let set = gpu.flr().plan().config().guides;
+                let err = |e: lrdenoise::Error| e.to_string();
+                let frame = lrdenoise::Frame::new(inputs.noisy_view().map_err(err)?, inputs.guides(&set).map_err(err)?);
+                let (w, h) = (inputs.w, inputs.h);
+                let motion = inputs.motion.as_deref().map(|m| lrdenoise::ImageView::interleaved(m, w, h, 2)).transpose().map_err(err)?;
+                let mut ov = lrdenoise::ImageViewMut::interleaved(out, w, h, 3).map_err(err)?;
+                gpu.denoise(&frame, motion.as_ref(), &mut ov).map(|_| ()).map_err(|e| format!("flr-temporal --device gpu: {e}"))
+            }
         }
     }
 
     /// Temporal methods: remember the state, so repeated timing runs of one
     /// frame can each start from it ([`Method::restore`]).
     pub fn save(&mut self) {
-        if let Method::Temporal(r) = self {
-            r.save();
+        match self {
+            Method::Temporal(r) => r.save(),
+            Method::FlrTemporalGpu { gpu, saved } => {
+                let mut h = vec![0f32; gpu.history_len()];
+                // a history that cannot be read back is not restored (the run goes on from where it is)
+                *saved = gpu.history(&mut h).ok().map(|frames| (h, frames));
+            }
+            _ => {}
         }
     }
     pub fn restore(&mut self) {
-        if let Method::Temporal(r) = self {
-            r.restore();
+        match self {
+            Method::Temporal(r) => r.restore(),
+            Method::FlrTemporalGpu { gpu, saved: Some((h, frames)) } => {
+                let _ = gpu.set_history(h, *frames);
+            }
+            _ => {}
         }
+    }
+
+    /// Whether every `run` is the next frame of a sequence.
+    pub fn is_temporal(&self) -> bool {
+        matches!(self, Method::Temporal(_) | Method::FlrTemporalGpu { .. })
     }
 }
 

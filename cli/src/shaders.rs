@@ -1,5 +1,5 @@
-//! `lrd shaders`: FLR's compute shaders in four languages and the dispatch
-//! description for one frame size.
+//! `lrd shaders`: FLR's and the temporal stage's compute shaders in four
+//! languages and the dispatch description for one frame size.
 
 use crate::bench::parse_size;
 use crate::methods::{self, FlrArgs};
@@ -53,9 +53,28 @@ pub fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Resul
         md += &format!("| `{}` | {} x {} x {} |\n", p.name(), p.workgroups[0], p.workgroups[1], p.workgroups[2]);
     }
     md += &format!("\nThe parameter block (binding 0, {} bytes) for these layouts is `params.bin`.\n", lrdenoise::flr::gpu::PARAMS_BYTES);
+    // temporal FLR: the stage's module around FLR's passes (FLR planned with its clamp off)
+    let t = lrdenoise_gpu::translate(lrdenoise::temporal::gpu::TEMPORAL_WGSL).map_err(|e| e.to_string())?;
+    write("temporal.wgsl", t.wgsl.as_bytes())?;
+    write("temporal.spv", &le_bytes(&t.spirv))?;
+    write("temporal.metal", t.msl.as_bytes())?;
+    write("temporal.hlsl", t.hlsl.as_bytes())?;
+    let temporal = flr.temporal_config()?;
+    let tplan = lrdenoise::temporal::gpu::GpuTemporalPlan::new(temporal, cfg.guides, w, h).map_err(|e| format!("shaders: {e}"))?;
+    md += "\n## Temporal FLR\n\nThe temporal stage's module (`temporal.*`) has its own bind group; bindings Light, Guides and \
+           Fitted are FLR's noisy, guide and output buffers (f32 inputs; FLR planned with `fireflies: None`: the stage clamps). \
+           Upload the parameter block of lrdenoise::temporal::gpu::GpuTemporalPlan::params each frame (its slots alternate).\n\n\
+           | binding | buffer | access | bytes |\n|---:|---|---|---:|\n";
+    for b in tplan.buffers() {
+        md += &format!("| {} | {:?} | {:?} | {} |\n", b.binding, b.buffer, b.access, b.bytes);
+    }
+    md += "\nPasses: these, then FLR's, then `t_resolve`.\n\n| entry point | workgroups |\n|---|---|\n";
+    for p in tplan.passes_before().iter().chain([tplan.pass_after()].iter()) {
+        md += &format!("| `{}` | {} x {} x {} |\n", p.name(), p.workgroups[0], p.workgroups[1], p.workgroups[2]);
+    }
     write("dispatch.md", md.as_bytes())?;
     write("params.bin", params.as_bytes())?;
-    println!("wrote flr.wgsl, flr.spv, flr.metal, flr.hlsl, dispatch.md and params.bin to {}", out.display());
+    println!("wrote flr.* and temporal.* (wgsl, spv, metal, hlsl), dispatch.md and params.bin to {}", out.display());
     Ok(())
 }
 

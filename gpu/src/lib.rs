@@ -28,6 +28,9 @@ use lrdenoise::flr::gpu::{Access, GpuLayouts, GpuPlan, InputFormat, FLR_WGSL};
 use lrdenoise::{Arg, Error, FlrConfig, Frame, ImageViewMut, Report};
 use std::fmt;
 
+mod temporal;
+pub use temporal::GpuTemporalFlr;
+
 pub use lrdenoise::flr::gpu;
 
 /// What can go wrong on the GPU path.
@@ -93,6 +96,8 @@ pub struct GpuFlr {
 
 /// Most timestamps written per frame: the beginning and end of each pass.
 const TIMESTAMPS: u32 = 2 * lrdenoise::flr::gpu::MAX_PASSES as u32;
+/// Readback bytes after the timestamps for a caller's counters (the temporal stage's).
+const EXTRA_BYTES: u64 = 16;
 
 /// Requests the default adapter and a device with default limits.
 pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError> {
@@ -222,7 +227,7 @@ impl GpuFlr {
         });
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("lrdenoise readback"),
-            size: out_bytes + lrdenoise::flr::gpu::STATS_BYTES + TIMESTAMPS as u64 * 8,
+            size: out_bytes + lrdenoise::flr::gpu::STATS_BYTES + TIMESTAMPS as u64 * 8 + EXTRA_BYTES,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -305,6 +310,19 @@ impl GpuFlr {
     /// second full-resolution set at upsample 1 (FLNR).
     pub fn denoise(&mut self, frame: &Frame<'_>, out: &mut ImageViewMut<'_>) -> Result<Report, GpuError> {
         let (w, h) = self.plan.size();
+        check_output(out, w, h)?;
+        self.upload(frame)?;
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise flr") });
+        self.encode(&mut enc);
+        let result = self.buffers[7].clone();
+        self.finish(enc, scope, &result, out, None, &mut [])
+    }
+
+    /// Checks `frame` and uploads it into the noisy and guide buffers (and
+    /// the parameter block its guide sets need).
+    fn upload(&mut self, frame: &Frame<'_>) -> Result<(), GpuError> {
+        let (w, h) = self.plan.size();
         let (iw, ih) = self.plan.input_size();
         let n = &frame.noisy;
         if (n.width(), n.height()) != (iw, ih) {
@@ -312,9 +330,6 @@ impl GpuFlr {
         }
         if n.channel_count() < 3 {
             return Err(Error::ChannelCount { arg: Arg::Noisy, expected: 3, got: n.channel_count() }.into());
-        }
-        if out.width() != w || out.height() != h || out.channel_count() < 3 {
-            return Err(Error::SizeMismatch { arg: Arg::Output, expected: (w, h), got: (out.width(), out.height()) }.into());
         }
         if frame.sample_weights.is_some() {
             return Err(Error::Unsupported("FLR on the GPU has no per-pixel sample weights (Frame::sample_weights given)").into());
@@ -377,16 +392,35 @@ impl GpuFlr {
                 }
             }
         }
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise flr") });
-        self.encode(&mut enc);
+        Ok(())
+    }
+
+    /// Copies `result` (3 f32 planes of the output size), the stats and the
+    /// first `extra.len()` (≤ [`EXTRA_BYTES`]) bytes of `extra_from` into the
+    /// readback buffer, submits `enc`, waits, writes the planes into `out`,
+    /// the extra bytes into `extra` and returns FLR's report.
+    fn finish(
+        &mut self,
+        mut enc: wgpu::CommandEncoder,
+        scope: wgpu::ErrorScopeGuard,
+        result: &wgpu::Buffer,
+        out: &mut ImageViewMut<'_>,
+        extra_from: Option<&wgpu::Buffer>,
+        extra: &mut [u8],
+    ) -> Result<Report, GpuError> {
+        let (w, h) = self.plan.size();
+        let plane = w * h;
         let out_bytes = self.buffers[7].size();
-        enc.copy_buffer_to_buffer(&self.buffers[7], 0, &self.readback, 0, out_bytes);
+        enc.copy_buffer_to_buffer(result, 0, &self.readback, 0, out_bytes);
         enc.copy_buffer_to_buffer(&self.buffers[3], 0, &self.readback, out_bytes, lrdenoise::flr::gpu::STATS_BYTES);
         let ts_at = out_bytes + lrdenoise::flr::gpu::STATS_BYTES;
         if let Some((set, resolve)) = &self.timer {
             enc.resolve_query_set(set, 0..TIMESTAMPS, resolve, 0);
             enc.copy_buffer_to_buffer(resolve, 0, &self.readback, ts_at, TIMESTAMPS as u64 * 8);
+        }
+        let extra_at = ts_at + TIMESTAMPS as u64 * 8;
+        if let Some(b) = extra_from {
+            enc.copy_buffer_to_buffer(b, 0, &self.readback, extra_at, extra.len().min(EXTRA_BYTES as usize) as u64);
         }
         self.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
@@ -417,6 +451,10 @@ impl GpuFlr {
                 let passes = self.pipelines.len();
                 self.pass_ms = Some((0..passes).map(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period * 1e-6).collect());
             }
+            if extra_from.is_some() {
+                let n = extra.len().min(EXTRA_BYTES as usize);
+                extra[..n].copy_from_slice(&data[extra_at as usize..extra_at as usize + n]);
+            }
             self.plan.report(&data[out_bytes as usize..])
         };
         self.readback.unmap();
@@ -424,7 +462,15 @@ impl GpuFlr {
     }
 }
 
-/// The FLR shader module in other languages, translated by naga.
+/// Checks that `out` is `w × h` with at least 3 channels.
+fn check_output(out: &ImageViewMut<'_>, w: usize, h: usize) -> Result<(), GpuError> {
+    if out.width() != w || out.height() != h || out.channel_count() < 3 {
+        return Err(Error::SizeMismatch { arg: Arg::Output, expected: (w, h), got: (out.width(), out.height()) }.into());
+    }
+    Ok(())
+}
+
+/// A shader module in other languages, translated by naga.
 #[derive(Debug)]
 pub struct Shaders {
     pub wgsl: &'static str,
@@ -438,11 +484,17 @@ pub struct Shaders {
 
 /// Translates [`FLR_WGSL`] to SPIR-V, MSL and HLSL.
 pub fn shaders() -> Result<Shaders, GpuError> {
+    translate(FLR_WGSL)
+}
+
+/// Validates a WGSL module (FLR's, or the temporal stage's
+/// [`lrdenoise::temporal::gpu::TEMPORAL_WGSL`]) and translates it to SPIR-V, MSL and HLSL.
+pub fn translate(wgsl: &'static str) -> Result<Shaders, GpuError> {
     let err = |e: &dyn fmt::Display| GpuError::Shader(e.to_string());
-    let module = naga::front::wgsl::parse_str(FLR_WGSL).map_err(|e| GpuError::Shader(e.emit_to_string(FLR_WGSL)))?;
+    let module = naga::front::wgsl::parse_str(wgsl).map_err(|e| GpuError::Shader(e.emit_to_string(wgsl)))?;
     let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
         .validate(&module)
-        .map_err(|e| GpuError::Shader(e.emit_to_string(FLR_WGSL)))?;
+        .map_err(|e| GpuError::Shader(e.emit_to_string(wgsl)))?;
     let spirv = naga::back::spv::write_vec(&module, &info, &naga::back::spv::Options::default(), None).map_err(|e| err(&e))?;
     let (msl, _) =
         naga::back::msl::write_string(&module, &info, &naga::back::msl::Options::default(), &naga::back::msl::PipelineOptions::default())
@@ -450,5 +502,5 @@ pub fn shaders() -> Result<Shaders, GpuError> {
     let mut hlsl = String::new();
     let opts = naga::back::hlsl::Options::default();
     naga::back::hlsl::Writer::new(&mut hlsl, &opts, &Default::default()).write(&module, &info, None).map_err(|e| err(&e))?;
-    Ok(Shaders { wgsl: FLR_WGSL, spirv, msl, hlsl })
+    Ok(Shaders { wgsl, spirv, msl, hlsl })
 }

@@ -1,0 +1,324 @@
+//! Temporal FLR on a `wgpu` device: the temporal stage's shaders
+//! ([`lrdenoise::temporal::gpu`]) around FLR's, run as
+//! [`GpuTemporalPlan`] describes.
+
+use crate::{check_output, GpuError, GpuFlr};
+use lrdenoise::flr::gpu::{Access, InputFormat};
+use lrdenoise::temporal::gpu::{GpuTemporalParams, GpuTemporalPlan, TemporalBuffer, COUNTERS_BYTES, TEMPORAL_WGSL};
+use lrdenoise::temporal::TemporalConfig;
+use lrdenoise::{Arg, Error, FlrConfig, Frame, ImageView, ImageViewMut, Report};
+
+/// Temporal FLR ([`lrdenoise::flr::temporal::TemporalFlr`]) for one frame
+/// size on a wgpu device: the history lives on the device, one per
+/// executor (one sequence; [`GpuTemporalFlr::reset`] after a cut the stage
+/// does not detect).
+///
+/// ```no_run
+/// use lrdenoise::temporal::TemporalConfig;
+/// use lrdenoise::{FlrConfig, Frame, Guides, GuideSet, ImageView, ImageViewMut};
+/// let (w, h) = (64, 48);
+/// let (noisy, normal, depth) = (vec![0.5f32; w * h * 3], vec![0.0f32; w * h * 3], vec![1.0f32; w * h]);
+/// let motion = vec![0.0f32; w * h * 2];
+/// let cfg = FlrConfig::with_guides(GuideSet::NORMAL_DEPTH);
+/// let mut tflr = lrdenoise_gpu::GpuTemporalFlr::new(cfg, TemporalConfig::default(), w, h)?;
+/// let mut out = vec![0f32; w * h * 3];
+/// for _ in 0..3 {
+///     let guides = Guides {
+///         normal: Some(ImageView::interleaved(&normal, w, h, 3)?),
+///         depth: Some(ImageView::interleaved(&depth, w, h, 1)?),
+///         ..Default::default()
+///     };
+///     let frame = Frame::new(ImageView::interleaved(&noisy, w, h, 3)?, guides);
+///     let mv = ImageView::interleaved(&motion, w, h, 2)?;
+///     tflr.denoise(&frame, Some(&mv), &mut ImageViewMut::interleaved(&mut out, w, h, 3)?)?;
+/// }
+/// assert_eq!(tflr.frames(), 3);
+/// # Ok::<(), lrdenoise_gpu::GpuError>(())
+/// ```
+#[derive(Debug)]
+pub struct GpuTemporalFlr {
+    /// FLR on the accumulated light (its clamp off: the stage clamps).
+    flr: GpuFlr,
+    plan: GpuTemporalPlan,
+    fireflies: Option<f32>,
+    clamp_negative: bool,
+    /// The passes before FLR's, then the one after.
+    pipelines: Vec<(wgpu::ComputePipeline, [u32; 3])>,
+    bind_group: wgpu::BindGroup,
+    /// This executor's own buffers: params, motion, history, work, counters, output.
+    params: wgpu::Buffer,
+    history: wgpu::Buffer,
+    motion: wgpu::Buffer,
+    output: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    /// Frames in the history (its parity picks the slots, as on the CPU).
+    frames: u32,
+    /// Host staging of the motion planes (reused).
+    staging: Vec<f32>,
+}
+
+impl GpuTemporalFlr {
+    /// Plans temporal FLR for `width × height` frames on the default adapter.
+    /// As on the CPU, the stage rejects history with the guides of
+    /// `cfg.guides` it knows (normal, position, depth) and joint upsampling
+    /// is not supported.
+    pub fn new(cfg: FlrConfig, temporal: TemporalConfig, width: usize, height: usize) -> Result<Self, GpuError> {
+        let (device, queue, name) = crate::default_device()?;
+        Self::with_device(device, queue, name, cfg, temporal, width, height)
+    }
+
+    /// As [`GpuTemporalFlr::new`] on the caller's device (`adapter` is only a label).
+    pub fn with_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        adapter: String,
+        cfg: FlrConfig,
+        temporal: TemporalConfig,
+        width: usize,
+        height: usize,
+    ) -> Result<Self, GpuError> {
+        if cfg.upsample != 1 {
+            return Err(Error::Unsupported("temporal FLR with upsample > 1").into());
+        }
+        let plan = GpuTemporalPlan::new(temporal, cfg.guides, width, height)?;
+        let flr_cfg = FlrConfig { fireflies: None, ..cfg };
+        let flr = GpuFlr::with_device(device.clone(), queue, adapter, flr_cfg, width, height, InputFormat::F32)?;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("lrdenoise temporal"),
+            source: wgpu::ShaderSource::Wgsl(TEMPORAL_WGSL.into()),
+        });
+        let descs = plan.buffers();
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = descs
+            .iter()
+            .map(|d| wgpu::BindGroupLayoutEntry {
+                binding: d.binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match d.access {
+                        Access::Uniform => wgpu::BufferBindingType::Uniform,
+                        Access::ReadOnlyStorage => wgpu::BufferBindingType::Storage { read_only: true },
+                        Access::ReadWriteStorage => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let bgl =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("lrdenoise temporal"), entries: &entries });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("lrdenoise temporal"),
+            bind_group_layouts: &[Some(&bgl)],
+            immediate_size: 0,
+        });
+        let pipelines = plan
+            .passes_before()
+            .iter()
+            .chain([plan.pass_after()].iter())
+            .map(|p| {
+                let pipe = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(p.name()),
+                    layout: Some(&layout),
+                    module: &module,
+                    entry_point: Some(p.name()),
+                    compilation_options: Default::default(),
+                    cache: None,
+                });
+                (pipe, p.workgroups)
+            })
+            .collect();
+        let own = |d: &lrdenoise::temporal::gpu::TemporalBufferDesc| {
+            let usage = match d.access {
+                Access::Uniform => wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                _ => wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            };
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: d.bytes.next_multiple_of(4).max(4),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let shared = |b: TemporalBuffer| -> Result<wgpu::Buffer, GpuError> {
+            let binding = match b {
+                TemporalBuffer::Light => 1,
+                TemporalBuffer::Guides => 2,
+                _ => 7, // TemporalBuffer::Fitted
+            };
+            flr.buffer(binding).cloned().ok_or(GpuError::Device("FLR's buffers".into()))
+        };
+        let mut bound = Vec::with_capacity(descs.len());
+        for d in &descs {
+            bound.push(match d.buffer {
+                TemporalBuffer::Light | TemporalBuffer::Guides | TemporalBuffer::Fitted => shared(d.buffer)?,
+                _ => own(d),
+            });
+        }
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("lrdenoise temporal"),
+            layout: &bgl,
+            entries: &bound
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect::<Vec<_>>(),
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Device(e.to_string()));
+        }
+        let at = |b: TemporalBuffer| bound[b as usize].clone();
+        Ok(GpuTemporalFlr {
+            plan,
+            fireflies: cfg.fireflies,
+            clamp_negative: cfg.clamp_negative,
+            pipelines,
+            bind_group,
+            params: at(TemporalBuffer::Params),
+            motion: at(TemporalBuffer::Motion),
+            history: at(TemporalBuffer::History),
+            output: at(TemporalBuffer::Output),
+            counters: at(TemporalBuffer::Counters),
+            frames: 0,
+            staging: vec![0.0; 2 * width * height],
+            flr,
+        })
+    }
+
+    /// The dispatch description of the temporal stage this executor runs.
+    pub fn plan(&self) -> &GpuTemporalPlan {
+        &self.plan
+    }
+
+    /// The FLR executor inside (its adapter, its plan, its pass times).
+    pub fn flr(&self) -> &GpuFlr {
+        &self.flr
+    }
+
+    /// Frames accumulated in the history.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Forgets the history: the next frame starts a sequence.
+    pub fn reset(&mut self) {
+        self.frames = 0;
+    }
+
+    /// f32 values of the history (the CPU stage's [`lrdenoise::temporal::Reprojection::history_len`]).
+    pub fn history_len(&self) -> usize {
+        self.plan.stage().history_len()
+    }
+
+    /// Copies the history into `dst` ([`GpuTemporalFlr::history_len`] values,
+    /// the CPU stage's layout) and returns the frame count: with
+    /// [`GpuTemporalFlr::set_history`], a sequence can move between the GPU
+    /// and the CPU (`History::resume(dst, frames)`) or restart from a saved state.
+    pub fn history(&self, dst: &mut [f32]) -> Result<u32, GpuError> {
+        let n = self.history_len();
+        if dst.len() != n {
+            return Err(Error::BufferTooSmall { arg: Arg::History, needed: n, len: dst.len() }.into());
+        }
+        let device = &self.flr.device;
+        let bytes = 4 * n as u64;
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("lrdenoise history readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise history") });
+        enc.copy_buffer_to_buffer(&self.history, 0, &staging, 0, bytes);
+        self.flr.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
+        rx.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
+        {
+            let data = staging.get_mapped_range(..).map_err(|e| GpuError::Device(e.to_string()))?;
+            dst.copy_from_slice(bytemuck::cast_slice(&data[..]));
+        }
+        staging.unmap();
+        Ok(self.frames)
+    }
+
+    /// Replaces the history with `src` (the CPU stage's layout, as
+    /// [`GpuTemporalFlr::history`] or a CPU `History` left it) after `frames` frames.
+    pub fn set_history(&mut self, src: &[f32], frames: u32) -> Result<(), GpuError> {
+        let n = self.history_len();
+        if src.len() != n {
+            return Err(Error::BufferTooSmall { arg: Arg::History, needed: n, len: src.len() }.into());
+        }
+        self.flr.queue.write_buffer(&self.history, 0, bytemuck::cast_slice(src));
+        self.frames = frames;
+        Ok(())
+    }
+
+    /// One frame of the sequence: uploads it and its motion (2 channels,
+    /// previous − current pixel position; `None`: a static camera), runs the
+    /// stage and FLR, waits and writes the result into `out`. The report
+    /// holds the stage's counts and FLR's, as on the CPU.
+    pub fn denoise(&mut self, frame: &Frame<'_>, motion: Option<&ImageView<'_>>, out: &mut ImageViewMut<'_>) -> Result<Report, GpuError> {
+        let (w, h) = self.flr.plan().size();
+        check_output(out, w, h)?;
+        if frame.guides_low.is_some() {
+            return Err(Error::Unsupported("temporal FLR with a second (low-resolution) guide set").into());
+        }
+        let plane = w * h;
+        match motion {
+            Some(m) => {
+                if (m.width(), m.height()) != (w, h) {
+                    return Err(Error::SizeMismatch { arg: Arg::Motion, expected: (w, h), got: (m.width(), m.height()) }.into());
+                }
+                if m.channel_count() < 2 {
+                    return Err(Error::ChannelCount { arg: Arg::Motion, expected: 2, got: m.channel_count() }.into());
+                }
+                let (mx, my) = self.staging.split_at_mut(plane);
+                for y in 0..h {
+                    let row = y * w..(y + 1) * w;
+                    m.read_row_n(y, 0, [&mut mx[row.clone()], &mut my[row]]).ok_or(Error::InvalidTile { index: y, count: h })?;
+                }
+            }
+            None => self.staging.fill(0.0),
+        }
+        let params: GpuTemporalParams = self.plan.params(self.frames, self.fireflies, self.clamp_negative)?;
+        self.flr.upload(frame)?;
+        let queue = &self.flr.queue;
+        queue.write_buffer(&self.motion, 0, bytemuck::cast_slice(&self.staging));
+        queue.write_buffer(&self.params, 0, params.as_bytes());
+        let device = self.flr.device.clone();
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise temporal flr") });
+        let dispatch = |enc: &mut wgpu::CommandEncoder, (pipe, [x, y, z]): &(wgpu::ComputePipeline, [u32; 3])| {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            pass.set_pipeline(pipe);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(*x, *y, *z);
+        };
+        let (before, after) = self.pipelines.split_at(4);
+        for p in before {
+            dispatch(&mut enc, p);
+        }
+        self.flr.encode(&mut enc);
+        for p in after {
+            dispatch(&mut enc, p);
+        }
+        let mut counters = [0u8; COUNTERS_BYTES as usize];
+        let (output, counters_buf) = (self.output.clone(), self.counters.clone());
+        let fit = self.flr.finish(enc, scope, &output, out, Some(&counters_buf), &mut counters)?;
+        let c = self.plan.counts(&counters, &params);
+        self.frames = if self.frames == u32::MAX { 2 } else { self.frames + 1 };
+        // FLR's report but for the NaN/Inf samples: the stage counted (and bridged) those
+        Ok(Report {
+            history_rejected: c.rejected,
+            invalid_motion: c.invalid_motion,
+            history_resets: c.cut,
+            nonfinite_noisy: c.nonfinite,
+            clamped_fireflies: c.clamped,
+            ..fit
+        })
+    }
+}

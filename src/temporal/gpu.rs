@@ -1,0 +1,308 @@
+//! The temporal stage on GPUs: the WGSL compute shaders ([`TEMPORAL_WGSL`])
+//! and how to run them around FLR's passes ([`crate::flr::gpu`]), for engines
+//! that drive their own graphics API; `lrdenoise-gpu`'s `GpuTemporalFlr`
+//! executes the same description with `wgpu`. `no_std`, no allocation.
+//!
+//! One frame of temporal FLR on the GPU:
+//! 1. Once: compile [`TEMPORAL_WGSL`] and FLR's shaders (FLR planned with
+//!    [`FlrConfig::fireflies`](crate::FlrConfig) off and f32 planar inputs,
+//!    [`crate::flr::gpu::GpuLayouts::planar`]: the stage clamps the light
+//!    itself); create the buffers of [`GpuTemporalPlan::buffers`], where
+//!    [`TemporalBuffer::Light`], [`TemporalBuffer::Guides`] and
+//!    [`TemporalBuffer::Fitted`] are FLR's noisy, guide and output buffers.
+//! 2. Each frame: upload the noisy light, the guides and the motion; upload
+//!    [`GpuTemporalPlan::params`] for the frame index; dispatch
+//!    [`GpuTemporalPlan::passes_before`], FLR's passes, then
+//!    [`GpuTemporalPlan::pass_after`], with a storage barrier between them;
+//!    read the output buffer and, for the counts, the counters
+//!    ([`GpuTemporalPlan::counts`]).
+//!
+//! The history buffer has the CPU stage's layout and length
+//! ([`Reprojection::history_len`]). The shaders compute what
+//! [`Reprojection::accumulate`] and [`Reprojection::resolve`] compute, pixel
+//! by pixel in f32; a compiler that fuses multiplies and adds may round a
+//! value differently, and a tap or a sample within rounding of a limit may
+//! then be taken on one path and not on the other.
+
+use super::{Counts, Reprojection, TemporalConfig};
+use crate::error::Error;
+use crate::fireflies;
+use crate::guides::GuideSet;
+
+/// The temporal stage's shader module: entry points `t_cells`, `t_taps`,
+/// `t_thresholds`, `t_accumulate`, `t_resolve`.
+pub const TEMPORAL_WGSL: &str = include_str!("temporal.wgsl");
+
+/// "Absent" in the parameter block's offsets.
+const NONE: u32 = u32::MAX;
+
+/// The uniform parameter block (binding 0), laid out as the WGSL `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GpuTemporalParams {
+    /// Frame width in pixels.
+    pub width: u32,
+    /// Frame height in pixels.
+    pub height: u32,
+    /// Firefly-clamp cells per band of 8 rows.
+    pub nc: u32,
+    /// Bands of 8 rows.
+    pub bands: u32,
+    /// f32 fields of a pixel's history record.
+    pub record: u32,
+    /// Record fields of the normal, the position and the depth (`u32::MAX`: absent).
+    pub n_at: u32,
+    /// See `n_at`.
+    pub p_at: u32,
+    /// See `n_at`.
+    pub d_at: u32,
+    /// Element offset of the history slot this frame reads.
+    pub read_off: u32,
+    /// Element offset of the history slot this frame writes.
+    pub write_off: u32,
+    /// Element offset of the clamp cells within a slot.
+    pub cells_at: u32,
+    /// 1 when the read slot holds a previous frame.
+    pub has_history: u32,
+    /// Element offset in the guide buffer of the normal's x plane (`u32::MAX`: absent).
+    pub g_normal: u32,
+    /// Element offset of the position's x plane (`u32::MAX`: absent).
+    pub g_position: u32,
+    /// Element offset of the depth plane (`u32::MAX`: absent).
+    pub g_depth: u32,
+    /// 1: negative output becomes 0.
+    pub clamp_negative: u32,
+    /// The firefly clamp's factor `k` (0: off).
+    pub fireflies: f32,
+    /// [`TemporalConfig::firefly_history`].
+    pub firefly_history: f32,
+    /// [`TemporalConfig::max_history`].
+    pub max_history: f32,
+    /// [`TemporalConfig::normal_limit`].
+    pub normal_limit: f32,
+    /// [`TemporalConfig::position_limit`].
+    pub position_limit: f32,
+    /// [`TemporalConfig::depth_limit`].
+    pub depth_limit: f32,
+    /// [`TemporalConfig::clip_gamma`].
+    pub clip_gamma: f32,
+    /// [`TemporalConfig::output_alpha`].
+    pub output_alpha: f32,
+    /// A frame with more pixels without history than this is a camera cut.
+    pub cut_limit: u32,
+    /// Largest motion component taken as a motion vector, in pixels.
+    pub max_motion: f32,
+    /// Padding to the WGSL layout; zero.
+    pub pad: [u32; 2],
+}
+
+// SAFETY: `repr(C)`, 26 four-byte fields and an array of two, no padding
+// (112 bytes: checked below); any bit pattern is valid.
+unsafe impl bytemuck::Zeroable for GpuTemporalParams {}
+// SAFETY: as above.
+unsafe impl bytemuck::Pod for GpuTemporalParams {}
+const _: () = assert!(core::mem::size_of::<GpuTemporalParams>() == 112);
+
+impl GpuTemporalParams {
+    /// The block's bytes, as the uniform buffer holds them.
+    pub fn as_bytes(&self) -> &[u8] {
+        bytemuck::bytes_of(self)
+    }
+}
+
+/// The buffers of the temporal bind group, in binding order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TemporalBuffer {
+    /// [`GpuTemporalParams`], uniform.
+    Params,
+    /// The noisy light (3 f32 planes), overwritten with the accumulated
+    /// light: FLR's noisy buffer. Read-write storage.
+    Light,
+    /// FLR's guide buffer (f32 planes in FLR's channel order). Read-only storage.
+    Guides,
+    /// Previous − current pixel position (2 f32 planes; zeros for a static camera).
+    Motion,
+    /// The caller's history: [`Reprojection::history_len`] f32. Read-write.
+    History,
+    /// Working space of one frame. Read-write.
+    Work,
+    /// Four u32 counters ([`GpuTemporalPlan::counts`]). Read-write.
+    Counters,
+    /// FLR's output (3 f32 planes). Read-only storage.
+    Fitted,
+    /// The stage's output (3 f32 planes). Read-write.
+    Output,
+}
+
+/// One buffer of the temporal bind group.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TemporalBufferDesc {
+    /// Which buffer.
+    pub buffer: TemporalBuffer,
+    /// Its binding index in group 0.
+    pub binding: u32,
+    /// How it is bound.
+    pub access: crate::flr::gpu::Access,
+    /// Minimum size in bytes.
+    pub bytes: u64,
+}
+
+/// One dispatch of the temporal module.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TemporalPass {
+    /// The entry point's name, NUL-terminated.
+    pub entry: &'static core::ffi::CStr,
+    /// Workgroups along x, y and z.
+    pub workgroups: [u32; 3],
+}
+
+impl TemporalPass {
+    /// The entry point's name.
+    pub fn name(&self) -> &'static str {
+        self.entry.to_str().unwrap_or("")
+    }
+}
+
+/// Bytes of the counters buffer.
+pub const COUNTERS_BYTES: u64 = 16;
+
+/// How to run the temporal stage on a GPU for one frame size, configuration
+/// and guide set.
+#[derive(Clone, Copy, Debug)]
+pub struct GpuTemporalPlan {
+    stage: Reprojection,
+    /// Guide-buffer channel of the normal's x, the position's x and the depth.
+    channels: [Option<usize>; 3],
+}
+
+impl GpuTemporalPlan {
+    /// The plan for `width × height` frames whose guides are `guides` (the
+    /// stage rejects history with its normal, position and depth). Frames
+    /// whose history would not be addressable with 32-bit indices are refused.
+    pub fn new(cfg: TemporalConfig, guides: GuideSet, width: usize, height: usize) -> Result<Self, Error> {
+        let stage = Reprojection::new(cfg, guides, width, height)?;
+        if stage.history_len() >= u32::MAX as usize || Self::work_len_of(&stage) >= u32::MAX as usize {
+            return Err(Error::Unsupported("the GPU temporal stage at this frame size (history beyond 32-bit indices)"));
+        }
+        // FLR's channel order: normal (3), depth, position (3), AO, user channels
+        let normal = guides.normal.then_some(0);
+        let depth = guides.depth.then_some(3 * guides.normal as usize);
+        let position = guides.position.then_some(3 * guides.normal as usize + guides.depth as usize);
+        Ok(GpuTemporalPlan { stage, channels: [normal, position, depth] })
+    }
+
+    /// The CPU stage this plan mirrors (its history length, its counts).
+    pub fn stage(&self) -> &Reprojection {
+        &self.stage
+    }
+
+    fn work_len_of(stage: &Reprojection) -> usize {
+        let (w, h) = (stage.width, stage.height);
+        4 * fireflies::cells(w) * h.div_ceil(fireflies::CELL) + 3 * w * h
+    }
+
+    /// The bind group's buffers, in binding order, with their sizes.
+    pub fn buffers(&self) -> [TemporalBufferDesc; 9] {
+        use crate::flr::gpu::Access::*;
+        let plane = (self.stage.width * self.stage.height) as u64;
+        let guides = self.channels.iter().zip([3u64, 3, 1]).filter_map(|(c, n)| c.map(|c| c as u64 + n)).max().unwrap_or(1);
+        let f = 4u64;
+        let list = [
+            (TemporalBuffer::Params, Uniform, core::mem::size_of::<GpuTemporalParams>() as u64),
+            (TemporalBuffer::Light, ReadWriteStorage, 3 * plane * f),
+            (TemporalBuffer::Guides, ReadOnlyStorage, guides * plane * f),
+            (TemporalBuffer::Motion, ReadOnlyStorage, 2 * plane * f),
+            (TemporalBuffer::History, ReadWriteStorage, self.stage.history_len() as u64 * f),
+            (TemporalBuffer::Work, ReadWriteStorage, Self::work_len_of(&self.stage) as u64 * f),
+            (TemporalBuffer::Counters, ReadWriteStorage, COUNTERS_BYTES),
+            (TemporalBuffer::Fitted, ReadOnlyStorage, 3 * plane * f),
+            (TemporalBuffer::Output, ReadWriteStorage, 3 * plane * f),
+        ];
+        list.map(|(buffer, access, bytes)| TemporalBufferDesc { buffer, binding: buffer as u32, access, bytes })
+    }
+
+    /// The passes before FLR's: `t_cells`, `t_taps`, `t_thresholds`, `t_accumulate`.
+    pub fn passes_before(&self) -> [TemporalPass; 4] {
+        let cells = [self.cells().div_ceil(64) as u32, self.bands() as u32, 1];
+        let pixels = self.pixel_groups();
+        [
+            TemporalPass { entry: c"t_cells", workgroups: cells },
+            TemporalPass { entry: c"t_taps", workgroups: pixels },
+            TemporalPass { entry: c"t_thresholds", workgroups: cells },
+            TemporalPass { entry: c"t_accumulate", workgroups: pixels },
+        ]
+    }
+
+    /// The pass after FLR's: `t_resolve`.
+    pub fn pass_after(&self) -> TemporalPass {
+        TemporalPass { entry: c"t_resolve", workgroups: self.pixel_groups() }
+    }
+
+    fn cells(&self) -> usize {
+        fireflies::cells(self.stage.width)
+    }
+    fn bands(&self) -> usize {
+        self.stage.height.div_ceil(fireflies::CELL)
+    }
+    fn pixel_groups(&self) -> [u32; 3] {
+        [self.stage.width.div_ceil(8) as u32, self.stage.height.div_ceil(8) as u32, 1]
+    }
+
+    /// The parameter block of the frame whose history holds `frames` frames
+    /// (the CPU's [`crate::temporal::History::frames`]: its parity picks the
+    /// slots), with the firefly clamp's factor (`None`: off) and whether
+    /// negative output becomes 0.
+    pub fn params(&self, frames: u32, fireflies: Option<f32>, clamp_negative: bool) -> Result<GpuTemporalParams, Error> {
+        if fireflies.is_some_and(|k| !fireflies::valid_strength(k)) {
+            return Err(Error::InvalidConfig("fireflies strength (must be finite and >= 1)"));
+        }
+        let s = &self.stage;
+        let (w, h) = (s.width, s.height);
+        let cfg = s.config();
+        let slot = s.slot_len() as u32;
+        let (read_off, write_off) = if frames.is_multiple_of(2) { (slot, 0) } else { (0, slot) };
+        let (n_at, p_at, d_at) = s.guide_fields();
+        let field = |on: bool, at: usize| if on { at as u32 } else { NONE };
+        let plane = (w * h) as u32;
+        let offset = |c: Option<usize>| c.map_or(NONE, |c| c as u32 * plane);
+        Ok(GpuTemporalParams {
+            width: w as u32,
+            height: h as u32,
+            nc: self.cells() as u32,
+            bands: self.bands() as u32,
+            record: s.record() as u32,
+            n_at: field(s.normal, n_at),
+            p_at: field(s.position, p_at),
+            d_at: field(s.depth, d_at),
+            read_off,
+            write_off,
+            cells_at: (s.record() * s.plane()) as u32,
+            has_history: (frames > 0) as u32,
+            g_normal: offset(self.channels[0]),
+            g_position: offset(self.channels[1]),
+            g_depth: offset(self.channels[2]),
+            clamp_negative: clamp_negative as u32,
+            fireflies: fireflies.unwrap_or(0.0),
+            firefly_history: cfg.firefly_history,
+            max_history: cfg.max_history,
+            normal_limit: cfg.normal_limit,
+            position_limit: cfg.position_limit,
+            depth_limit: cfg.depth_limit,
+            clip_gamma: cfg.clip_gamma,
+            output_alpha: cfg.output_alpha,
+            // `Reprojection::is_cut` in integers: rejected > f · n ⇔ rejected > ⌊f · n⌋
+            cut_limit: libm::floor(cfg.cut_fraction as f64 * s.plane() as f64).min(u32::MAX as f64) as u32,
+            max_motion: s.max_motion(),
+            pad: [0; 2],
+        })
+    }
+
+    /// The frame's counts from the counters buffer's bytes (rejected, invalid
+    /// motion, NaN/Inf samples, clamped samples) as [`Reprojection::accumulate`]
+    /// reports them, for the frame `params` was made for.
+    pub fn counts(&self, counters: &[u8], params: &GpuTemporalParams) -> Counts {
+        let at = |i: usize| counters.get(4 * i..4 * i + 4).map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])) as u64;
+        let cut = params.has_history != 0 && at(0) > params.cut_limit as u64;
+        Counts { rejected: if cut { 0 } else { at(0) }, invalid_motion: at(1), nonfinite: at(2), clamped: at(3), cut: cut as u64 }
+    }
+}
