@@ -340,7 +340,10 @@ fn flnr_runs_with_bundled_and_given_weights() {
 #[test]
 fn device_flag_and_shaders() {
     fails_with(&["denoise", &data("room_7.exr"), "-o", "x.exr", "--device", "tpu"], &["--device", "tpu"]);
-    fails_with(&["denoise", &data("room_7.exr"), "-o", "x.exr", "--device", "gpu", "--method", "bmfr"], &["only flr runs on the GPU"]);
+    fails_with(
+        &["denoise", &data("room_7.exr"), "-o", "x.exr", "--device", "gpu", "--method", "bmfr"],
+        &["only flr and flr-temporal run on the GPU"],
+    );
     // shaders and dispatch description (no adapter needed)
     let dir = tmp("shaders");
     let (ok, _, e) = lrd(&["shaders", "--out", dir.to_str().unwrap(), "--size", "640x360", "--guides", "normal,depth"]);
