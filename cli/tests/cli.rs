@@ -428,6 +428,8 @@ fn gpu_device_matches_cpu() {
     let cpu_rows = table("cpu");
     assert!(!cpu_rows.is_empty());
     assert_eq!(cpu_rows, table("gpu"));
+    let (ok, so, e) = lrd(&["bench", "--method", "flr-temporal", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
+    assert!(ok && so.contains("GPU adapter") && so.contains("temporal gpu") && so.contains("median"), "{so}{e}");
 }
 
 /// `--sigma 6,12,20` is the adaptive window, and the default: labelled,
