@@ -300,7 +300,9 @@ impl Reprojection {
     fn cells_len(&self) -> usize {
         2 * fireflies::cells(self.width) * self.height.div_ceil(fireflies::CELL)
     }
-    fn slot_len(&self) -> usize {
+    /// f32 values of one of the history's two slots (a frame's records and
+    /// its clamp cells): the history is slot 0, then slot 1.
+    pub fn slot_len(&self) -> usize {
         self.record() * self.plane() + self.cells_len()
     }
     /// f32 values of the [`History`] buffer: two slots.

@@ -189,11 +189,11 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
 /// method restarts every run from the same state (restoring is not timed), so
 /// it ends one frame further, as if run once.
 pub fn time_method(m: &mut Method, inputs: &Inputs, out: &mut [f32], runs: usize) -> Result<(f64, Vec<f64>), String> {
-    m.save();
+    m.save()?;
     m.run(inputs, out)?;
     let mut t = Vec::with_capacity(runs);
     for _ in 0..runs.max(1) {
-        m.restore();
+        m.restore()?;
         let s = Instant::now();
         m.run(inputs, out)?;
         t.push(s.elapsed().as_secs_f64() * 1e3);

@@ -804,25 +804,30 @@ impl Method {
 
     /// Temporal methods: remember the state, so repeated timing runs of one
     /// frame can each start from it ([`Method::restore`]).
-    pub fn save(&mut self) {
+    pub fn save(&mut self) -> Result<(), String> {
         match self {
             Method::Temporal(r) => r.save(),
             Method::FlrTemporalGpu { gpu, saved } => {
                 let mut h = vec![0f32; gpu.history_len()];
-                // a history that cannot be read back is not restored (the run goes on from where it is)
-                *saved = gpu.history(&mut h).ok().map(|frames| (h, frames));
+                let frames = gpu.history(&mut h).map_err(|e| format!("flr-temporal --device gpu: reading the history: {e}"))?;
+                *saved = Some((h, frames));
             }
             _ => {}
         }
+        Ok(())
     }
-    pub fn restore(&mut self) {
+
+    /// Temporal methods: go back to the state [`Method::save`] kept (on the
+    /// GPU, the history is on the device when this returns).
+    pub fn restore(&mut self) -> Result<(), String> {
         match self {
             Method::Temporal(r) => r.restore(),
             Method::FlrTemporalGpu { gpu, saved: Some((h, frames)) } => {
-                let _ = gpu.set_history(h, *frames);
+                gpu.set_history(h, *frames).map_err(|e| format!("flr-temporal --device gpu: restoring the history: {e}"))?;
             }
             _ => {}
         }
+        Ok(())
     }
 
     /// Whether every `run` is the next frame of a sequence.

@@ -63,7 +63,9 @@ pub fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Resul
     let tplan = lrdenoise::temporal::gpu::GpuTemporalPlan::new(temporal, cfg.guides, w, h).map_err(|e| format!("shaders: {e}"))?;
     md += "\n## Temporal FLR\n\nThe temporal stage's module (`temporal.*`) has its own bind group; bindings Light, Guides and \
            Fitted are FLR's noisy, guide and output buffers (f32 inputs; FLR planned with `fireflies: None`: the stage clamps). \
-           Upload the parameter block of lrdenoise::temporal::gpu::GpuTemporalPlan::params each frame (its slots alternate).\n\n\
+           Upload the parameter block of lrdenoise::temporal::gpu::GpuTemporalPlan::params each frame, and the motion into \
+           Work at `GpuTemporalPlan::motion_offset`. The history is two buffers of one slot each: bind the one \
+           `GpuTemporalPlan::slots` reads as HistoryIn and the other as HistoryOut (they swap each frame).\n\n\
            | binding | buffer | access | bytes |\n|---:|---|---|---:|\n";
     for b in tplan.buffers() {
         md += &format!("| {} | {:?} | {:?} | {} |\n", b.binding, b.buffer, b.access, b.bytes);

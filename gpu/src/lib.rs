@@ -24,10 +24,11 @@
 //! # Ok::<(), lrdenoise_gpu::GpuError>(())
 //! ```
 
-use lrdenoise::flr::gpu::{Access, GpuLayouts, GpuPlan, InputFormat, FLR_WGSL};
+use lrdenoise::flr::gpu::{GpuLayouts, GpuPlan, InputFormat, FLR_WGSL};
 use lrdenoise::{Arg, Error, FlrConfig, Frame, ImageViewMut, Report};
 use std::fmt;
 
+mod compute;
 mod temporal;
 pub use temporal::GpuTemporalFlr;
 
@@ -44,6 +45,17 @@ pub enum GpuError {
     Device(String),
     /// A shader could not be translated (`shaders`).
     Shader(String),
+    /// A buffer the frame size needs is larger than the device allows for
+    /// one buffer or binding (`max_buffer_size`, `max_storage_buffer_binding_size`):
+    /// a smaller frame, fewer guides, or a device with larger limits.
+    TooLarge {
+        /// Which buffer.
+        buffer: String,
+        /// Its size in bytes.
+        bytes: u64,
+        /// The device's limit in bytes.
+        limit: u64,
+    },
 }
 
 impl fmt::Display for GpuError {
@@ -53,6 +65,9 @@ impl fmt::Display for GpuError {
             GpuError::NoAdapter(why) => write!(f, "no GPU adapter: {why}"),
             GpuError::Device(why) => write!(f, "GPU device error: {why}"),
             GpuError::Shader(why) => write!(f, "shader translation failed: {why}"),
+            GpuError::TooLarge { buffer, bytes, limit } => {
+                write!(f, "{buffer} needs {bytes} bytes, above this device's limit of {limit} bytes for one buffer")
+            }
         }
     }
 }
@@ -99,7 +114,10 @@ const TIMESTAMPS: u32 = 2 * lrdenoise::flr::gpu::MAX_PASSES as u32;
 /// Readback bytes after the timestamps for a caller's counters (the temporal stage's).
 const EXTRA_BYTES: u64 = 16;
 
-/// Requests the default adapter and a device with default limits.
+/// Requests the default adapter and a device with default limits, except
+/// the largest buffer and storage binding, which are the adapter's own
+/// (wgpu's defaults, 256 and 128 MiB, are below what 4K frames need, and
+/// what many adapters allow).
 pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError> {
     let instance = wgpu::Instance::default();
     let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
@@ -107,7 +125,17 @@ pub fn default_device() -> Result<(wgpu::Device, wgpu::Queue, String), GpuError>
     let info = adapter.get_info();
     let name = format!("{} ({:?}, {:?})", info.name, info.device_type, info.backend);
     // timestamps where the adapter has them: per-pass GPU times (`GpuFlr::pass_times_ms`)
-    let desc = wgpu::DeviceDescriptor { required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY, ..Default::default() };
+    let own = adapter.limits();
+    let required_limits = wgpu::Limits {
+        max_buffer_size: own.max_buffer_size,
+        max_storage_buffer_binding_size: own.max_storage_buffer_binding_size,
+        ..wgpu::Limits::default()
+    };
+    let desc = wgpu::DeviceDescriptor {
+        required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
+        required_limits,
+        ..Default::default()
+    };
     let (device, queue) = pollster::block_on(adapter.request_device(&desc)).map_err(|e| GpuError::Device(e.to_string()))?;
     Ok((device, queue, name))
 }
@@ -148,68 +176,13 @@ impl GpuFlr {
             label: Some("lrdenoise flr"),
             source: wgpu::ShaderSource::Wgsl(FLR_WGSL.into()),
         });
-        let entries: Vec<wgpu::BindGroupLayoutEntry> = descs
+        let bgl = compute::layout(&device, "lrdenoise flr", descs.iter().map(|d| (d.binding, d.access)));
+        let pipelines = compute::pipelines(&device, &module, &bgl, plan.passes().iter().map(|p| (p.name(), p.workgroups)));
+        let buffers = descs
             .iter()
-            .map(|d| wgpu::BindGroupLayoutEntry {
-                binding: d.binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: match d.access {
-                        Access::Uniform => wgpu::BufferBindingType::Uniform,
-                        Access::ReadOnlyStorage => wgpu::BufferBindingType::Storage { read_only: true },
-                        Access::ReadWriteStorage => wgpu::BufferBindingType::Storage { read_only: false },
-                    },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            })
-            .collect();
-        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("lrdenoise flr"), entries: &entries });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("lrdenoise flr"),
-            bind_group_layouts: &[Some(&bgl)],
-            immediate_size: 0,
-        });
-        let pipelines = plan
-            .passes()
-            .iter()
-            .map(|p| {
-                let pipe = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(p.name()),
-                    layout: Some(&layout),
-                    module: &module,
-                    entry_point: Some(p.name()),
-                    compilation_options: Default::default(),
-                    cache: None,
-                });
-                (pipe, p.workgroups)
-            })
-            .collect();
-        let buffers: Vec<wgpu::Buffer> = descs
-            .iter()
-            .map(|d| {
-                let usage = match d.access {
-                    Access::Uniform => wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                    _ => wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-                };
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: None,
-                    size: d.bytes.next_multiple_of(4),
-                    usage,
-                    mapped_at_creation: false,
-                })
-            })
-            .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lrdenoise flr"),
-            layout: &bgl,
-            entries: &buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                .collect::<Vec<_>>(),
-        });
+            .map(|d| compute::buffer(&device, &format!("lrdenoise flr {:?}", d.buffer), d.access, d.bytes))
+            .collect::<Result<Vec<_>, _>>()?;
+        let bind_group = compute::bind_group(&device, "lrdenoise flr", &bgl, &buffers.iter().collect::<Vec<_>>());
         let out_bytes = descs[7].bytes.next_multiple_of(4);
         let timer = device.features().contains(wgpu::Features::TIMESTAMP_QUERY).then(|| {
             let set = device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -423,17 +396,13 @@ impl GpuFlr {
             enc.copy_buffer_to_buffer(b, 0, &self.readback, extra_at, extra.len().min(EXTRA_BYTES as usize) as u64);
         }
         self.queue.submit([enc.finish()]);
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.readback.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Device(e.to_string()));
         }
-        rx.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
-        let report = {
-            let data = self.readback.get_mapped_range(..).map_err(|e| GpuError::Device(e.to_string()))?;
+        let (timer, passes) = (self.timer.is_some(), self.pipelines.len());
+        let period = self.queue.get_timestamp_period() as f64; // ns per tick
+        let mut pass_ms = None;
+        let report = compute::read_back(&self.device, &self.readback, |data| {
             let vals: &[f32] = bytemuck::cast_slice(&data[..3 * plane * 4]);
             for y in 0..h {
                 let row = y * w..(y + 1) * w;
@@ -444,20 +413,20 @@ impl GpuFlr {
                 )
                 .ok_or(Error::InvalidTile { index: y, count: h })?;
             }
-            if self.timer.is_some() {
+            if timer {
                 let ticks: &[u8] = &data[ts_at as usize..ts_at as usize + TIMESTAMPS as usize * 8];
                 let tick = |j: usize| u64::from_le_bytes(ticks[8 * j..8 * j + 8].try_into().unwrap_or([0; 8]));
-                let period = self.queue.get_timestamp_period() as f64; // ns per tick
-                let passes = self.pipelines.len();
-                self.pass_ms = Some((0..passes).map(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period * 1e-6).collect());
+                pass_ms = Some((0..passes).map(|i| tick(2 * i + 1).saturating_sub(tick(2 * i)) as f64 * period * 1e-6).collect());
             }
             if extra_from.is_some() {
                 let n = extra.len().min(EXTRA_BYTES as usize);
                 extra[..n].copy_from_slice(&data[extra_at as usize..extra_at as usize + n]);
             }
-            self.plan.report(&data[out_bytes as usize..])
-        };
-        self.readback.unmap();
+            Ok(self.plan.report(&data[out_bytes as usize..]))
+        })?;
+        if pass_ms.is_some() {
+            self.pass_ms = pass_ms;
+        }
         Ok(report)
     }
 }

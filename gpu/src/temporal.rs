@@ -2,7 +2,7 @@
 //! ([`lrdenoise::temporal::gpu`]) around FLR's, run as
 //! [`GpuTemporalPlan`] describes.
 
-use crate::{check_output, GpuError, GpuFlr};
+use crate::{check_output, compute, GpuError, GpuFlr};
 use lrdenoise::flr::gpu::{Access, InputFormat};
 use lrdenoise::temporal::gpu::{GpuTemporalParams, GpuTemporalPlan, TemporalBuffer, COUNTERS_BYTES, TEMPORAL_WGSL};
 use lrdenoise::temporal::TemporalConfig;
@@ -44,11 +44,12 @@ pub struct GpuTemporalFlr {
     clamp_negative: bool,
     /// The passes before FLR's, then the one after.
     pipelines: Vec<(wgpu::ComputePipeline, [u32; 3])>,
-    bind_group: wgpu::BindGroup,
-    /// This executor's own buffers: params, motion, history, work, counters, output.
+    /// The bind group of each read slot (`GpuTemporalPlan::slots`).
+    bind_groups: [wgpu::BindGroup; 2],
+    /// This executor's own buffers: params, the history's two slots, work (with the motion), counters, output.
     params: wgpu::Buffer,
-    history: wgpu::Buffer,
-    motion: wgpu::Buffer,
+    slots: [wgpu::Buffer; 2],
+    work: wgpu::Buffer,
     output: wgpu::Buffer,
     counters: wgpu::Buffer,
     /// Frames in the history (its parity picks the slots, as on the CPU).
@@ -81,6 +82,7 @@ impl GpuTemporalFlr {
             return Err(Error::Unsupported("temporal FLR with upsample > 1").into());
         }
         let plan = GpuTemporalPlan::new(temporal, cfg.guides, width, height)?;
+        plan.params(0, cfg.fireflies, cfg.clamp_negative)?; // refuses a bad clamp factor here, not at the first frame
         let flr_cfg = FlrConfig { fireflies: None, ..cfg };
         let flr = GpuFlr::with_device(device.clone(), queue, adapter, flr_cfg, width, height, InputFormat::F32)?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -89,95 +91,44 @@ impl GpuTemporalFlr {
             source: wgpu::ShaderSource::Wgsl(TEMPORAL_WGSL.into()),
         });
         let descs = plan.buffers();
-        let entries: Vec<wgpu::BindGroupLayoutEntry> = descs
-            .iter()
-            .map(|d| wgpu::BindGroupLayoutEntry {
-                binding: d.binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: match d.access {
-                        Access::Uniform => wgpu::BufferBindingType::Uniform,
-                        Access::ReadOnlyStorage => wgpu::BufferBindingType::Storage { read_only: true },
-                        Access::ReadWriteStorage => wgpu::BufferBindingType::Storage { read_only: false },
-                    },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            })
-            .collect();
-        let bgl =
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("lrdenoise temporal"), entries: &entries });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("lrdenoise temporal"),
-            bind_group_layouts: &[Some(&bgl)],
-            immediate_size: 0,
-        });
-        let pipelines = plan
-            .passes_before()
-            .iter()
-            .chain([plan.pass_after()].iter())
-            .map(|p| {
-                let pipe = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(p.name()),
-                    layout: Some(&layout),
-                    module: &module,
-                    entry_point: Some(p.name()),
-                    compilation_options: Default::default(),
-                    cache: None,
-                });
-                (pipe, p.workgroups)
-            })
-            .collect();
-        let own = |d: &lrdenoise::temporal::gpu::TemporalBufferDesc| {
-            let usage = match d.access {
-                Access::Uniform => wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                _ => wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-            };
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: None,
-                size: d.bytes.next_multiple_of(4).max(4),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        let shared = |b: TemporalBuffer| -> Result<wgpu::Buffer, GpuError> {
-            let binding = match b {
-                TemporalBuffer::Light => 1,
-                TemporalBuffer::Guides => 2,
-                _ => 7, // TemporalBuffer::Fitted
-            };
-            flr.buffer(binding).cloned().ok_or(GpuError::Device("FLR's buffers".into()))
-        };
+        let bgl = compute::layout(&device, "lrdenoise temporal", descs.iter().map(|d| (d.binding, d.access)));
+        let passes = plan.passes_before().into_iter().chain([plan.pass_after()]);
+        let pipelines = compute::pipelines(&device, &module, &bgl, passes.map(|p| (p.name(), p.workgroups)));
+        let flr_buffer = |binding: usize| flr.buffer(binding).cloned().ok_or(GpuError::Device("FLR's buffers".into()));
         let mut bound = Vec::with_capacity(descs.len());
         for d in &descs {
             bound.push(match d.buffer {
-                TemporalBuffer::Light | TemporalBuffer::Guides | TemporalBuffer::Fitted => shared(d.buffer)?,
-                _ => own(d),
+                TemporalBuffer::Light => flr_buffer(1)?,
+                TemporalBuffer::Guides => flr_buffer(2)?,
+                TemporalBuffer::Fitted => flr_buffer(7)?,
+                // the slots, created once each below (read-write: the slot
+                // read this frame is the one written the next)
+                TemporalBuffer::HistoryIn => compute::buffer(&device, "lrdenoise history slot 0", Access::ReadWriteStorage, d.bytes)?,
+                TemporalBuffer::HistoryOut => compute::buffer(&device, "lrdenoise history slot 1", Access::ReadWriteStorage, d.bytes)?,
+                _ => compute::buffer(&device, &format!("lrdenoise temporal {:?}", d.buffer), d.access, d.bytes)?,
             });
         }
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lrdenoise temporal"),
-            layout: &bgl,
-            entries: &bound
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                .collect::<Vec<_>>(),
+        let at = |b: TemporalBuffer| bound[b as usize].clone();
+        let slots = [at(TemporalBuffer::HistoryIn), at(TemporalBuffer::HistoryOut)];
+        // bind_groups[r]: slot r read, the other written
+        let bind_groups = [0, 1].map(|r| {
+            let mut list: Vec<&wgpu::Buffer> = bound.iter().collect();
+            list[TemporalBuffer::HistoryIn as usize] = &slots[r];
+            list[TemporalBuffer::HistoryOut as usize] = &slots[1 - r];
+            compute::bind_group(&device, "lrdenoise temporal", &bgl, &list)
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Device(e.to_string()));
         }
-        let at = |b: TemporalBuffer| bound[b as usize].clone();
         Ok(GpuTemporalFlr {
             plan,
             fireflies: cfg.fireflies,
             clamp_negative: cfg.clamp_negative,
             pipelines,
-            bind_group,
+            bind_groups,
             params: at(TemporalBuffer::Params),
-            motion: at(TemporalBuffer::Motion),
-            history: at(TemporalBuffer::History),
+            work: at(TemporalBuffer::Work),
+            slots,
             output: at(TemporalBuffer::Output),
             counters: at(TemporalBuffer::Counters),
             frames: 0,
@@ -221,38 +172,40 @@ impl GpuTemporalFlr {
             return Err(Error::BufferTooSmall { arg: Arg::History, needed: n, len: dst.len() }.into());
         }
         let device = &self.flr.device;
-        let bytes = 4 * n as u64;
+        let slot_bytes = self.slots[0].size();
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("lrdenoise history readback"),
-            size: bytes,
+            size: 2 * slot_bytes,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise history") });
-        enc.copy_buffer_to_buffer(&self.history, 0, &staging, 0, bytes);
+        enc.copy_buffer_to_buffer(&self.slots[0], 0, &staging, 0, slot_bytes);
+        enc.copy_buffer_to_buffer(&self.slots[1], 0, &staging, slot_bytes, slot_bytes);
         self.flr.queue.submit([enc.finish()]);
-        let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
-        rx.recv().map_err(|e| GpuError::Device(e.to_string()))?.map_err(|e| GpuError::Device(e.to_string()))?;
-        {
-            let data = staging.get_mapped_range(..).map_err(|e| GpuError::Device(e.to_string()))?;
-            dst.copy_from_slice(bytemuck::cast_slice(&data[..]));
-        }
-        staging.unmap();
+        let slot = n / 2;
+        compute::read_back(device, &staging, |data| {
+            let values: &[f32] = bytemuck::cast_slice(data);
+            dst[..slot].copy_from_slice(&values[..slot]);
+            dst[slot..].copy_from_slice(&values[slot_bytes as usize / 4..][..slot]);
+            Ok(())
+        })?;
         Ok(self.frames)
     }
 
     /// Replaces the history with `src` (the CPU stage's layout, as
-    /// [`GpuTemporalFlr::history`] or a CPU `History` left it) after `frames` frames.
+    /// [`GpuTemporalFlr::history`] or a CPU `History` left it) after `frames`
+    /// frames, and waits until the device holds it.
     pub fn set_history(&mut self, src: &[f32], frames: u32) -> Result<(), GpuError> {
         let n = self.history_len();
         if src.len() != n {
             return Err(Error::BufferTooSmall { arg: Arg::History, needed: n, len: src.len() }.into());
         }
-        self.flr.queue.write_buffer(&self.history, 0, bytemuck::cast_slice(src));
+        let (a, b) = src.split_at(n / 2);
+        self.flr.queue.write_buffer(&self.slots[0], 0, bytemuck::cast_slice(a));
+        self.flr.queue.write_buffer(&self.slots[1], 0, bytemuck::cast_slice(b));
+        self.flr.queue.submit([]);
+        self.flr.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
         self.frames = frames;
         Ok(())
     }
@@ -287,15 +240,16 @@ impl GpuTemporalFlr {
         let params: GpuTemporalParams = self.plan.params(self.frames, self.fireflies, self.clamp_negative)?;
         self.flr.upload(frame)?;
         let queue = &self.flr.queue;
-        queue.write_buffer(&self.motion, 0, bytemuck::cast_slice(&self.staging));
+        queue.write_buffer(&self.work, self.plan.motion_offset(), bytemuck::cast_slice(&self.staging));
         queue.write_buffer(&self.params, 0, params.as_bytes());
+        let (read_slot, _) = GpuTemporalPlan::slots(self.frames);
         let device = self.flr.device.clone();
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("lrdenoise temporal flr") });
         let dispatch = |enc: &mut wgpu::CommandEncoder, (pipe, [x, y, z]): &(wgpu::ComputePipeline, [u32; 3])| {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
             pass.set_pipeline(pipe);
-            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.set_bind_group(0, &self.bind_groups[read_slot], &[]);
             pass.dispatch_workgroups(*x, *y, *z);
         };
         let (before, after) = self.pipelines.split_at(4);

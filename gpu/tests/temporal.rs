@@ -11,7 +11,7 @@
 mod common;
 use common::*;
 use lrdenoise::flr::temporal::TemporalFlr;
-use lrdenoise::temporal::gpu::{GpuTemporalPlan, TEMPORAL_WGSL};
+use lrdenoise::temporal::gpu::{GpuTemporalParams, GpuTemporalPlan, TemporalBuffer, TEMPORAL_WGSL};
 use lrdenoise::temporal::{History, TemporalConfig};
 use lrdenoise::*;
 use lrdenoise_gpu::{GpuError, GpuTemporalFlr};
@@ -221,6 +221,8 @@ fn bad_calls_are_refused() {
         GpuTemporalFlr::new(FlrConfig { upsample: 2, ..cfg }, TemporalConfig::default(), 64, 48),
         Err(GpuError::Config(Error::Unsupported(_)))
     ));
+    let r = GpuTemporalFlr::new(FlrConfig { fireflies: Some(0.5), ..cfg }, TemporalConfig::default(), 32, 24);
+    assert!(matches!(r, Err(GpuError::Config(Error::InvalidConfig(_)))), "a clamp factor below 1 is refused at creation: {r:?}");
     let mut g = gpu(cfg, TemporalConfig::default(), 32, 24);
     let f = Owned::synthetic(32, 24, 1, 0.5);
     let m = vec![0f32; 2 * 16 * 24];
@@ -260,15 +262,106 @@ fn the_plan_mirrors_the_cpu_stage() {
     let p0 = plan.params(0, Some(1.5), false).unwrap();
     let p1 = plan.params(1, Some(1.5), false).unwrap();
     assert_eq!((p0.has_history, p1.has_history), (0, 1));
-    assert_eq!((p0.read_off, p0.write_off), (p1.write_off, p1.read_off));
-    assert_eq!(2 * (p0.read_off + p0.write_off) as usize, cpu.history_len());
+    // the slots alternate with the frame count, as the CPU's History's do
+    assert_eq!((GpuTemporalPlan::slots(0), GpuTemporalPlan::slots(1), GpuTemporalPlan::slots(2)), ((1, 0), (0, 1), (1, 0)));
     assert_eq!(p0.cut_limit as usize, w * h / 2);
     // normal planes 0..3, depth 3 (AO 4 is not a rejection guide)
     assert_eq!((p0.g_normal, p0.g_depth, p0.g_position), (0, 3 * (w * h) as u32, u32::MAX));
     assert!(plan.params(0, Some(0.5), false).is_err(), "a clamp factor below 1 is refused");
     let b = plan.buffers();
-    assert_eq!(b[4].bytes, 4 * cpu.history_len() as u64);
+    // one slot per history buffer: the history is slot 0 then slot 1
+    assert_eq!((b[3].buffer, b[8].buffer), (TemporalBuffer::HistoryIn, TemporalBuffer::HistoryOut));
+    assert_eq!(2 * b[3].bytes, 4 * cpu.history_len() as u64);
+    assert_eq!(b[3].bytes, b[8].bytes);
+    assert!(
+        b.iter().filter(|d| d.access != lrdenoise::flr::gpu::Access::Uniform).count() <= 8,
+        "WebGPU's default: 8 storage buffers per stage"
+    );
+    assert!(b.iter().enumerate().all(|(i, d)| d.binding == i as u32));
     let bytes: Vec<u8> = [(w * h) as u32, 2, 0, 9].iter().flat_map(|v| v.to_le_bytes()).collect();
     let counts = plan.counts(&bytes, &p1);
     assert_eq!((counts.cut, counts.rejected, counts.invalid_motion, counts.clamped), (1, 0, 2, 9));
+}
+
+/// The Rust parameter block has the WGSL `Params` layout: the same fields in
+/// the same order at the same offsets, and the same size (no adapter needed).
+#[test]
+fn the_parameter_block_matches_the_shader() {
+    macro_rules! offsets {
+        ($($f:ident),*) => { [$((stringify!($f), core::mem::offset_of!(GpuTemporalParams, $f) as u32)),*] };
+    }
+    let rust = offsets!(
+        width,
+        height,
+        nc,
+        bands,
+        record,
+        n_at,
+        p_at,
+        d_at,
+        cells_at,
+        has_history,
+        g_normal,
+        g_position,
+        g_depth,
+        clamp_negative,
+        fireflies,
+        firefly_history,
+        max_history,
+        normal_limit,
+        position_limit,
+        depth_limit,
+        clip_gamma,
+        output_alpha,
+        cut_limit,
+        max_motion,
+        pad
+    );
+    let module = naga::front::wgsl::parse_str(TEMPORAL_WGSL).unwrap();
+    let (members, span) = module
+        .types
+        .iter()
+        .find_map(|(_, t)| match &t.inner {
+            naga::TypeInner::Struct { members, span } if t.name.as_deref() == Some("Params") => Some((members.clone(), *span)),
+            _ => None,
+        })
+        .expect("the WGSL declares Params");
+    let wgsl: Vec<(String, u32)> =
+        members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).filter(|(n, _)| !n.starts_with("pad")).collect();
+    let rust: Vec<(String, u32)> = rust.iter().filter(|(n, _)| *n != "pad").map(|(n, o)| (n.to_string(), *o)).collect();
+    assert_eq!(wgsl, rust);
+    assert_eq!(span as usize, core::mem::size_of::<GpuTemporalParams>());
+}
+
+/// A device whose storage bindings are smaller than a history slot gives a
+/// typed error at creation, naming the buffer; a 1080p history (two 91 MB
+/// slots) fits wgpu's default limits and runs.
+#[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
+fn buffer_limits_are_checked_and_1080p_fits_the_default_limits() {
+    let device = |limits: wgpu::Limits| {
+        let instance = wgpu::Instance::default();
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default())).expect(NEEDS_ADAPTER);
+        let desc = wgpu::DeviceDescriptor { required_limits: limits, ..Default::default() };
+        let (d, q) = pollster::block_on(adapter.request_device(&desc)).unwrap();
+        (d, q)
+    };
+    let cfg = FlrConfig::with_guides(GuideSet::NORMAL_DEPTH);
+    let small = wgpu::Limits { max_storage_buffer_binding_size: 1 << 20, ..wgpu::Limits::default() };
+    let (d, q) = device(small);
+    let r = GpuTemporalFlr::with_device(d, q, "small".into(), cfg, TemporalConfig::default(), 256, 256);
+    assert!(matches!(r, Err(GpuError::TooLarge { limit: 1048576, .. })), "{r:?}");
+
+    let (w, h) = (1920, 1080);
+    let (d, q) = device(wgpu::Limits::default());
+    let mut g = GpuTemporalFlr::with_device(d, q, "default limits".into(), cfg, TemporalConfig::default(), w, h).unwrap();
+    let f = Owned::synthetic(w, h, 1, 0.5);
+    let mut out = vec![f32::NAN; 3 * w * h];
+    for _ in 0..2 {
+        g.denoise(&f.frame(cfg.guides), None, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+    }
+    assert!(out.iter().all(|v| v.is_finite()));
+    let mut history = vec![0f32; g.history_len()];
+    assert_eq!(g.history(&mut history).unwrap(), 2);
+    assert!(g.history_len() * 4 > 128 << 20, "the history is larger than one default binding");
 }

@@ -9,16 +9,22 @@
 //!    [`crate::flr::gpu::GpuLayouts::planar`]: the stage clamps the light
 //!    itself); create the buffers of [`GpuTemporalPlan::buffers`], where
 //!    [`TemporalBuffer::Light`], [`TemporalBuffer::Guides`] and
-//!    [`TemporalBuffer::Fitted`] are FLR's noisy, guide and output buffers.
-//! 2. Each frame: upload the noisy light, the guides and the motion; upload
-//!    [`GpuTemporalPlan::params`] for the frame index; dispatch
+//!    [`TemporalBuffer::Fitted`] are FLR's noisy, guide and output buffers,
+//!    and the history is two buffers of one slot each (below).
+//! 2. Each frame: upload the noisy light, the guides and the motion (into
+//!    the work buffer at [`GpuTemporalPlan::motion_offset`]); upload
+//!    [`GpuTemporalPlan::params`] for the frame index; bind the history slots
+//!    as [`GpuTemporalPlan::slots`] says (they swap each frame); dispatch
 //!    [`GpuTemporalPlan::passes_before`], FLR's passes, then
 //!    [`GpuTemporalPlan::pass_after`], with a storage barrier between them;
 //!    read the output buffer and, for the counts, the counters
 //!    ([`GpuTemporalPlan::counts`]).
 //!
-//! The history buffer has the CPU stage's layout and length
-//! ([`Reprojection::history_len`]). The shaders compute what
+//! The history has the CPU stage's layout ([`Reprojection::history_len`]
+//! values: slot 0, then slot 1, [`Reprojection::slot_len`] each), held as
+//! one buffer per slot so that no binding is larger than a slot (wgpu's
+//! default limit on a storage binding is 128 MiB; a 1080p slot with normal
+//! and depth is 91 MB). The shaders compute what
 //! [`Reprojection::accumulate`] and [`Reprojection::resolve`] compute, pixel
 //! by pixel in f32; a compiler that fuses multiplies and adds may round a
 //! value differently, and a tap or a sample within rounding of a limit may
@@ -56,10 +62,6 @@ pub struct GpuTemporalParams {
     pub p_at: u32,
     /// See `n_at`.
     pub d_at: u32,
-    /// Element offset of the history slot this frame reads.
-    pub read_off: u32,
-    /// Element offset of the history slot this frame writes.
-    pub write_off: u32,
     /// Element offset of the clamp cells within a slot.
     pub cells_at: u32,
     /// 1 when the read slot holds a previous frame.
@@ -93,10 +95,10 @@ pub struct GpuTemporalParams {
     /// Largest motion component taken as a motion vector, in pixels.
     pub max_motion: f32,
     /// Padding to the WGSL layout; zero.
-    pub pad: [u32; 2],
+    pub pad: [u32; 4],
 }
 
-// SAFETY: `repr(C)`, 26 four-byte fields and an array of two, no padding
+// SAFETY: `repr(C)`, 24 four-byte fields and an array of four, no padding
 // (112 bytes: checked below); any bit pattern is valid.
 unsafe impl bytemuck::Zeroable for GpuTemporalParams {}
 // SAFETY: as above.
@@ -120,11 +122,11 @@ pub enum TemporalBuffer {
     Light,
     /// FLR's guide buffer (f32 planes in FLR's channel order). Read-only storage.
     Guides,
-    /// Previous − current pixel position (2 f32 planes; zeros for a static camera).
-    Motion,
-    /// The caller's history: [`Reprojection::history_len`] f32. Read-write.
-    History,
-    /// Working space of one frame. Read-write.
+    /// The history slot the previous frame wrote ([`Reprojection::slot_len`] f32). Read-only storage.
+    HistoryIn,
+    /// Working space of one frame; the motion, previous − current pixel
+    /// position (2 f32 planes, zeros for a static camera), is uploaded into
+    /// it at [`GpuTemporalPlan::motion_offset`]. Read-write.
     Work,
     /// Four u32 counters ([`GpuTemporalPlan::counts`]). Read-write.
     Counters,
@@ -132,6 +134,8 @@ pub enum TemporalBuffer {
     Fitted,
     /// The stage's output (3 f32 planes). Read-write.
     Output,
+    /// The history slot this frame writes ([`Reprojection::slot_len`] f32). Read-write.
+    HistoryOut,
 }
 
 /// One buffer of the temporal bind group.
@@ -198,7 +202,14 @@ impl GpuTemporalPlan {
 
     fn work_len_of(stage: &Reprojection) -> usize {
         let (w, h) = (stage.width, stage.height);
-        4 * fireflies::cells(w) * h.div_ceil(fireflies::CELL) + 3 * w * h
+        4 * fireflies::cells(w) * h.div_ceil(fireflies::CELL) + 5 * w * h
+    }
+
+    /// Byte offset in [`TemporalBuffer::Work`] of the motion's two planes
+    /// (x, then y; `width · height` f32 each).
+    pub fn motion_offset(&self) -> u64 {
+        let (w, h) = (self.stage.width, self.stage.height);
+        4 * (4 * fireflies::cells(w) * h.div_ceil(fireflies::CELL) + 3 * w * h) as u64
     }
 
     /// The bind group's buffers, in binding order, with their sizes.
@@ -211,12 +222,12 @@ impl GpuTemporalPlan {
             (TemporalBuffer::Params, Uniform, core::mem::size_of::<GpuTemporalParams>() as u64),
             (TemporalBuffer::Light, ReadWriteStorage, 3 * plane * f),
             (TemporalBuffer::Guides, ReadOnlyStorage, guides * plane * f),
-            (TemporalBuffer::Motion, ReadOnlyStorage, 2 * plane * f),
-            (TemporalBuffer::History, ReadWriteStorage, self.stage.history_len() as u64 * f),
+            (TemporalBuffer::HistoryIn, ReadOnlyStorage, self.stage.slot_len() as u64 * f),
             (TemporalBuffer::Work, ReadWriteStorage, Self::work_len_of(&self.stage) as u64 * f),
             (TemporalBuffer::Counters, ReadWriteStorage, COUNTERS_BYTES),
             (TemporalBuffer::Fitted, ReadOnlyStorage, 3 * plane * f),
             (TemporalBuffer::Output, ReadWriteStorage, 3 * plane * f),
+            (TemporalBuffer::HistoryOut, ReadWriteStorage, self.stage.slot_len() as u64 * f),
         ];
         list.map(|(buffer, access, bytes)| TemporalBufferDesc { buffer, binding: buffer as u32, access, bytes })
     }
@@ -248,6 +259,19 @@ impl GpuTemporalPlan {
         [self.stage.width.div_ceil(8) as u32, self.stage.height.div_ceil(8) as u32, 1]
     }
 
+    /// The history slots of the frame whose history holds `frames` frames,
+    /// as `(read, write)`: slot 1 is read and slot 0 written when `frames` is
+    /// even, as the CPU's [`crate::temporal::History`] does. Bind the buffer
+    /// of the read slot as [`TemporalBuffer::HistoryIn`] and the other as
+    /// [`TemporalBuffer::HistoryOut`].
+    pub fn slots(frames: u32) -> (usize, usize) {
+        if frames.is_multiple_of(2) {
+            (1, 0)
+        } else {
+            (0, 1)
+        }
+    }
+
     /// The parameter block of the frame whose history holds `frames` frames
     /// (the CPU's [`crate::temporal::History::frames`]: its parity picks the
     /// slots), with the firefly clamp's factor (`None`: off) and whether
@@ -259,8 +283,6 @@ impl GpuTemporalPlan {
         let s = &self.stage;
         let (w, h) = (s.width, s.height);
         let cfg = s.config();
-        let slot = s.slot_len() as u32;
-        let (read_off, write_off) = if frames.is_multiple_of(2) { (slot, 0) } else { (0, slot) };
         let (n_at, p_at, d_at) = s.guide_fields();
         let field = |on: bool, at: usize| if on { at as u32 } else { NONE };
         let plane = (w * h) as u32;
@@ -274,8 +296,6 @@ impl GpuTemporalPlan {
             n_at: field(s.normal, n_at),
             p_at: field(s.position, p_at),
             d_at: field(s.depth, d_at),
-            read_off,
-            write_off,
             cells_at: (s.record() * s.plane()) as u32,
             has_history: (frames > 0) as u32,
             g_normal: offset(self.channels[0]),
@@ -293,7 +313,7 @@ impl GpuTemporalPlan {
             // `Reprojection::is_cut` in integers: rejected > f · n ⇔ rejected > ⌊f · n⌋
             cut_limit: libm::floor(cfg.cut_fraction as f64 * s.plane() as f64).min(u32::MAX as f64) as u32,
             max_motion: s.max_motion(),
-            pad: [0; 2],
+            pad: [0; 4],
         })
     }
 

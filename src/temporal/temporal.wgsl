@@ -1,6 +1,6 @@
 // The temporal stage (src/temporal.rs) as WGSL compute shaders, in f32 like
-// the CPU path. One module, one bind group (bindings 0–8), run around FLR's
-// passes each frame, in this order, with the workgroup counts of
+// the CPU path. One module, one bind group (bindings 0–8, eight storage
+// buffers: WebGPU's default limit per stage), run around FLR's passes each frame, in this order, with the workgroup counts of
 // `lrdenoise::temporal::gpu::GpuTemporalPlan::passes`:
 //
 //   t_cells → t_taps → t_thresholds → t_accumulate → (FLR's passes) → t_resolve
@@ -16,12 +16,13 @@
 // t_resolve   per pixel: the previous output through the accepted taps,
 //             clipped to the fit's 3×3 YCoCg box, blended with the fit
 //
-// The history buffer has the CPU's layout (`Reprojection::history_len`): two
-// slots, each the records of every row (field f of pixel x in row y at
+// The history is the CPU's (`Reprojection::history_len`), bound as its two
+// slots: `hist_in`, the slot the previous frame wrote, and `hist_out`, the
+// slot this frame writes (the executor swaps them each frame). A slot holds
+// the records of every row (field f of pixel x in row y at
 // (y · record + f) · width + x: light 3, history length 1, output 3, the
 // rejection guides) and then, per band of 8 rows, the largest luminance the
-// clamp kept in each cell and each cell's neighbourhood mean. A frame reads
-// the slot `read_off` and writes the slot `write_off`.
+// clamp kept in each cell and each cell's neighbourhood mean.
 
 const NONE: u32 = 0xffffffffu;
 const CELL: u32 = 8u; // fireflies::CELL
@@ -43,10 +44,8 @@ struct Params {
     n_at: u32,
     p_at: u32,
     d_at: u32,
-    // element offsets of the slot read and the slot written; the offset of
-    // the cells within a slot; 1 when the read slot holds a previous frame
-    read_off: u32,
-    write_off: u32,
+    // the element offset of the cells within a slot; 1 when `hist_in` holds
+    // a previous frame
     cells_at: u32,
     has_history: u32,
     // element offsets in `guides` of the normal's x plane, the position's x
@@ -70,6 +69,8 @@ struct Params {
     max_motion: f32,
     pad0: u32,
     pad1: u32,
+    pad2: u32,
+    pad3: u32,
 }
 
 struct Counters {
@@ -84,17 +85,19 @@ struct Counters {
 @group(0) @binding(1) var<storage, read_write> light: array<f32>;
 // FLR's guide planes (f32)
 @group(0) @binding(2) var<storage, read> guides: array<f32>;
-// previous − current position, in pixels (2 planes)
-@group(0) @binding(3) var<storage, read> motion: array<f32>;
-@group(0) @binding(4) var<storage, read_write> history: array<f32>;
+// the history slot the previous frame wrote
+@group(0) @binding(3) var<storage, read> hist_in: array<f32>;
 // per band and cell: sum, count, largest luminance; then per band and cell the
-// threshold; then the reprojected previous output (3 planes, NaN: none)
-@group(0) @binding(5) var<storage, read_write> work: array<f32>;
-@group(0) @binding(6) var<storage, read_write> counters: Counters;
+// threshold; then the reprojected previous output (3 planes, NaN: none); then
+// the motion, previous − current position in pixels (2 planes, uploaded)
+@group(0) @binding(4) var<storage, read_write> work: array<f32>;
+@group(0) @binding(5) var<storage, read_write> counters: Counters;
 // FLR's output (RGB planes)
-@group(0) @binding(7) var<storage, read> fitted: array<f32>;
+@group(0) @binding(6) var<storage, read> fitted: array<f32>;
 // the stage's output (RGB planes)
-@group(0) @binding(8) var<storage, read_write> output: array<f32>;
+@group(0) @binding(7) var<storage, read_write> output: array<f32>;
+// the history slot this frame writes
+@group(0) @binding(8) var<storage, read_write> hist_out: array<f32>;
 
 // Finite test on the bits: immune to compilers that assume no NaN.
 fn finite(v: f32) -> bool {
@@ -132,9 +135,9 @@ fn guide(base: u32, c: u32, i: u32) -> f32 {
     return guides[base + c * plane() + i];
 }
 
-// Field `f` of pixel (x, y)'s record in the slot at `slot`.
-fn rec(slot: u32, f: u32, x: u32, y: u32) -> u32 {
-    return slot + (y * P.record + f) * P.width + x;
+// Field `f` of pixel (x, y)'s record in a slot.
+fn rec(f: u32, x: u32, y: u32) -> u32 {
+    return (y * P.record + f) * P.width + x;
 }
 
 fn thresholds_at() -> u32 {
@@ -143,6 +146,10 @@ fn thresholds_at() -> u32 {
 
 fn prev_out_at() -> u32 {
     return 4u * P.nc * P.bands;
+}
+
+fn motion_at() -> u32 {
+    return prev_out_at() + 3u * plane();
 }
 
 // The camera-cut test (`Reprojection::is_cut`), after t_taps.
@@ -208,8 +215,8 @@ struct Taps {
 
 fn motion_ok(x: u32, y: u32) -> bool {
     let i = y * P.width + x;
-    let mx = motion[i];
-    let my = motion[plane() + i];
+    let mx = work[motion_at() + i];
+    let my = work[motion_at() + plane() + i];
     // false for NaN (compared on the bits' magnitude: no NaN assumptions)
     return finite(mx) && finite(my) && abs(mx) <= P.max_motion && abs(my) <= P.max_motion;
 }
@@ -224,14 +231,13 @@ fn tap_ok(tx: i32, ty: i32, wt: f32, x: u32, y: u32) -> bool {
     }
     let ux = u32(tx);
     let uy = u32(ty);
-    let s = P.read_off;
     var ok = true;
     if P.g_normal != NONE {
         let a = vec3<f32>(cur_guide(P.g_normal, 0u, x, y), cur_guide(P.g_normal, 1u, x, y), cur_guide(P.g_normal, 2u, x, y));
         let b = vec3<f32>(
-            history[rec(s, P.n_at, ux, uy)],
-            history[rec(s, P.n_at + 1u, ux, uy)],
-            history[rec(s, P.n_at + 2u, ux, uy)],
+            hist_in[rec(P.n_at, ux, uy)],
+            hist_in[rec(P.n_at + 1u, ux, uy)],
+            hist_in[rec(P.n_at + 2u, ux, uy)],
         );
         let d = a.x * b.x + a.y * b.y + a.z * b.z;
         let empty = all(a == vec3<f32>(0.0)) && all(b == vec3<f32>(0.0));
@@ -245,24 +251,24 @@ fn tap_ok(tx: i32, ty: i32, wt: f32, x: u32, y: u32) -> bool {
         let plim = P.position_limit * depth;
         var d2 = 0.0;
         for (var c = 0u; c < 3u; c++) {
-            let e = history[rec(s, P.p_at + c, ux, uy)] - cur_guide(P.g_position, c, x, y);
+            let e = hist_in[rec(P.p_at + c, ux, uy)] - cur_guide(P.g_position, c, x, y);
             d2 += e * e;
         }
         ok = ok && d2 <= plim * plim;
     } else if P.g_depth != NONE {
         let d = cur_guide(P.g_depth, 0u, x, y);
-        ok = ok && abs(history[rec(s, P.d_at, ux, uy)] - d) <= P.depth_limit * abs(d);
+        ok = ok && abs(hist_in[rec(P.d_at, ux, uy)] - d) <= P.depth_limit * abs(d);
     }
-    let pl = vec3<f32>(history[rec(s, LIGHT, ux, uy)], history[rec(s, LIGHT + 1u, ux, uy)], history[rec(s, LIGHT + 2u, ux, uy)]);
-    let pn = history[rec(s, COUNT, ux, uy)];
+    let pl = vec3<f32>(hist_in[rec(LIGHT, ux, uy)], hist_in[rec(LIGHT + 1u, ux, uy)], hist_in[rec(LIGHT + 2u, ux, uy)]);
+    let pn = hist_in[rec(COUNT, ux, uy)];
     return ok && finite(pl.x) && finite(pl.y) && finite(pl.z) && finite(pn) && pn >= 0.0;
 }
 
 // The 4 taps of (x, y) (`reproject::bilinear_taps`), those rejected at weight 0.
 fn taps(x: u32, y: u32) -> Taps {
     let i = y * P.width + x;
-    let px = f32(x) + motion[i];
-    let py = f32(y) + motion[plane() + i];
+    let px = f32(x) + work[motion_at() + i];
+    let py = f32(y) + work[motion_at() + plane() + i];
     let fx = floor(px);
     let fy = floor(py);
     let ax = px - fx;
@@ -320,11 +326,11 @@ fn t_thresholds(@builtin(global_invocation_id) gid: vec3<u32>) {
     if i >= P.nc || band >= P.bands {
         return;
     }
-    let out_cells = P.write_off + P.cells_at + 2u * band * P.nc;
+    let out_cells = P.cells_at + 2u * band * P.nc;
     if P.fireflies == 0.0 {
         // no clamp, no cap for the next frame
-        history[out_cells + i] = inf();
-        history[out_cells + P.nc + i] = inf();
+        hist_out[out_cells + i] = inf();
+        hist_out[out_cells + P.nc + i] = inf();
         work[thresholds_at() + band * P.nc + i] = inf();
         return;
     }
@@ -358,15 +364,15 @@ fn t_thresholds(@builtin(global_invocation_id) gid: vec3<u32>) {
     var cap = inf();
     var before = inf();
     if P.has_history != 0u && !is_cut() && P.firefly_history > 0.0 {
-        let prev = P.read_off + P.cells_at + 2u * band * P.nc;
+        let in_cells = P.cells_at + 2u * band * P.nc;
         let lo = select(0u, i - REACH, i >= REACH);
         let hi = min(i + REACH + 1u, P.nc);
         var near = 0.0;
         for (var j = lo; j < hi; j++) {
-            near = max(near, history[prev + j]);
+            near = max(near, hist_in[in_cells + j]);
         }
         cap = P.firefly_history * near;
-        before = history[prev + P.nc + i];
+        before = hist_in[in_cells + P.nc + i];
     }
     let brighter = mean > before;
     var limit = select(cap, cap * (mean / before), brighter);
@@ -378,8 +384,8 @@ fn t_thresholds(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let t = P.fireflies * max(min(best.z, limit), mean);
     let own = cell(band, i32(i)).z;
-    history[out_cells + P.nc + i] = mean;
-    history[out_cells + i] = min(own, t);
+    hist_out[out_cells + P.nc + i] = mean;
+    hist_out[out_cells + i] = min(own, t);
     work[thresholds_at() + band * P.nc + i] = select(t, inf(), own <= t && own < LUMA_CAP);
 }
 
@@ -415,20 +421,19 @@ fn t_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     if !cur_ok {
         atomicAdd(&counters.nonfinite, 1u);
     }
-    let w_slot = P.write_off;
     // the current guides into the record
     if P.g_normal != NONE {
         for (var c = 0u; c < 3u; c++) {
-            history[rec(w_slot, P.n_at + c, x, y)] = guide(P.g_normal, c, i);
+            hist_out[rec(P.n_at + c, x, y)] = guide(P.g_normal, c, i);
         }
     }
     if P.g_position != NONE {
         for (var c = 0u; c < 3u; c++) {
-            history[rec(w_slot, P.p_at + c, x, y)] = guide(P.g_position, c, i);
+            hist_out[rec(P.p_at + c, x, y)] = guide(P.g_position, c, i);
         }
     }
     if P.g_depth != NONE {
-        history[rec(w_slot, P.d_at, x, y)] = guide(P.g_depth, 0u, i);
+        hist_out[rec(P.d_at, x, y)] = guide(P.g_depth, 0u, i);
     }
     var tw = 0.0;
     var hn = 0.0;
@@ -437,18 +442,17 @@ fn t_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     var po = vec3<f32>(0.0);
     if P.has_history != 0u && !is_cut() && motion_ok(x, y) {
         let t = taps(x, y);
-        let s = P.read_off;
-        for (var k = 0u; k < 4u; k++) {
+            for (var k = 0u; k < 4u; k++) {
             let wt = t.w[k];
             if wt > 0.0 {
                 let tx = u32(t.x0 + i32(k & 1u));
                 let ty = u32(t.y0 + i32(k >> 1u));
                 tw += wt;
-                hn += wt * history[rec(s, COUNT, tx, ty)];
+                hn += wt * hist_in[rec(COUNT, tx, ty)];
                 for (var c = 0u; c < 3u; c++) {
-                    prev[c] += wt * history[rec(s, LIGHT + c, tx, ty)];
+                    prev[c] += wt * hist_in[rec(LIGHT + c, tx, ty)];
                 }
-                let o = vec3<f32>(history[rec(s, OUTPUT, tx, ty)], history[rec(s, OUTPUT + 1u, tx, ty)], history[rec(s, OUTPUT + 2u, tx, ty)]);
+                let o = vec3<f32>(hist_in[rec(OUTPUT, tx, ty)], hist_in[rec(OUTPUT + 1u, tx, ty)], hist_in[rec(OUTPUT + 2u, tx, ty)]);
                 if finite(o.x) && finite(o.y) && finite(o.z) {
                     ow += wt;
                     po += wt * o;
@@ -476,10 +480,10 @@ fn t_accumulate(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     for (var c = 0u; c < 3u; c++) {
-        history[rec(w_slot, LIGHT + c, x, y)] = acc[c];
+        hist_out[rec(LIGHT + c, x, y)] = acc[c];
         light[c * n + i] = acc[c];
     }
-    history[rec(w_slot, COUNT, x, y)] = count;
+    hist_out[rec(COUNT, x, y)] = count;
     var pv = vec3<f32>(nan());
     if ow > 0.0 {
         pv = po * (1.0 / ow);
@@ -550,7 +554,7 @@ fn t_resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
             let v = select(lo, p[c], p[c] >= lo);
             clipped[c] = select(hi, v, v <= hi);
         }
-        let hn = history[rec(P.write_off, COUNT, x, y)];
+        let hn = hist_out[rec(COUNT, x, y)];
         var a = 1.0;
         if hn > 0.0 {
             a = min(max(1.0 / hn, P.output_alpha), 1.0);
@@ -566,7 +570,7 @@ fn t_resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
         if !finite(v) {
             v = 0.0;
         }
-        history[rec(P.write_off, OUTPUT + c, x, y)] = v;
+        hist_out[rec(OUTPUT + c, x, y)] = v;
         output[c * n + i] = v;
     }
 }
