@@ -470,6 +470,19 @@ int main(int argc, char **argv) {
         printf(" %s %ux%u", gpu.passes[i].entry, gpu.passes[i].workgroups[0], gpu.passes[i].workgroups[1]);
     printf("; output buffer %llu bytes\n", (unsigned long long)gpu.buffer_bytes[7]);
 
+    /* Temporal FLR on the GPU: the stage's passes around FLR's, the history on the device. */
+    LrdTemporalConfig tgc = lrd_temporal_config_default();
+    LrdGpuTemporalDispatch tgpu;
+    CHECK(lrd_gpu_temporal_dispatch(&cfg, &tgc, W, H, &tgpu));
+    printf("GPU temporal: %zu bytes of WGSL; %s .. %s, FLR's %u passes, %s; two history slots of %llu bytes\n",
+           strlen(lrd_gpu_temporal_wgsl()), tgpu.before[0].entry, tgpu.before[3].entry, tgpu.flr.pass_count,
+           tgpu.after.entry, (unsigned long long)tgpu.buffer_bytes[3]);
+    {
+        size_t tsb = 0, thb = 0;
+        CHECK(lrd_flr_temporal_sizes(&cfg, &tgc, W, H, &tsb, &thb));
+        if (2 * tgpu.buffer_bytes[3] != thb) return 9; /* the slots are the CPU history */
+    }
+
     if (argc > 1) {
         FILE *f = fopen(argv[1], "wb");
         if (!f || fwrite(whole, sizeof(float), 3 * W * H, f) != 3 * W * H) return 5;

@@ -890,6 +890,70 @@ typedef struct LrdGpuDispatch {
   uint8_t params[1424];
 } LrdGpuDispatch;
 
+/**
+ * How to run temporal FLR's compute shaders (FLR's, and the temporal stage's
+ * module `lrd_gpu_temporal_wgsl`) for one frame size, with the history on
+ * the device. Each frame:
+ * 1. upload the noisy light, the guides (as for `flr`) and the motion (x
+ *    then y plane, f32, previous minus current pixel position; zeros for a
+ *    static camera) into buffer 4 at `motion_offset`;
+ * 2. upload `params_first` for the first frame of a sequence (or after a
+ *    cut the caller knows of), `params` otherwise;
+ * 3. bind the history's two slot buffers (`buffer_bytes[3]` bytes each): a
+ *    frame after an even number of frames (0, 2, …) reads slot 1 as binding 3
+ *    and writes slot 0 as binding 8, the next the other way round;
+ * 4. dispatch `before`, then `flr.passes`, then `after`, with a storage
+ *    barrier between dispatches;
+ * 5. read buffer 7, the output (R, G, B f32 planes), and for the counts
+ *    buffer 5: four u32, pixels without history, invalid motion vectors,
+ *    NaN/Inf samples, clamped fireflies; a frame with history is a camera
+ *    cut (its history restarted) when the first exceeds `cut_limit`.
+ *
+ * The stage's bind group, binding `i` = `buffer_bytes[i]`: 0 the uniform
+ * parameter block, 1 the light (FLR's noisy buffer, binding 1 of `flr`,
+ * overwritten with the accumulated light), 2 the guides (FLR's guide buffer),
+ * 3 the history slot read (read-only storage), 4 work, 5 counters, 6 FLR's
+ * output (binding 7 of `flr`), 7 the stage's output, 8 the history slot
+ * written. The slots, slot 0 then slot 1, are the CPU history
+ * (`lrd_flr_denoise_temporal`'s `LrdHistory.data`) of the same configs and
+ * size, so a sequence can move between the two paths.
+ */
+typedef struct LrdGpuTemporalDispatch {
+  /**
+   * FLR's dispatch for the accumulated light: `config` with the firefly
+   * clamp off (the stage clamps the light), f32 planar inputs.
+   */
+  struct LrdGpuDispatch flr;
+  /**
+   * The stage's passes before FLR's: `t_cells`, `t_taps`, `t_thresholds`, `t_accumulate`.
+   */
+  struct LrdGpuPass before[4];
+  /**
+   * The stage's pass after FLR's: `t_resolve`.
+   */
+  struct LrdGpuPass after;
+  /**
+   * Minimum size of each buffer of the stage's bind group in bytes, in binding order.
+   */
+  uint64_t buffer_bytes[9];
+  /**
+   * Byte offset of the motion planes in buffer 4.
+   */
+  uint64_t motion_offset;
+  /**
+   * A frame with history and more pixels without history than this is a camera cut.
+   */
+  uint32_t cut_limit;
+  /**
+   * The parameter block (binding 0) of a sequence's first frame: upload unchanged.
+   */
+  uint8_t params_first[112];
+  /**
+   * The parameter block of every later frame.
+   */
+  uint8_t params[112];
+} LrdGpuTemporalDispatch;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -1229,6 +1293,23 @@ LrdStatus lrd_gpu_dispatch(const struct LrdFlrConfig *config,
  * FLR's WGSL shader module (static, NUL-terminated).
  */
 const char *lrd_gpu_wgsl(void);
+
+/**
+ * Fills `out` with the GPU dispatch description of temporal FLR with
+ * `config` and `temporal` for `width`×`height` frames. `config->upsample`
+ * must be 1 and `temporal->rejection_guides` 0 (the GPU stage judges history
+ * by FLR's own normal, position and depth): LRD_STATUS_UNSUPPORTED otherwise.
+ */
+LrdStatus lrd_gpu_temporal_dispatch(const struct LrdFlrConfig *config,
+                                    const struct LrdTemporalConfig *temporal,
+                                    uint32_t width,
+                                    uint32_t height,
+                                    struct LrdGpuTemporalDispatch *out);
+
+/**
+ * The temporal stage's WGSL shader module (static, NUL-terminated).
+ */
+const char *lrd_gpu_temporal_wgsl(void);
 
 /**
  * The library version, e.g. "0.1.0" (static, NUL-terminated).

@@ -195,6 +195,56 @@ fn entry_points_validate_everything() {
 }
 
 #[test]
+fn gpu_temporal_dispatch_description() {
+    use lrdenoise_core::temporal::gpu::{GpuTemporalPlan, TEMPORAL_WGSL};
+    let (cfg, t) = (lrd_flr_config_default(), lrd_temporal_config_default());
+    let mut d = std::mem::MaybeUninit::<LrdGpuTemporalDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_temporal_dispatch(&cfg, &t, 100, 70, d.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let d = unsafe { d.assume_init() };
+    let core = lrdenoise_core::FlrConfig::default();
+    let plan = GpuTemporalPlan::new(lrdenoise_core::temporal::TemporalConfig::default(), core.guides, 100, 70).unwrap();
+    let names = |p: &[LrdGpuPass]| p.iter().map(|p| unsafe { CStr::from_ptr(p.entry) }.to_str().unwrap().to_string()).collect::<Vec<_>>();
+    assert_eq!(names(&d.before), ["t_cells", "t_taps", "t_thresholds", "t_accumulate"]);
+    assert_eq!(names(&[d.after]), ["t_resolve"]);
+    assert_eq!(d.before.map(|p| p.workgroups), plan.passes_before().map(|p| p.workgroups));
+    assert_eq!(d.buffer_bytes, plan.buffers().map(|b| b.bytes));
+    assert_eq!(d.motion_offset, plan.motion_offset());
+    assert_eq!(&d.params_first[..], plan.params(0, core.fireflies, core.clamp_negative).unwrap().as_bytes());
+    assert_eq!(&d.params[..], plan.params(1, core.fireflies, core.clamp_negative).unwrap().as_bytes());
+    assert_eq!(d.cut_limit as usize, 100 * 70 / 2);
+    // FLR's part: the configuration without its clamp (the stage clamps), f32
+    let mut no_clamp = cfg;
+    no_clamp.fireflies = 0.0;
+    let mut f = std::mem::MaybeUninit::<LrdGpuDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_dispatch(&no_clamp, 100, 70, 0, f.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let f = unsafe { f.assume_init() };
+    assert_eq!((d.flr.pass_count, d.flr.buffer_bytes, d.flr.params), (f.pass_count, f.buffer_bytes, f.params));
+    // the slots, slot 0 then slot 1, are the CPU history
+    let (mut scratch, mut history) = (0usize, 0usize);
+    assert_eq!(unsafe { lrd_flr_temporal_sizes(&cfg, &t, 100, 70, &mut scratch, &mut history) }, LrdStatus::LRD_STATUS_OK);
+    assert_eq!(2 * d.buffer_bytes[3] as usize, history);
+    assert_eq!(unsafe { CStr::from_ptr(lrd_gpu_temporal_wgsl()) }.to_str().unwrap(), TEMPORAL_WGSL);
+    // refused
+    let mut out = std::mem::MaybeUninit::<LrdGpuTemporalDispatch>::zeroed();
+    let call = |c: *const LrdFlrConfig, t: *const LrdTemporalConfig, w: u32, o: *mut LrdGpuTemporalDispatch| unsafe {
+        lrd_gpu_temporal_dispatch(c, t, w, 70, o)
+    };
+    assert_eq!(call(null(), &t, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_NULL_POINTER);
+    assert_eq!(call(&cfg, null(), 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_NULL_POINTER);
+    assert_eq!(call(&cfg, &t, 100, null_mut()), LrdStatus::LRD_STATUS_NULL_POINTER);
+    assert_eq!(call(&cfg, &t, 0, out.as_mut_ptr()), LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+    let mut up = cfg;
+    up.upsample = 2;
+    assert_eq!(call(&up, &t, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+    let mut own = t;
+    own.rejection_guides = LRD_GUIDE_NORMAL;
+    assert_eq!(call(&cfg, &own, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+    let mut bad = t;
+    bad.max_history = 0.0;
+    assert_eq!(call(&cfg, &bad, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+}
+
+#[test]
 fn gpu_dispatch_description() {
     use lrdenoise_core::flr::gpu::{GpuLayouts, GpuPlan};
     let cfg = lrd_flr_config_default();
