@@ -19,6 +19,9 @@ use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not,
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
+/// Pixels ahead of a group whose history records it prefetches.
+const PREFETCH_AHEAD: usize = 64;
+
 /// The most pixels a group holds.
 pub(super) const MAX_LANES: usize = 8;
 
@@ -43,6 +46,11 @@ pub(super) trait Lane:
     fn iota() -> Self;
     /// `s[i..i + N]`.
     fn load(s: &[f32], i: usize) -> Option<Self>;
+    /// The `N` values from `p` (unaligned).
+    ///
+    /// # Safety
+    /// `p..p + N` must be in one readable slice of `f32`.
+    unsafe fn load_ptr(p: *const f32) -> Self;
     /// `s[i..i + N] = self`.
     fn store(self, s: &mut [f32], i: usize) -> Option<()>;
     fn first(self) -> f32;
@@ -91,6 +99,11 @@ impl Lane for Portable {
     #[inline(always)]
     fn load(s: &[f32], i: usize) -> Option<Self> {
         Some(Portable::from(<[f32; Self::N]>::try_from(s.get(i..i + Self::N)?).ok()?))
+    }
+    #[inline(always)]
+    unsafe fn load_ptr(p: *const f32) -> Self {
+        // SAFETY: the caller's contract; `Portable` is `N` f32 with no invalid bit patterns
+        unsafe { core::ptr::read_unaligned(p as *const Portable) }
     }
     #[inline(always)]
     fn store(self, s: &mut [f32], i: usize) -> Option<()> {
@@ -220,6 +233,27 @@ fn load3<L: Lane>(s: &[f32], i: usize, f: usize, w: usize) -> Option<[L; 3]> {
     Some([L::load(s, i + f * w)?, L::load(s, i + (f + 1) * w)?, L::load(s, i + (f + 2) * w)?])
 }
 
+/// `s[i..i + N]` without a bounds check.
+///
+/// # Safety
+/// `i + N ≤ s.len()`.
+#[inline(always)]
+unsafe fn tap<L: Lane>(s: &[f32], i: usize) -> L {
+    debug_assert!(i + L::N <= s.len());
+    // SAFETY: the caller's contract
+    unsafe { L::load_ptr(s.as_ptr().add(i)) }
+}
+
+/// [`tap`] of the fields at `i`, `i + w`, `i + 2w`.
+///
+/// # Safety
+/// `i + 2w + N ≤ s.len()`.
+#[inline(always)]
+unsafe fn tap3<L: Lane>(s: &[f32], i: usize, w: usize) -> [L; 3] {
+    // SAFETY: the caller's contract
+    unsafe { [tap(s, i), tap(s, i + w), tap(s, i + 2 * w)] }
+}
+
 /// `v` where `mask` is set, +0 elsewhere (a `select` against zero in one instruction).
 #[inline(always)]
 fn keep<L: Lane>(mask: L, v: L) -> L {
@@ -263,7 +297,21 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
     }
     let (bx, iy) = (bx as usize, iy as usize);
     let (ax, ay) = (px - fx, py - fyv);
-    let taps = [(bx, iy, (one - ax) * (one - ay)), (bx + 1, iy, ax * (one - ay)), (bx, iy + 1, (one - ax) * ay), (bx + 1, iy + 1, ax * ay)];
+    // (column, row below iy, weight) of the 4 taps
+    let taps = [(bx, 0, (one - ax) * (one - ay)), (bx + 1, 0, ax * (one - ay)), (bx, 1, (one - ax) * ay), (bx + 1, 1, ax * ay)];
+    // the previous records of rows iy and iy + 1, which every tap reads
+    let records = r.read.get(iy * w * rec..(iy + 2) * w * rec)?;
+    // row iy + 1 is new to this output row (row iy was the previous row's
+    // second): its fields some groups ahead, a stream each
+    if bx % 16 < L::N {
+        for f in 0..rec {
+            crate::image::prefetch(records, (rec + f) * w + bx + PREFETCH_AHEAD);
+        }
+    }
+    // SAFETY (each `tap`, `tap3` below): the fields read are fields of the
+    // record (`f + 2 < rec` for `tap3`: the guide fields are read only where
+    // the plan has them) and `tx + N ≤ bx + 1 + N ≤ w` (checked above), so
+    // `(dy · rec + f) · w + tx + N ≤ 2 · w · rec`, the length of `records`.
     let (n_at, p_at, d_at) = st.guide_fields();
     let zero = L::splat(0.0);
     let normal = if st.normal { load3(out_row, x, n_at, w)? } else { [zero; 3] };
@@ -273,22 +321,21 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
     let plim = L::splat(cfg.position_limit) * depth;
     let (mut tw, mut n, mut prev) = (zero, zero, [zero; 3]);
     let (mut ow, mut out) = (zero, [zero; 3]);
-    for (tx, ty, wt) in taps {
-        let j = ty * w * rec + tx;
+    for (tx, dy, wt) in taps {
         let mut ok = wt.gt(zero);
         if st.normal {
-            let b = load3(r.read, j, n_at, w)?;
+            let b = unsafe { tap3::<L>(records, (dy * rec + n_at) * w + tx, w) };
             let dot = normal[0] * b[0] + normal[1] * b[1] + normal[2] * b[2];
             ok &= dot.ge(L::splat(cfg.normal_limit)) | (empty(normal) & empty(b));
         }
         if st.position {
-            let p = load3::<L>(r.read, j, p_at, w)?;
+            let p = unsafe { tap3::<L>(records, (dy * rec + p_at) * w + tx, w) };
             let e = [p[0] - position[0], p[1] - position[1], p[2] - position[2]];
             ok &= (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).le(plim * plim);
         } else if st.depth {
-            ok &= (L::load(r.read, j + d_at * w)? - d).abs().le(L::splat(cfg.depth_limit) * d.abs());
+            ok &= (unsafe { tap::<L>(records, (dy * rec + d_at) * w + tx) } - d).abs().le(L::splat(cfg.depth_limit) * d.abs());
         }
-        let (pl, pn) = (load3::<L>(r.read, j, LIGHT, w)?, L::load(r.read, j + COUNT * w)?);
+        let (pl, pn) = unsafe { (tap3::<L>(records, (dy * rec + LIGHT) * w + tx, w), tap::<L>(records, (dy * rec + COUNT) * w + tx)) };
         ok &= finite([pl[0], pl[1], pl[2], pn]) & pn.ge(zero);
         // a rejected tap adds +0, which leaves these sums (never -0) as they are
         tw += keep(ok, wt);
@@ -296,7 +343,7 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
         for ch in 0..3 {
             prev[ch] += keep(ok, wt * pl[ch]);
         }
-        let po = load3::<L>(r.read, j, OUTPUT, w)?;
+        let po = unsafe { tap3::<L>(records, (dy * rec + OUTPUT) * w + tx, w) };
         let ok = ok & finite(po);
         ow += keep(ok, wt);
         for ch in 0..3 {

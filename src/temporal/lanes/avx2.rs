@@ -106,6 +106,11 @@ impl Lane for Avx {
         Some(Avx(unsafe { _mm256_loadu_ps(s.as_ptr()) }))
     }
     #[inline(always)]
+    unsafe fn load_ptr(p: *const f32) -> Self {
+        // SAFETY: the caller's contract (8 readable f32 from `p`); unaligned load
+        Avx(unsafe { _mm256_loadu_ps(p) })
+    }
+    #[inline(always)]
     fn store(self, s: &mut [f32], i: usize) -> Option<()> {
         let s = s.get_mut(i..i + 8)?;
         unsafe { _mm256_storeu_ps(s.as_mut_ptr(), self.0) };
