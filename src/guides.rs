@@ -42,6 +42,13 @@ impl GuideSet {
         3 * self.normal as usize + self.depth as usize + 3 * self.position as usize + self.ao as usize + self.user as usize
     }
 
+    /// This set with the normal, position and depth of `other` added (the
+    /// guides a temporal frame carries: FLR's and those the stage judges
+    /// history by).
+    pub const fn with_geometry_of(self, other: GuideSet) -> GuideSet {
+        GuideSet { normal: self.normal | other.normal, position: self.position | other.position, depth: self.depth | other.depth, ..self }
+    }
+
     /// The AO channel's index among the `Q` guide channels (they come in the
     /// order normal, depth, position, AO, user), if AO is in the set.
     pub const fn ao_channel(&self) -> Option<usize> {

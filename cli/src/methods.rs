@@ -622,6 +622,19 @@ pub struct Built {
     pub min_bytes: Option<usize>,
 }
 
+/// The guides temporal FLR judges history taps by: FLR's, and world
+/// positions where the frames have them (they judge a tap by where it is,
+/// whatever the camera did); " rp" is added to `label` when positions are
+/// not among FLR's own.
+fn rejection_guides(cfg: &FlrConfig, inputs: &Inputs, label: &mut String) -> GuideSet {
+    let mut reject = cfg.guides;
+    reject.position |= inputs.missing(&GuideSet { position: true, ..GuideSet::NONE }).is_none();
+    if reject.position && !cfg.guides.position {
+        *label += " rp";
+    }
+    reject
+}
+
 /// Table label and flags of temporal FLR with `cfg` and `temporal`.
 fn temporal_label(cfg: &FlrConfig, temporal: &lrdenoise::temporal::TemporalConfig) -> (String, String) {
     let mut label = format!("{} temporal", label(cfg));
@@ -677,8 +690,11 @@ impl Method {
                 if a.history_weights {
                     return Err("flr-temporal --device gpu: --history-weights runs on the CPU only".into());
                 }
-                let (label, flags) = temporal_label(&cfg, &temporal);
-                let gpu = lrdenoise_gpu::GpuTemporalFlr::new(cfg, temporal, w, h).map_err(|e| format!("flr-temporal --device gpu: {e}"))?;
+                let (mut label, flags) = temporal_label(&cfg, &temporal);
+                let reject = rejection_guides(&cfg, inputs, &mut label);
+                let err = |e: lrdenoise_gpu::GpuError| format!("flr-temporal --device gpu: {e}");
+                let gpu =
+                    lrdenoise_gpu::GpuTemporalFlr::new(cfg, temporal, w, h).map_err(err)?.with_rejection_guides(reject).map_err(err)?;
                 let method = Method::FlrTemporalGpu { gpu: Box::new(gpu), saved: None };
                 Ok(Built { method, label: label + " gpu", flags: flags + " --device gpu", min_bytes: None })
             }
@@ -691,12 +707,7 @@ impl Method {
                     label += " hw";
                     flags += " --history-weights";
                 }
-                // history taps are judged by world position where the frames have it (camera-invariant)
-                let mut reject = cfg.guides;
-                reject.position |= inputs.missing(&GuideSet { position: true, ..GuideSet::NONE }).is_none();
-                if reject.position && !cfg.guides.position {
-                    label += " rp";
-                }
+                let reject = rejection_guides(&cfg, inputs, &mut label);
                 let runner = TemporalRunner::flr(cfg, temporal, a.history_weights, reject, w, h, threads)?;
                 let min_bytes = Some(temporal_bytes(w, h, cfg.guides.channels(), &runner));
                 Ok(Built { method: Method::Temporal(Box::new(runner)), label, flags, min_bytes })
@@ -791,7 +802,7 @@ impl Method {
                 gpu.denoise(&frame, &mut ov).map(|_| ()).map_err(|e| e.to_string())
             }
             Method::FlrTemporalGpu { gpu, .. } => {
-                let set = gpu.flr().plan().config().guides;
+                let set = gpu.frame_guides();
                 let err = |e: lrdenoise::Error| e.to_string();
                 let frame = lrdenoise::Frame::new(inputs.noisy_view().map_err(err)?, inputs.guides(&set).map_err(err)?);
                 let (w, h) = (inputs.w, inputs.h);

@@ -496,16 +496,7 @@ impl TemporalRunner {
         let set = match &self.pipeline {
             Pipeline::Bmfr(b) => b.config().guides,
             Pipeline::Walr(w) => w.config().guides,
-            Pipeline::Flr { plan, .. } => {
-                // FLR's guides and those the stage rejects history taps with
-                let (fit, reject) = (plan.flr().config().guides, plan.stage().rejection_guides());
-                GuideSet {
-                    normal: fit.normal | reject.normal,
-                    position: fit.position | reject.position,
-                    depth: fit.depth | reject.depth,
-                    ..fit
-                }
-            }
+            Pipeline::Flr { plan, .. } => plan.frame_guides(),
         };
         let (w, h) = (inputs.w, inputs.h);
         let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;

@@ -407,17 +407,21 @@ fn gpu_device_matches_cpu() {
     assert!(mean < 1e-4, "adaptive: mean relative difference {mean:.2e}");
     let (ok, so, e) = lrd(&["bench", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
     assert!(ok && so.contains("GPU adapter") && so.contains("median") && so.contains("GPU time"), "{so}{e}");
-    // temporal FLR on the GPU: each frame of a sequence as on the CPU (both rejecting by position)
+    // temporal FLR on the GPU: each frame of a sequence as on the CPU, both
+    // rejecting by position (FLR fitted with it, or without it: then the
+    // positions are the stage's alone)
     let seq = data("seq_box_7");
     let g = ["--guides", "normal,depth,position,ao"];
-    let (cpu, gpu) = (tmp("seq_cpu"), tmp("seq_gpu"));
-    assert!(lrd(&[&["denoise-seq", &seq, "-o", cpu.to_str().unwrap()][..], &g].concat()).0);
-    let (ok, so, e) = lrd(&[&["denoise-seq", &seq, "-o", gpu.to_str().unwrap(), "--device", "gpu"][..], &g].concat());
-    assert!(ok && so.contains("6 frames"), "{so}{e}");
-    for i in 0..6 {
-        let name = format!("frame_{i:04}.exr");
-        let mean = rel_diff(&denoised(&cpu.join(&name)), &denoised(&gpu.join(&name)));
-        assert!(mean < 2e-4, "temporal {name}: mean relative difference {mean:.2e}");
+    for (tag, guides) in [("fit", &g[..]), ("reject", &[][..])] {
+        let (cpu, gpu) = (tmp(&format!("seq_cpu_{tag}")), tmp(&format!("seq_gpu_{tag}")));
+        assert!(lrd(&[&["denoise-seq", &seq, "-o", cpu.to_str().unwrap()][..], guides].concat()).0);
+        let (ok, so, e) = lrd(&[&["denoise-seq", &seq, "-o", gpu.to_str().unwrap(), "--device", "gpu"][..], guides].concat());
+        assert!(ok && so.contains("6 frames"), "{so}{e}");
+        for i in 0..6 {
+            let name = format!("frame_{i:04}.exr");
+            let mean = rel_diff(&denoised(&cpu.join(&name)), &denoised(&gpu.join(&name)));
+            assert!(mean < 2e-4, "temporal ({tag}) {name}: mean relative difference {mean:.2e}");
+        }
     }
     // `eval` repeats each frame (--runs) from the saved history: the GPU's table is the CPU's
     let table = |dev: &str| {
@@ -429,7 +433,8 @@ fn gpu_device_matches_cpu() {
     assert!(!cpu_rows.is_empty());
     assert_eq!(cpu_rows, table("gpu"));
     let (ok, so, e) = lrd(&["bench", "--method", "flr-temporal", "--device", "gpu", "--size", "64x48", "--runs", "5"]);
-    assert!(ok && so.contains("GPU adapter") && so.contains("temporal gpu") && so.contains("median"), "{so}{e}");
+    // the synthetic frame has positions: the GPU judges history by them, as the CPU does
+    assert!(ok && so.contains("GPU adapter") && so.contains("temporal rp gpu") && so.contains("median"), "{so}{e}");
 }
 
 /// `--sigma 6,12,20` is the adaptive window, and the default: labelled,

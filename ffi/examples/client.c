@@ -481,6 +481,13 @@ int main(int argc, char **argv) {
         size_t tsb = 0, thb = 0;
         CHECK(lrd_flr_temporal_sizes(&cfg, &tgc, W, H, &tsb, &thb));
         if (2 * tgpu.buffer_bytes[3] != thb) return 9; /* the slots are the CPU history */
+        /* history judged by world positions too: they go into the work buffer after the motion */
+        tgc.rejection_guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION;
+        CHECK(lrd_gpu_temporal_dispatch(&cfg, &tgc, W, H, &tgpu));
+        CHECK(lrd_flr_temporal_sizes(&cfg, &tgc, W, H, &tsb, &thb));
+        if (2 * tgpu.buffer_bytes[3] != thb || tgpu.work_guides[1] == UINT64_MAX) return 9;
+        printf("GPU temporal with positions: upload them at byte %llu of the work buffer\n",
+               (unsigned long long)tgpu.work_guides[1]);
     }
 
     if (argc > 1) {

@@ -896,7 +896,8 @@ typedef struct LrdGpuDispatch {
  * the device. Each frame:
  * 1. upload the noisy light, the guides (as for `flr`) and the motion (x
  *    then y plane, f32, previous minus current pixel position; zeros for a
- *    static camera) into buffer 4 at `motion_offset`;
+ *    static camera) into buffer 4 at `motion_offset`, and there too the
+ *    rejection guides FLR does not read (`work_guides`);
  * 2. upload `params_first` for the first frame of a sequence (or after a
  *    cut the caller knows of), `params` otherwise;
  * 3. bind the history's two slot buffers (`buffer_bytes[3]` bytes each): a
@@ -940,6 +941,13 @@ typedef struct LrdGpuTemporalDispatch {
    * Byte offset of the motion planes in buffer 4.
    */
   uint64_t motion_offset;
+  /**
+   * Byte offsets in buffer 4 of the normal (x, y, z planes), the position
+   * (x, y, z planes) and the depth (one plane) when
+   * `temporal->rejection_guides` names them and `config->guides` does not
+   * (f32, `width · height` values a plane); UINT64_MAX: not uploaded.
+   */
+  uint64_t work_guides[3];
   /**
    * A frame with history and more pixels without history than this is a camera cut.
    */
@@ -1296,9 +1304,9 @@ const char *lrd_gpu_wgsl(void);
 
 /**
  * Fills `out` with the GPU dispatch description of temporal FLR with
- * `config` and `temporal` for `width`×`height` frames. `config->upsample`
- * must be 1 and `temporal->rejection_guides` 0 (the GPU stage judges history
- * by FLR's own normal, position and depth): LRD_STATUS_UNSUPPORTED otherwise.
+ * `config` and `temporal` for `width`×`height` frames (`config->upsample`
+ * must be 1: LRD_STATUS_UNSUPPORTED otherwise). History taps are judged by
+ * `temporal->rejection_guides`, as in `lrd_flr_denoise_temporal`.
  */
 LrdStatus lrd_gpu_temporal_dispatch(const struct LrdFlrConfig *config,
                                     const struct LrdTemporalConfig *temporal,

@@ -124,7 +124,8 @@ pub extern "C" fn lrd_gpu_wgsl() -> *const c_char {
 /// the device. Each frame:
 /// 1. upload the noisy light, the guides (as for `flr`) and the motion (x
 ///    then y plane, f32, previous minus current pixel position; zeros for a
-///    static camera) into buffer 4 at `motion_offset`;
+///    static camera) into buffer 4 at `motion_offset`, and there too the
+///    rejection guides FLR does not read (`work_guides`);
 /// 2. upload `params_first` for the first frame of a sequence (or after a
 ///    cut the caller knows of), `params` otherwise;
 /// 3. bind the history's two slot buffers (`buffer_bytes[3]` bytes each): a
@@ -159,6 +160,11 @@ pub struct LrdGpuTemporalDispatch {
     pub buffer_bytes: [u64; 9],
     /// Byte offset of the motion planes in buffer 4.
     pub motion_offset: u64,
+    /// Byte offsets in buffer 4 of the normal (x, y, z planes), the position
+    /// (x, y, z planes) and the depth (one plane) when
+    /// `temporal->rejection_guides` names them and `config->guides` does not
+    /// (f32, `width · height` values a plane); UINT64_MAX: not uploaded.
+    pub work_guides: [u64; 3],
     /// A frame with history and more pixels without history than this is a camera cut.
     pub cut_limit: u32,
     /// The parameter block (binding 0) of a sequence's first frame: upload unchanged.
@@ -171,9 +177,9 @@ pub struct LrdGpuTemporalDispatch {
 const _: () = assert!(core::mem::size_of::<lrdenoise_core::temporal::gpu::GpuTemporalParams>() == 112);
 
 /// Fills `out` with the GPU dispatch description of temporal FLR with
-/// `config` and `temporal` for `width`×`height` frames. `config->upsample`
-/// must be 1 and `temporal->rejection_guides` 0 (the GPU stage judges history
-/// by FLR's own normal, position and depth): LRD_STATUS_UNSUPPORTED otherwise.
+/// `config` and `temporal` for `width`×`height` frames (`config->upsample`
+/// must be 1: LRD_STATUS_UNSUPPORTED otherwise). History taps are judged by
+/// `temporal->rejection_guides`, as in `lrd_flr_denoise_temporal`.
 #[cfg(feature = "flr")]
 #[no_mangle]
 pub unsafe extern "C" fn lrd_gpu_temporal_dispatch(
@@ -188,12 +194,13 @@ pub unsafe extern "C" fn lrd_gpu_temporal_dispatch(
     guard(|| {
         // SAFETY: checked for NULL; the caller passes a valid config pointer.
         let c = unsafe { config.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
-        let t = crate::temporal::temporal_config(temporal)?;
+        let (t, reject) = crate::temporal::temporal_config_and_rejection(temporal)?;
         let cfg = crate::flr::config(c)?;
         if cfg.upsample != 1 {
             return Err(LRD_STATUS_UNSUPPORTED);
         }
-        let plan = GpuTemporalPlan::new(t, cfg.guides, width as usize, height as usize).map_err(status_of)?;
+        let reject = reject.unwrap_or(cfg.guides);
+        let plan = GpuTemporalPlan::with_rejection_guides(t, cfg.guides, reject, width as usize, height as usize).map_err(status_of)?;
         let flr = flr_dispatch(lrdenoise_core::FlrConfig { fireflies: None, ..cfg }, width, height, InputFormat::F32)?;
         let pass = |p: lrdenoise_core::temporal::gpu::TemporalPass| LrdGpuPass { entry: p.entry.as_ptr(), workgroups: p.workgroups };
         let first = plan.params(0, cfg.fireflies, cfg.clamp_negative).map_err(status_of)?;
@@ -204,6 +211,7 @@ pub unsafe extern "C" fn lrd_gpu_temporal_dispatch(
             after: pass(plan.pass_after()),
             buffer_bytes: plan.buffers().map(|b| b.bytes),
             motion_offset: plan.motion_offset(),
+            work_guides: plan.work_guides().map(|o| o.unwrap_or(u64::MAX)),
             cut_limit: later.cut_limit,
             params_first: [0; 112],
             params: [0; 112],

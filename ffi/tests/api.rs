@@ -212,6 +212,7 @@ fn gpu_temporal_dispatch_description() {
     assert_eq!(&d.params_first[..], plan.params(0, core.fireflies, core.clamp_negative).unwrap().as_bytes());
     assert_eq!(&d.params[..], plan.params(1, core.fireflies, core.clamp_negative).unwrap().as_bytes());
     assert_eq!(d.cut_limit as usize, 100 * 70 / 2);
+    assert_eq!(d.work_guides, [u64::MAX; 3], "FLR's guides judge the history");
     // FLR's part: the configuration without its clamp (the stage clamps), f32
     let mut no_clamp = cfg;
     no_clamp.fireflies = 0.0;
@@ -236,12 +237,37 @@ fn gpu_temporal_dispatch_description() {
     let mut up = cfg;
     up.upsample = 2;
     assert_eq!(call(&up, &t, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_UNSUPPORTED);
-    let mut own = t;
-    own.rejection_guides = LRD_GUIDE_NORMAL;
-    assert_eq!(call(&cfg, &own, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_UNSUPPORTED);
+    let mut bad = t;
+    bad.rejection_guides = LRD_GUIDE_AO;
+    assert_eq!(call(&cfg, &bad, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
     let mut bad = t;
     bad.max_history = 0.0;
     assert_eq!(call(&cfg, &bad, 100, out.as_mut_ptr()), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+}
+
+/// Rejection guides beyond FLR's: the planes FLR does not read go into the
+/// work buffer, and the slots are still the CPU history of the same configs.
+#[test]
+fn gpu_temporal_dispatch_with_rejection_guides() {
+    use lrdenoise_core::temporal::gpu::GpuTemporalPlan;
+    use lrdenoise_core::GuideSet;
+    let (cfg, mut t) = (lrd_flr_config_default(), lrd_temporal_config_default());
+    t.rejection_guides = LRD_GUIDE_NORMAL | LRD_GUIDE_DEPTH | LRD_GUIDE_POSITION;
+    let mut d = std::mem::MaybeUninit::<LrdGpuTemporalDispatch>::zeroed();
+    assert_eq!(unsafe { lrd_gpu_temporal_dispatch(&cfg, &t, 100, 70, d.as_mut_ptr()) }, LrdStatus::LRD_STATUS_OK);
+    let d = unsafe { d.assume_init() };
+    let core = lrdenoise_core::FlrConfig::default();
+    let reject = GuideSet { position: true, ..core.guides };
+    let plan =
+        GpuTemporalPlan::with_rejection_guides(lrdenoise_core::temporal::TemporalConfig::default(), core.guides, reject, 100, 70).unwrap();
+    let positions = plan.work_guides()[1].unwrap();
+    assert_eq!(d.work_guides, [u64::MAX, positions, u64::MAX]);
+    assert_eq!(positions, d.motion_offset + 2 * 4 * 100 * 70, "after the motion");
+    assert_eq!(d.buffer_bytes, plan.buffers().map(|b| b.bytes));
+    assert_eq!(&d.params[..], plan.params(1, core.fireflies, core.clamp_negative).unwrap().as_bytes());
+    let (mut scratch, mut history) = (0usize, 0usize);
+    assert_eq!(unsafe { lrd_flr_temporal_sizes(&cfg, &t, 100, 70, &mut scratch, &mut history) }, LrdStatus::LRD_STATUS_OK);
+    assert_eq!(2 * d.buffer_bytes[3] as usize, history, "the CPU history with positions");
 }
 
 #[test]

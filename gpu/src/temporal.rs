@@ -6,7 +6,7 @@ use crate::{check_output, compute, GpuError, GpuFlr};
 use lrdenoise::flr::gpu::{Access, InputFormat};
 use lrdenoise::temporal::gpu::{GpuTemporalParams, GpuTemporalPlan, TemporalBuffer, COUNTERS_BYTES, TEMPORAL_WGSL};
 use lrdenoise::temporal::TemporalConfig;
-use lrdenoise::{Arg, Error, FlrConfig, Frame, ImageView, ImageViewMut, Report};
+use lrdenoise::{Arg, Error, FlrConfig, Frame, GuideSet, ImageView, ImageViewMut, Report};
 
 /// Temporal FLR ([`lrdenoise::flr::temporal::TemporalFlr`]) for one frame
 /// size on a wgpu device: the history lives on the device, one per
@@ -54,7 +54,7 @@ pub struct GpuTemporalFlr {
     counters: wgpu::Buffer,
     /// Frames in the history (its parity picks the slots, as on the CPU).
     frames: u32,
-    /// Host staging of the motion planes (reused).
+    /// Host staging of the motion planes and the work buffer's rejection guides (reused).
     staging: Vec<f32>,
 }
 
@@ -84,7 +84,27 @@ impl GpuTemporalFlr {
         let plan = GpuTemporalPlan::new(temporal, cfg.guides, width, height)?;
         plan.params(0, cfg.fireflies, cfg.clamp_negative)?; // refuses a bad clamp factor here, not at the first frame
         let flr_cfg = FlrConfig { fireflies: None, ..cfg };
-        let flr = GpuFlr::with_device(device.clone(), queue, adapter, flr_cfg, width, height, InputFormat::F32)?;
+        let flr = GpuFlr::with_device(device, queue, adapter, flr_cfg, width, height, InputFormat::F32)?;
+        Self::build(flr, plan, cfg.fireflies, cfg.clamp_negative)
+    }
+
+    /// The same executor with history taps judged by the normal, position and
+    /// depth of `guides` rather than FLR's own, as
+    /// [`TemporalFlr::with_rejection_guides`](lrdenoise::flr::temporal::TemporalFlr::with_rejection_guides)
+    /// on the CPU (world positions judge a tap by where it is, whatever the
+    /// camera did). The frames then carry FLR's guides and these; those FLR
+    /// does not read are uploaded next to the motion. The history restarts.
+    pub fn with_rejection_guides(self, guides: GuideSet) -> Result<Self, GpuError> {
+        let (w, h) = self.flr.plan().size();
+        let fit = self.flr.plan().config().guides;
+        let plan = GpuTemporalPlan::with_rejection_guides(*self.plan.stage().config(), fit, guides, w, h)?;
+        Self::build(self.flr, plan, self.fireflies, self.clamp_negative)
+    }
+
+    /// The stage's pipelines and buffers around `flr`.
+    fn build(flr: GpuFlr, plan: GpuTemporalPlan, fireflies: Option<f32>, clamp_negative: bool) -> Result<Self, GpuError> {
+        let device = flr.device.clone();
+        let (width, height) = flr.plan().size();
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("lrdenoise temporal"),
@@ -120,10 +140,11 @@ impl GpuTemporalFlr {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Device(e.to_string()));
         }
+        let work_planes = 2 + plan.work_guides().iter().zip([3, 3, 1]).map(|(g, n)| if g.is_some() { n } else { 0 }).sum::<usize>();
         Ok(GpuTemporalFlr {
             plan,
-            fireflies: cfg.fireflies,
-            clamp_negative: cfg.clamp_negative,
+            fireflies,
+            clamp_negative,
             pipelines,
             bind_groups,
             params: at(TemporalBuffer::Params),
@@ -132,7 +153,7 @@ impl GpuTemporalFlr {
             output: at(TemporalBuffer::Output),
             counters: at(TemporalBuffer::Counters),
             frames: 0,
-            staging: vec![0.0; 2 * width * height],
+            staging: vec![0.0; work_planes * width * height],
             flr,
         })
     }
@@ -140,6 +161,11 @@ impl GpuTemporalFlr {
     /// The dispatch description of the temporal stage this executor runs.
     pub fn plan(&self) -> &GpuTemporalPlan {
         &self.plan
+    }
+
+    /// The guides each frame carries: FLR's and the stage's rejection guides.
+    pub fn frame_guides(&self) -> GuideSet {
+        self.flr.plan().config().guides.with_geometry_of(self.plan.stage().rejection_guides())
     }
 
     /// The FLR executor inside (its adapter, its plan, its pass times).
@@ -229,16 +255,43 @@ impl GpuTemporalFlr {
                 if m.channel_count() < 2 {
                     return Err(Error::ChannelCount { arg: Arg::Motion, expected: 2, got: m.channel_count() }.into());
                 }
-                let (mx, my) = self.staging.split_at_mut(plane);
+                let (mx, rest) = self.staging.split_at_mut(plane);
+                let my = &mut rest[..plane];
                 for y in 0..h {
                     let row = y * w..(y + 1) * w;
                     m.read_row_n(y, 0, [&mut mx[row.clone()], &mut my[row]]).ok_or(Error::InvalidTile { index: y, count: h })?;
                 }
             }
-            None => self.staging.fill(0.0),
+            None => self.staging[..2 * plane].fill(0.0),
+        }
+        // the rejection guides FLR does not read, after the motion
+        let g = &frame.guides;
+        for ((at, view), channels) in self.plan.work_guides().into_iter().zip([g.normal, g.position, g.depth]).zip([3, 3, 1]) {
+            let Some(at) = at else { continue };
+            let v = view.ok_or(Error::GuideMismatch)?;
+            if (v.width(), v.height()) != (w, h) {
+                return Err(Error::SizeMismatch { arg: Arg::Guide, expected: (w, h), got: (v.width(), v.height()) }.into());
+            }
+            if v.channel_count() < channels {
+                return Err(Error::ChannelCount { arg: Arg::Guide, expected: channels, got: v.channel_count() }.into());
+            }
+            let first = (at - self.plan.motion_offset()) as usize / 4;
+            let planes = &mut self.staging[first..first + channels * plane];
+            for y in 0..h {
+                for c in 0..channels {
+                    let row = c * plane + y * w;
+                    v.read_row(y, c, 0, &mut planes[row..row + w]).ok_or(Error::InvalidTile { index: y, count: h })?;
+                }
+            }
         }
         let params: GpuTemporalParams = self.plan.params(self.frames, self.fireflies, self.clamp_negative)?;
-        self.flr.upload(frame)?;
+        // FLR reads its own guides only (the rejection guides beyond them are in the work buffer)
+        let fit_set = self.flr.plan().config().guides;
+        let mut fit = frame.guides;
+        fit.normal = fit.normal.filter(|_| fit_set.normal);
+        fit.position = fit.position.filter(|_| fit_set.position);
+        fit.depth = fit.depth.filter(|_| fit_set.depth);
+        self.flr.upload(&Frame { guides: fit, ..*frame })?;
         let queue = &self.flr.queue;
         queue.write_buffer(&self.work, self.plan.motion_offset(), bytemuck::cast_slice(&self.staging));
         queue.write_buffer(&self.params, 0, params.as_bytes());

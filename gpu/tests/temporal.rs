@@ -11,7 +11,7 @@
 mod common;
 use common::*;
 use lrdenoise::flr::temporal::TemporalFlr;
-use lrdenoise::temporal::gpu::{GpuTemporalParams, GpuTemporalPlan, TemporalBuffer, TEMPORAL_WGSL};
+use lrdenoise::temporal::gpu::{GpuTemporalParams, GpuTemporalPlan, TemporalBuffer, GUIDE_IN_WORK, TEMPORAL_WGSL};
 use lrdenoise::temporal::{History, TemporalConfig};
 use lrdenoise::*;
 use lrdenoise_gpu::{GpuError, GpuTemporalFlr};
@@ -95,9 +95,16 @@ fn rel_diff(gpu: &[f32], cpu: &[f32]) -> (f64, f64) {
 /// Runs `frames` frames on both paths (frame 5 on: a camera cut, every
 /// vector out of the frame) and compares each frame's output and counts.
 fn sequence(name: &str, cfg: FlrConfig, t: TemporalConfig, w: usize, h: usize, frames: usize) {
-    let set = cfg.guides;
-    let cpu = TemporalFlr::new(cfg, t, w, h).unwrap();
-    let mut g = gpu(cfg, t, w, h);
+    sequence_rejecting(name, cfg, cfg.guides, t, w, h, frames);
+}
+
+/// [`sequence`] with history taps judged by the guides of `reject`.
+fn sequence_rejecting(name: &str, cfg: FlrConfig, reject: GuideSet, t: TemporalConfig, w: usize, h: usize, frames: usize) {
+    let cpu = TemporalFlr::new(cfg, t, w, h).unwrap().with_rejection_guides(reject).unwrap();
+    let mut g = gpu(cfg, t, w, h).with_rejection_guides(reject).unwrap();
+    assert_eq!(g.history_len(), cpu.history_len());
+    let set = cpu.frame_guides();
+    assert_eq!(g.frame_guides(), set);
     let (mut hist, mut scratch, mut flr_scratch) =
         (vec![0f32; cpu.history_len()], vec![0f32; cpu.scratch_len()], vec![0f64; cpu.flr_scratch_len()]);
     let mut history = History::new(&mut hist);
@@ -213,6 +220,19 @@ fn positions_no_clamp_and_no_output_blend_match_the_cpu() {
     sequence("no rejection guides", one, TemporalConfig::default(), 9, 7, 6);
 }
 
+/// History judged by guides FLR does not fit with (uploaded into the work
+/// buffer): positions next to FLR's normal, depth and AO, as `lrd` runs
+/// frames that have them, and normal and depth under a fit on AO alone.
+#[test]
+#[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
+fn rejection_guides_beyond_flrs_match_the_cpu() {
+    let t = TemporalConfig::default();
+    let cfg = FlrConfig::with_guides(GuideSet::NORMAL_DEPTH_AO);
+    sequence_rejecting("positions beside FLR's", cfg, GuideSet { position: true, ..GuideSet::NORMAL_DEPTH_AO }, t, 61, 37, 7);
+    let ao = FlrConfig::with_guides(GuideSet { normal: false, depth: false, position: false, ao: true, user: 0 });
+    sequence_rejecting("normal and depth beside AO", ao, GuideSet::NORMAL_DEPTH, t, 33, 20, 6);
+}
+
 #[test]
 #[ignore = "needs a wgpu adapter (lavapipe: mesa-vulkan-drivers); run with --ignored, CI does"]
 fn bad_calls_are_refused() {
@@ -281,6 +301,37 @@ fn the_plan_mirrors_the_cpu_stage() {
     let bytes: Vec<u8> = [(w * h) as u32, 2, 0, 9].iter().flat_map(|v| v.to_le_bytes()).collect();
     let counts = plan.counts(&bytes, &p1);
     assert_eq!((counts.cut, counts.rejected, counts.invalid_motion, counts.clamped), (1, 0, 2, 9));
+    assert_eq!(plan.work_guides(), [None; 3], "every rejection guide is FLR's");
+}
+
+/// Rejection guides FLR does not read go into the work buffer after the
+/// motion, flagged in the parameter block; the history has the CPU's layout.
+#[test]
+fn rejection_guides_beyond_flrs_are_planned_in_the_work_buffer() {
+    let (w, h) = (33, 17);
+    let plane = (w * h) as u64;
+    let t = TemporalConfig::default();
+    let with_position = GuideSet { position: true, ..GuideSet::NORMAL_DEPTH_AO };
+    let plan = GpuTemporalPlan::with_rejection_guides(t, GuideSet::NORMAL_DEPTH_AO, with_position, w, h).unwrap();
+    let cpu = TemporalFlr::new(FlrConfig::with_guides(GuideSet::NORMAL_DEPTH_AO), t, w, h).unwrap();
+    let cpu = cpu.with_rejection_guides(with_position).unwrap();
+    assert_eq!(plan.stage().history_len(), cpu.history_len());
+    let mo = plan.motion_offset();
+    assert_eq!(plan.work_guides(), [None, Some(mo + 8 * plane), None]);
+    let p = plan.params(0, None, false).unwrap();
+    assert_eq!((p.g_normal, p.g_depth), (0, 3 * plane as u32), "FLR's own planes");
+    assert_eq!(p.g_position, GUIDE_IN_WORK | (mo / 4 + 2 * plane) as u32);
+    let fitted_alone = GpuTemporalPlan::new(t, GuideSet::NORMAL_DEPTH_AO, w, h).unwrap();
+    let work = |p: &GpuTemporalPlan| p.buffers()[TemporalBuffer::Work as usize].bytes;
+    assert_eq!(work(&plan), work(&fitted_alone) + 3 * 4 * plane, "three more planes");
+    assert!(mo + 4 * 5 * plane <= work(&plan), "motion and guides fit in the work buffer");
+    // a fit on AO alone: normal and depth both in the work buffer, in that order
+    let ao = GuideSet { normal: false, depth: false, position: false, ao: true, user: 0 };
+    let plan = GpuTemporalPlan::with_rejection_guides(t, ao, GuideSet::NORMAL_DEPTH, w, h).unwrap();
+    assert_eq!(plan.work_guides(), [Some(mo + 8 * plane), None, Some(mo + 20 * plane)]);
+    let p = plan.params(1, None, false).unwrap();
+    assert_eq!((p.g_normal & GUIDE_IN_WORK, p.g_position, p.g_depth & GUIDE_IN_WORK), (GUIDE_IN_WORK, u32::MAX, GUIDE_IN_WORK));
+    assert_eq!(plan.buffers()[TemporalBuffer::Guides as usize].bytes, 4 * plane, "FLR's AO plane");
 }
 
 /// The Rust parameter block has the WGSL `Params` layout: the same fields in

@@ -94,6 +94,10 @@ impl TemporalFlr {
         self.stage = Reprojection::new(*self.stage.config(), guides, w, h)?;
         Ok(self)
     }
+    /// The guides each frame carries: FLR's and the stage's rejection guides.
+    pub fn frame_guides(&self) -> GuideSet {
+        self.flr.config().guides.with_geometry_of(self.stage.rejection_guides())
+    }
     /// Whether the fit weighs pixels by their history length ([`TemporalFlr::with_history_weights`]).
     pub fn history_weights(&self) -> bool {
         self.history_weights

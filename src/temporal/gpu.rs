@@ -12,7 +12,8 @@
 //!    [`TemporalBuffer::Fitted`] are FLR's noisy, guide and output buffers,
 //!    and the history is two buffers of one slot each (below).
 //! 2. Each frame: upload the noisy light, the guides and the motion (into
-//!    the work buffer at [`GpuTemporalPlan::motion_offset`]); upload
+//!    the work buffer at [`GpuTemporalPlan::motion_offset`], followed by the
+//!    rejection guides FLR does not read, [`GpuTemporalPlan::work_guides`]); upload
 //!    [`GpuTemporalPlan::params`] for the frame index; bind the history slots
 //!    as [`GpuTemporalPlan::slots`] says (they swap each frame); dispatch
 //!    [`GpuTemporalPlan::passes_before`], FLR's passes, then
@@ -42,6 +43,10 @@ pub const TEMPORAL_WGSL: &str = include_str!("temporal.wgsl");
 /// "Absent" in the parameter block's offsets.
 const NONE: u32 = u32::MAX;
 
+/// Set in a parameter block's guide offset (`g_normal`, `g_position`,
+/// `g_depth`): the planes are in the work buffer, not in FLR's guide buffer.
+pub const GUIDE_IN_WORK: u32 = 1 << 31;
+
 /// The uniform parameter block (binding 0), laid out as the WGSL `Params`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -66,11 +71,12 @@ pub struct GpuTemporalParams {
     pub cells_at: u32,
     /// 1 when the read slot holds a previous frame.
     pub has_history: u32,
-    /// Element offset in the guide buffer of the normal's x plane (`u32::MAX`: absent).
+    /// Element offset of the normal's x plane: in the guide buffer, or with
+    /// [`GUIDE_IN_WORK`] set, in the work buffer (`u32::MAX`: absent).
     pub g_normal: u32,
-    /// Element offset of the position's x plane (`u32::MAX`: absent).
+    /// Element offset of the position's x plane, as `g_normal`.
     pub g_position: u32,
-    /// Element offset of the depth plane (`u32::MAX`: absent).
+    /// Element offset of the depth plane, as `g_normal`.
     pub g_depth: u32,
     /// 1: negative output becomes 0.
     pub clamp_negative: u32,
@@ -126,7 +132,8 @@ pub enum TemporalBuffer {
     HistoryIn,
     /// Working space of one frame; the motion, previous − current pixel
     /// position (2 f32 planes, zeros for a static camera), is uploaded into
-    /// it at [`GpuTemporalPlan::motion_offset`]. Read-write.
+    /// it at [`GpuTemporalPlan::motion_offset`], and the rejection guides FLR
+    /// does not read at [`GpuTemporalPlan::work_guides`]. Read-write.
     Work,
     /// Four u32 counters ([`GpuTemporalPlan::counts`]). Read-write.
     Counters,
@@ -170,29 +177,60 @@ impl TemporalPass {
 /// Bytes of the counters buffer.
 pub const COUNTERS_BYTES: u64 = 16;
 
+/// Where the stage reads one rejection guide.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Source {
+    /// FLR's guide buffer, from this channel on.
+    Flr(usize),
+    /// The work buffer, from this plane after the motion's two.
+    Work(usize),
+}
+
 /// How to run the temporal stage on a GPU for one frame size, configuration
 /// and guide set.
 #[derive(Clone, Copy, Debug)]
 pub struct GpuTemporalPlan {
     stage: Reprojection,
-    /// Guide-buffer channel of the normal's x, the position's x and the depth.
-    channels: [Option<usize>; 3],
+    /// Where the normal, the position and the depth are read.
+    sources: [Option<Source>; 3],
 }
 
 impl GpuTemporalPlan {
-    /// The plan for `width × height` frames whose guides are `guides` (the
-    /// stage rejects history with its normal, position and depth). Frames
-    /// whose history would not be addressable with 32-bit indices are refused.
+    /// The plan for `width × height` frames whose guides are `guides`, FLR's:
+    /// the stage rejects history with its normal, position and depth. Frames
+    /// whose history would not be addressable with 31-bit indices are refused.
     pub fn new(cfg: TemporalConfig, guides: GuideSet, width: usize, height: usize) -> Result<Self, Error> {
-        let stage = Reprojection::new(cfg, guides, width, height)?;
-        if stage.history_len() >= u32::MAX as usize || Self::work_len_of(&stage) >= u32::MAX as usize {
-            return Err(Error::Unsupported("the GPU temporal stage at this frame size (history beyond 32-bit indices)"));
-        }
+        Self::with_rejection_guides(cfg, guides, guides, width, height)
+    }
+
+    /// The plan for FLR fitted on `fit` and history taps judged by the normal,
+    /// position and depth of `reject` (as
+    /// [`TemporalFlr::with_rejection_guides`](crate::flr::temporal::TemporalFlr::with_rejection_guides)):
+    /// those FLR does not read are uploaded into the work buffer
+    /// ([`GpuTemporalPlan::work_guides`]).
+    pub fn with_rejection_guides(cfg: TemporalConfig, fit: GuideSet, reject: GuideSet, width: usize, height: usize) -> Result<Self, Error> {
+        let stage = Reprojection::new(cfg, reject, width, height)?;
         // FLR's channel order: normal (3), depth, position (3), AO, user channels
-        let normal = guides.normal.then_some(0);
-        let depth = guides.depth.then_some(3 * guides.normal as usize);
-        let position = guides.position.then_some(3 * guides.normal as usize + guides.depth as usize);
-        Ok(GpuTemporalPlan { stage, channels: [normal, position, depth] })
+        let in_flr = [(fit.normal, 0), (fit.position, 3 * fit.normal as usize + fit.depth as usize), (fit.depth, 3 * fit.normal as usize)];
+        let wanted = [reject.normal, reject.position, reject.depth];
+        let mut sources = [None; 3];
+        let mut extra = 0;
+        for (k, ((flr, channel), want)) in in_flr.into_iter().zip(wanted).enumerate() {
+            sources[k] = match (want, flr) {
+                (false, _) => None,
+                (true, true) => Some(Source::Flr(channel)),
+                (true, false) => {
+                    let at = extra;
+                    extra += [3, 3, 1][k];
+                    Some(Source::Work(at))
+                }
+            };
+        }
+        let plan = GpuTemporalPlan { stage, sources };
+        if plan.stage.history_len() >= GUIDE_IN_WORK as usize || plan.work_len() >= GUIDE_IN_WORK as usize {
+            return Err(Error::Unsupported("the GPU temporal stage at this frame size (history beyond 31-bit indices)"));
+        }
+        Ok(plan)
     }
 
     /// The CPU stage this plan mirrors (its history length, its counts).
@@ -200,9 +238,28 @@ impl GpuTemporalPlan {
         &self.stage
     }
 
-    fn work_len_of(stage: &Reprojection) -> usize {
-        let (w, h) = (stage.width, stage.height);
-        4 * fireflies::cells(w) * h.div_ceil(fireflies::CELL) + 5 * w * h
+    /// Planes of rejection guides in the work buffer.
+    fn work_guide_planes(&self) -> usize {
+        self.sources.iter().zip([3, 3, 1]).map(|(s, n)| if matches!(s, Some(Source::Work(_))) { n } else { 0 }).sum()
+    }
+
+    /// f32 values of the work buffer.
+    fn work_len(&self) -> usize {
+        let (w, h) = (self.stage.width, self.stage.height);
+        4 * fireflies::cells(w) * h.div_ceil(fireflies::CELL) + (5 + self.work_guide_planes()) * w * h
+    }
+
+    /// Byte offsets in [`TemporalBuffer::Work`] of the normal (3 planes:
+    /// x, y, z), the position (3 planes) and the depth (1 plane) where the
+    /// stage judges history by them and FLR does not read them (`None`: not
+    /// uploaded). They follow the motion's planes, in this order, so the
+    /// motion and these are one upload of consecutive planes.
+    pub fn work_guides(&self) -> [Option<u64>; 3] {
+        let plane = (self.stage.width * self.stage.height) as u64;
+        self.sources.map(|s| match s {
+            Some(Source::Work(p)) => Some(self.motion_offset() + 4 * plane * (2 + p as u64)),
+            _ => None,
+        })
     }
 
     /// Byte offset in [`TemporalBuffer::Work`] of the motion's two planes
@@ -216,14 +273,23 @@ impl GpuTemporalPlan {
     pub fn buffers(&self) -> [TemporalBufferDesc; 9] {
         use crate::flr::gpu::Access::*;
         let plane = (self.stage.width * self.stage.height) as u64;
-        let guides = self.channels.iter().zip([3u64, 3, 1]).filter_map(|(c, n)| c.map(|c| c as u64 + n)).max().unwrap_or(1);
+        let guides = self
+            .sources
+            .iter()
+            .zip([3u64, 3, 1])
+            .filter_map(|(s, n)| match s {
+                Some(Source::Flr(c)) => Some(*c as u64 + n),
+                _ => None,
+            })
+            .max()
+            .unwrap_or(1);
         let f = 4u64;
         let list = [
             (TemporalBuffer::Params, Uniform, core::mem::size_of::<GpuTemporalParams>() as u64),
             (TemporalBuffer::Light, ReadWriteStorage, 3 * plane * f),
             (TemporalBuffer::Guides, ReadOnlyStorage, guides * plane * f),
             (TemporalBuffer::HistoryIn, ReadOnlyStorage, self.stage.slot_len() as u64 * f),
-            (TemporalBuffer::Work, ReadWriteStorage, Self::work_len_of(&self.stage) as u64 * f),
+            (TemporalBuffer::Work, ReadWriteStorage, self.work_len() as u64 * f),
             (TemporalBuffer::Counters, ReadWriteStorage, COUNTERS_BYTES),
             (TemporalBuffer::Fitted, ReadOnlyStorage, 3 * plane * f),
             (TemporalBuffer::Output, ReadWriteStorage, 3 * plane * f),
@@ -286,7 +352,12 @@ impl GpuTemporalPlan {
         let (n_at, p_at, d_at) = s.guide_fields();
         let field = |on: bool, at: usize| if on { at as u32 } else { NONE };
         let plane = (w * h) as u32;
-        let offset = |c: Option<usize>| c.map_or(NONE, |c| c as u32 * plane);
+        let motion_at = (self.motion_offset() / 4) as u32;
+        let offset = |s: Option<Source>| match s {
+            None => NONE,
+            Some(Source::Flr(c)) => c as u32 * plane,
+            Some(Source::Work(p)) => GUIDE_IN_WORK | (motion_at + (2 + p as u32) * plane),
+        };
         Ok(GpuTemporalParams {
             width: w as u32,
             height: h as u32,
@@ -298,9 +369,9 @@ impl GpuTemporalPlan {
             d_at: field(s.depth, d_at),
             cells_at: (s.record() * s.plane()) as u32,
             has_history: (frames > 0) as u32,
-            g_normal: offset(self.channels[0]),
-            g_position: offset(self.channels[1]),
-            g_depth: offset(self.channels[2]),
+            g_normal: offset(self.sources[0]),
+            g_position: offset(self.sources[1]),
+            g_depth: offset(self.sources[2]),
             clamp_negative: clamp_negative as u32,
             fireflies: fireflies.unwrap_or(0.0),
             firefly_history: cfg.firefly_history,

@@ -25,6 +25,7 @@
 // clamp kept in each cell and each cell's neighbourhood mean.
 
 const NONE: u32 = 0xffffffffu;
+const GUIDE_IN_WORK: u32 = 0x80000000u; // gpu::GUIDE_IN_WORK
 const CELL: u32 = 8u; // fireflies::CELL
 const REACH: u32 = 6u; // fireflies::REACH
 const LUMA_CAP: f32 = 1e30; // fireflies::LUMA_CAP
@@ -48,8 +49,9 @@ struct Params {
     // a previous frame
     cells_at: u32,
     has_history: u32,
-    // element offsets in `guides` of the normal's x plane, the position's x
-    // plane and the depth plane (planes of width · height, NONE: absent)
+    // element offsets of the normal's x plane, the position's x plane and
+    // the depth plane (planes of width · height, NONE: absent): in `guides`,
+    // or with GUIDE_IN_WORK set, in `work` (rejection guides FLR does not read)
     g_normal: u32,
     g_position: u32,
     g_depth: u32,
@@ -132,6 +134,9 @@ fn light_at(x: u32, y: u32) -> vec3<f32> {
 }
 
 fn guide(base: u32, c: u32, i: u32) -> f32 {
+    if (base & GUIDE_IN_WORK) != 0u {
+        return work[(base & ~GUIDE_IN_WORK) + c * plane() + i];
+    }
     return guides[base + c * plane() + i];
 }
 
