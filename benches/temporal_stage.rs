@@ -4,8 +4,10 @@
 //! (every pixel reprojects through 4 taps), normal + depth, one thread; the
 //! pixel groups in `wide`'s lanes and in AVX2's (where the CPU has it)
 //! against the per-pixel reference, alternated; minimum and median of RUNS
-//! (default 15) each.
-//! `cargo bench --bench temporal_stage [-- WIDTH HEIGHT [RUNS]]`
+//! (default 15) each. Then both steps as temporal FLR runs them on one and
+//! on THREADS (default 2) workers (scoped std threads, each taking a
+//! contiguous group of bands, as in `stage_threads`), alternated.
+//! `cargo bench --bench temporal_stage [-- WIDTH HEIGHT [RUNS [THREADS]]]`
 use lrdenoise::temporal::{History, Inputs, Reprojection, TemporalConfig};
 use lrdenoise::*;
 use std::time::Instant;
@@ -72,4 +74,39 @@ fn main() {
         let ((amin, amed), (rmin, rmed)) = (stat(a), stat(r));
         println!("{name:>14}: step 1 {amin:.2} / {amed:.2}, step 3 {rmin:.2} / {rmed:.2}");
     }
+    let threads = a.get(3).copied().unwrap_or(2).max(2);
+    let mut scratch = vec![0f32; fast.parallel_scratch_len(threads).unwrap()];
+    let mut times = [(Vec::new(), Vec::new()), (Vec::new(), Vec::new())];
+    for _ in 0..runs {
+        for (i, workers) in [1, threads].into_iter().enumerate() {
+            let exec = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| run_groups(workers, n, f);
+            let mut history = History::resume(&mut hist, frames);
+            let t = Instant::now();
+            fast.accumulate_parallel(&inputs, &mut history, &mut scratch, workers, &exec).unwrap();
+            times[i].0.push(t.elapsed().as_secs_f64() * 1e3);
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            let t = Instant::now();
+            fast.resolve_parallel(&current, &mut history, &mut scratch, false, true, &mut ov, workers, &exec).unwrap();
+            times[i].1.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    println!("threads (the run-time lanes), {runs} runs: min / median ms");
+    for (workers, (a, r)) in [1, threads].into_iter().zip(times.iter_mut()) {
+        let ((amin, amed), (rmin, rmed)) = (stat(a), stat(r));
+        println!("{workers:>2} worker(s): step 1 {amin:.2} / {amed:.2}, step 3 {rmin:.2} / {rmed:.2}");
+    }
+}
+
+/// `f(i, worker)` for every `i < count`, `workers` scoped threads each taking a contiguous group.
+fn run_groups(workers: usize, count: usize, f: &(dyn Fn(usize, usize) + Sync)) {
+    if workers == 1 {
+        (0..count).for_each(|i| f(i, 0));
+        return;
+    }
+    let per = count.div_ceil(workers);
+    std::thread::scope(|s| {
+        for w in 0..workers {
+            s.spawn(move || (w * per..((w + 1) * per).min(count)).for_each(|i| f(i, w)));
+        }
+    });
 }

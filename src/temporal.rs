@@ -56,8 +56,10 @@ pub struct TemporalConfig {
     /// Smallest cosine between a history tap's normal and the current one (default 0.5, 60°).
     pub normal_limit: f32,
     /// Largest world-position distance of a history tap, as a fraction of the
-    /// camera distance when the frame has depth, in world units when it has
-    /// none (default 0.05).
+    /// camera distance (default 0.05): the depth where the frame has it, else
+    /// estimated from the pixel's footprint (the distance to its left or
+    /// right neighbour's position, for a 60° horizontal field of view), so
+    /// that a scene's unit does not matter.
     pub position_limit: f32,
     /// Without positions: largest relative depth difference (default 0.05).
     pub depth_limit: f32,
@@ -126,6 +128,37 @@ impl TemporalConfig {
 /// Largest motion, in frame sizes, that is taken as a motion vector; longer
 /// ones (and NaN/Inf) are counted as invalid and the pixel gets no history.
 const MAX_MOTION_FRAMES: f32 = 2.0;
+
+/// `2 tan 30°`: the width of a 60° field of view at distance 1
+/// ([`Reprojection::footprint_limit2`]).
+const TWO_TAN_30: f32 = 1.154_700_5;
+
+/// The squared pixel footprint of pixel `x` of a row whose record is `row`
+/// (fields `w` apart; the position's x, y, z at `p_at`): the smaller squared
+/// distance from its position to its left and right neighbours' (the one on
+/// the same surface, at an edge), of those that are finite; 0 without one,
+/// which keeps only taps at the very same position. The pixel groups compute
+/// the same in lanes, bit for bit.
+fn footprint2(row: &[f32], p_at: usize, w: usize, x: usize) -> f32 {
+    let p = |x: usize, c: usize| row[(p_at + c) * w + x];
+    let d2 = |n: usize| {
+        let e = [p(n, 0) - p(x, 0), p(n, 1) - p(x, 1), p(n, 2) - p(x, 2)];
+        let d = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+        if d.is_finite() {
+            d
+        } else {
+            f32::INFINITY
+        }
+    };
+    let left = if x > 0 { d2(x - 1) } else { f32::INFINITY };
+    let right = if x + 1 < w { d2(x + 1) } else { f32::INFINITY };
+    let m = left.min(right);
+    if m.is_finite() {
+        m
+    } else {
+        0.0
+    }
+}
 
 // The fields of a history slot: accumulated light (3), history length (1),
 // output (3), then the rejection guides (normal 3, position 3, depth 1:
@@ -691,6 +724,15 @@ impl Reprojection {
         let p_at = GUIDES + 3 * self.normal as usize;
         (GUIDES, p_at, p_at + 3 * self.position as usize)
     }
+    /// Without depth, the square of the position limit per squared pixel
+    /// footprint ([`footprint2`]): the camera distance is estimated as the
+    /// footprint times the frame's width over `2 tan 30°` (a 60° horizontal
+    /// field of view), and the limit is [`TemporalConfig::position_limit`]
+    /// of it, as with depth.
+    fn footprint_limit2(&self) -> f32 {
+        let k = self.cfg.position_limit * (self.width as f32 / TWO_TAN_30);
+        k * k
+    }
     /// Largest motion component taken as a motion vector, in pixels.
     fn max_motion(&self) -> f32 {
         MAX_MOTION_FRAMES * self.width.max(self.height) as f32
@@ -719,8 +761,15 @@ impl Reprojection {
         let (mut ow, mut out) = (0f32, [0f32; 3]);
         if r.has_history && motion_ok {
             let g = |f: usize| out_row[at(f)];
-            let depth = if self.depth { g(d_at).abs() } else { 1.0 };
-            let plim = cfg.position_limit * depth;
+            // the square of the largest position distance of a tap
+            let plim2 = if self.depth {
+                let plim = cfg.position_limit * g(d_at).abs();
+                plim * plim
+            } else if self.position {
+                self.footprint_limit2() * footprint2(out_row, p_at, w, x)
+            } else {
+                0.0
+            };
             for (tx, ty, wt) in bilinear_taps(px, py) {
                 if tx < 0 || ty < 0 || tx >= w as i64 || ty >= h as i64 || wt.is_nan() || wt <= 0.0 {
                     continue;
@@ -739,7 +788,7 @@ impl Reprojection {
                 }
                 if self.position {
                     let d2: f32 = (0..3).map(|c| (t(p_at + c) - g(p_at + c)) * (t(p_at + c) - g(p_at + c))).sum();
-                    ok &= d2 <= plim * plim;
+                    ok &= d2 <= plim2;
                 } else if self.depth {
                     let d = g(d_at);
                     ok &= (t(d_at) - d).abs() <= cfg.depth_limit * d.abs();

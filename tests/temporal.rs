@@ -258,6 +258,76 @@ fn positions_keep_the_history_of_a_camera_moving_closer() {
     assert!(matches!(run(with_positions, SET), Err(Error::GuideMismatch)));
 }
 
+/// Without depth, a tap's position is judged against the pixel's footprint
+/// (the distance to its neighbours' positions), so the scene's unit does not
+/// matter: a pan over a plane with a step and a block that moves away, its
+/// positions in units 1024 times larger or smaller, keeps the same taps and
+/// accumulates the same light, bit for bit (a power of two scales both sides
+/// exactly). The block's pixels lose their history, the others keep it.
+#[test]
+fn positions_without_depth_judge_taps_whatever_the_scenes_unit() {
+    let (w, h) = (64, 24);
+    let set = GuideSet { position: true, ..GuideSet::NONE };
+    let st = Reprojection::new(TemporalConfig::default(), set, w, h).unwrap();
+    // frame k: the plane (0.01 x, z, 0.01 y) seen 0.4k px right and 0.3k px down, z stepping at
+    // x = 32, and in front of it a block of 10 × 4 pixels that moves away by 1 each frame
+    let plane = |k: usize, scale: f32| -> Vec<f32> {
+        (0..w * h)
+            .flat_map(|i| {
+                let (x, y) = ((i % w) as f32 + 0.4 * k as f32, (i / w) as f32 + 0.3 * k as f32);
+                let block = (10..20).contains(&(i % w)) && (10..14).contains(&(i / w));
+                let z = if block {
+                    0.5 + k as f32
+                } else if x < 32.0 {
+                    1.0
+                } else {
+                    3.0
+                };
+                [0.01 * x * scale, z * scale, 0.01 * y * scale]
+            })
+            .collect()
+    };
+    let motion: Vec<f32> = (0..w * h).flat_map(|_| [0.4f32, 0.3]).collect();
+    let run = |scale: f32| {
+        let (mut hist, mut scratch) = (vec![0f32; st.history_len()], vec![0f32; st.scratch_len()]);
+        let mut history = History::new(&mut hist);
+        let mut rejected = Vec::new();
+        for k in 0..3 {
+            let (f, p) = (frame_at(w, h, k as u64), plane(k, scale));
+            let inp = Inputs {
+                noisy: ImageView::interleaved(&f.noisy, w, h, 3).unwrap(),
+                fireflies: None,
+                guides: Guides { position: Some(ImageView::interleaved(&p, w, h, 3).unwrap()), ..Default::default() },
+                motion: Some(ImageView::interleaved(&motion, w, h, 2).unwrap()),
+            };
+            let c = st.accumulate(&inp, &mut history, &mut scratch).unwrap();
+            rejected.push(c.rejected);
+            let (current, mut out) = (vec![0.25f32; 3 * w * h], vec![0f32; 3 * w * h]);
+            let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+            st.resolve(&current, &mut history, &mut scratch, false, true, &mut ov).unwrap();
+        }
+        let mut acc = vec![0f32; 3 * w * h];
+        let view = st.accumulated(&mut history).unwrap();
+        for y in 0..h {
+            view.read_row_n(y, 0, {
+                let (r, rest) = acc.split_at_mut(w * h);
+                let (g, b) = rest.split_at_mut(w * h);
+                [&mut r[y * w..(y + 1) * w], &mut g[y * w..(y + 1) * w], &mut b[y * w..(y + 1) * w]]
+            })
+            .unwrap();
+        }
+        (rejected, acc)
+    };
+    let (rejected, acc) = run(1.0);
+    // frame 0 has no history; then the block's pixels lose theirs, the rest keep it
+    assert!((30..=40).contains(&rejected[1]) && (30..=40).contains(&rejected[2]), "{rejected:?}");
+    for scale in [1024.0, 1.0 / 1024.0] {
+        let (r, a) = run(scale);
+        assert_eq!(r, rejected, "scale {scale}");
+        assert!(a.iter().zip(&acc).all(|(x, y)| x.to_bits() == y.to_bits()), "scale {scale}: the accumulated light differs");
+    }
+}
+
 /// Frame 0 then frame 1 of a static sequence through the stage alone, with
 /// the firefly clamp; returns frame 1's counts and accumulated light.
 fn two_frames(cfg: TemporalConfig, f0: &Owned, f1: &Owned) -> (temporal::Counts, Vec<f32>) {
@@ -509,9 +579,12 @@ fn pixel_groups_equal_the_per_pixel_reference() {
                                 _ => {}
                             }
                         }
-                        // a strip of sky: no normal
+                        // a strip of sky: no normal; a few positions NaN or huge (footprints without a finite neighbour)
                         for i in (0..w * h).filter(|i| i % w < w / 5) {
                             f.normal[3 * i..3 * i + 3].fill(0.0);
+                        }
+                        for i in (0..w * h).filter(|i| i % 29 == 3) {
+                            f.position[3 * i + i % 3] = if i % 2 == 0 { f32::NAN } else { 3e38 };
                         }
                         let guides = f.guides(set);
                         let mut outs = Vec::new();

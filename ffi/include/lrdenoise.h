@@ -587,7 +587,8 @@ typedef struct LrdTemporalConfig {
   float normal_limit;
   /**
    * Largest world-position distance of a history tap, as a fraction of the
-   * camera distance with depth, in world units without (default 0.05).
+   * camera distance: the depth, or without depth an estimate from the
+   * pixel's footprint for a 60° field of view (default 0.05).
    */
   float position_limit;
   /**

@@ -42,7 +42,8 @@ pub struct LrdTemporalConfig {
     /// Smallest cosine between a history tap's normal and the current one (default 0.5).
     pub normal_limit: f32,
     /// Largest world-position distance of a history tap, as a fraction of the
-    /// camera distance with depth, in world units without (default 0.05).
+    /// camera distance: the depth, or without depth an estimate from the
+    /// pixel's footprint for a 60° field of view (default 0.05).
     pub position_limit: f32,
     /// Without positions: largest relative depth difference (default 0.05).
     pub depth_limit: f32,

@@ -214,6 +214,9 @@ fn positions_no_clamp_and_no_output_blend_match_the_cpu() {
     let (w, h) = (57, 41);
     let pos = FlrConfig::with_guides(WITH_POSITION);
     sequence("positions", pos, TemporalConfig::default(), w, h, 6);
+    // without depth: positions judged against each pixel's footprint
+    let no_depth = FlrConfig::with_guides(GuideSet { normal: true, position: true, ..GuideSet::NONE });
+    sequence("positions without depth", no_depth, TemporalConfig::default(), w, h, 6);
     let off = FlrConfig { fireflies: None, ..FlrConfig::with_guides(GuideSet::NORMAL_DEPTH) };
     sequence("no clamp", off, TemporalConfig { output_alpha: 1.0, firefly_history: 0.0, ..TemporalConfig::default() }, w, h, 6);
     let one = FlrConfig::with_guides(GuideSet { normal: false, depth: false, position: false, ao: true, user: 0 });
@@ -366,6 +369,7 @@ fn the_parameter_block_matches_the_shader() {
         output_alpha,
         cut_limit,
         max_motion,
+        footprint_limit2,
         pad
     );
     let module = naga::front::wgsl::parse_str(TEMPORAL_WGSL).unwrap();

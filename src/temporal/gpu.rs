@@ -100,11 +100,14 @@ pub struct GpuTemporalParams {
     pub cut_limit: u32,
     /// Largest motion component taken as a motion vector, in pixels.
     pub max_motion: f32,
+    /// Without depth: the squared position limit per squared pixel footprint
+    /// (the CPU stage's, from [`TemporalConfig::position_limit`] and the width).
+    pub footprint_limit2: f32,
     /// Padding to the WGSL layout; zero.
-    pub pad: [u32; 4],
+    pub pad: [u32; 3],
 }
 
-// SAFETY: `repr(C)`, 24 four-byte fields and an array of four, no padding
+// SAFETY: `repr(C)`, 25 four-byte fields and an array of three, no padding
 // (112 bytes: checked below); any bit pattern is valid.
 unsafe impl bytemuck::Zeroable for GpuTemporalParams {}
 // SAFETY: as above.
@@ -384,7 +387,8 @@ impl GpuTemporalPlan {
             // `Reprojection::is_cut` in integers: rejected > f · n ⇔ rejected > ⌊f · n⌋
             cut_limit: libm::floor(cfg.cut_fraction as f64 * s.plane() as f64).min(u32::MAX as f64) as u32,
             max_motion: s.max_motion(),
-            pad: [0; 4],
+            footprint_limit2: s.footprint_limit2(),
+            pad: [0; 3],
         })
     }
 

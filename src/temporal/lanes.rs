@@ -220,6 +220,26 @@ fn finite<L: Lane, const K: usize>(v: [L; K]) -> L {
     s.eq(zero)
 }
 
+/// `super::footprint2` of the pixels `x..x + N` (their positions `p`), for
+/// groups with both neighbours in the row (`None` otherwise: the per-pixel
+/// code takes the row's ends).
+#[inline(always)]
+fn footprint2<L: Lane>(row: &[f32], p_at: usize, w: usize, x: usize, p: [L; 3]) -> Option<L> {
+    if x == 0 || x + L::N + 1 > w {
+        return None;
+    }
+    let m = distance2(load3(row, x - 1, p_at, w)?, p).min(distance2(load3(row, x + 1, p_at, w)?, p));
+    Some(m.is_finite().select(m, L::splat(0.0)))
+}
+
+/// `|a − b|²`, +Inf where that is not finite.
+#[inline(always)]
+fn distance2<L: Lane>(a: [L; 3], b: [L; 3]) -> L {
+    let e = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let d = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+    d.is_finite().select(d, L::splat(f32::INFINITY))
+}
+
 /// Lanes where all 3 values are 0.
 #[inline(always)]
 fn empty<L: Lane>(v: [L; 3]) -> L {
@@ -317,8 +337,15 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
     let normal = if st.normal { load3(out_row, x, n_at, w)? } else { [zero; 3] };
     let position = if st.position { load3(out_row, x, p_at, w)? } else { [zero; 3] };
     let d = if st.depth { L::load(out_row, d_at * w + x)? } else { zero };
-    let depth = if st.depth { d.abs() } else { one };
-    let plim = L::splat(cfg.position_limit) * depth;
+    // the square of the largest position distance of a tap (as `Reprojection::accumulate_pixel`)
+    let plim2 = if st.depth {
+        let plim = L::splat(cfg.position_limit) * d.abs();
+        plim * plim
+    } else if st.position {
+        L::splat(st.footprint_limit2()) * footprint2(out_row, p_at, w, x, position)?
+    } else {
+        zero
+    };
     let (mut tw, mut n, mut prev) = (zero, zero, [zero; 3]);
     let (mut ow, mut out) = (zero, [zero; 3]);
     for (tx, dy, wt) in taps {
@@ -331,7 +358,7 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
         if st.position {
             let p = unsafe { tap3::<L>(records, (dy * rec + p_at) * w + tx, w) };
             let e = [p[0] - position[0], p[1] - position[1], p[2] - position[2]];
-            ok &= (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).le(plim * plim);
+            ok &= (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).le(plim2);
         } else if st.depth {
             ok &= (unsafe { tap::<L>(records, (dy * rec + d_at) * w + tx) } - d).abs().le(L::splat(cfg.depth_limit) * d.abs());
         }

@@ -69,10 +69,11 @@ struct Params {
     cut_limit: u32,
     // largest motion component taken as a motion vector, in pixels
     max_motion: f32,
+    // without depth: the squared position limit per squared pixel footprint
+    footprint_limit2: f32,
     pad0: u32,
     pad1: u32,
     pad2: u32,
-    pad3: u32,
 }
 
 struct Counters {
@@ -230,6 +231,32 @@ fn cur_guide(off: u32, c: u32, x: u32, y: u32) -> f32 {
     return guide(off, c, y * P.width + x);
 }
 
+fn cur_position(x: u32, y: u32) -> vec3<f32> {
+    return vec3<f32>(cur_guide(P.g_position, 0u, x, y), cur_guide(P.g_position, 1u, x, y), cur_guide(P.g_position, 2u, x, y));
+}
+
+// |a − b|², +Inf where that is not finite.
+fn distance2(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    let e = a - b;
+    let d = e.x * e.x + e.y * e.y + e.z * e.z;
+    return select(inf(), d, finite(d));
+}
+
+// The squared pixel footprint of (x, y) (`temporal::footprint2`): the smaller
+// squared distance to the left and right neighbours' positions, of those
+// that are finite; 0 without one.
+fn footprint2(x: u32, y: u32) -> f32 {
+    let p = cur_position(x, y);
+    var m = inf();
+    if x > 0u {
+        m = distance2(cur_position(x - 1u, y), p);
+    }
+    if x + 1u < P.width {
+        m = min(m, distance2(cur_position(x + 1u, y), p));
+    }
+    return select(0.0, m, finite(m));
+}
+
 fn tap_ok(tx: i32, ty: i32, wt: f32, x: u32, y: u32) -> bool {
     if tx < 0 || ty < 0 || tx >= i32(P.width) || ty >= i32(P.height) || !(wt > 0.0) {
         return false;
@@ -249,17 +276,19 @@ fn tap_ok(tx: i32, ty: i32, wt: f32, x: u32, y: u32) -> bool {
         ok = ok && (d >= P.normal_limit || empty);
     }
     if P.g_position != NONE {
-        var depth = 1.0;
+        var plim2 = 0.0;
         if P.g_depth != NONE {
-            depth = abs(cur_guide(P.g_depth, 0u, x, y));
+            let plim = P.position_limit * abs(cur_guide(P.g_depth, 0u, x, y));
+            plim2 = plim * plim;
+        } else {
+            plim2 = P.footprint_limit2 * footprint2(x, y);
         }
-        let plim = P.position_limit * depth;
         var d2 = 0.0;
         for (var c = 0u; c < 3u; c++) {
             let e = hist_in[rec(P.p_at + c, ux, uy)] - cur_guide(P.g_position, c, x, y);
             d2 += e * e;
         }
-        ok = ok && d2 <= plim * plim;
+        ok = ok && d2 <= plim2;
     } else if P.g_depth != NONE {
         let d = cur_guide(P.g_depth, 0u, x, y);
         ok = ok && abs(hist_in[rec(P.d_at, ux, uy)] - d) <= P.depth_limit * abs(d);
