@@ -356,7 +356,23 @@ fn device_flag_and_shaders() {
     let dir16 = tmp("shaders16");
     let (ok, _, e) = lrd(&["shaders", "--out", dir16.to_str().unwrap(), "--f16-inputs"]);
     assert!(ok, "{e}");
-    assert!(std::fs::read_to_string(dir16.join("dispatch.md")).unwrap().contains("F16 inputs"));
+    let md = std::fs::read_to_string(dir16.join("dispatch.md")).unwrap();
+    assert!(md.contains("F16 inputs"));
+    // temporal FLR's own FLR dispatch: its clamp off and f32 inputs, whatever the single-frame one has
+    use lrdenoise::flr::gpu::{GpuLayouts, GpuPlan, InputFormat};
+    use lrdenoise::FlrConfig;
+    let plan = GpuPlan::new(FlrConfig { fireflies: None, ..FlrConfig::default() }, 1920, 1080).unwrap();
+    let params = plan.params(&GpuLayouts::planar(1920, 1080, InputFormat::F32)).unwrap();
+    let temporal_flr = std::fs::read(dir16.join("temporal_flr_params.bin")).unwrap();
+    assert_eq!(temporal_flr, params.as_bytes());
+    assert_ne!(temporal_flr, std::fs::read(dir16.join("params.bin")).unwrap());
+    let temporal_part = md.split("## Temporal FLR").nth(1).unwrap();
+    // FLR's noisy buffer (binding 1) holds f32 light there
+    assert!(temporal_part.contains(&format!("| 1 | Noisy | ReadOnlyStorage | {} |", 3 * 1920 * 1080 * 4)), "{temporal_part}");
+    assert!(temporal_part.contains("| temporal | `t_resolve` |") && temporal_part.contains("| flr | `moments` |"), "{temporal_part}");
+    for f in ["temporal_params_first.bin", "temporal_params.bin"] {
+        assert_eq!(std::fs::metadata(dir16.join(f)).unwrap().len(), 112, "{f}");
+    }
     let dira = tmp("shaders_adaptive");
     let (ok, _, e) = lrd(&["shaders", "--out", dira.to_str().unwrap(), "--size", "640x360", "--sigma", "6,12,20"]);
     assert!(ok, "{e}");
