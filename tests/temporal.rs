@@ -586,6 +586,19 @@ fn pixel_groups_equal_the_per_pixel_reference() {
                         for i in (0..w * h).filter(|i| i % 29 == 3) {
                             f.position[3 * i + i % 3] = if i % 2 == 0 { f32::NAN } else { 3e38 };
                         }
+                        // a history with NaN/Inf in it (a caller may resume any buffer), the same in both
+                        if k == 2 {
+                            for hist in [&mut ha, &mut hb] {
+                                for (j, v) in hist.iter_mut().enumerate() {
+                                    match j % 37 {
+                                        5 => *v = f32::NAN,
+                                        11 => *v = f32::INFINITY,
+                                        17 => *v = f32::NEG_INFINITY,
+                                        _ => {}
+                                    }
+                                }
+                            }
+                        }
                         let guides = f.guides(set);
                         let mut outs = Vec::new();
                         for (st, hist, scratch) in [(&fast, &mut ha, &mut sa), (&slow, &mut hb, &mut sb)] {

@@ -363,7 +363,9 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
             ok &= (unsafe { tap::<L>(records, (dy * rec + d_at) * w + tx) } - d).abs().le(L::splat(cfg.depth_limit) * d.abs());
         }
         let (pl, pn) = unsafe { (tap3::<L>(records, (dy * rec + LIGHT) * w + tx, w), tap::<L>(records, (dy * rec + COUNT) * w + tx)) };
-        ok &= finite([pl[0], pl[1], pl[2], pn]) & pn.ge(zero);
+        // (NaN/Inf in the history are not tested per tap: an accepted one makes its sums
+        // NaN/Inf, and such a group is left to the per-pixel code below)
+        ok &= pn.ge(zero);
         // a rejected tap adds +0, which leaves these sums (never -0) as they are
         tw += keep(ok, wt);
         n += keep(ok, wt * pn);
@@ -371,11 +373,15 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
             prev[ch] += keep(ok, wt * pl[ch]);
         }
         let po = unsafe { tap3::<L>(records, (dy * rec + OUTPUT) * w + tx, w) };
-        let ok = ok & finite(po);
         ow += keep(ok, wt);
         for ch in 0..3 {
             out[ch] += keep(ok, wt * po[ch]);
         }
+    }
+    // every accepted tap was finite (the per-pixel code skips the others, taking the
+    // history's light and output separately): otherwise a sum is NaN/Inf
+    if !finite([n, prev[0], prev[1], prev[2], out[0], out[1], out[2]]).all() {
+        return None;
     }
     let kept = if r.clamped { kept(raw, cur) } else { one };
     let max_history = L::splat(cfg.max_history);
