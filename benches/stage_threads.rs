@@ -11,23 +11,13 @@ use lrdenoise::*;
 use std::sync::Mutex;
 use std::time::Instant;
 
+#[path = "common/threads.rs"]
+mod threads;
+use threads::run_groups;
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
-}
-
-/// `f(i, worker)` for every `i < count`, `workers` scoped threads each taking a contiguous group.
-fn run_groups(workers: usize, count: usize, f: &(dyn Fn(usize, usize) + Sync)) {
-    if workers == 1 {
-        (0..count).for_each(|i| f(i, 0));
-        return;
-    }
-    let per = count.div_ceil(workers);
-    std::thread::scope(|s| {
-        for w in 0..workers {
-            s.spawn(move || (w * per..((w + 1) * per).min(count)).for_each(|i| f(i, w)));
-        }
-    });
 }
 
 fn main() {

@@ -12,6 +12,10 @@ use lrdenoise::temporal::{History, Inputs, Reprojection, TemporalConfig};
 use lrdenoise::*;
 use std::time::Instant;
 
+#[path = "common/threads.rs"]
+mod threads;
+use threads::run_groups;
+
 fn main() {
     let a: Vec<usize> = std::env::args().skip(1).filter_map(|s| s.parse().ok()).collect();
     let (w, h) = (a.first().copied().unwrap_or(1920), a.get(1).copied().unwrap_or(1080));
@@ -95,18 +99,4 @@ fn main() {
         let ((amin, amed), (rmin, rmed)) = (stat(a), stat(r));
         println!("{workers:>2} worker(s): step 1 {amin:.2} / {amed:.2}, step 3 {rmin:.2} / {rmed:.2}");
     }
-}
-
-/// `f(i, worker)` for every `i < count`, `workers` scoped threads each taking a contiguous group.
-fn run_groups(workers: usize, count: usize, f: &(dyn Fn(usize, usize) + Sync)) {
-    if workers == 1 {
-        (0..count).for_each(|i| f(i, 0));
-        return;
-    }
-    let per = count.div_ceil(workers);
-    std::thread::scope(|s| {
-        for w in 0..workers {
-            s.spawn(move || (w * per..((w + 1) * per).min(count)).for_each(|i| f(i, w)));
-        }
-    });
 }
