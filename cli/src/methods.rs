@@ -30,7 +30,7 @@ pub struct FlrArgs {
     /// Block size B: one affine model per BxB pixels (1, 2, 4, 8, 16)
     #[arg(long)]
     pub block: Option<usize>,
-    /// Gaussian window sigma in full-resolution pixels: one value fits one window (fastest; e.g. 12); three increasing values fit all three and blend them per cell (the adaptive window; default 6,12,20)
+    /// Gaussian window sigma in full-resolution pixels: one value fits one window (fastest; e.g. 12); three increasing values fit all three and blend them per cell (the adaptive window; default 6,12,20, flr-temporal 3,6,12)
     #[arg(long)]
     pub sigma: Option<String>,
     /// Window truncation radius in full-resolution pixels (default 3*sigma); with no --sigma, a single sigma = 12 window
@@ -309,6 +309,15 @@ pub fn parse_regularization(s: &str) -> Result<Regularization, String> {
 
 impl FlrArgs {
     /// The configuration for a frame (default guides depend on what it has).
+    /// `cfg` with temporal FLR's window ([`FlrConfig::temporal`]) unless a
+    /// window flag (`--sigma`, `--radius`, `--box`) chose one.
+    pub fn temporal_window(&self, mut cfg: FlrConfig) -> FlrConfig {
+        if self.sigma.is_none() && self.radius.is_none() && self.box_radius.is_none() {
+            cfg.blur = FlrConfig::temporal().blur;
+        }
+        cfg
+    }
+
     pub fn config(&self, inputs: &Inputs) -> Result<FlrConfig, String> {
         let guides = match &self.guides {
             Some(s) => parse_guides(s)?,
@@ -685,7 +694,7 @@ impl Method {
                 Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg), min_bytes })
             }
             "flr-temporal" if a.gpu()? => {
-                let cfg = a.config(inputs)?;
+                let cfg = a.temporal_window(a.config(inputs)?);
                 let temporal = a.temporal_config()?;
                 if a.history_weights {
                     return Err("flr-temporal --device gpu: --history-weights runs on the CPU only".into());
@@ -700,7 +709,7 @@ impl Method {
             }
             _ if a.gpu()? => Err(format!("--device gpu: only flr and flr-temporal run on the GPU, not {name}")),
             "flr-temporal" => {
-                let cfg = a.config(inputs)?;
+                let cfg = a.temporal_window(a.config(inputs)?);
                 let temporal = a.temporal_config()?;
                 let (mut label, mut flags) = temporal_label(&cfg, &temporal);
                 if a.history_weights {

@@ -64,7 +64,7 @@ pub fn shaders(out: &Path, size: &str, f16_inputs: bool, flr: &FlrArgs) -> Resul
     let tplan = lrdenoise::temporal::gpu::GpuTemporalPlan::new(temporal, cfg.guides, w, h).map_err(|e| format!("shaders: {e}"))?;
     // FLR inside temporal FLR: its clamp off (the stage clamps) and f32 planar inputs (the
     // stage writes the accumulated light into FLR's noisy buffer), whatever --f16-inputs says
-    let tflr_cfg = lrdenoise::FlrConfig { fireflies: None, ..cfg };
+    let tflr_cfg = lrdenoise::FlrConfig { fireflies: None, ..flr.temporal_window(cfg) };
     let tflr = GpuPlan::new(tflr_cfg, w, h).map_err(|e| format!("shaders: {e}"))?;
     let tlayouts = GpuLayouts::planar(w, h, InputFormat::F32);
     let tflr_params = tflr.params(&tlayouts).map_err(|e| e.to_string())?;

@@ -361,7 +361,7 @@ fn device_flag_and_shaders() {
     // temporal FLR's own FLR dispatch: its clamp off and f32 inputs, whatever the single-frame one has
     use lrdenoise::flr::gpu::{GpuLayouts, GpuPlan, InputFormat};
     use lrdenoise::FlrConfig;
-    let plan = GpuPlan::new(FlrConfig { fireflies: None, ..FlrConfig::default() }, 1920, 1080).unwrap();
+    let plan = GpuPlan::new(FlrConfig { fireflies: None, ..FlrConfig::temporal() }, 1920, 1080).unwrap();
     let params = plan.params(&GpuLayouts::planar(1920, 1080, InputFormat::F32)).unwrap();
     let temporal_flr = std::fs::read(dir16.join("temporal_flr_params.bin")).unwrap();
     assert_eq!(temporal_flr, params.as_bytes());

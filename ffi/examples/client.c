@@ -352,9 +352,10 @@ int main(int argc, char **argv) {
        = previous minus current position), so every pixel reprojects through
        four taps. */
     {
+        LrdFlrConfig tcfg = lrd_flr_config_temporal_default(); /* smaller windows for accumulated light */
         LrdTemporalConfig tc = lrd_temporal_config_default();
         size_t sbytes = 0, hbytes = 0;
-        CHECK(lrd_flr_temporal_sizes(&cfg, &tc, W, H, &sbytes, &hbytes));
+        CHECK(lrd_flr_temporal_sizes(&tcfg, &tc, W, H, &sbytes, &hbytes));
         void *tscratch = malloc(sbytes), *hdata = malloc(hbytes);
         float *tout = malloc(sizeof(float) * 3 * W * H), *mv = malloc(sizeof(float) * 2 * W * H);
         if (!tscratch || !hdata || !tout || !mv) return 2;
@@ -369,11 +370,11 @@ int main(int argc, char **argv) {
         LrdReport trep;
         memset(&trep, 0, sizeof trep);
         for (int k = 0; k < 3; k++)
-            CHECK(lrd_flr_denoise_temporal(&cfg, &tc, &frame, k ? &motion : NULL, &hist, &to, tscratch, sbytes, &trep));
+            CHECK(lrd_flr_denoise_temporal(&tcfg, &tc, &frame, k ? &motion : NULL, &hist, &to, tscratch, sbytes, &trep));
         for (size_t i = 0; i < 3 * (size_t)W * H; i++)
             if (!(tout[i] >= 0.0f && tout[i] < 1e30f)) return 6;
         if (hist.frames != 3) return 6;
-        if (lrd_flr_denoise_temporal(&cfg, NULL, &frame, &motion, &hist, &to, tscratch, sbytes, NULL) != LRD_STATUS_NULL_POINTER) return 3;
+        if (lrd_flr_denoise_temporal(&tcfg, NULL, &frame, &motion, &hist, &to, tscratch, sbytes, NULL) != LRD_STATUS_NULL_POINTER) return 3;
         printf("FLR temporal: 3 frames, %zu + %zu bytes of scratch + history, %llu pixels without history\n", sbytes, hbytes,
                (unsigned long long)trep.history_rejected);
         free(tscratch); free(hdata); free(tout); free(mv);

@@ -974,6 +974,13 @@ extern "C" {
 struct LrdFlrConfig lrd_flr_config_default(void);
 
 /**
+ * The defaults for temporal FLR (`lrd_flr_denoise_temporal`): those of
+ * `lrd_flr_config_default` with the adaptive window's sigmas at 3/6/12 (light
+ * accumulated over frames is less noisy, so smaller windows fit it better).
+ */
+struct LrdFlrConfig lrd_flr_config_temporal_default(void);
+
+/**
  * Scratch bytes `lrd_flr_denoise` needs for `width`×`height` output frames.
  */
 LrdStatus lrd_flr_scratch_size(const struct LrdFlrConfig *config,

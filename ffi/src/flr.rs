@@ -169,7 +169,19 @@ fn tiled_scratch_bytes(flr: &Flr, workers: usize) -> Result<usize, LrdStatus> {
 /// LRD_BLUR_ADAPTIVE with sigmas 6/12/20 (`sigma` = 12 for LRD_BLUR_GAUSSIAN), normalized 1e-3/1e-2).
 #[no_mangle]
 pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
-    let d = FlrConfig::default();
+    lrd_flr_config_of(&FlrConfig::default())
+}
+
+/// The defaults for temporal FLR (`lrd_flr_denoise_temporal`): those of
+/// `lrd_flr_config_default` with the adaptive window's sigmas at 3/6/12 (light
+/// accumulated over frames is less noisy, so smaller windows fit it better).
+#[no_mangle]
+pub extern "C" fn lrd_flr_config_temporal_default() -> LrdFlrConfig {
+    lrd_flr_config_of(&FlrConfig::temporal())
+}
+
+/// The C form of the default-guide configuration `d`.
+fn lrd_flr_config_of(d: &FlrConfig) -> LrdFlrConfig {
     let (blur, sigma, radius, sigmas) = match d.blur {
         Blur::Gaussian { sigma, radius } => (LrdBlur::LRD_BLUR_GAUSSIAN, sigma, radius.unwrap_or(-1.0), [0.0; 3]),
         Blur::Box { radius } => (LrdBlur::LRD_BLUR_BOX, 0.0, radius, [0.0; 3]),

@@ -19,7 +19,7 @@ use lrdenoise::{Arg, Error, FlrConfig, Frame, GuideSet, ImageView, ImageViewMut,
 /// let (w, h) = (64, 48);
 /// let (noisy, normal, depth) = (vec![0.5f32; w * h * 3], vec![0.0f32; w * h * 3], vec![1.0f32; w * h]);
 /// let motion = vec![0.0f32; w * h * 2];
-/// let cfg = FlrConfig::with_guides(GuideSet::NORMAL_DEPTH);
+/// let cfg = FlrConfig { guides: GuideSet::NORMAL_DEPTH, ..FlrConfig::temporal() };
 /// let mut tflr = lrdenoise_gpu::GpuTemporalFlr::new(cfg, TemporalConfig::default(), w, h)?;
 /// let mut out = vec![0f32; w * h * 3];
 /// for _ in 0..3 {

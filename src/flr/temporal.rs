@@ -15,7 +15,8 @@
 //! let (w, h) = (32, 24);
 //! let (noisy, normal, depth) = (vec![0.5f32; w * h * 3], vec![0.0f32; w * h * 3], vec![1.0f32; w * h]);
 //! let motion = vec![0.0f32; w * h * 2];
-//! let tflr = TemporalFlr::new(FlrConfig::with_guides(GuideSet::NORMAL_DEPTH), TemporalConfig::default(), w, h)?;
+//! let cfg = FlrConfig { guides: GuideSet::NORMAL_DEPTH, ..FlrConfig::temporal() };
+//! let tflr = TemporalFlr::new(cfg, TemporalConfig::default(), w, h)?;
 //! let (mut history, mut scratch) = (vec![0f32; tflr.history_len()], vec![0f32; tflr.scratch_len()]);
 //! let mut flr_scratch = vec![0f64; tflr.flr_scratch_len()];
 //! let mut history = History::new(&mut history); // one per sequence
@@ -62,6 +63,8 @@ impl TemporalFlr {
     /// Plans temporal FLR for `width × height` frames. The stage rejects
     /// history with the guides of `cfg.guides` it knows (normal, position,
     /// depth); joint upsampling (`cfg.upsample > 1`) is not supported.
+    /// [`FlrConfig::temporal`] is the default configuration for it (smaller
+    /// windows than a single frame's).
     pub fn new(cfg: FlrConfig, temporal: TemporalConfig, width: usize, height: usize) -> Result<Self, Error> {
         if cfg.upsample != 1 {
             return Err(Error::Unsupported("temporal FLR with upsample > 1"));
