@@ -33,13 +33,6 @@ fn gpu(cfg: FlrConfig, w: usize, h: usize) -> GpuFlr {
     }
 }
 
-/// Mean and largest |gpu − cpu|, relative to the mean |cpu|.
-fn rel_diff(gpu: &[f32], cpu: &[f32]) -> (f64, f64) {
-    let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64 + 1e-6;
-    let d = || gpu.iter().zip(cpu).map(|(a, b)| (a - b).abs() as f64);
-    (d().sum::<f64>() / cpu.len() as f64 / scale, d().fold(0.0, f64::max) / scale)
-}
-
 /// Runs both paths; returns (mean, max) relative differences and both reports.
 fn compare(cfg: FlrConfig, f: &Owned, set: GuideSet) -> (f64, f64, Report, Report) {
     let mut g = gpu(cfg, f.w, f.h);

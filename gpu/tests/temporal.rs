@@ -86,12 +86,6 @@ fn gpu(cfg: FlrConfig, t: TemporalConfig, w: usize, h: usize) -> GpuTemporalFlr 
     }
 }
 
-fn rel_diff(gpu: &[f32], cpu: &[f32]) -> (f64, f64) {
-    let scale = cpu.iter().map(|v| v.abs() as f64).sum::<f64>() / cpu.len() as f64 + 1e-6;
-    let d = || gpu.iter().zip(cpu).map(|(a, b)| (a - b).abs() as f64);
-    (d().sum::<f64>() / cpu.len() as f64 / scale, d().fold(0.0, f64::max) / scale)
-}
-
 /// Runs `frames` frames on both paths (frame 5 on: a camera cut, every
 /// vector out of the frame) and compares each frame's output and counts.
 fn sequence(name: &str, cfg: FlrConfig, t: TemporalConfig, w: usize, h: usize, frames: usize) {

@@ -552,3 +552,10 @@ pub fn threads(workers: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync))
         });
     }
 }
+
+/// Mean and largest |a − b|, relative to the mean |b| (the reference), as (mean, max).
+pub fn rel_diff(a: &[f32], b: &[f32]) -> (f64, f64) {
+    let scale = b.iter().map(|v| v.abs() as f64).sum::<f64>() / b.len() as f64 + 1e-6;
+    let d = || a.iter().zip(b).map(|(x, y)| (x - y).abs() as f64);
+    (d().sum::<f64>() / b.len() as f64 / scale, d().fold(0.0, f64::max) / scale)
+}
