@@ -204,9 +204,9 @@ impl Denoiser for crate::flnr::Flnr<'_> {
         let net = &mut bytemuck::cast_slice_mut::<f64, f32>(net)[..net_len];
         crate::flnr::Flnr::denoise(self, frame, net, flr, out)
     }
-    /// FLR's tiled f64 scratch, then the network's parallel f32 scratch packed two per f64.
+    /// FLR's tiled f64 scratch (the fit's or the prior's, the larger), then the network's parallel f32 scratch packed two per f64.
     fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
-        self.flr().tiled_scratch_len(workers)?.checked_add(crate::flnr::Flnr::parallel_scratch_len(self, workers)?.div_ceil(2))
+        self.flr_tiled_scratch_len(workers)?.checked_add(crate::flnr::Flnr::parallel_scratch_len(self, workers)?.div_ceil(2))
     }
     fn denoise_parallel(
         &self,
@@ -221,7 +221,7 @@ impl Denoiser for crate::flnr::Flnr<'_> {
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let flr_len = self.flr().tiled_scratch_len(workers).ok_or(overflow)?;
+        let flr_len = self.flr_tiled_scratch_len(workers).ok_or(overflow)?;
         let net_len = crate::flnr::Flnr::parallel_scratch_len(self, workers).ok_or(overflow)?;
         let (flr, net) = scratch.split_at_mut(flr_len);
         let net = &mut bytemuck::cast_slice_mut::<f64, f32>(net)[..net_len];

@@ -12,11 +12,16 @@
 //! improve on it; the paper's replacement needs far longer training to catch up
 //! with the plain guides.
 //!
-//! Network input (8 planes, as `train/flnr.py` builds it): the normal (3),
-//! depth divided by the frame's mean depth (1), AO (1), and
-//! `ln(1 + max(noisy, 0) / s)` (3) with `s` the frame's mean of
-//! `max(noisy, 0)`; NaN/Inf become 0 (and FLR itself excludes NaN/Inf noisy
-//! samples). The frame needs normal, depth and AO.
+//! Network input (as `train/flnr.py` builds it): the normal (3), depth
+//! divided by the frame's mean depth (1), AO (1), and `ln(1 + max(noisy, 0) /
+//! s)` (3) with `s` the frame's mean of `max(noisy, 0)`; NaN/Inf become 0
+//! (and FLR itself excludes NaN/Inf noisy samples). A network of 11 input
+//! planes also reads **FLR's defaults output** on the same frame, as
+//! `ln(1 + max(FLR, 0) / s)` (3): the *prior*, a first FLR
+//! ([`FlrConfig::default`] with the configured firefly clamp) that runs
+//! before the network, so that the network refines a denoised estimate
+//! instead of learning the light from one noisy sample. The frame needs
+//! normal, depth and AO.
 //!
 //! **Tiles with halos.** The network runs tile by tile (default
 //! [`DEFAULT_TILE`] = 512 px edge, at least [`MIN_TILE`]), each on its input
@@ -24,10 +29,10 @@
 //! rounded up to 20 so the stride-2 grids of tile and frame coincide) and
 //! clipped to the frame, so its working memory is bounded by the tile, not the
 //! frame. At 1920×1080 with the bundled 12/24/48 network,
-//! [`Flnr::scratch_len`] is 39.3 M f32 (157 MB) instead of 226 M (0.9 GB) for
-//! the whole frame at once: 22.7 M for one tile's tensors, 16.6 M for the
-//! 2·Q' = 8 learned guide planes FLR reads, which stay frame-sized like any
-//! other guides of the frame. The tiles' results are bit-identical to the
+//! [`Flnr::scratch_len`] is about 46 M f32 (184 MB) instead of about 0.2 G
+//! (0.9 GB) for the whole frame at once: 23.3 M for one tile's tensors,
+//! 16.6 M for the 2·Q' = 8 learned guide planes FLR reads and 6.2 M for the
+//! prior, which stay frame-sized like any other guides of the frame. The tiles' results are bit-identical to the
 //! whole frame's (the zero padding at the frame's border is the same; a
 //! tile's own border effects stay inside its halo; tested). The halo is
 //! recomputed: ~1.16× the network's arithmetic at 512 px tiles, ~1.34× at 256
@@ -47,11 +52,14 @@ use core::sync::atomic::{AtomicBool, Ordering};
 
 /// Guides the network reads.
 pub const INPUT_GUIDES: GuideSet = GuideSet::NORMAL_DEPTH_AO;
-const IN_CHANNELS: usize = 8;
+/// Input planes of a network that reads the guides and the noisy light.
+const BASE_INPUTS: usize = 8;
+/// Input planes of a network that also reads the prior (FLR's defaults output).
+const PRIOR_INPUTS: usize = BASE_INPUTS + 3;
 /// Default edge (pixels) of the network's output tiles. 512: the halo's
 /// recomputation is ~1.16× at this size (~1.34× at 256; the 3×3 layers do not
-/// depend on a tile's tensors staying in cache), a tile's tensors (22.7 M
-/// f32, 91 MB, for the bundled network) are a tenth of the whole frame's, and
+/// depend on a tile's tensors staying in cache), a tile's tensors (23.3 M
+/// f32, 93 MB, for the bundled network) are a tenth of the whole frame's, and
 /// a 1080p frame still has 12 tiles to spread over threads.
 pub const DEFAULT_TILE: usize = 512;
 /// Fewest network tiles per worker at which [`Flnr::denoise_parallel`]
@@ -129,6 +137,8 @@ impl<'w> FlnrConfig<'w> {
 pub struct Flnr<'w> {
     net: UNet<'w>,
     flr: Flr,
+    /// FLR's defaults, whose output the network reads (11-input networks).
+    prior: Option<Flr>,
     width: usize,
     height: usize,
     q: usize,
@@ -147,8 +157,9 @@ impl<'w> Flnr<'w> {
     pub fn new(config: FlnrConfig<'w>, width: usize, height: usize) -> Result<Self, Error> {
         let net = UNet::parse(config.weights)?;
         let q = net.out_channels() / 2;
-        if net.in_channels() != IN_CHANNELS || net.out_channels() % 2 != 0 || !(1..=MAX_USER_GUIDES).contains(&q) {
-            return Err(Error::InvalidConfig("weights: FLNR needs 8 input channels and 2·Q' outputs, Q' ≤ 4"));
+        let inputs = net.in_channels();
+        if !(inputs == BASE_INPUTS || inputs == PRIOR_INPUTS) || net.out_channels() % 2 != 0 || !(1..=MAX_USER_GUIDES).contains(&q) {
+            return Err(Error::InvalidConfig("weights: FLNR needs 8 or 11 input channels and 2·Q' outputs, Q' ≤ 4"));
         }
         let [eps_mul, eps_add] = net.flr_eps();
         let blur = match *net.flr_sigmas() {
@@ -167,9 +178,15 @@ impl<'w> Flnr<'w> {
             ..FlrConfig::default()
         };
         let flr = Flr::new(cfg, width, height)?;
+        let prior = if inputs == PRIOR_INPUTS {
+            let cfg = FlrConfig { guides: INPUT_GUIDES, fireflies: config.fireflies, ..FlrConfig::default() };
+            Some(Flr::new(cfg, width, height)?)
+        } else {
+            None
+        };
         let align = 1 << net.levels();
         let halo = net.receptive_radius().div_ceil(align) * align;
-        let fl = Flnr { net, flr, width, height, q, tile: DEFAULT_TILE, halo, region_max: (0, 0) };
+        let fl = Flnr { net, flr, prior, width, height, q, tile: DEFAULT_TILE, halo, region_max: (0, 0) };
         fl.with_tile(config.tile)
     }
 
@@ -201,6 +218,14 @@ impl<'w> Flnr<'w> {
     /// The FLR plan (σ, ε, ϵ from the weights).
     pub fn flr(&self) -> &Flr {
         &self.flr
+    }
+    /// The plan of the FLR whose output the network reads, for networks of
+    /// 11 input planes; `None` for networks of 8.
+    pub fn prior(&self) -> Option<&Flr> {
+        self.prior.as_ref()
+    }
+    fn inputs(&self) -> usize {
+        self.net.in_channels()
     }
     /// The tile edge asked for ([`FlnrConfig::tile`]).
     pub fn tile(&self) -> usize {
@@ -256,23 +281,45 @@ impl<'w> Flnr<'w> {
     pub fn guide_planes_len(&self) -> usize {
         2 * self.q * self.plane()
     }
+    /// f32 of the prior (FLR's defaults output, a frame-sized interleaved
+    /// RGB image; 0 without a prior): what [`Flnr::run_prior`] writes and
+    /// [`Flnr::network_tile`] reads.
+    pub fn prior_len(&self) -> usize {
+        if self.prior.is_some() {
+            3 * self.plane()
+        } else {
+            0
+        }
+    }
     /// f32 of working space one thread needs for [`Flnr::network_tile`]: one
     /// tile's network input and output and working tensors
     /// ([`UNet::scratch_len`] of the largest tile input).
     pub fn tile_scratch_len(&self) -> usize {
         let r = self.region_len();
-        (IN_CHANNELS + 2 * self.q) * r + self.net.scratch_len(self.region_max.0, self.region_max.1)
+        (self.inputs() + 2 * self.q) * r + self.net.scratch_len(self.region_max.0, self.region_max.1)
     }
-    /// f32 of scratch for [`Flnr::denoise`]: the guide planes plus one tile's
-    /// working space (without the tile's output copy when the whole frame is
-    /// one tile: it is written straight into the planes).
+    /// f32 of scratch for [`Flnr::denoise`]: the guide planes, the prior's
+    /// planes and one tile's working space (without the tile's output copy
+    /// when the whole frame is one tile: it is written straight into the
+    /// planes).
     pub fn scratch_len(&self) -> usize {
         let copy = if self.single_tile() { 2 * self.q * self.region_len() } else { 0 };
-        self.guide_planes_len() + self.tile_scratch_len() - copy
+        self.guide_planes_len() + self.prior_len() + self.tile_scratch_len() - copy
     }
-    /// f64 of scratch for the FLR stage ([`Flr::scratch_len`]).
+    /// f64 of scratch for the FLR stages on one thread: the larger of
+    /// [`Flr::scratch_len`] of the fit and of the prior.
     pub fn flr_scratch_len(&self) -> usize {
-        self.flr.scratch_len()
+        self.flr.scratch_len().max(self.prior.map_or(0, |p| p.scratch_len()))
+    }
+    /// f64 of scratch for the FLR stages of [`Flnr::denoise_parallel`] on
+    /// `workers` workers (`None` if it overflows): the larger of
+    /// [`Flr::tiled_scratch_len`] of the fit and of the prior.
+    pub fn flr_tiled_scratch_len(&self, workers: usize) -> Option<usize> {
+        let prior = match &self.prior {
+            Some(p) => p.tiled_scratch_len(workers)?,
+            None => 0,
+        };
+        Some(self.flr.tiled_scratch_len(workers)?.max(prior))
     }
 
     /// The frame's input scales, one pass over its depth and noisy rows.
@@ -312,17 +359,19 @@ impl<'w> Flnr<'w> {
         views: &[ImageView<'_>; 5],
         noisy: &ImageView<'_>,
         sc: InputScale,
+        prior: &[f32],
         r: Rect,
         x: &mut [f32],
         threads: Threads<'_>,
     ) -> Result<(), Error> {
         let (w, h) = (r.width(), r.height());
-        let planes = Planes::new(x, IN_CHANNELS, w * h, w, h)?;
+        let planes = Planes::new(x, self.inputs(), w * h, w, h)?;
+        let prior = Prior { rgb: prior, width: self.width };
         let failed = AtomicBool::new(false);
         for_rows(threads, h, &|y0, y1| {
             for y in y0..y1 {
                 // SAFETY: each band writes only its own rows of `planes`, which borrows `x` exclusively.
-                if unsafe { !input_row(views, noisy, sc, r, &planes, y) } {
+                if unsafe { !input_row(views, noisy, sc, &prior, r, &planes, y) } {
                     failed.store(true, Ordering::Relaxed);
                 }
             }
@@ -366,6 +415,32 @@ impl<'w> Flnr<'w> {
         self.scale_of(&views[3], &frame.noisy)
     }
 
+    /// Step 1b, for networks that read the prior ([`Flnr::prior`]; nothing
+    /// to do otherwise): FLR's defaults on `frame` into `prior` (at least
+    /// [`Flnr::prior_len`] f32, an interleaved RGB image of the frame's
+    /// size), in `flr_scratch` (at least [`Flnr::flr_scratch_len`] f64).
+    pub fn run_prior(&self, frame: &Frame<'_>, prior: &mut [f32], flr_scratch: &mut [f64]) -> Result<(), Error> {
+        self.views(frame)?;
+        self.prior_planes(frame, prior, flr_scratch, None)
+    }
+
+    /// [`Flnr::run_prior`] on a checked frame, on this thread or spread over `threads`.
+    fn prior_planes(&self, frame: &Frame<'_>, prior: &mut [f32], flr_scratch: &mut [f64], threads: Threads<'_>) -> Result<(), Error> {
+        let Some(plan) = &self.prior else { return Ok(()) };
+        let len = self.prior_len();
+        if prior.len() < len {
+            return Err(Error::ScratchTooSmall { needed: len, got: prior.len() });
+        }
+        let (w, h) = (self.width, self.height);
+        let f = Frame { noisy: frame.noisy, guides: frame.guides, guides_low: None, sample_weights: None };
+        let mut out = ImageViewMut::interleaved(&mut prior[..len], w, h, 3)?;
+        match threads {
+            Some((workers, for_each)) => plan.denoise_parallel(&f, flr_scratch, &mut out, workers, for_each),
+            None => plan.denoise(&f, flr_scratch, &mut out),
+        }
+        .map(|_| ())
+    }
+
     /// Runs the network on the input region `reg` into `o` (2·Q' planes of
     /// `reg`'s size); `x` holds the input, `net_scratch` the network's tensors.
     #[allow(clippy::too_many_arguments)]
@@ -374,6 +449,7 @@ impl<'w> Flnr<'w> {
         views: &[ImageView<'_>; 5],
         noisy: &ImageView<'_>,
         sc: InputScale,
+        prior: &[f32],
         reg: Rect,
         x: &mut [f32],
         net_scratch: &mut [f32],
@@ -381,8 +457,8 @@ impl<'w> Flnr<'w> {
         threads: Threads<'_>,
     ) -> Result<(), Error> {
         let rn = reg.width() * reg.height();
-        let x = &mut x[..IN_CHANNELS * rn];
-        self.input(views, noisy, sc, reg, x, threads)?;
+        let x = &mut x[..self.inputs() * rn];
+        self.input(views, noisy, sc, prior, reg, x, threads)?;
         let (w, h, o) = (reg.width(), reg.height(), &mut o[..2 * self.q * rn]);
         match threads {
             Some((workers, for_each)) => self.net.forward_parallel(Isa::detect(), x, w, h, net_scratch, o, workers, for_each),
@@ -393,26 +469,39 @@ impl<'w> Flnr<'w> {
     /// Step 2: the network on tile `t` (row-major over [`Flnr::tile_grid`];
     /// every tile once, in any order, on any thread), computed in
     /// `tile_scratch` (at least [`Flnr::tile_scratch_len`] f32, one per
-    /// thread). The result borrows the scratch until it is scattered
-    /// ([`TileGuides::scatter`]) into the guide planes. Tiles are
-    /// independent, so the planes come out bit-identical to [`Flnr::denoise`]'s.
+    /// thread); `prior`: the planes [`Flnr::run_prior`] wrote (any slice,
+    /// e.g. empty, for networks without a prior). The result borrows the
+    /// scratch until it is scattered ([`TileGuides::scatter`]) into the
+    /// guide planes. Tiles are independent, so the planes come out
+    /// bit-identical to [`Flnr::denoise`]'s.
     pub fn network_tile<'s>(
         &self,
         frame: &Frame<'_>,
         scale: InputScale,
+        prior: &[f32],
         t: usize,
         tile_scratch: &'s mut [f32],
     ) -> Result<TileGuides<'s>, Error> {
         let views = self.views(frame)?;
-        self.run_tile(&views, &frame.noisy, scale, t, tile_scratch, None)
+        self.check_prior(prior)?;
+        self.run_tile(&views, &frame.noisy, scale, prior, t, tile_scratch, None)
     }
 
-    /// [`Flnr::network_tile`] on views already checked.
+    fn check_prior(&self, prior: &[f32]) -> Result<(), Error> {
+        if prior.len() < self.prior_len() {
+            return Err(Error::ScratchTooSmall { needed: self.prior_len(), got: prior.len() });
+        }
+        Ok(())
+    }
+
+    /// [`Flnr::network_tile`] on views and prior already checked.
+    #[allow(clippy::too_many_arguments)]
     fn run_tile<'s>(
         &self,
         views: &[ImageView<'_>; 5],
         noisy: &ImageView<'_>,
         scale: InputScale,
+        prior: &[f32],
         t: usize,
         tile_scratch: &'s mut [f32],
         threads: Threads<'_>,
@@ -423,9 +512,9 @@ impl<'w> Flnr<'w> {
         let rect = self.tile_rect(t)?;
         let reg = self.region(rect);
         let rl = self.region_len();
-        let (x, rest) = tile_scratch.split_at_mut(IN_CHANNELS * rl);
+        let (x, rest) = tile_scratch.split_at_mut(self.inputs() * rl);
         let (o, net_scratch) = rest.split_at_mut(2 * self.q * rl);
-        self.forward_region(views, noisy, scale, reg, x, net_scratch, o, threads)?;
+        self.forward_region(views, noisy, scale, prior, reg, x, net_scratch, o, threads)?;
         let len = 2 * self.q * reg.width() * reg.height();
         Ok(TileGuides { rect, region: reg, planes: 2 * self.q, frame: (self.width, self.height), data: &o[..len] })
     }
@@ -475,19 +564,23 @@ impl<'w> Flnr<'w> {
         }
         let views = self.views(frame)?;
         let sc = self.scale_of(&views[3], &frame.noisy)?;
-        let (g, work) = scratch.split_at_mut(self.guide_planes_len());
-        self.network_planes(&views, &frame.noisy, sc, g, work, None)?;
+        let (g, rest) = scratch.split_at_mut(self.guide_planes_len());
+        let (prior, work) = rest.split_at_mut(self.prior_len());
+        self.prior_planes(frame, prior, flr_scratch, None)?;
+        self.network_planes(&views, &frame.noisy, sc, prior, g, work, None)?;
         let f = self.learned_frame(frame, g)?;
         self.flr.denoise(&f, flr_scratch, out)
     }
 
     /// The network on every tile, one after another, into the learned guide
     /// planes `g`; `work`: [`Flnr::scratch_len`]'s share after the planes.
+    #[allow(clippy::too_many_arguments)]
     fn network_planes(
         &self,
         views: &[ImageView<'_>; 5],
         noisy: &ImageView<'_>,
         sc: InputScale,
+        prior: &[f32],
         g: &mut [f32],
         work: &mut [f32],
         threads: Threads<'_>,
@@ -495,12 +588,12 @@ impl<'w> Flnr<'w> {
         if self.single_tile() {
             // the whole frame in one piece, straight into the planes
             let reg = Rect { x0: 0, y0: 0, x1: self.width, y1: self.height };
-            let (x, net_scratch) = work.split_at_mut(IN_CHANNELS * self.region_len());
-            self.forward_region(views, noisy, sc, reg, x, net_scratch, g, threads)
+            let (x, net_scratch) = work.split_at_mut(self.inputs() * self.region_len());
+            self.forward_region(views, noisy, sc, prior, reg, x, net_scratch, g, threads)
         } else {
             let (nx, ny) = self.tile_grid();
             for t in 0..nx * ny {
-                self.run_tile(views, noisy, sc, t, work, threads)?.scatter(g)?;
+                self.run_tile(views, noisy, sc, prior, t, work, threads)?.scatter(g)?;
             }
             Ok(())
         }
@@ -513,10 +606,10 @@ impl<'w> Flnr<'w> {
         workers > 1 && nx * ny < TILES_PER_WORKER.saturating_mul(workers)
     }
 
-    /// The guide planes' share of a parallel scratch (rounded up to whole
-    /// f64, so that the tile scratches after them stay 8-byte aligned).
+    /// The guide and prior planes' share of a parallel scratch (rounded up
+    /// to whole f64, so that the tile scratches after them stay 8-byte aligned).
     fn padded_planes_len(&self) -> usize {
-        self.guide_planes_len().div_ceil(2) * 2
+        (self.guide_planes_len() + self.prior_len()).div_ceil(2) * 2
     }
 
     /// f32 values of the network scratch [`Flnr::denoise_parallel`] needs for
@@ -532,14 +625,13 @@ impl<'w> Flnr<'w> {
         TileRun::scratch_len(nx * ny, workers.max(1), self.tile_scratch_len())?.checked_add(self.padded_planes_len())
     }
 
-    /// [`Flnr::denoise`] with the network, then FLR's tiles, spread by the
-    /// caller's executor ([`Executor`]); bit-identical to it. The network
-    /// runs whole tiles on the workers where there are at least
+    /// [`Flnr::denoise`] with the prior, the network, then FLR's tiles,
+    /// spread by the caller's executor ([`Executor`]); bit-identical to it.
+    /// The network runs whole tiles on the workers where there are at least
     /// [`TILES_PER_WORKER`] per worker, and otherwise each layer's rows in
-    /// bands over them. `scratch`: at
-    /// least [`Flnr::parallel_scratch_len`] f32; `flr_scratch`: at least
-    /// `flr().tiled_scratch_len(workers)` f64; `out` must have rows that do
-    /// not overlap in memory. Allocates nothing.
+    /// bands over them. `scratch`: at least [`Flnr::parallel_scratch_len`]
+    /// f32; `flr_scratch`: at least [`Flnr::flr_tiled_scratch_len`] f64;
+    /// `out` must have rows that do not overlap in memory. Allocates nothing.
     pub fn denoise_parallel(
         &self,
         frame: &Frame<'_>,
@@ -551,12 +643,15 @@ impl<'w> Flnr<'w> {
     ) -> Result<Report, Error> {
         let views = self.views(frame)?;
         let sc = self.scale_of(&views[3], &frame.noisy)?;
+        let threads = Some((workers, for_each));
         if self.layer_threads(workers) {
             if scratch.len() < self.scratch_len() {
                 return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
             }
-            let (g, work) = scratch.split_at_mut(self.guide_planes_len());
-            self.network_planes(&views, &frame.noisy, sc, g, work, Some((workers, for_each)))?;
+            let (g, rest) = scratch.split_at_mut(self.guide_planes_len());
+            let (prior, work) = rest.split_at_mut(self.prior_len());
+            self.prior_planes(frame, prior, flr_scratch, threads)?;
+            self.network_planes(&views, &frame.noisy, sc, prior, g, work, threads)?;
             let f = self.learned_frame(frame, g)?;
             return self.flr.denoise_parallel(&f, flr_scratch, out, workers, for_each);
         }
@@ -564,11 +659,14 @@ impl<'w> Flnr<'w> {
         if scratch.len() < np {
             return Err(Error::ScratchTooSmall { needed: np, got: scratch.len() });
         }
-        let (planes, rest) = scratch.split_at_mut(np);
+        let (both, rest) = scratch.split_at_mut(np);
+        let (planes, prior) = both.split_at_mut(self.guide_planes_len());
+        self.prior_planes(frame, prior, flr_scratch, threads)?;
+        let prior: &[f32] = prior;
         let (nx, ny) = self.tile_grid();
         let shared = PlanesPtr(planes.as_mut_ptr());
         run_tiles(rest, nx * ny, workers, self.tile_scratch_len(), for_each, &|t, buf| {
-            let tile = self.run_tile(&views, &frame.noisy, sc, t, buf, None)?;
+            let tile = self.run_tile(&views, &frame.noisy, sc, prior, t, buf, None)?;
             // SAFETY: the planes hold `guide_planes_len` f32 (checked above)
             // and are not otherwise used until every tile has returned; each
             // tile runs once (`run_tiles`) and writes only the pixels of its
@@ -678,12 +776,27 @@ impl TileGuides<'_> {
     }
 }
 
+/// The prior as the network input reads it: an interleaved RGB image of
+/// `width`-pixel rows (empty without a prior).
+struct Prior<'a> {
+    rgb: &'a [f32],
+    width: usize,
+}
+
 /// Row `y` of the network input planes of the pixels `r` (see
-/// [`Flnr::input`]); `false` if a view has no such row.
+/// [`Flnr::input`]); `false` if a view or the prior has no such row.
 ///
 /// # Safety
 /// No other live slice covers row `y` of `planes`.
-unsafe fn input_row(views: &[ImageView<'_>; 5], noisy: &ImageView<'_>, sc: InputScale, r: Rect, planes: &Planes<'_>, y: usize) -> bool {
+unsafe fn input_row(
+    views: &[ImageView<'_>; 5],
+    noisy: &ImageView<'_>,
+    sc: InputScale,
+    prior: &Prior<'_>,
+    r: Rect,
+    planes: &Planes<'_>,
+    y: usize,
+) -> bool {
     let fy = r.y0 + y;
     for (c, v) in views.iter().enumerate() {
         // SAFETY: the caller keeps row y to this call (and below).
@@ -705,6 +818,16 @@ unsafe fn input_row(views: &[ImageView<'_>; 5], noisy: &ImageView<'_>, sc: Input
         // SAFETY: as above.
         for v in unsafe { planes.row(c, y) }.iter_mut() {
             *v = libm::log1pf(clean(*v).max(0.0) / sc.light);
+        }
+    }
+    if planes.channels() == PRIOR_INPUTS {
+        let at = 3 * (fy * prior.width + r.x0);
+        let Some(src) = prior.rgb.get(at..at + 3 * r.width()) else { return false };
+        for c in 0..3 {
+            // SAFETY: as above.
+            for (v, p) in unsafe { planes.row(BASE_INPUTS + c, y) }.iter_mut().zip(src.chunks_exact(3)) {
+                *v = libm::log1pf(clean(p[c]).max(0.0) / sc.light);
+            }
         }
     }
     true

@@ -62,14 +62,29 @@ def load(path):
         }
 
 
-def net_input(fr):
-    """The network's input planes (see the module docs; src/flnr.rs mirrors it)."""
+def net_input(fr, flr_out=None):
+    """The network's input planes (see the module docs; src/flnr.rs mirrors it); with
+    `flr_out` (FLR's defaults on the frame), its ln(1 + max(·, 0) / s) as 3 more planes."""
     noisy = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
     s = max(float(np.maximum(noisy, 0).mean()), 1e-6)
     d = fr["depth"]
     dm = float(d[np.isfinite(d) & (d > 0)].mean()) if np.any(np.isfinite(d) & (d > 0)) else 1.0
-    x = np.concatenate([fr["normal"], d / dm, fr["ao"], np.log1p(np.maximum(noisy, 0) / s)], 0)
+    planes = [fr["normal"], d / dm, fr["ao"], np.log1p(np.maximum(noisy, 0) / s)]
+    if flr_out is not None:
+        planes.append(np.log1p(np.maximum(flr_out, 0) / s))
+    x = np.concatenate(planes, 0)
     return np.nan_to_num(x, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+
+
+def flr_defaults(fr):
+    """FLR's library defaults on the frame's own guides (normal, depth, AO; the adaptive
+    window, ε = 1e-3, ϵ = 1e-2, AO demodulation 0.1): the network's last 3 input planes
+    with `--flr-input` (src/flnr.rs runs the same before the network)."""
+    noisy = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
+    x = torch.from_numpy(net_input(fr))[None]
+    with torch.no_grad():
+        out = flr(torch.from_numpy(noisy)[None], x[:, :5], x[:, :5], ADAPTIVE_SIGMAS, 1e-3, 1e-2, x[:, 4:5], DEFAULT_AO_OFFSET)
+    return out[0].numpy().astype(np.float32)
 
 
 LUMA = (0.2126, 0.7152, 0.0722)
@@ -77,6 +92,7 @@ LUMA = (0.2126, 0.7152, 0.0722)
 ADAPTIVE_SIGMAS = (6.0, 12.0, 20.0)
 BIAS_DISCOUNT = 0.5
 POOL_MIN_SIGMA = 1.5  # larger windows with σ ≥ 1.5 B are fitted on the 2×2-pooled grid
+DEFAULT_AO_OFFSET = 0.1  # the library's AO demodulation offset c
 
 
 def moments(y, z):
@@ -208,9 +224,9 @@ def smape(a, b):
 
 
 class Flnr(torch.nn.Module):
-    def __init__(self, widths, sigmas, ao_offset):
+    def __init__(self, widths, sigmas, ao_offset, cin=8):
         super().__init__()
-        self.net = UNet(8, 2 * QP, widths)
+        self.net = UNet(cin, 2 * QP, widths)
         # the map guides start equal to the model guides, so that an untrained FLNR is FLR with
         # QP more (random, smooth) guides rather than FLR applied to guides it never fitted; the
         # last layer's weights are scaled up so that those guides vary (a spread of ~1e-4 would
@@ -278,8 +294,9 @@ def crops(frames, size, batch, augment=True):
         oy, ox = random.randrange(0, h - size + 1), random.randrange(0, w - size + 1)
         sl = (slice(None), slice(oy, oy + size), slice(ox, ox + size))
         x, y, r = fr["x"][sl].copy(), fr["y"][sl], fr["r"][sl]
+        f = fr["f"][sl] if "f" in fr else None
         if augment:
-            x, y, r = recolour(x, y, r, fr["m"])
+            x, y, r = recolour(x, y, r, fr["m"], f)
         if random.random() < 0.5:
             x, y, r = x[:, :, ::-1], y[:, :, ::-1], r[:, :, ::-1]
         if random.random() < 0.5:
@@ -292,14 +309,18 @@ def crops(frames, size, batch, augment=True):
     return torch.from_numpy(np.stack(xs)), torch.from_numpy(np.stack(ys)), torch.from_numpy(np.stack(rs))
 
 
-def recolour(x, y, r, means):
-    """`crops`' augmentation of one crop: normals rotated, AO raised to a power, light tinted."""
+def recolour(x, y, r, means, f=None):
+    """`crops`' augmentation of one crop: normals rotated, AO raised to a power, light tinted
+    (`f`: the crop of FLR's output on the untinted frame, tinted the same; FLR is not
+    refitted to the new AO and tint, which move its output little)."""
     x[0:3] = np.einsum("ij,jhw->ihw", random_rotation(), x[0:3]).astype(np.float32)
     x[4] = np.clip(x[4], 0.0, 1.0) ** math.exp(random.uniform(-0.7, 0.7))
     col = np.exp(np.random.uniform(-0.4, 0.4, size=(3, 1, 1))).astype(np.float32)
     y, r = y * col, r * col
     scale = max(float((col[:, 0, 0] * means).mean()), 1e-6)
     x[5:8] = np.log1p(np.maximum(y, 0) / scale)
+    if f is not None:
+        x[8:11] = np.log1p(np.maximum(f * col, 0) / scale)
     return x, y, r
 
 
@@ -363,31 +384,36 @@ def main():
     ap.add_argument("--val", nargs="*", default=[], help="frames only scored (per family) at the end, to choose between runs; never trained on")
     ap.add_argument("--heldout", nargs="*", default=[], help="held-out families: scored once at the end (per family, with OIDN), never trained or chosen on")
     ap.add_argument("--threads", type=int, default=2, help="PyTorch's CPU threads")
+    ap.add_argument("--flr-input", action="store_true", help="the network also reads FLR's defaults output (11 input planes); with --init from an 8-input blob, the new inputs start at zero weight")
+    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--check", action="store_true", help="only print plain FLR's PSNR per frame (compare with `lrd eval`)")
     args = ap.parse_args()
-    torch.manual_seed(0)
-    random.seed(0)
-    np.random.seed(0)
+    torch.manual_seed(args.seed)
+    random.seed(args.seed)
+    np.random.seed(args.seed)
     torch.set_num_threads(args.threads)
     def prepare(p):
         fr = load(p)
         y = np.nan_to_num(fr["noisy"], nan=0.0, posinf=0.0, neginf=0.0)
         m = np.maximum(y, 0).reshape(3, -1).mean(1)  # per-channel means: the light-colour augmentation rescales the input
-        return {"x": net_input(fr), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "normal": fr["normal"], "reference": fr["reference"], "m": m, "name": p}
+        extra = {}
+        if args.flr_input:
+            extra["f"] = flr_defaults(fr)
+        return {**extra, "x": net_input(fr, extra.get("f")), "y": y, "r": fr["reference"], "albedo": fr["albedo"], "normal": fr["normal"], "reference": fr["reference"], "m": m, "name": p}
 
     frames = [prepare(p) for p in args.frames]
     val = [prepare(p) for p in args.val]
     heldout = [prepare(p) for p in args.heldout]
     sigmas = [float(v) for v in args.sigmas.split(",")]
     print(f"{len(frames)} frames; widths {args.widths}; FLR windows {sigmas}; AO demodulation {args.ao_demodulation or 'off'}")
-    model = Flnr([int(v) for v in args.widths.split(",")], sigmas, args.ao_demodulation)
+    model = Flnr([int(v) for v in args.widths.split(",")], sigmas, args.ao_demodulation, 11 if args.flr_input else 8)
     if args.check:
         for fr in frames:
             print(f"{fr['name']}: plain FLR {psnr(full_frame(model, fr, plain=True), fr):.2f} dB")
         return
     if args.init:
         # the network and the ε, ϵ it was trained with
-        _, (eps_mul, eps_add), _ = load_blob(model.net, args.init)
+        _, (eps_mul, eps_add), _ = load_blob(model.net, args.init, widen=True)
         with torch.no_grad():
             model.log_eps_mul.fill_(math.log(eps_mul))
             model.log_eps_add.fill_(math.log(eps_add))

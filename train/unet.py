@@ -82,12 +82,14 @@ def export(model, path, sigmas=(12.0,), eps=(1e-3, 1e-2), ao_offset=0.0):
         f.write(head + payload.astype("<f2").tobytes())
 
 
-def load_blob(model, path):
-    """Loads a blob's weights (version 1, 2 or 3) into `model` (same shapes); returns
-    the FLR it was trained with as (sigmas, eps, ao_offset)."""
+def load_blob(model, path, widen=False):
+    """Loads a blob's weights (version 1, 2 or 3) into `model` (same shapes; with `widen`,
+    a blob of fewer input planes fills the first ones, the others start at zero weight);
+    returns the FLR it was trained with as (sigmas, eps, ao_offset)."""
     b = open(path, "rb").read()
     assert b[:4] == MAGIC, "not an lrdenoise network"
     version, cin, cout, levels = struct.unpack_from("<4I", b, 4)
+    assert cout == model.cout and (cin == model.cin or widen and cin < model.cin), "input or output planes differ"
     pos = 20 + 4 * (levels + 1)
     assert list(struct.unpack_from(f"<{levels + 1}I", b, 20)) == list(model.widths), "widths differ"
     if version == 1:
@@ -103,8 +105,14 @@ def load_blob(model, path):
     payload = np.frombuffer(b, dtype="<f2", count=n, offset=pos + 4).astype(np.float32)
     at = 0
     with torch.no_grad():
-        for conv in model.convs():
+        for i, conv in enumerate(model.convs()):
             for t in (conv.weight, conv.bias):
+                if i == 0 and t is conv.weight and cin < model.cin:
+                    shape = (t.shape[0], cin) + tuple(t.shape[2:])
+                    t.zero_()
+                    t[:, :cin] = torch.from_numpy(payload[at : at + int(np.prod(shape))].reshape(shape))
+                    at += int(np.prod(shape))
+                    continue
                 t.copy_(torch.from_numpy(payload[at : at + t.numel()].reshape(t.shape)))
                 at += t.numel()
     assert at == n, "payload size differs"

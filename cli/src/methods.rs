@@ -734,7 +734,8 @@ impl Method {
                 let fireflies = a.fireflies.as_deref().map(parse_fireflies).transpose()?.unwrap_or(default);
                 let runner = FlnrRunner::new(blob, fireflies, w, h, threads).map_err(|e| format!("flnr ({name}): {e}"))?;
                 let net = runner.flnr.network();
-                let label = format!("flnr {:?}", net.widths()).replace(' ', "") + &fireflies_label(fireflies, default);
+                let prior = if runner.flnr.prior().is_some() { "+prior" } else { "" };
+                let label = format!("flnr {:?}", net.widths()).replace(' ', "") + prior + &fireflies_label(fireflies, default);
                 let mut flags = match &a.weights {
                     Some(p) => format!("--method flnr --weights {}", p.display()),
                     None => "--method flnr".to_string(),

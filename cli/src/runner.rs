@@ -360,7 +360,7 @@ impl FlnrRunner {
         let (scratch, flr_scratch) = if threads > 1 {
             (
                 vec![0f32; flnr.parallel_scratch_len(threads).ok_or("flnr: scratch size overflows")?],
-                vec![0f64; flnr.flr().tiled_scratch_len(threads).ok_or("flnr: scratch size overflows")?],
+                vec![0f64; flnr.flr_tiled_scratch_len(threads).ok_or("flnr: scratch size overflows")?],
             )
         } else {
             (vec![0f32; flnr.scratch_len()], vec![0f64; flnr.flr_scratch_len()])

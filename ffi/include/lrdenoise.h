@@ -187,7 +187,8 @@ enum LrdFlnrStage
 #endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
  {
   /**
-   * One tile (tile 0): checks the frame and measures the network's input scales.
+   * One tile (tile 0): checks the frame, measures the network's input scales
+   * and, for networks that read it, runs the prior (FLR's defaults).
    */
   LRD_FLNR_STAGE_PREPARE = 0,
   /**

@@ -11,7 +11,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LrdFlnrStage {
-    /// One tile (tile 0): checks the frame and measures the network's input scales.
+    /// One tile (tile 0): checks the frame, measures the network's input scales
+    /// and, for networks that read it, runs the prior (FLR's defaults).
     LRD_FLNR_STAGE_PREPARE = 0,
     /// `lrd_flnr_tile_count` tiles: the network on one tile (nearly all of the
     /// time; tiles may run concurrently, each call with its own `worker`).
@@ -63,10 +64,12 @@ fn flnr_plan<'w>(config: *const LrdFlnrConfig, width: u32, height: u32) -> Resul
 }
 
 /// Byte offsets of a threaded FLNR scratch: the header (input scales), FLR's
-/// f64 scratch, the learned guide planes, then one network scratch per worker.
+/// f64 scratch, the learned guide planes, the prior's planes (networks of 11
+/// inputs), then one network scratch per worker.
 struct FlnrLayout {
     flr: usize,
     planes: usize,
+    prior: usize,
     workers: usize,
     worker: usize,
     total: usize,
@@ -77,9 +80,10 @@ fn flnr_layout(fl: &Flnr<'_>, workers: usize) -> Result<FlnrLayout, LrdStatus> {
     let flr = HEADER;
     let planes = fl.flr_scratch_len().checked_mul(8).and_then(|b| b.checked_add(flr)).ok_or(big)?;
     let worker_bytes = fl.tile_scratch_len().checked_mul(4).ok_or(big)?;
-    let first_worker = fl.guide_planes_len().checked_mul(4).and_then(|b| b.checked_add(planes)).ok_or(big)?;
+    let prior = fl.guide_planes_len().checked_mul(4).and_then(|b| b.checked_add(planes)).ok_or(big)?;
+    let first_worker = fl.prior_len().checked_mul(4).and_then(|b| b.checked_add(prior)).ok_or(big)?;
     let total = worker_bytes.checked_mul(workers).and_then(|b| b.checked_add(first_worker)).ok_or(big)?;
-    Ok(FlnrLayout { flr, planes, workers: first_worker, worker: worker_bytes, total })
+    Ok(FlnrLayout { flr, planes, prior, workers: first_worker, worker: worker_bytes, total })
 }
 
 /// Bytes at the start of a threaded FLNR scratch: the marker, the input
@@ -249,6 +253,9 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
                 s if s == LrdFlnrStage::LRD_FLNR_STAGE_PREPARE as u32 => {
                     one(tile)?;
                     let sc = fl.input_scale(&f).map_err(status_of)?;
+                    let prior = core::slice::from_raw_parts_mut(base.add(lay.prior) as *mut f32, fl.prior_len());
+                    let fs = core::slice::from_raw_parts_mut(base.add(lay.flr) as *mut f64, fl.flr_scratch_len());
+                    fl.run_prior(&f, prior, fs).map_err(status_of)?;
                     scale_at.write_unaligned(sc);
                     (*networks_done).store(0, Ordering::Relaxed);
                     header.write(FLNR_PREPARED);
@@ -263,7 +270,8 @@ pub unsafe extern "C" fn lrd_flnr_run_tile(
                     let sc = scale_at.read_unaligned();
                     let ws =
                         core::slice::from_raw_parts_mut(base.add(lay.workers + worker as usize * lay.worker) as *mut f32, lay.worker / 4);
-                    let tg = fl.network_tile(&f, sc, tile as usize, ws).map_err(status_of)?;
+                    let prior = core::slice::from_raw_parts(base.add(lay.prior) as *const f32, fl.prior_len());
+                    let tg = fl.network_tile(&f, sc, prior, tile as usize, ws).map_err(status_of)?;
                     let (r, w, np) = (tg.rect(), out.width as usize, out.width as usize * out.height as usize);
                     for k in 0..tg.plane_count() {
                         for y in r.y0..r.y1 {

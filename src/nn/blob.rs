@@ -1,5 +1,5 @@
 //! The weight blob of FLNR's network: a small, versioned, little-endian
-//! format written by `train/export.py`, parsed and validated without copying.
+//! format written by `train/unet.py`, parsed and validated without copying.
 //!
 //! ```text
 //! offset  field

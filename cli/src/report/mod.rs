@@ -72,7 +72,7 @@ default 4, not shown). `bmfr-temporal` is the pipeline over a sequence (accumula
 - `walr`: `tT` à-trous iterations (`--iterations`); `pw-adaptive` the last two windows blended per pixel (default), `pwW` a fixed \
 weight W of the previous window (`--previous-weight`), none = one window; `f16`/`f32` storage of the averages; `notrace` no edge \
 tracing (`--no-tracing`). `walr-temporal` is its pipeline over a sequence.
-- `flnr[…]`: the U-Net's channel widths (the bundled weights unless `--weights`).
+- `flnr[…]`: the U-Net's channel widths (the bundled weights unless `--weights`); `+prior`: the network also reads FLR's defaults output.
 - `[noisy4]`: run on the 4-spp input layer instead of the 1-spp `noisy` (`--input-layer noisy4`); `noisy`, `noisy4`: the inputs \
 themselves, undenoised.
 ";

@@ -328,6 +328,11 @@ impl<'o> Planes<'o> {
         self.height
     }
 
+    /// Planes.
+    pub fn channels(&self) -> usize {
+        self.count
+    }
+
     /// Row `y` of plane `c` (empty outside the tensor).
     ///
     /// # Safety
