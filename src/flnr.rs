@@ -298,8 +298,8 @@ impl<'w> Flnr<'w> {
         let r = self.region_len();
         (self.inputs() + 2 * self.q) * r + self.net.scratch_len(self.region_max.0, self.region_max.1)
     }
-    /// f32 of scratch for [`Flnr::denoise`]: the guide planes, the prior's
-    /// planes and one tile's working space (without the tile's output copy
+    /// f32 of scratch for [`Flnr::denoise`]: the guide planes, the prior
+    /// and one tile's working space (without the tile's output copy
     /// when the whole frame is one tile: it is written straight into the
     /// planes).
     pub fn scratch_len(&self) -> usize {
@@ -427,13 +427,9 @@ impl<'w> Flnr<'w> {
     /// [`Flnr::run_prior`] on a checked frame, on this thread or spread over `threads`.
     fn prior_planes(&self, frame: &Frame<'_>, prior: &mut [f32], flr_scratch: &mut [f64], threads: Threads<'_>) -> Result<(), Error> {
         let Some(plan) = &self.prior else { return Ok(()) };
-        let len = self.prior_len();
-        if prior.len() < len {
-            return Err(Error::ScratchTooSmall { needed: len, got: prior.len() });
-        }
-        let (w, h) = (self.width, self.height);
+        self.check_prior(prior)?;
         let f = Frame { noisy: frame.noisy, guides: frame.guides, guides_low: None, sample_weights: None };
-        let mut out = ImageViewMut::interleaved(&mut prior[..len], w, h, 3)?;
+        let mut out = ImageViewMut::interleaved(&mut prior[..self.prior_len()], self.width, self.height, 3)?;
         match threads {
             Some((workers, for_each)) => plan.denoise_parallel(&f, flr_scratch, &mut out, workers, for_each),
             None => plan.denoise(&f, flr_scratch, &mut out),
