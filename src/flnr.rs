@@ -457,7 +457,7 @@ impl<'w> Flnr<'w> {
         self.input(views, noisy, sc, prior, reg, x, threads)?;
         let (w, h, o) = (reg.width(), reg.height(), &mut o[..2 * self.q * rn]);
         match threads {
-            Some((workers, for_each)) => self.net.forward_parallel(Isa::detect(), x, w, h, net_scratch, o, workers, for_each),
+            Some((workers, for_each)) => self.net.forward_parallel(Isa::detect_widest(), x, w, h, net_scratch, o, workers, for_each),
             None => self.net.forward(x, w, h, net_scratch, o),
         }
     }

@@ -1,11 +1,14 @@
 //! Which vector instruction set a kernel may use on this CPU, detected at run
 //! time with `core::arch` (so `no_std` builds get it too).
 
-#[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma", target_feature = "f16c"))))]
+#[cfg(all(
+    target_arch = "x86_64",
+    not(all(target_feature = "avx2", target_feature = "fma", target_feature = "f16c", target_feature = "avx512f"))
+))]
 use core::sync::atomic::{AtomicU8, Ordering};
 
-/// The instruction set of a kernel's 8-lane loops: the network's 3×3 layers
-/// (`nn::conv`), the QR's column updates (`kernels::qr`), and FLR's block
+/// The instruction set of a kernel's vector loops: the network's 3×3 layers
+/// (`nn::conv`, 8 lanes, or 16 with [`Isa::Avx512`]), the QR's column updates (`kernels::qr`), and FLR's block
 /// accumulation (`kernels::moments`), four-cell solve (`kernels::solve`, in
 /// `f64` lanes) and model application (`kernels::apply`).
 ///
@@ -23,6 +26,10 @@ pub enum Isa {
     Portable,
     /// `core::arch` AVX2 + FMA intrinsics (x86-64 only).
     Avx2Fma,
+    /// AVX-512F intrinsics (x86-64 only) for the kernels that have an
+    /// AVX-512 version (the network's 3×3 layers, `nn::conv`); every other
+    /// kernel runs its AVX2 + FMA version. Chosen by [`Isa::detect_widest`].
+    Avx512,
 }
 
 impl Isa {
@@ -35,17 +42,30 @@ impl Isa {
         }
     }
 
+    /// The fastest instruction set for a kernel that has an AVX-512 version:
+    /// [`Isa::Avx512`] where the CPU has AVX-512F (with AVX2 and FMA) and
+    /// the OS saves its registers, else [`Isa::detect`]. 16-lane vectors
+    /// and 32 registers hold twice the accumulators of the AVX2 version.
+    pub fn detect_widest() -> Isa {
+        if Isa::Avx512.available() {
+            Isa::Avx512
+        } else {
+            Isa::detect()
+        }
+    }
+
     /// Whether this build can run `self` on this CPU.
     pub fn available(self) -> bool {
         match self {
             Isa::Portable => true,
             Isa::Avx2Fma => avx2_fma_available(),
+            Isa::Avx512 => avx2_fma_available() && avx512_available(),
         }
     }
 
     /// Whether a kernel asked to run on `self` takes its `avx2.rs` intrinsics
     /// file: the build's `wide` lacks AVX2 + FMA (a plain x86-64 build, whose
-    /// lanes are SSE2), `self` is [`Isa::Avx2Fma`] and the CPU has it. The
+    /// lanes are SSE2), `self` is [`Isa::Avx2Fma`] (or [`Isa::Avx512`], which implies it) and the CPU has it. The
     /// one rule of every kernel's dispatch (`qr`, `moments`, `solve`,
     /// `apply`, `blur`, the temporal stage's lanes; `conv` runs its file in
     /// every build). An `x86-64-v3`
@@ -55,7 +75,7 @@ impl Isa {
     /// `#[cfg(target_arch = "x86_64")]`: the intrinsics files exist only there.
     #[inline]
     pub fn intrinsics(self) -> bool {
-        !cfg!(all(target_feature = "avx2", target_feature = "fma")) && self == Isa::Avx2Fma && self.available()
+        !cfg!(all(target_feature = "avx2", target_feature = "fma")) && self != Isa::Portable && self.available()
     }
 }
 
@@ -86,6 +106,38 @@ fn avx2_fma_available() -> bool {
     false
 }
 
+#[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
+fn avx512_available() -> bool {
+    true
+}
+
+#[cfg(all(target_arch = "x86_64", not(target_feature = "avx512f")))]
+fn avx512_available() -> bool {
+    static KNOWN: AtomicU8 = AtomicU8::new(0);
+    cached(&KNOWN, cpu_has_avx512f)
+}
+
+/// CPUID leaf 7: AVX-512F (EBX bit 16); CPUID leaf 1: OSXSAVE (ECX bit 27);
+/// XCR0 bits 1, 2 and 5–7: the OS saves the XMM, YMM, opmask and upper ZMM
+/// registers.
+#[cfg(all(target_arch = "x86_64", not(target_feature = "avx512f")))]
+#[allow(unused_unsafe)] // the CPUID intrinsics are safe in recent Rust, unsafe in older ones
+fn cpu_has_avx512f() -> bool {
+    use core::arch::x86_64::{__cpuid, __cpuid_count, _xgetbv};
+    // SAFETY: every x86-64 CPU has CPUID leaves 0 and 1.
+    let (max_leaf, ecx) = unsafe { (__cpuid(0).eax, __cpuid(1).ecx) };
+    if max_leaf < 7 || ecx & (1 << 27) == 0 {
+        return false;
+    }
+    // SAFETY: OSXSAVE (checked above) means the OS has enabled XGETBV; leaf 7 exists.
+    unsafe { _xgetbv(0) & 0xe6 == 0xe6 && __cpuid_count(7, 0).ebx & (1 << 16) != 0 }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn avx512_available() -> bool {
+    false
+}
+
 /// Whether the CPU converts halves in hardware: F16C, with the AVX state saved
 /// by the OS (its instructions are VEX-encoded). Used by `convert`, which
 /// `half` leaves to software in a `no_std` build without F16C compiled in.
@@ -104,7 +156,10 @@ pub fn f16c_available() -> bool {
 
 /// `detect()`, asked once per process: its answer is kept in `known` (0: not
 /// asked yet, 1: no, 2: yes), since CPUID is slow in virtual machines.
-#[cfg(all(target_arch = "x86_64", not(all(target_feature = "avx2", target_feature = "fma", target_feature = "f16c"))))]
+#[cfg(all(
+    target_arch = "x86_64",
+    not(all(target_feature = "avx2", target_feature = "fma", target_feature = "f16c", target_feature = "avx512f"))
+))]
 fn cached(known: &AtomicU8, detect: fn() -> bool) -> bool {
     match known.load(Ordering::Relaxed) {
         0 => {
@@ -142,6 +197,7 @@ mod tests {
         assert_eq!(super::Isa::Avx2Fma.available(), std_says);
         assert_eq!(super::Isa::detect() == super::Isa::Avx2Fma, std_says);
         assert_eq!(super::f16c_available(), std::is_x86_feature_detected!("f16c"));
+        assert_eq!(super::Isa::Avx512.available(), std_says && std::is_x86_feature_detected!("avx512f"));
     }
 }
 

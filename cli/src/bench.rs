@@ -56,10 +56,11 @@ pub fn bench(
     let min = all.iter().copied().fold(f64::MAX, f64::min);
     let max = all.iter().copied().fold(0.0, f64::max);
     println!(
-        "{method} {w}x{h} [{}] layout {layout:?} threads {threads} simd {} (run-time kernels {:?}): median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
+        "{method} {w}x{h} [{}] layout {layout:?} threads {threads} simd {} (run-time kernels {:?}{}): median {med:.3} ms (min {min:.3}, max {max:.3}, {} runs), {:.1} MPix/s",
         b.label,
         lrdenoise::SIMD_LEVEL,
         lrdenoise::isa::Isa::detect(),
+        if method == "flnr" { format!(", network {:?}", lrdenoise::isa::Isa::detect_widest()) } else { String::new() },
         all.len(),
         (w * h) as f64 / med / 1e3
     );

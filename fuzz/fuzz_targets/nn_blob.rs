@@ -16,6 +16,6 @@ fuzz_target!(|d: &[u8]| {
     let mut banded = vec![0f32; out.len()];
     let workers = 2 + d.len() % 3;
     let each = |n: usize, f: &(dyn Fn(usize, usize) + Sync)| (0..n).for_each(|i| f(i, i % workers));
-    net.forward_parallel(lrdenoise::nn::Isa::detect(), &input, w, h, &mut scratch, &mut banded, workers, &each).unwrap();
+    net.forward_parallel(lrdenoise::nn::Isa::detect_widest(), &input, w, h, &mut scratch, &mut banded, workers, &each).unwrap();
     assert!(out.iter().zip(&banded).all(|(a, b)| a.to_bits() == b.to_bits()));
 });

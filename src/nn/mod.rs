@@ -112,9 +112,9 @@ impl UNet<'_> {
     /// Runs the network on `input` (`in_channels()` planes of `w × h`,
     /// plane-major) into `out` (`out_channels()` planes). `scratch`: at least
     /// [`UNet::scratch_len`] f32. Allocates nothing.
-    /// The 3×3 layers use the fastest instruction set available ([`Isa::detect`]).
+    /// The 3×3 layers use the fastest instruction set available ([`Isa::detect_widest`]).
     pub fn forward(&self, input: &[f32], w: usize, h: usize, scratch: &mut [f32], out: &mut [f32]) -> Result<(), Error> {
-        self.forward_with(Isa::detect(), input, w, h, scratch, out)
+        self.forward_with(Isa::detect_widest(), input, w, h, scratch, out)
     }
 
     /// [`UNet::forward`] with the 3×3 layers' instruction set chosen by the

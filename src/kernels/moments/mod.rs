@@ -691,7 +691,7 @@ mod tests {
                 Isa::Portable => accumulate::<Q>(groups, weights, &mut sums, wsum, &lay, &mut acc, check),
                 // SAFETY: the test returned early unless the CPU has AVX2 and FMA.
                 // (Called directly: `accumulate_on` skips it where `wide` is AVX2.)
-                Isa::Avx2Fma => unsafe { avx2::accumulate::<Q>(groups, weights, &mut sums, wsum, &lay, &mut acc, check) },
+                Isa::Avx2Fma | Isa::Avx512 => unsafe { avx2::accumulate::<Q>(groups, weights, &mut sums, wsum, &lay, &mut acc, check) },
             };
             (ok, acc)
         }

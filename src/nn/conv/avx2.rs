@@ -10,7 +10,7 @@
 //! the rounding of the unfused products (tests/nn.rs compares both with f64).
 
 use super::{Lanes, OB};
-use core::arch::x86_64::{__m256, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps};
+use core::arch::x86_64::{__m256, _mm256_broadcast_ss, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps};
 
 /// The 8 values `s[x..x + 8]`, zeros for those outside `s` (see [`super::load8`]).
 #[inline(always)]
@@ -27,71 +27,102 @@ fn load8(s: &[f32], x: isize) -> __m256 {
     }
 }
 
-/// [`super::conv3_lanes`] with AVX2 + FMA; returns the end of the pixels filled.
-///
-/// Two 8-pixel groups per pass where the row has room: 2 × `OB` independent
-/// accumulators. With `OB` alone, each accumulator's chain of dependent
-/// multiply-adds (4 cycles each) left half of the FMA throughput idle.
+/// `8 · G` output pixels per pass: with `OB` channels, `G · OB` independent
+/// accumulators.
+const G: usize = 2;
+
+/// [`super::conv3_lanes`] with AVX2 + FMA over output pixels `x0..x1`;
+/// returns `x1`.
 ///
 /// # Safety
-/// The CPU must support AVX2 and FMA ([`super::Isa::Avx2Fma`] available).
+/// The CPU must support AVX2 and FMA ([`super::Isa::Avx2Fma`] available),
+/// and `g.fits()` must hold.
 #[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
-    let end = rows[0].len(); // the output row (≥ 8)
-    let mut x = 0;
-    while x + 16 <= end {
-        // SAFETY: AVX2 and FMA are guaranteed by this function's caller.
-        unsafe { groups::<2>(g, rows, x) };
-        x += 16;
-    }
-    while x < end {
-        // the last group is shifted left to end at `end` (it recomputes a few
+pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize, x1: usize) -> usize {
+    let ow = rows[0].len(); // ≥ 8, and x1 ≥ min(x0 + STRIP, ow)
+    let mut x = x0;
+    while x < x1 {
+        // the last pass is shifted left to end at `x1` (it recomputes a few
         // pixels, bit-identically: every group starts from the bias)
-        // SAFETY: as above.
-        unsafe { groups::<1>(g, rows, x.min(end - 8)) };
-        x += 8;
+        if ow >= 8 * G && x1 >= 8 * G {
+            let xs = x.min(x1 - 8 * G);
+            // SAFETY: AVX2, FMA and `g.fits()` are guaranteed by this function's caller.
+            unsafe { groups::<G>(g, rows, xs) };
+            x = xs + 8 * G;
+        } else {
+            let xs = x.min(x1.max(8) - 8);
+            // SAFETY: as above.
+            unsafe { groups::<1>(g, rows, xs) };
+            x = xs + 8;
+        }
     }
-    end
+    x1
 }
 
-/// `G` consecutive 8-pixel groups from pixel `x0` of [`conv3_lanes`].
+/// `N` consecutive 8-pixel groups from pixel `x0` of [`conv3_lanes`].
 ///
 /// # Safety
-/// The CPU must support AVX2 and FMA.
+/// The CPU must support AVX2 and FMA, and `g.fits()` must hold.
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-unsafe fn groups<const G: usize>(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize) {
+unsafe fn groups<const N: usize>(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize) {
     let (w, plane, ew) = (g.w, g.plane, g.w.div_ceil(2));
-    let mut acc = [g.bias.map(|b| _mm256_set1_ps(b)); G];
-    // every tap of the G groups inside the row (else the zero padding is
+    let mut acc = [[_mm256_setzero_ps(); OB]; N];
+    for ak in acc.iter_mut() {
+        for (a, &b) in ak.iter_mut().zip(&g.bias) {
+            *a = _mm256_set1_ps(b);
+        }
+    }
+    // every tap of the N groups inside the row (else the zero padding is
     // loaded lane by lane); stride 2 reads odd[x − 1..], even[x..], odd[x..]
-    let interior = x0 >= 1 && if g.stride == 1 { x0 + 8 * G < w } else { x0 + 8 * G <= w / 2 };
-    for i in 0..g.cin {
-        let src = &g.lanes[i * plane..];
+    let interior = x0 >= 1 && if g.stride == 1 { x0 + 8 * N < w } else { x0 + 8 * N <= w / 2 };
+    if interior {
+        // where the three taps' 8·N values start in a row
+        let offs = if g.stride == 1 { [x0 - 1, x0, x0 + 1] } else { [ew + x0 - 1, x0, ew + x0] };
+        // the rows inside the input: (ky, offset of row sy)
+        let mut valid = [(0, 0); 3];
+        let mut n = 0;
         for (ky, r) in g.src_rows.iter().enumerate() {
-            let Some(sy) = *r else { continue };
-            let srow = &src[sy * w..(sy + 1) * w];
-            let t = (i * 3 + ky) * 3;
-            // (loops, not `array::from_fn`: its closure would not inherit
-            // this function's target features, and the loads would be calls)
-            let mut v = [[_mm256_setzero_ps(); 3]; G];
-            if interior {
-                // the taps' 8·G values each, inside the row
-                let n = 8 * G;
-                let taps: [&[f32]; 3] = if g.stride == 1 {
-                    [&srow[x0 - 1..x0 - 1 + n], &srow[x0..x0 + n], &srow[x0 + 1..x0 + 1 + n]]
-                } else {
-                    let (even, odd) = srow.split_at(ew);
-                    [&odd[x0 - 1..x0 - 1 + n], &even[x0..x0 + n], &odd[x0..x0 + n]]
-                };
-                for (k, vk) in v.iter_mut().enumerate() {
-                    for (vj, tj) in vk.iter_mut().zip(taps) {
-                        // SAFETY: `tj` holds 8·G values and k < G, so the 8 read
-                        // are inside it; AVX is guaranteed by the caller.
-                        *vj = unsafe { _mm256_loadu_ps(tj.as_ptr().add(8 * k)) };
+            if let Some(sy) = *r {
+                valid[n] = (ky, sy * w);
+                n += 1;
+            }
+        }
+        let (base, wbase) = (g.lanes.as_ptr(), g.wts.as_ptr());
+        for i in 0..g.cin {
+            for &(ky, ro) in &valid[..n] {
+                // SAFETY: `g.fits()`: row sy of plane i (i < cin) lies inside
+                // `lanes`; `interior`: offs[kx] + 8·N ≤ w (stride 2:
+                // ew + x0 + 8·N ≤ ew + w/2 = w).
+                let row = unsafe { base.add(i * plane + ro) };
+                let t = (i * 3 + ky) * 3;
+                for (kx, &off) in offs.iter().enumerate() {
+                    let mut v = [_mm256_setzero_ps(); N];
+                    for (k, vk) in v.iter_mut().enumerate() {
+                        // SAFETY: see `row`; AVX is guaranteed by the caller.
+                        *vk = unsafe { _mm256_loadu_ps(row.add(off + 8 * k)) };
+                    }
+                    for b in 0..OB {
+                        // SAFETY: `g.fits()`: wts holds cin · 9 · OB values, and
+                        // (t + kx) · OB + b < that.
+                        let s = unsafe { _mm256_broadcast_ss(&*wbase.add((t + kx) * OB + b)) };
+                        for (ak, vk) in acc.iter_mut().zip(&v) {
+                            ak[b] = _mm256_fmadd_ps(s, *vk, ak[b]);
+                        }
                     }
                 }
-            } else {
+            }
+        }
+    } else {
+        for i in 0..g.cin {
+            let src = &g.lanes[i * plane..];
+            for (ky, r) in g.src_rows.iter().enumerate() {
+                let Some(sy) = *r else { continue };
+                let srow = &src[sy * w..(sy + 1) * w];
+                let t = (i * 3 + ky) * 3;
+                // (loops, not `array::from_fn`: its closure would not inherit
+                // this function's target features, and the loads would be calls)
+                let mut v = [[_mm256_setzero_ps(); 3]; N];
                 for (k, vk) in v.iter_mut().enumerate() {
                     let xi = (x0 + 8 * k) as isize;
                     *vk = if g.stride == 1 {
@@ -101,13 +132,13 @@ unsafe fn groups<const G: usize>(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
                         [load8(odd, xi - 1), load8(even, xi), load8(odd, xi)]
                     };
                 }
-            }
-            for (b, wb) in g.wts.iter().enumerate() {
-                let wb = &wb[t..t + 3];
-                for (j, &wt) in wb.iter().enumerate() {
-                    let s = _mm256_set1_ps(wt);
-                    for (a, vk) in acc.iter_mut().zip(&v) {
-                        a[b] = _mm256_fmadd_ps(s, vk[j], a[b]);
+                for kx in 0..3 {
+                    let wk = &g.wts[(t + kx) * OB..(t + kx + 1) * OB];
+                    for (b, &wt) in wk.iter().enumerate() {
+                        let s = _mm256_set1_ps(wt);
+                        for (ak, vk) in acc.iter_mut().zip(&v) {
+                            ak[b] = _mm256_fmadd_ps(s, vk[kx], ak[b]);
+                        }
                     }
                 }
             }

@@ -4,10 +4,13 @@
 //! Rows are accumulated with slice arithmetic the compiler vectorises; the
 //! 3×3 layers' rows in 8-pixel lanes, with `wide` (any ISA, chosen at
 //! compile time) or, where the CPU has them, AVX2 + FMA intrinsics
-//! (`avx2`, chosen at run time: see [`Isa`]).
+//! (`avx2`) or AVX-512F intrinsics in 16-pixel lanes (`avx512`), chosen at
+//! run time (see [`Isa`]).
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 
 use crate::error::Error;
 use half::f16;
@@ -63,7 +66,17 @@ pub enum Act {
 const LEAKY_SLOPE: f32 = 0.01;
 
 /// Output channels computed together (their accumulators share every load).
-const OB: usize = 4;
+/// 6 divides the bundled network's widths (12, 24, 48); with the AVX2 lanes'
+/// two 8-pixel groups that is 12 independent accumulators, enough to keep
+/// both FMA pipes busy through the multiply-add latency, and 15 of the 16
+/// vector registers live.
+const OB: usize = 6;
+
+/// Output pixels of a row computed for every block of `OB` channels before
+/// the next ones: the input a strip reads (`cin · 3` rows of
+/// `stride · STRIP + 2` values) stays in L1 across the blocks, instead of
+/// being fetched again from L2 for each block.
+const STRIP: usize = 32;
 
 pub use crate::isa::Isa;
 
@@ -77,11 +90,12 @@ pub use crate::isa::Isa;
 /// stride 2 runs per pixel). `isa`: the lanes' instruction set;
 /// [`Isa::Portable`] where `isa` is not [`Isa::available`].
 ///
-/// Output rows are the outer loop and blocks of `OB` output channels the
-/// inner one: the 3·cin input rows an output row reads are fetched into the
-/// cache once for all the blocks (blocks outermost re-streamed the whole
-/// input tensor from memory `cout / OB` times). Each output row stays in L1
-/// while it accumulates every input channel and tap.
+/// Output rows are the outer loop, strips of `STRIP` pixels the next and
+/// blocks of `OB` output channels the inner one: the 3·cin input rows an
+/// output row reads are fetched into the cache once for all the blocks, and
+/// a strip's part of them stays in L1 across the blocks (blocks outermost
+/// re-streamed the whole input tensor from memory `cout / OB` times). The
+/// accumulators stay in registers across every input channel and tap.
 #[allow(clippy::too_many_arguments)]
 pub fn conv(
     isa: Isa,
@@ -181,10 +195,6 @@ impl<'a> Layer<'a> {
         if weights.len() < d.weights_len() {
             return Err(Error::ScratchTooSmall { needed: d.weights_len(), got: weights.len() });
         }
-        let wts = &mut weights[..d.weights_len()];
-        for (i, v) in wts.iter_mut().enumerate() {
-            *v = d.param(i);
-        }
         let split = split.filter(|s| splits(d, w, h, ip, s.len()));
         let (lanes_input, stride) = match split {
             Some(s) => (&s[..d.cin * ip], 2),
@@ -193,6 +203,21 @@ impl<'a> Layer<'a> {
         // blocks of OB output channels in lanes (3×3 on rows wide enough), the
         // rest one channel at a time
         let blocks = if d.k == 3 && ((d.stride == 1 && w >= 18) || split.is_some()) { d.cout / OB } else { 0 };
+        // the blocks' weights as [block][tap][OB] (one tap's OB weights
+        // adjacent, read in sequence by the lanes), the rest as [out][tap]
+        let wts = &mut weights[..d.weights_len()];
+        let (packed, rest) = wts.split_at_mut(blocks * OB * taps);
+        for (k, block) in packed.chunks_exact_mut(OB * taps).enumerate() {
+            for (t, tap) in block.chunks_exact_mut(OB).enumerate() {
+                for (b, v) in tap.iter_mut().enumerate() {
+                    *v = d.param((k * OB + b) * taps + t);
+                }
+            }
+        }
+        let first = blocks * OB * taps;
+        for (i, v) in rest.iter_mut().enumerate() {
+            *v = d.param(first + i);
+        }
         Ok(Layer { isa, d, input, lanes_input, stride, w, h, in_plane: ip, act, wts, blocks })
     }
 
@@ -213,21 +238,35 @@ impl<'a> Layer<'a> {
         let taps = d.cin * d.k * d.k;
         let input = self.input;
         for y in y0..y1.min(oh) {
-            for k in 0..self.blocks {
-                let mut rows: [&mut [f32]; OB] = Default::default();
-                let mut bias = [0f32; OB];
-                let mut wb: [&[f32]; OB] = [&[]; OB];
-                for (b, r) in rows.iter_mut().enumerate() {
-                    let o = k * OB + b;
-                    bias[b] = d.bias(o);
-                    wb[b] = &wts[o * taps..(o + 1) * taps];
-                    // SAFETY: row y of plane o is this call's alone (the caller's contract).
-                    *r = unsafe { out.row(o, y) };
-                    r.fill(bias[b]);
+            if self.blocks > 0 {
+                let ow = d.out_size(w, h).0;
+                let mut x0 = 0;
+                while x0 < ow {
+                    let x1 = (x0 + STRIP).min(ow);
+                    for k in 0..self.blocks {
+                        let mut rows: [&mut [f32]; OB] = Default::default();
+                        for (b, r) in rows.iter_mut().enumerate() {
+                            // SAFETY: row y of plane k·OB + b is this call's alone (the caller's contract).
+                            *r = unsafe { out.row(k * OB + b, y) };
+                        }
+                        let bias = core::array::from_fn(|b| d.bias(k * OB + b));
+                        let g = Lanes {
+                            wts: &wts[k * OB * taps..(k + 1) * OB * taps],
+                            cin: d.cin,
+                            lanes: self.lanes_input,
+                            w,
+                            plane: ip,
+                            src_rows: src_rows(self.stride * y, h),
+                            stride: self.stride,
+                            bias,
+                        };
+                        conv3_block_strip(self.isa, &g, input, h, &mut rows, x0, x1);
+                    }
+                    x0 = x1;
                 }
-                conv3_rows_block(self.isa, &wb, d.cin, self.lanes_input, input, (w, h, ip), y, self.stride, bias, &mut rows);
-                for r in rows.iter_mut() {
-                    activate(r, self.act);
+                for o in 0..self.blocks * OB {
+                    // SAFETY: as above.
+                    activate(unsafe { out.row(o, y) }, self.act);
                 }
             }
             for o in self.blocks * OB..d.cout {
@@ -366,65 +405,62 @@ fn activate(row: &mut [f32], act: Act) {
     }
 }
 
-/// [`conv3_row_lanes`] for `OB` output channels at once: each 8-pixel load
-/// feeds `OB` accumulators. Stride 1 reads `input`; stride 2 reads `lanes`,
-/// the input with each row split into [even | odd] columns, where the taps of
-/// output pixel x are odd[x − 1], even[x], odd[x]. The lanes cover whole
-/// rows (the groups at either end load the zero padding lane by lane); rows
-/// of fewer than 8 output pixels are computed per pixel from `input`.
-#[allow(clippy::too_many_arguments)]
-fn conv3_rows_block(
-    isa: Isa,
-    wts: &[&[f32]; OB],
-    cin: usize,
-    lanes: &[f32],
-    input: &[f32],
-    (w, h, plane): (usize, usize, usize),
-    y: usize,
-    stride: usize,
-    bias: [f32; OB],
-    rows: &mut [&mut [f32]; OB],
-) {
-    let sy = |ky: usize| (stride * y + ky).checked_sub(1).filter(|&r| r < h);
-    let src_rows: [Option<usize>; 3] = [sy(0), sy(1), sy(2)];
+/// The 3 input rows of output row `y` of a 3×3 layer (`sy` = stride · y;
+/// `None`: the zero padding).
+fn src_rows(sy: usize, h: usize) -> [Option<usize>; 3] {
+    let r = |ky: usize| (sy + ky).checked_sub(1).filter(|&r| r < h);
+    [r(0), r(1), r(2)]
+}
+
+/// Output pixels `x0..x1` of `OB` channels' rows (`rows`, whole output rows)
+/// of a 3×3 layer, from the bias: each 8-pixel load feeds `OB` accumulators.
+/// Stride 1 reads `g.lanes`, the input; stride 2 reads `g.lanes` as the input
+/// with each row split into [even | odd] columns, where the taps of output
+/// pixel x are odd[x − 1], even[x], odd[x]. The lanes cover whole rows (the
+/// groups at either end load the zero padding lane by lane); rows of fewer
+/// than 8 output pixels are computed per pixel from `input` (`h` rows).
+fn conv3_block_strip(isa: Isa, g: &Lanes<'_>, input: &[f32], h: usize, rows: &mut [&mut [f32]; OB], x0: usize, x1: usize) {
     let ow = rows[0].len();
-    // The lanes cover the whole row (loads past either end read the zero
-    // padding); a row narrower than one group goes per pixel.
-    let g = Lanes { wts, cin, lanes, w, plane, src_rows, stride, bias };
-    let done = if ow < 8 {
-        0
+    let done = if ow < 8 || !g.fits() {
+        x0
     } else {
         match isa {
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: `conv` runs `Isa::Avx2Fma` only where it is available (checked at its top).
-            Isa::Avx2Fma => unsafe { avx2::conv3_lanes(&g, rows) },
-            _ => conv3_lanes(&g, rows),
+            // SAFETY: `conv` runs an instruction set only where it is
+            // available (checked in `Layer::new`); `g.fits()` holds.
+            Isa::Avx2Fma => unsafe { avx2::conv3_lanes(g, rows, x0, x1) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as above.
+            Isa::Avx512 => unsafe { avx512::conv3_lanes(g, rows, x0, x1) },
+            _ => conv3_lanes(g, rows, x0, x1),
         }
     };
-    for (row, wb) in rows.iter_mut().zip(wts) {
-        for (px, out) in row.iter_mut().enumerate().skip(done) {
-            let mut a = *out;
-            for i in 0..cin {
-                let src = &input[i * plane..i * plane + w * h];
-                for (ky, r) in src_rows.iter().enumerate() {
+    let (w, plane, stride) = (g.w, g.plane, g.stride);
+    for (b, row) in rows.iter_mut().enumerate() {
+        for px in done..x1.min(row.len()) {
+            let mut a = g.bias[b];
+            for i in 0..g.cin {
+                let Some(src) = input.get(i * plane..i * plane + w * h) else { return };
+                for (ky, r) in g.src_rows.iter().enumerate() {
                     let Some(sy) = *r else { continue };
                     for kx in 0..3 {
                         let sx = (stride * px + kx) as isize - 1;
                         if sx >= 0 && (sx as usize) < w {
-                            a += wb[(i * 3 + ky) * 3 + kx] * src[sy * w + sx as usize];
+                            a += g.wts[((i * 3 + ky) * 3 + kx) * OB + b] * src[sy * w + sx as usize];
                         }
                     }
                 }
             }
-            *out = a;
+            row[px] = a;
         }
     }
 }
 
-/// One output row's 8-pixel groups for [`conv3_rows_block`]: what the lanes
-/// read (see there).
+/// What the lanes of one block of `OB` output channels read, for one output
+/// row (see [`conv3_block_strip`]).
 struct Lanes<'a> {
-    wts: &'a [&'a [f32]; OB],
+    /// The block's weights, `[tap][OB]` (tap = (i · 3 + ky) · 3 + kx).
+    wts: &'a [f32],
     cin: usize,
     lanes: &'a [f32],
     w: usize,
@@ -434,6 +470,18 @@ struct Lanes<'a> {
     src_rows: [Option<usize>; 3],
     stride: usize,
     bias: [f32; OB],
+}
+
+impl Lanes<'_> {
+    /// Whether every value the lanes read lies inside `lanes` and `wts`: the
+    /// unchecked loads of the AVX2 lanes rely on it.
+    fn fits(&self) -> bool {
+        let rows_fit = self.src_rows.iter().flatten().all(|&sy| (sy + 1) * self.w <= self.plane);
+        rows_fit
+            && self.stride <= 2
+            && self.lanes.len() >= self.cin * self.plane
+            && self.wts.len() >= self.cin * 9 * OB
+    }
 }
 
 /// The 8 values `s[x..x + 8]`, zeros for those outside `s` (the zero padding:
@@ -462,20 +510,19 @@ fn padded8(s: &[f32], x: isize) -> [f32; 8] {
     a
 }
 
-/// The 8-pixel groups of [`conv3_rows_block`] with `wide` (`OB` accumulators
-/// per group, 3 loads and 3·`OB` multiply-adds per input row and channel);
-/// returns the end of the pixels filled (from 0).
-fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
+/// The 8-pixel groups of [`conv3_block_strip`] with `wide` (`OB`
+/// accumulators per group, 3 loads and 3·`OB` multiply-adds per input row
+/// and channel) over output pixels `x0..x1` (rows of at least 8); returns
+/// `x1`.
+fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize, x1: usize) -> usize {
     use wide::f32x8;
     let (w, plane, ew) = (g.w, g.plane, g.w.div_ceil(2));
-    let mut x = 0;
-    let mut done = 0;
-    let end = rows[0].len(); // the output row (≥ 8)
-    while done < end {
-        // the last group is shifted left to end at `end` (it recomputes a few
+    let mut x = x0;
+    while x < x1 {
+        // the last group is shifted left to end at `x1` (it recomputes a few
         // pixels, bit-identically: every group starts from the bias)
-        x = x.min(end - 8);
-        let xi = x as isize;
+        let xs = x.min(x1.max(8) - 8);
+        let xi = xs as isize;
         let mut acc = g.bias.map(f32x8::splat);
         for i in 0..g.cin {
             let src = &g.lanes[i * plane..];
@@ -483,27 +530,26 @@ fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB]) -> usize {
                 let Some(sy) = *r else { continue };
                 let srow = &src[sy * w..(sy + 1) * w];
                 let t = (i * 3 + ky) * 3;
-                let (v0, v1, v2) = if g.stride == 1 {
-                    (load8(srow, xi - 1), load8(srow, xi), load8(srow, xi + 1))
+                let v = if g.stride == 1 {
+                    [load8(srow, xi - 1), load8(srow, xi), load8(srow, xi + 1)]
                 } else {
                     let (even, odd) = srow.split_at(ew);
-                    (load8(odd, xi - 1), load8(even, xi), load8(odd, xi))
+                    [load8(odd, xi - 1), load8(even, xi), load8(odd, xi)]
                 };
-                for (a, wb) in acc.iter_mut().zip(g.wts) {
-                    let wb = &wb[t..t + 3];
-                    *a = f32x8::splat(wb[0]).mul_add(v0, *a);
-                    *a = f32x8::splat(wb[1]).mul_add(v1, *a);
-                    *a = f32x8::splat(wb[2]).mul_add(v2, *a);
+                for (kx, vk) in v.iter().enumerate() {
+                    let wk = &g.wts[(t + kx) * OB..(t + kx + 1) * OB];
+                    for (a, &wt) in acc.iter_mut().zip(wk) {
+                        *a = f32x8::splat(wt).mul_add(*vk, *a);
+                    }
                 }
             }
         }
         for (a, r) in acc.iter().zip(rows.iter_mut()) {
-            r[x..x + 8].copy_from_slice(&a.to_array());
+            r[xs..xs + 8].copy_from_slice(&a.to_array());
         }
-        done = x + 8;
-        x += 8;
+        x = xs + 8;
     }
-    done
+    x1
 }
 
 /// One output row of a 3×3 stride-1 convolution (`prow` holds the bias):
