@@ -812,21 +812,46 @@ unsafe fn input_row(
     }
     for c in 5..8 {
         // SAFETY: as above.
-        for v in unsafe { planes.row(c, y) }.iter_mut() {
-            *v = libm::log1pf(clean(*v).max(0.0) / sc.light);
-        }
+        log_light(unsafe { planes.row(c, y) }, sc.light);
     }
     if planes.channels() == PRIOR_INPUTS {
         let at = 3 * (fy * prior.width + r.x0);
         let Some(src) = prior.rgb.get(at..at + 3 * r.width()) else { return false };
         for c in 0..3 {
             // SAFETY: as above.
-            for (v, p) in unsafe { planes.row(BASE_INPUTS + c, y) }.iter_mut().zip(src.chunks_exact(3)) {
-                *v = libm::log1pf(clean(p[c]).max(0.0) / sc.light);
+            let row = unsafe { planes.row(BASE_INPUTS + c, y) };
+            for (v, p) in row.iter_mut().zip(src.chunks_exact(3)) {
+                *v = p[c];
             }
+            log_light(row, sc.light);
         }
     }
     true
+}
+
+/// `ln(1 + v / scale)` of light (NaN/Inf → 0, negatives → 0), in place:
+/// eight values at a time with `wide`'s `ln_1p`, the tail padded to eight,
+/// so a value's result does not depend on its position in the row (tiles
+/// read rows from different columns).
+fn log_light(row: &mut [f32], scale: f32) {
+    use wide::f32x8;
+    let scale = f32x8::splat(scale);
+    let f = |a: [f32; 8]| -> [f32; 8] {
+        let x = f32x8::from(a);
+        let x = x.is_finite().select(x, f32x8::ZERO).max(f32x8::ZERO) / scale;
+        x.ln_1p().to_array()
+    };
+    let mut chunks = row.chunks_exact_mut(8);
+    for c in &mut chunks {
+        if let Ok(a) = <[f32; 8]>::try_from(&*c) {
+            c.copy_from_slice(&f(a));
+        }
+    }
+    let tail = chunks.into_remainder();
+    let mut a = [0f32; 8];
+    a[..tail.len()].copy_from_slice(tail);
+    let n = tail.len();
+    tail.copy_from_slice(&f(a)[..n]);
 }
 
 /// NaN/Inf → 0.

@@ -226,12 +226,14 @@ fn the_prior_is_flr_defaults_output_as_the_networks_last_three_inputs() {
     let depths: Vec<f64> = f.depth.iter().filter(|d| d.is_finite() && **d > 0.0).map(|&d| d as f64).collect();
     let dm = (depths.iter().sum::<f64>() / depths.len() as f64) as f32;
     let light = ((f.noisy.iter().map(|&v| clean(v).max(0.0) as f64).sum::<f64>() / (3 * n) as f64) as f32).max(1e-6);
+    // ln(1 + v) as the library computes it: `wide`'s, lane by lane
+    let log1p = |v: f32| wide::f32x8::splat(v).ln_1p().to_array()[0];
     let mut x = vec![0f32; 11 * n];
     for i in 0..n {
         for c in 0..3 {
             x[c * n + i] = clean(f.normal[3 * i + c]);
-            x[(5 + c) * n + i] = libm::log1pf(clean(f.noisy[3 * i + c]).max(0.0) / light);
-            x[(8 + c) * n + i] = libm::log1pf(clean(prior[3 * i + c]).max(0.0) / light);
+            x[(5 + c) * n + i] = log1p(clean(f.noisy[3 * i + c]).max(0.0) / light);
+            x[(8 + c) * n + i] = log1p(clean(prior[3 * i + c]).max(0.0) / light);
         }
         x[3 * n + i] = clean(f.depth[i] / dm);
         x[4 * n + i] = clean(f.ao[i]);

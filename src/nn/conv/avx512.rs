@@ -6,8 +6,11 @@
 //! (fused multiply-adds over input channel, kernel row, kernel column), so
 //! their outputs are identical.
 
-use super::{Lanes, OB};
-use core::arch::x86_64::{__m512, _mm512_fmadd_ps, _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps, _mm512_set1_ps, _mm512_setzero_ps};
+use super::{Lanes, LEAKY_SLOPE, OB};
+use core::arch::x86_64::{
+    __m512, _mm512_cmp_ps_mask, _mm512_fmadd_ps, _mm512_mask_mul_ps, _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps, _mm512_set1_ps,
+    _mm512_setzero_ps, _CMP_LT_OQ,
+};
 
 /// 16-pixel groups per pass.
 const N: usize = 2;
@@ -91,13 +94,15 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
             }
         }
         let end = x1.min(ow);
+        let slope = _mm512_set1_ps(LEAKY_SLOPE);
         for (k, ak) in acc.iter().enumerate() {
             let px = x + 16 * k;
             let keep = mask(px as isize, end);
             for (a, r) in ak.iter().zip(rows.iter_mut()) {
+                let a = if g.leaky { _mm512_mask_mul_ps(*a, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(*a, _mm512_setzero_ps()), *a, slope) } else { *a };
                 // SAFETY: the mask keeps the lanes written inside `r` (px + j <
                 // end ≤ r.len()); AVX-512F is guaranteed by the caller.
-                unsafe { _mm512_mask_storeu_ps(r.as_mut_ptr().wrapping_add(px), keep, *a) };
+                unsafe { _mm512_mask_storeu_ps(r.as_mut_ptr().wrapping_add(px), keep, a) };
             }
         }
         x += 16 * N;

@@ -33,16 +33,23 @@ pub struct ConvDesc<'b> {
 impl ConvDesc<'_> {
     pub(crate) const EMPTY: ConvDesc<'static> = ConvDesc { cin: 0, cout: 0, k: 0, stride: 1, params: &[] };
     #[inline]
-    fn param(&self, i: usize) -> f32 {
-        let b = &self.params[2 * i..2 * i + 2];
-        f16::from_le_bytes([b[0], b[1]]).to_f32()
+    /// Parameters `first..first + dst.len()` (weights `[out][in][k][k]`,
+    /// then biases) into `dst` as f32, converted in runs of 64.
+    fn params_f32(&self, first: usize, dst: &mut [f32]) {
+        let mut halves = [f16::ZERO; 64];
+        for (j, run) in dst.chunks_mut(64).enumerate() {
+            let at = 2 * (first + 64 * j);
+            let Some(bytes) = self.params.get(at..at + 2 * run.len()) else { return };
+            for (h, b) in halves.iter_mut().zip(bytes.chunks_exact(2)) {
+                *h = f16::from_le_bytes([b[0], b[1]]);
+            }
+            crate::convert::f16_to_f32(&halves[..run.len()], run);
+        }
     }
-    /// f32 of `weights` scratch [`conv`] needs: `cout · cin · k · k`.
+    /// f32 of `weights` scratch [`conv`] needs: `cout · cin · k · k` weights
+    /// and `cout` biases.
     pub fn weights_len(&self) -> usize {
-        self.cout * self.cin * self.k * self.k
-    }
-    fn bias(&self, o: usize) -> f32 {
-        self.param(self.cout * self.cin * self.k * self.k + o)
+        self.cout * self.cin * self.k * self.k + self.cout
     }
     /// Output size for a `w × h` input.
     pub fn out_size(&self, w: usize, h: usize) -> (usize, usize) {
@@ -166,6 +173,8 @@ pub struct Layer<'a> {
     in_plane: usize,
     act: Act,
     wts: &'a [f32],
+    /// The biases in f32.
+    bias: &'a [f32],
     /// Output channels computed in blocks of `OB` lanes.
     blocks: usize,
 }
@@ -205,20 +214,24 @@ impl<'a> Layer<'a> {
         let blocks = if d.k == 3 && ((d.stride == 1 && w >= 18) || split.is_some()) { d.cout / OB } else { 0 };
         // the blocks' weights as [block][tap][OB] (one tap's OB weights
         // adjacent, read in sequence by the lanes), the rest as [out][tap]
-        let wts = &mut weights[..d.weights_len()];
+        let (wts, bias) = weights[..d.weights_len()].split_at_mut(d.cout * taps);
         let (packed, rest) = wts.split_at_mut(blocks * OB * taps);
+        let mut run = [0f32; 64];
         for (k, block) in packed.chunks_exact_mut(OB * taps).enumerate() {
-            for (t, tap) in block.chunks_exact_mut(OB).enumerate() {
-                for (b, v) in tap.iter_mut().enumerate() {
-                    *v = d.param((k * OB + b) * taps + t);
+            for b in 0..OB {
+                let first = (k * OB + b) * taps;
+                for t0 in (0..taps).step_by(64) {
+                    let n = (taps - t0).min(64);
+                    d.params_f32(first + t0, &mut run[..n]);
+                    for (t, &v) in run[..n].iter().enumerate() {
+                        block[(t0 + t) * OB + b] = v;
+                    }
                 }
             }
         }
-        let first = blocks * OB * taps;
-        for (i, v) in rest.iter_mut().enumerate() {
-            *v = d.param(first + i);
-        }
-        Ok(Layer { isa, d, input, lanes_input, stride, w, h, in_plane: ip, act, wts, blocks })
+        d.params_f32(blocks * OB * taps, rest);
+        d.params_f32(d.cout * taps, bias);
+        Ok(Layer { isa, d, input, lanes_input, stride, w, h, in_plane: ip, act, wts, bias, blocks })
     }
 
     /// Output rows.
@@ -249,7 +262,7 @@ impl<'a> Layer<'a> {
                             // SAFETY: row y of plane k·OB + b is this call's alone (the caller's contract).
                             *r = unsafe { out.row(k * OB + b, y) };
                         }
-                        let bias = core::array::from_fn(|b| d.bias(k * OB + b));
+                        let bias = core::array::from_fn(|b| self.bias[k * OB + b]);
                         let g = Lanes {
                             wts: &wts[k * OB * taps..(k + 1) * OB * taps],
                             cin: d.cin,
@@ -259,21 +272,24 @@ impl<'a> Layer<'a> {
                             src_rows: src_rows(self.stride * y, h),
                             stride: self.stride,
                             bias,
+                            leaky: self.act == Act::Leaky,
                         };
                         conv3_block_strip(self.isa, &g, input, h, &mut rows, x0, x1);
                     }
                     x0 = x1;
                 }
-                for o in 0..self.blocks * OB {
-                    // SAFETY: as above.
-                    activate(unsafe { out.row(o, y) }, self.act);
+                if self.act != Act::Leaky {
+                    for o in 0..self.blocks * OB {
+                        // SAFETY: as above.
+                        activate(unsafe { out.row(o, y) }, self.act);
+                    }
                 }
             }
             for o in self.blocks * OB..d.cout {
                 let wts = &wts[o * taps..(o + 1) * taps];
                 // SAFETY: as above.
                 let prow = unsafe { out.row(o, y) };
-                prow.fill(d.bias(o));
+                prow.fill(self.bias[o]);
                 for i in 0..d.cin {
                     let src = &input[i * ip..i * ip + w * h];
                     match (d.k, d.stride) {
@@ -389,18 +405,40 @@ impl<'o> Planes<'o> {
     }
 }
 
+/// Leaky ReLU of one value (what every version of the lanes computes).
+#[inline(always)]
+fn leaky(v: f32) -> f32 {
+    if v < 0.0 {
+        v * LEAKY_SLOPE
+    } else {
+        v
+    }
+}
+
 fn activate(row: &mut [f32], act: Act) {
     match act {
         Act::Leaky => {
             // a select, not a conditional store: it vectorises
             for p in row.iter_mut() {
-                *p = if *p < 0.0 { *p * LEAKY_SLOPE } else { *p };
+                *p = leaky(*p);
             }
         }
         Act::Sigmoid => {
-            for p in row.iter_mut() {
-                *p = 1.0 / (1.0 + libm::expf(-*p));
+            // 8 at a time with `wide`'s `exp`, the tail padded to 8, so a
+            // value's result does not depend on its position in the row
+            use wide::f32x8;
+            let f = |a: [f32; 8]| (f32x8::ONE / (f32x8::ONE + (-f32x8::from(a)).exp())).to_array();
+            let mut chunks = row.chunks_exact_mut(8);
+            for c in &mut chunks {
+                if let Ok(a) = <[f32; 8]>::try_from(&*c) {
+                    c.copy_from_slice(&f(a));
+                }
             }
+            let tail = chunks.into_remainder();
+            let n = tail.len();
+            let mut a = [0f32; 8];
+            a[..n].copy_from_slice(tail);
+            tail.copy_from_slice(&f(a)[..n]);
         }
     }
 }
@@ -451,7 +489,7 @@ fn conv3_block_strip(isa: Isa, g: &Lanes<'_>, input: &[f32], h: usize, rows: &mu
                     }
                 }
             }
-            row[px] = a;
+            row[px] = if g.leaky { leaky(a) } else { a };
         }
     }
 }
@@ -470,6 +508,9 @@ struct Lanes<'a> {
     src_rows: [Option<usize>; 3],
     stride: usize,
     bias: [f32; OB],
+    /// Whether the lanes apply the leaky ReLU before they store (else the
+    /// caller applies the layer's activation).
+    leaky: bool,
 }
 
 impl Lanes<'_> {
@@ -545,6 +586,7 @@ fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize, x1: usize)
             }
         }
         for (a, r) in acc.iter().zip(rows.iter_mut()) {
+            let a = if g.leaky { a.simd_lt(f32x8::ZERO).select(*a * f32x8::splat(LEAKY_SLOPE), *a) } else { *a };
             r[xs..xs + 8].copy_from_slice(&a.to_array());
         }
         x = xs + 8;
