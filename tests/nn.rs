@@ -112,7 +112,8 @@ fn avx2_and_avx512_lanes_match_the_portable_lanes() {
     // and remaining channels (13 = two blocks of 6 and one more), strips of
     // 32 pixels; the AVX2 lanes go 16 pixels at a time, and 30 and 46 leave
     // more than one group after the last pair; the AVX-512 lanes go 32 at a
-    // time with masked ends (33, 65: one pixel past a pass).
+    // time with masked ends (33, 65: one pixel past a pass), in Winograd's
+    // F(2, 3) for stride 1 (other rounding: compared within the bound).
     for &(w, h) in &[(18, 3), (19, 9), (30, 4), (33, 6), (40, 7), (46, 5), (65, 4), (257, 5)] {
         let b = blob(5, 3, &[6, 13, 12], 12.0, w as u64);
         let net = UNet::parse(&b).unwrap();
@@ -130,12 +131,6 @@ fn avx2_and_avx512_lanes_match_the_portable_lanes() {
             // only, within the f64 reference test's bound
             let worst = o.iter().zip(&outs[0].1).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
             assert!(worst < 1e-4, "{isa:?} {w}x{h}: {worst}");
-        }
-        // the two intrinsics versions: the same fused multiply-adds in the same order
-        let fused: Vec<_> = outs.iter().filter(|(i, _)| *i != Isa::Portable).collect();
-        if let [(_, a), (_, b)] = fused[..] {
-            let bad = a.iter().zip(b).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
-            assert_eq!(bad, 0, "{w}x{h}: AVX-512 and AVX2 differ at {bad} values");
         }
     }
 }

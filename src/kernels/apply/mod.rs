@@ -457,9 +457,13 @@ mod tests {
                     (Isa::Portable, true) => simd_spans::<Q, true, _>(base, slopes, &span, &guides, demod, &mut outs),
                     (Isa::Portable, false) => simd_spans::<Q, false, _>(base, slopes, &span, &guides, demod, &mut outs),
                     // SAFETY: the test returned early unless the CPU has AVX2 and FMA.
-                    (Isa::Avx2Fma | Isa::Avx512, true) => unsafe { avx2::simd_spans::<Q, true, _>(base, slopes, &span, &guides, demod, &mut outs) },
+                    (Isa::Avx2Fma | Isa::Avx512, true) => unsafe {
+                        avx2::simd_spans::<Q, true, _>(base, slopes, &span, &guides, demod, &mut outs)
+                    },
                     // SAFETY: as above.
-                    (Isa::Avx2Fma | Isa::Avx512, false) => unsafe { avx2::simd_spans::<Q, false, _>(base, slopes, &span, &guides, demod, &mut outs) },
+                    (Isa::Avx2Fma | Isa::Avx512, false) => unsafe {
+                        avx2::simd_spans::<Q, false, _>(base, slopes, &span, &guides, demod, &mut outs)
+                    },
                 };
                 (r, out)
             };

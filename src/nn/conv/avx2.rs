@@ -11,7 +11,9 @@
 
 use super::{Lanes, LEAKY_SLOPE, OB};
 use core::arch::x86_64::{
-    __m256, _mm256_blendv_ps, _mm256_broadcast_ss, _mm256_cmp_ps, _mm256_fmadd_ps, _mm256_mul_ps, _CMP_LT_OQ, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps};
+    __m256, _mm256_blendv_ps, _mm256_broadcast_ss, _mm256_cmp_ps, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_set1_ps,
+    _mm256_setzero_ps, _mm256_storeu_ps, _CMP_LT_OQ,
+};
 
 /// The 8 values `s[x..x + 8]`, zeros for those outside `s` (see [`super::load8`]).
 #[inline(always)]
@@ -149,7 +151,11 @@ unsafe fn groups<const N: usize>(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
     for (k, ak) in acc.iter().enumerate() {
         let x = x0 + 8 * k;
         for (a, r) in ak.iter().zip(rows.iter_mut()) {
-            let a = if g.leaky { _mm256_blendv_ps(*a, _mm256_mul_ps(*a, slope), _mm256_cmp_ps::<_CMP_LT_OQ>(*a, _mm256_setzero_ps())) } else { *a };
+            let a = if g.leaky {
+                _mm256_blendv_ps(*a, _mm256_mul_ps(*a, slope), _mm256_cmp_ps::<_CMP_LT_OQ>(*a, _mm256_setzero_ps()))
+            } else {
+                *a
+            };
             if let Some(dst) = r.get_mut(x..x + 8) {
                 // SAFETY: `dst` holds exactly 8 f32, written unaligned (AVX guaranteed).
                 unsafe { _mm256_storeu_ps(dst.as_mut_ptr(), a) };

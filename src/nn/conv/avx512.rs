@@ -8,8 +8,9 @@
 
 use super::{Lanes, LEAKY_SLOPE, OB};
 use core::arch::x86_64::{
-    __m512, _mm512_cmp_ps_mask, _mm512_fmadd_ps, _mm512_mask_mul_ps, _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps, _mm512_set1_ps,
-    _mm512_setzero_ps, _CMP_LT_OQ,
+    __m512, _mm512_add_ps, _mm512_alignr_epi32, _mm512_castps_si512, _mm512_castsi512_ps, _mm512_cmp_ps_mask, _mm512_fmadd_ps,
+    _mm512_loadu_si512, _mm512_mask_mul_ps, _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps, _mm512_permutex2var_ps, _mm512_set1_ps,
+    _mm512_setzero_ps, _mm512_sub_ps, _CMP_LT_OQ,
 };
 
 /// 16-pixel groups per pass.
@@ -99,7 +100,8 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
             let px = x + 16 * k;
             let keep = mask(px as isize, end);
             for (a, r) in ak.iter().zip(rows.iter_mut()) {
-                let a = if g.leaky { _mm512_mask_mul_ps(*a, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(*a, _mm512_setzero_ps()), *a, slope) } else { *a };
+                let a =
+                    if g.leaky { _mm512_mask_mul_ps(*a, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(*a, _mm512_setzero_ps()), *a, slope) } else { *a };
                 // SAFETY: the mask keeps the lanes written inside `r` (px + j <
                 // end ≤ r.len()); AVX-512F is guaranteed by the caller.
                 unsafe { _mm512_mask_storeu_ps(r.as_mut_ptr().wrapping_add(px), keep, a) };
@@ -109,3 +111,120 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
     }
     x1
 }
+
+/// A stride-1 layer's lanes in Winograd's F(2, 3) along the row: per input
+/// channel and kernel row, output pixels 2m and 2m + 1 take the input
+/// values d0..d3 at 2m − 1..2m + 2 and four products instead of six,
+///
+/// ```text
+/// m1 = (d0 − d2)·g0   m2 = (d1 + d2)·(g0 + g1 + g2)/2
+/// m3 = (d2 − d1)·(g0 − g1 + g2)/2   m4 = (d1 − d3)·g2
+/// y(2m) = m1 + m2 + m3   y(2m + 1) = m2 − m3 − m4
+/// ```
+///
+/// each product summed over the input channels and kernel rows before the
+/// two outputs are formed (the bias starts m2's sum). 32 output pixels (16
+/// pairs) per pass and `OB` channels: 4 · `OB` accumulators. The rounding
+/// differs from the direct products' (both are within tests/nn.rs's f64
+/// bound). Output pixels `x0..x1` (x0 even); returns `x1`.
+///
+/// # Safety
+/// The CPU must support AVX-512F, `g.fits()` must hold, `g.stride` is 1 and
+/// `g.wino` holds the block's transformed weights.
+#[target_feature(enable = "avx512f")]
+pub(super) unsafe fn winograd_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize, x1: usize) -> usize {
+    let (w, plane) = (g.w, g.plane);
+    let mut valid = [(0, 0); 3];
+    let mut n = 0;
+    for (ky, r) in g.src_rows.iter().enumerate() {
+        if let Some(sy) = *r {
+            valid[n] = (ky, sy * w);
+            n += 1;
+        }
+    }
+    // SAFETY: plain loads of index tables (AVX-512F guaranteed by the caller).
+    let (even_i, odd_i, lo_i, hi_i) = unsafe {
+        (
+            _mm512_loadu_si512(EVEN.as_ptr().cast()),
+            _mm512_loadu_si512(ODD.as_ptr().cast()),
+            _mm512_loadu_si512(LO.as_ptr().cast()),
+            _mm512_loadu_si512(HI.as_ptr().cast()),
+        )
+    };
+    let (base, wbase) = (g.lanes.as_ptr(), g.wino.as_ptr());
+    let ow = rows[0].len();
+    let slope = _mm512_set1_ps(LEAKY_SLOPE);
+    let mut x = x0;
+    while x < x1 {
+        // the values at x − 16.. (only x − 1 read), x.., x + 16.., x + 32..
+        // (only x + 32 read), the zero padding masked off
+        let xi = x as isize;
+        let m = [mask(xi - 16, w) & 0x8000, mask(xi, w), mask(xi + 16, w), mask(xi + 32, w) & 1];
+        // the block in halves of HB channels: 4 · HB accumulators and the
+        // shuffles stay in registers
+        for b0 in (0..OB).step_by(HB) {
+            let mut acc = [[_mm512_setzero_ps(); HB]; 4];
+            for (a, &b) in acc[1].iter_mut().zip(&g.bias[b0..]) {
+                *a = _mm512_set1_ps(b);
+            }
+            for i in 0..g.cin {
+                for &(ky, ro) in &valid[..n] {
+                    let row = base.wrapping_add(i * plane + ro).wrapping_offset(xi);
+                    // SAFETY: `g.fits()`: row sy of plane i lies inside `lanes`,
+                    // and the masks keep the lanes read inside it.
+                    let [before, l0, l1, after] = unsafe {
+                        [
+                            _mm512_maskz_loadu_ps(m[0], row.wrapping_sub(16)),
+                            _mm512_maskz_loadu_ps(m[1], row),
+                            _mm512_maskz_loadu_ps(m[2], row.wrapping_add(16)),
+                            _mm512_maskz_loadu_ps(m[3], row.wrapping_add(32)),
+                        ]
+                    };
+                    let d1 = _mm512_permutex2var_ps(l0, even_i, l1); // d(x + 2j)
+                    let d2 = _mm512_permutex2var_ps(l0, odd_i, l1); // d(x + 2j + 1)
+                                                                    // d(x + 2j − 1): d(x − 1), then d2 shifted up one lane
+                    let d0 = _mm512_castsi512_ps(_mm512_alignr_epi32::<15>(_mm512_castps_si512(d2), _mm512_castps_si512(before)));
+                    // d(x + 2j + 2): d1 shifted down one lane, then d(x + 32)
+                    let d3 = _mm512_castsi512_ps(_mm512_alignr_epi32::<1>(_mm512_castps_si512(after), _mm512_castps_si512(d1)));
+                    let u = [_mm512_sub_ps(d0, d2), _mm512_add_ps(d1, d2), _mm512_sub_ps(d2, d1), _mm512_sub_ps(d1, d3)];
+                    let t = (i * 3 + ky) * 4 * OB + b0;
+                    for b in 0..HB {
+                        for (j, (aj, uj)) in acc.iter_mut().zip(&u).enumerate() {
+                            // SAFETY: `g.fits()`: wino holds cin · 12 · OB values,
+                            // and t + j · OB + b < that.
+                            let s = _mm512_set1_ps(unsafe { *wbase.add(t + j * OB + b) });
+                            aj[b] = _mm512_fmadd_ps(*uj, s, aj[b]);
+                        }
+                    }
+                }
+            }
+            let end = x1.min(ow);
+            let keep = [mask(xi, end), mask(xi + 16, end)];
+            for (b, r) in rows[b0..b0 + HB].iter_mut().enumerate() {
+                let y0 = _mm512_add_ps(_mm512_add_ps(acc[0][b], acc[1][b]), acc[2][b]);
+                let y1 = _mm512_sub_ps(_mm512_sub_ps(acc[1][b], acc[2][b]), acc[3][b]);
+                for (h, (idx, k)) in [(lo_i, keep[0]), (hi_i, keep[1])].into_iter().enumerate() {
+                    let a = _mm512_permutex2var_ps(y0, idx, y1);
+                    let a =
+                        if g.leaky { _mm512_mask_mul_ps(a, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, _mm512_setzero_ps()), a, slope) } else { a };
+                    // SAFETY: the mask keeps the lanes written inside `r` (x + 16h
+                    // + j < end ≤ r.len()); AVX-512F is guaranteed by the caller.
+                    unsafe { _mm512_mask_storeu_ps(r.as_mut_ptr().wrapping_add(x + 16 * h), k, a) };
+                }
+            }
+        }
+        x += 32;
+    }
+    x1
+}
+
+/// Channels of a block accumulated together by [`winograd_lanes`].
+const HB: usize = 3;
+
+/// `_mm512_permutex2var_ps` indices: the even and odd values of two vectors
+/// (0..16 the first, 16..32 the second), and the two halves of the
+/// interleaving of two vectors.
+const EVEN: [i32; 16] = [0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30];
+const ODD: [i32; 16] = [1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31];
+const LO: [i32; 16] = [0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23];
+const HI: [i32; 16] = [8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31];

@@ -46,10 +46,12 @@ impl ConvDesc<'_> {
             crate::convert::f16_to_f32(&halves[..run.len()], run);
         }
     }
-    /// f32 of `weights` scratch [`conv`] needs: `cout · cin · k · k` weights
-    /// and `cout` biases.
+    /// f32 of `weights` scratch [`conv`] needs: `cout · cin · k · k` weights,
+    /// `cout` biases and, for a 3×3 layer, room for the weights transformed
+    /// for the AVX-512 lanes' Winograd products (`cout · cin · 12`).
     pub fn weights_len(&self) -> usize {
-        self.cout * self.cin * self.k * self.k + self.cout
+        let wino = if self.k == 3 { self.cout * self.cin * 12 } else { 0 };
+        self.cout * self.cin * self.k * self.k + self.cout + wino
     }
     /// Output size for a `w × h` input.
     pub fn out_size(&self, w: usize, h: usize) -> (usize, usize) {
@@ -175,6 +177,8 @@ pub struct Layer<'a> {
     wts: &'a [f32],
     /// The biases in f32.
     bias: &'a [f32],
+    /// The blocks' weights for the Winograd lanes (empty: not used).
+    wino: &'a [f32],
     /// Output channels computed in blocks of `OB` lanes.
     blocks: usize,
 }
@@ -214,7 +218,8 @@ impl<'a> Layer<'a> {
         let blocks = if d.k == 3 && ((d.stride == 1 && w >= 18) || split.is_some()) { d.cout / OB } else { 0 };
         // the blocks' weights as [block][tap][OB] (one tap's OB weights
         // adjacent, read in sequence by the lanes), the rest as [out][tap]
-        let (wts, bias) = weights[..d.weights_len()].split_at_mut(d.cout * taps);
+        let (wts, rest) = weights[..d.weights_len()].split_at_mut(d.cout * taps);
+        let (bias, wino) = rest.split_at_mut(d.cout);
         let (packed, rest) = wts.split_at_mut(blocks * OB * taps);
         let mut run = [0f32; 64];
         for (k, block) in packed.chunks_exact_mut(OB * taps).enumerate() {
@@ -231,7 +236,28 @@ impl<'a> Layer<'a> {
         }
         d.params_f32(blocks * OB * taps, rest);
         d.params_f32(d.cout * taps, bias);
-        Ok(Layer { isa, d, input, lanes_input, stride, w, h, in_plane: ip, act, wts, bias, blocks })
+        // the AVX-512 lanes of a stride-1 layer multiply in Winograd's
+        // F(2, 3) along the row: per kernel row (g0, g1, g2) the four
+        // weights g0, (g0 + g1 + g2) / 2, (g0 − g1 + g2) / 2, g2, as
+        // [block][input channel · 3 + ky][4][OB]
+        let wino = if isa == Isa::Avx512 && d.k == 3 && d.stride == 1 && blocks > 0 {
+            let wino = &mut wino[..blocks * OB * d.cin * 12];
+            for (block, wb) in packed.chunks_exact(OB * taps).zip(wino.chunks_exact_mut(OB * d.cin * 12)) {
+                for (r, wr) in block.chunks_exact(3 * OB).zip(wb.chunks_exact_mut(4 * OB)) {
+                    for b in 0..OB {
+                        let (g0, g1, g2) = (r[b], r[OB + b], r[2 * OB + b]);
+                        wr[b] = g0;
+                        wr[OB + b] = (g0 + g1 + g2) * 0.5;
+                        wr[2 * OB + b] = (g0 - g1 + g2) * 0.5;
+                        wr[3 * OB + b] = g2;
+                    }
+                }
+            }
+            &*wino
+        } else {
+            &[]
+        };
+        Ok(Layer { isa, d, input, lanes_input, stride, w, h, in_plane: ip, act, wts, bias, wino, blocks })
     }
 
     /// Output rows.
@@ -263,8 +289,10 @@ impl<'a> Layer<'a> {
                             *r = unsafe { out.row(k * OB + b, y) };
                         }
                         let bias = core::array::from_fn(|b| self.bias[k * OB + b]);
+                        let wn = OB * d.cin * 12;
                         let g = Lanes {
                             wts: &wts[k * OB * taps..(k + 1) * OB * taps],
+                            wino: self.wino.get(k * wn..(k + 1) * wn).unwrap_or(&[]),
                             cin: d.cin,
                             lanes: self.lanes_input,
                             w,
@@ -469,6 +497,9 @@ fn conv3_block_strip(isa: Isa, g: &Lanes<'_>, input: &[f32], h: usize, rows: &mu
             Isa::Avx2Fma => unsafe { avx2::conv3_lanes(g, rows, x0, x1) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as above.
+            Isa::Avx512 if g.stride == 1 && !g.wino.is_empty() => unsafe { avx512::winograd_lanes(g, rows, x0, x1) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as above.
             Isa::Avx512 => unsafe { avx512::conv3_lanes(g, rows, x0, x1) },
             _ => conv3_lanes(g, rows, x0, x1),
         }
@@ -499,6 +530,8 @@ fn conv3_block_strip(isa: Isa, g: &Lanes<'_>, input: &[f32], h: usize, rows: &mu
 struct Lanes<'a> {
     /// The block's weights, `[tap][OB]` (tap = (i · 3 + ky) · 3 + kx).
     wts: &'a [f32],
+    /// The block's Winograd weights, `[i · 3 + ky][4][OB]`, or empty.
+    wino: &'a [f32],
     cin: usize,
     lanes: &'a [f32],
     w: usize,
@@ -522,6 +555,7 @@ impl Lanes<'_> {
             && self.stride <= 2
             && self.lanes.len() >= self.cin * self.plane
             && self.wts.len() >= self.cin * 9 * OB
+            && (self.wino.is_empty() || self.wino.len() >= self.cin * 12 * OB)
     }
 }
 
