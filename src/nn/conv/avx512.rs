@@ -6,11 +6,11 @@
 //! (fused multiply-adds over input channel, kernel row, kernel column), so
 //! their outputs are identical.
 
-use super::{Lanes, LEAKY_SLOPE, OB};
+use super::{Lanes, Planes, LEAKY_SLOPE, OB};
 use core::arch::x86_64::{
     __m512, _mm512_add_ps, _mm512_alignr_epi32, _mm512_castps_si512, _mm512_castsi512_ps, _mm512_cmp_ps_mask, _mm512_fmadd_ps,
     _mm512_loadu_si512, _mm512_mask_mul_ps, _mm512_mask_storeu_ps, _mm512_maskz_loadu_ps, _mm512_permutex2var_ps, _mm512_set1_ps,
-    _mm512_setzero_ps, _mm512_sub_ps, _CMP_LT_OQ,
+    _mm512_setzero_ps, _mm512_sub_ps, _mm_prefetch, _CMP_LT_OQ, _MM_HINT_T0,
 };
 
 /// 16-pixel groups per pass.
@@ -74,6 +74,12 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
                 // (wrapping: a group's first lanes may lie before the row,
                 // masked off and not read)
                 let row = base.wrapping_add(i * plane + ro);
+                // the next pass's values of the first two taps' parts of the
+                // row (stride 2: odd and even; stride 1: the same part)
+                for o in [off[0][0], off[1][0]] {
+                    _mm_prefetch::<_MM_HINT_T0>(row.wrapping_offset(o + 16 * N as isize).cast());
+                    _mm_prefetch::<_MM_HINT_T0>(row.wrapping_offset(o + 16 * N as isize + 16).cast());
+                }
                 let t = (i * 3 + ky) * 3;
                 for kx in 0..3 {
                     let mut v: [__m512; N] = [_mm512_setzero_ps(); N];
@@ -112,9 +118,10 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
     x1
 }
 
-/// A stride-1 layer's lanes in Winograd's F(2, 3) along the row: per input
-/// channel and kernel row, output pixels 2m and 2m + 1 take the input
-/// values d0..d3 at 2m − 1..2m + 2 and four products instead of six,
+/// One output row of a stride-1 layer's blocks in Winograd's F(2, 3) along
+/// the row: per input channel and kernel row, output pixels 2m and 2m + 1
+/// take the input values d0..d3 at 2m − 1..2m + 2 and four products instead
+/// of six,
 ///
 /// ```text
 /// m1 = (d0 − d2)·g0   m2 = (d1 + d2)·(g0 + g1 + g2)/2
@@ -124,16 +131,18 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
 ///
 /// each product summed over the input channels and kernel rows before the
 /// two outputs are formed (the bias starts m2's sum). 32 output pixels (16
-/// pairs) per pass and `OB` channels: 4 · `OB` accumulators. The rounding
-/// differs from the direct products' (both are within tests/nn.rs's f64
-/// bound). Output pixels `x0..x1` (x0 even); returns `x1`.
+/// pairs) per pass: the four transformed inputs (d0 − d2, ...) of up to
+/// `CH` input channels are computed once into a buffer that every block of
+/// output channels reads; with more input channels, each further `CH` adds
+/// its outputs to the row. The rounding differs from the direct products'
+/// (both are within tests/nn.rs's f64 bound).
 ///
 /// # Safety
-/// The CPU must support AVX-512F, `g.fits()` must hold, `g.stride` is 1 and
-/// `g.wino` holds the block's transformed weights.
+/// The CPU must support AVX-512F, `g.fits()` must hold, and no other live
+/// slice covers row `y` of `out`'s planes.
 #[target_feature(enable = "avx512f")]
-pub(super) unsafe fn winograd_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0: usize, x1: usize) -> usize {
-    let (w, plane) = (g.w, g.plane);
+pub(super) unsafe fn winograd_row(g: &WinogradRow<'_>, out: &Planes<'_>, y: usize) {
+    let (w, plane, cin) = (g.w, g.plane, g.cin);
     let mut valid = [(0, 0); 3];
     let mut n = 0;
     for (ky, r) in g.src_rows.iter().enumerate() {
@@ -152,73 +161,136 @@ pub(super) unsafe fn winograd_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], 
         )
     };
     let (base, wbase) = (g.lanes.as_ptr(), g.wino.as_ptr());
-    let ow = rows[0].len();
     let slope = _mm512_set1_ps(LEAKY_SLOPE);
-    let mut x = x0;
-    while x < x1 {
-        // the values at x − 16.. (only x − 1 read), x.., x + 16.., x + 32..
-        // (only x + 32 read), the zero padding masked off
+    let wn = OB * cin * 12; // one block's transformed weights
+                            // [input channel − c0][valid row][4]
+    let mut ubuf = [_mm512_setzero_ps(); CH * 3 * 4];
+    let mut x = 0;
+    while x < w {
+        // the values at x.. and x + 16.. (the zero padding masked off), and
+        // the single values at x − 1 and x + 32 where they lie inside the row
         let xi = x as isize;
-        let m = [mask(xi - 16, w) & 0x8000, mask(xi, w), mask(xi + 16, w), mask(xi + 32, w) & 1];
-        // the block in halves of HB channels: 4 · HB accumulators and the
-        // shuffles stay in registers
-        for b0 in (0..OB).step_by(HB) {
-            let mut acc = [[_mm512_setzero_ps(); HB]; 4];
-            for (a, &b) in acc[1].iter_mut().zip(&g.bias[b0..]) {
-                *a = _mm512_set1_ps(b);
-            }
-            for i in 0..g.cin {
-                for &(ky, ro) in &valid[..n] {
+        let m = [mask(xi, w), mask(xi + 16, w)];
+        let (has_before, has_after) = (x >= 1, x + 32 < w);
+        for c0 in (0..cin).step_by(CH) {
+            let c1 = (c0 + CH).min(cin);
+            for i in c0..c1 {
+                for (v, &(_, ro)) in valid[..n].iter().enumerate() {
                     let row = base.wrapping_add(i * plane + ro).wrapping_offset(xi);
                     // SAFETY: `g.fits()`: row sy of plane i lies inside `lanes`,
-                    // and the masks keep the lanes read inside it.
+                    // and the masks keep the lanes read inside it; x − 1 and
+                    // x + 32 are read only inside the row. (Loads with only
+                    // one lane unmasked ran many times slower on Zen 4.)
                     let [before, l0, l1, after] = unsafe {
                         [
-                            _mm512_maskz_loadu_ps(m[0], row.wrapping_sub(16)),
-                            _mm512_maskz_loadu_ps(m[1], row),
-                            _mm512_maskz_loadu_ps(m[2], row.wrapping_add(16)),
-                            _mm512_maskz_loadu_ps(m[3], row.wrapping_add(32)),
+                            _mm512_set1_ps(if has_before { *row.wrapping_sub(1) } else { 0.0 }),
+                            _mm512_maskz_loadu_ps(m[0], row),
+                            _mm512_maskz_loadu_ps(m[1], row.wrapping_add(16)),
+                            _mm512_set1_ps(if has_after { *row.wrapping_add(32) } else { 0.0 }),
                         ]
                     };
+                    // the next pass's values: a pass reads 3 · cin rows, more
+                    // streams than the hardware prefetcher follows
+                    _mm_prefetch::<_MM_HINT_T0>(row.wrapping_add(AHEAD).cast());
+                    _mm_prefetch::<_MM_HINT_T0>(row.wrapping_add(AHEAD + 16).cast());
                     let d1 = _mm512_permutex2var_ps(l0, even_i, l1); // d(x + 2j)
                     let d2 = _mm512_permutex2var_ps(l0, odd_i, l1); // d(x + 2j + 1)
                                                                     // d(x + 2j − 1): d(x − 1), then d2 shifted up one lane
                     let d0 = _mm512_castsi512_ps(_mm512_alignr_epi32::<15>(_mm512_castps_si512(d2), _mm512_castps_si512(before)));
                     // d(x + 2j + 2): d1 shifted down one lane, then d(x + 32)
                     let d3 = _mm512_castsi512_ps(_mm512_alignr_epi32::<1>(_mm512_castps_si512(after), _mm512_castps_si512(d1)));
-                    let u = [_mm512_sub_ps(d0, d2), _mm512_add_ps(d1, d2), _mm512_sub_ps(d2, d1), _mm512_sub_ps(d1, d3)];
-                    let t = (i * 3 + ky) * 4 * OB + b0;
-                    for b in 0..HB {
-                        for (j, (aj, uj)) in acc.iter_mut().zip(&u).enumerate() {
-                            // SAFETY: `g.fits()`: wino holds cin · 12 · OB values,
-                            // and t + j · OB + b < that.
-                            let s = _mm512_set1_ps(unsafe { *wbase.add(t + j * OB + b) });
-                            aj[b] = _mm512_fmadd_ps(*uj, s, aj[b]);
-                        }
-                    }
+                    let at = ((i - c0) * 3 + v) * 4;
+                    ubuf[at] = _mm512_sub_ps(d0, d2);
+                    ubuf[at + 1] = _mm512_add_ps(d1, d2);
+                    ubuf[at + 2] = _mm512_sub_ps(d2, d1);
+                    ubuf[at + 3] = _mm512_sub_ps(d1, d3);
                 }
             }
-            let end = x1.min(ow);
-            let keep = [mask(xi, end), mask(xi + 16, end)];
-            for (b, r) in rows[b0..b0 + HB].iter_mut().enumerate() {
-                let y0 = _mm512_add_ps(_mm512_add_ps(acc[0][b], acc[1][b]), acc[2][b]);
-                let y1 = _mm512_sub_ps(_mm512_sub_ps(acc[1][b], acc[2][b]), acc[3][b]);
-                for (h, (idx, k)) in [(lo_i, keep[0]), (hi_i, keep[1])].into_iter().enumerate() {
-                    let a = _mm512_permutex2var_ps(y0, idx, y1);
-                    let a =
-                        if g.leaky { _mm512_mask_mul_ps(a, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, _mm512_setzero_ps()), a, slope) } else { a };
-                    // SAFETY: the mask keeps the lanes written inside `r` (x + 16h
-                    // + j < end ≤ r.len()); AVX-512F is guaranteed by the caller.
-                    unsafe { _mm512_mask_storeu_ps(r.as_mut_ptr().wrapping_add(x + 16 * h), k, a) };
+            for k in 0..g.blocks {
+                for b0 in (0..OB).step_by(HB) {
+                    let mut acc = [[_mm512_setzero_ps(); HB]; 4];
+                    if c0 == 0 {
+                        for (a, &b) in acc[1].iter_mut().zip(&g.bias[k * OB + b0..]) {
+                            *a = _mm512_set1_ps(b);
+                        }
+                    }
+                    for i in c0..c1 {
+                        for (v, &(ky, _)) in valid[..n].iter().enumerate() {
+                            let u = &ubuf[((i - c0) * 3 + v) * 4..][..4];
+                            let t = k * wn + (i * 3 + ky) * 4 * OB + b0;
+                            for (j, (aj, uj)) in acc.iter_mut().zip(u).enumerate() {
+                                for (b, a) in aj.iter_mut().enumerate() {
+                                    // SAFETY: `g.fits()`: wino holds blocks · OB ·
+                                    // cin · 12 values, and t + j · OB + b < that.
+                                    let s = _mm512_set1_ps(unsafe { *wbase.add(t + j * OB + b) });
+                                    *a = _mm512_fmadd_ps(*uj, s, *a);
+                                }
+                            }
+                        }
+                    }
+                    let [a1, a2, a3, a4] = acc;
+                    for (b, (((m1, m2), m3), m4)) in a1.into_iter().zip(a2).zip(a3).zip(a4).enumerate() {
+                        let y0 = _mm512_add_ps(_mm512_add_ps(m1, m2), m3);
+                        let y1 = _mm512_sub_ps(_mm512_sub_ps(m2, m3), m4);
+                        // SAFETY: the caller keeps row y to this call.
+                        let r = unsafe { out.row(k * OB + b0 + b, y) };
+                        let end = r.len().min(w);
+                        for (h, idx) in [lo_i, hi_i].into_iter().enumerate() {
+                            let px = x + 16 * h;
+                            let keep = mask(px as isize, end);
+                            let p = r.as_mut_ptr().wrapping_add(px);
+                            let mut a = _mm512_permutex2var_ps(y0, idx, y1);
+                            if c0 > 0 {
+                                // SAFETY: the mask keeps the lanes read inside `r`.
+                                a = _mm512_add_ps(a, unsafe { _mm512_maskz_loadu_ps(keep, p) });
+                            }
+                            if c1 == cin && g.leaky {
+                                a = _mm512_mask_mul_ps(a, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, _mm512_setzero_ps()), a, slope);
+                            }
+                            // SAFETY: the mask keeps the lanes written inside `r`
+                            // (px + j < end ≤ r.len()); AVX-512F is guaranteed by the caller.
+                            unsafe { _mm512_mask_storeu_ps(p, keep, a) };
+                        }
+                    }
                 }
             }
         }
         x += 32;
     }
-    x1
 }
 
-/// Channels of a block accumulated together by [`winograd_lanes`].
+/// How far ahead (in values) [`winograd_row`] prefetches its input rows.
+const AHEAD: usize = 64;
+
+/// Input channels transformed at once by [`winograd_row`]: a 24 KiB buffer.
+const CH: usize = 32;
+
+/// What [`winograd_row`] reads for one output row of a stride-1 layer.
+pub(super) struct WinogradRow<'a> {
+    /// The transformed weights of every block, `[block][i · 3 + ky][4][OB]`.
+    pub wino: &'a [f32],
+    /// Biases of the blocks' channels.
+    pub bias: &'a [f32],
+    pub blocks: usize,
+    pub cin: usize,
+    pub lanes: &'a [f32],
+    pub w: usize,
+    pub plane: usize,
+    pub src_rows: [Option<usize>; 3],
+    pub leaky: bool,
+}
+
+impl WinogradRow<'_> {
+    /// Whether every value read lies inside `lanes`, `wino` and `bias`.
+    pub fn fits(&self) -> bool {
+        self.src_rows.iter().flatten().all(|&sy| (sy + 1) * self.w <= self.plane)
+            && self.lanes.len() >= self.cin * self.plane
+            && self.wino.len() >= self.blocks * OB * self.cin * 12
+            && self.bias.len() >= self.blocks * OB
+    }
+}
+
+/// Channels of a block accumulated together by [`winograd_row`].
 const HB: usize = 3;
 
 /// `_mm512_permutex2var_ps` indices: the even and odd values of two vectors

@@ -277,7 +277,30 @@ impl<'a> Layer<'a> {
         let taps = d.cin * d.k * d.k;
         let input = self.input;
         for y in y0..y1.min(oh) {
-            if self.blocks > 0 {
+            #[cfg(target_arch = "x86_64")]
+            let winograd = self.isa == Isa::Avx512 && self.stride == 1 && !self.wino.is_empty() && {
+                let g = avx512::WinogradRow {
+                    wino: self.wino,
+                    bias: self.bias,
+                    blocks: self.blocks,
+                    cin: d.cin,
+                    lanes: self.lanes_input,
+                    w,
+                    plane: ip,
+                    src_rows: src_rows(y, h),
+                    leaky: self.act == Act::Leaky,
+                };
+                let fits = g.fits();
+                if fits {
+                    // SAFETY: `Layer::new` runs `Isa::Avx512` only where it is
+                    // available; `g.fits()` holds; row y is this call's (the caller's contract).
+                    unsafe { avx512::winograd_row(&g, out, y) };
+                }
+                fits
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let winograd = false;
+            if self.blocks > 0 && !winograd {
                 let ow = d.out_size(w, h).0;
                 let mut x0 = 0;
                 while x0 < ow {
@@ -289,10 +312,8 @@ impl<'a> Layer<'a> {
                             *r = unsafe { out.row(k * OB + b, y) };
                         }
                         let bias = core::array::from_fn(|b| self.bias[k * OB + b]);
-                        let wn = OB * d.cin * 12;
                         let g = Lanes {
                             wts: &wts[k * OB * taps..(k + 1) * OB * taps],
-                            wino: self.wino.get(k * wn..(k + 1) * wn).unwrap_or(&[]),
                             cin: d.cin,
                             lanes: self.lanes_input,
                             w,
@@ -306,11 +327,11 @@ impl<'a> Layer<'a> {
                     }
                     x0 = x1;
                 }
-                if self.act != Act::Leaky {
-                    for o in 0..self.blocks * OB {
-                        // SAFETY: as above.
-                        activate(unsafe { out.row(o, y) }, self.act);
-                    }
+            }
+            if self.blocks > 0 && self.act != Act::Leaky {
+                for o in 0..self.blocks * OB {
+                    // SAFETY: row y is this call's (the caller's contract).
+                    activate(unsafe { out.row(o, y) }, self.act);
                 }
             }
             for o in self.blocks * OB..d.cout {
@@ -497,9 +518,6 @@ fn conv3_block_strip(isa: Isa, g: &Lanes<'_>, input: &[f32], h: usize, rows: &mu
             Isa::Avx2Fma => unsafe { avx2::conv3_lanes(g, rows, x0, x1) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: as above.
-            Isa::Avx512 if g.stride == 1 && !g.wino.is_empty() => unsafe { avx512::winograd_lanes(g, rows, x0, x1) },
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: as above.
             Isa::Avx512 => unsafe { avx512::conv3_lanes(g, rows, x0, x1) },
             _ => conv3_lanes(g, rows, x0, x1),
         }
@@ -530,8 +548,6 @@ fn conv3_block_strip(isa: Isa, g: &Lanes<'_>, input: &[f32], h: usize, rows: &mu
 struct Lanes<'a> {
     /// The block's weights, `[tap][OB]` (tap = (i · 3 + ky) · 3 + kx).
     wts: &'a [f32],
-    /// The block's Winograd weights, `[i · 3 + ky][4][OB]`, or empty.
-    wino: &'a [f32],
     cin: usize,
     lanes: &'a [f32],
     w: usize,
@@ -551,11 +567,7 @@ impl Lanes<'_> {
     /// unchecked loads of the AVX2 lanes rely on it.
     fn fits(&self) -> bool {
         let rows_fit = self.src_rows.iter().flatten().all(|&sy| (sy + 1) * self.w <= self.plane);
-        rows_fit
-            && self.stride <= 2
-            && self.lanes.len() >= self.cin * self.plane
-            && self.wts.len() >= self.cin * 9 * OB
-            && (self.wino.is_empty() || self.wino.len() >= self.cin * 12 * OB)
+        rows_fit && self.stride <= 2 && self.lanes.len() >= self.cin * self.plane && self.wts.len() >= self.cin * 9 * OB
     }
 }
 
