@@ -12,7 +12,7 @@
 use super::{Lanes, LEAKY_SLOPE, OB};
 use core::arch::x86_64::{
     __m256, _mm256_blendv_ps, _mm256_broadcast_ss, _mm256_cmp_ps, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_set1_ps,
-    _mm256_setzero_ps, _mm256_storeu_ps, _CMP_LT_OQ,
+    _mm256_setzero_ps, _mm256_storeu_ps, _mm_prefetch, _CMP_LT_OQ, _MM_HINT_T0,
 };
 
 /// The 8 values `s[x..x + 8]`, zeros for those outside `s` (see [`super::load8`]).
@@ -98,6 +98,12 @@ unsafe fn groups<const N: usize>(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
                 // `lanes`; `interior`: offs[kx] + 8·N ≤ w (stride 2:
                 // ew + x0 + 8·N ≤ ew + w/2 = w).
                 let row = unsafe { base.add(i * plane + ro) };
+                // the next pass's values of the first two taps' parts of the
+                // row: a pass reads 3 · cin rows, more streams than the
+                // hardware prefetcher follows
+                for o in [offs[0], offs[1]] {
+                    _mm_prefetch::<_MM_HINT_T0>(row.wrapping_add(o + 8 * N + 16).cast());
+                }
                 let t = (i * 3 + ky) * 3;
                 for (kx, &off) in offs.iter().enumerate() {
                     let mut v = [_mm256_setzero_ps(); N];
