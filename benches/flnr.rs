@@ -49,7 +49,7 @@ fn bench(c: &mut Criterion) {
         })
     });
     let net = fl.network();
-    let input = vec![0.5f32; 8 * n];
+    let input = vec![0.5f32; net.in_channels() * n];
     let mut gout = vec![0f32; net.out_channels() * n];
     let mut ns = vec![0f32; net.scratch_len(w, h)];
     g.bench_function("network_only", |b| b.iter(|| net.forward(black_box(&input), w, h, &mut ns, &mut gout).unwrap()));

@@ -1,10 +1,14 @@
-//! AVX-512F version of the 3×3 layers' lanes ([`super::conv3_lanes`]):
-//! 16-pixel vectors, and with 32 registers `N` groups of them per pass (`N ·
-//! OB` accumulators). Masked loads read the zero padding at either end of a
-//! row and masked stores end a pass at the strip's end, so every pass takes
-//! the same path. Same operations in the same order as the AVX2 version
-//! (fused multiply-adds over input channel, kernel row, kernel column), so
-//! their outputs are identical.
+//! AVX-512F versions of the 3×3 layers' lanes, 16-pixel vectors with 32
+//! registers:
+//! * [`conv3_lanes`] (the stride-2 layers): [`super::conv3_lanes`] with `N`
+//!   groups per pass (`N · OB` accumulators), the same fused multiply-adds in
+//!   the same order as the AVX2 version, so their outputs are identical;
+//! * [`winograd_row`] (the stride-1 layers): Winograd's F(2, 3) along the
+//!   row, four products per pair of outputs and kernel row instead of six.
+//!
+//! Masked loads read the zero padding at either end of a row and masked
+//! stores end a pass at the row's or the strip's end, so every pass takes
+//! the same path.
 
 use super::{Lanes, Planes, LEAKY_SLOPE, OB};
 use core::arch::x86_64::{

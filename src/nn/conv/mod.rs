@@ -401,7 +401,7 @@ impl<'a> Layer<'a> {
 /// A planar tensor (`count` planes of `width × height`, `plane` values
 /// apart) written row by row, possibly by several threads at once at
 /// disjoint rows (a layer's output in [`Layer::rows`], the split rows of
-/// [`split_rows`], a concatenation in [`concat_rows`]).
+/// [`split_rows`], a concatenation in [`Concat::rows`]).
 #[derive(Debug)]
 pub struct Planes<'o> {
     ptr: *mut f32,
