@@ -177,7 +177,9 @@ pub struct Layer<'a> {
     wts: &'a [f32],
     /// The biases in f32.
     bias: &'a [f32],
-    /// The blocks' weights for the Winograd lanes (empty: not used).
+    /// The blocks' weights for the Winograd lanes (empty: not used; read by
+    /// the AVX-512 lanes only).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     wino: &'a [f32],
     /// Output channels computed in blocks of `OB` lanes.
     blocks: usize,
