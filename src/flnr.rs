@@ -184,7 +184,7 @@ impl<'w> Flnr<'w> {
         } else {
             None
         };
-        let align = 1 << net.levels();
+        let align = tile_align(&net);
         let halo = net.receptive_radius().div_ceil(align) * align;
         let fl = Flnr { net, flr, prior, width, height, q, tile: DEFAULT_TILE, halo, region_max: (0, 0) };
         fl.with_tile(config.tile)
@@ -240,7 +240,7 @@ impl<'w> Flnr<'w> {
         (self.width.div_ceil(self.tile).max(1), self.height.div_ceil(self.tile).max(1))
     }
     fn tile_rect_at(&self, i: usize, j: usize, nx: usize, ny: usize) -> Rect {
-        let align = 1 << self.net.levels();
+        let align = tile_align(&self.net);
         Rect {
             x0: tile_start(i, nx, self.width, align),
             x1: tile_start(i + 1, nx, self.width, align),
@@ -827,6 +827,14 @@ unsafe fn input_row(
         }
     }
     true
+}
+
+/// What tile and region edges are multiples of: `2^levels`, so that the
+/// stride-2 grids of a tile and the frame coincide, and at least 2, so that
+/// the pairs of output columns of the AVX-512 Winograd lanes do too (a tile
+/// gives the whole frame's bits).
+fn tile_align(net: &UNet<'_>) -> usize {
+    (1usize << net.levels()).max(2)
 }
 
 /// `ln(1 + v / scale)` of light (NaN/Inf → 0, negatives → 0), in place:

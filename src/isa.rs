@@ -21,6 +21,7 @@ use core::sync::atomic::{AtomicU8, Ordering};
 /// default features (which lack `std`) therefore gets the AVX2 + FMA kernels
 /// too.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Isa {
     /// `wide`'s lanes (the build's instruction set).
     Portable,

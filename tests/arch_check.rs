@@ -259,7 +259,7 @@ fn kernel_oracles(failures: &mut Vec<String>) {
             let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
             let want = network_reference(&b, &input, w, h);
             let mut scratch = vec![0f32; net.scratch_len(w, h)];
-            for isa in [isa::Isa::Portable, isa::Isa::detect()] {
+            for isa in [isa::Isa::Portable, isa::Isa::detect(), isa::Isa::detect_widest()] {
                 let mut out = vec![0f32; 3 * w * h];
                 match net.forward_with(isa, &input, w, h, &mut scratch, &mut out) {
                     Ok(()) => {

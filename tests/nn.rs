@@ -29,14 +29,17 @@ fn matches_pytorch_on_the_exported_vector() {
     let mut out = vec![f32::NAN; cout * w * h];
     net.forward(input, w, h, &mut scratch, &mut out).unwrap();
     let worst = out.iter().zip(want).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-    // Same f16-rounded weights, f32 activations: only the summation order differs.
+    // Same f16-rounded weights, f32 activations: only the summation order
+    // differs (and with AVX-512, Winograd's products).
     assert!(worst < 1e-5, "worst |lrdenoise − PyTorch| = {worst}");
 }
 
 #[test]
 fn every_layer_matches_an_f64_reference_on_awkward_sizes() {
     for (k, &(w, h)) in [(1, 1), (7, 3), (3, 7), (16, 16), (33, 17), (257, 2), (48, 20), (19, 9)].iter().enumerate() {
-        for widths in [vec![3], vec![3, 5], vec![2, 4, 6], vec![4, 4, 4, 4, 4], vec![6, 13]] {
+        // [6, 27], [12, 24]: decoder layers of 33 and 36 input channels, more
+        // than the AVX-512 Winograd lanes transform at once
+        for widths in [vec![3], vec![3, 5], vec![2, 4, 6], vec![4, 4, 4, 4, 4], vec![6, 13], vec![6, 27], vec![12, 24]] {
             let b = blob(5, 3, &widths, 12.0, k as u64 + 1);
             let net = UNet::parse(&b).unwrap();
             let mut rng = Rng(9 + k as u64);
@@ -97,7 +100,8 @@ fn layer_rows_over_threads_equal_one_thread_bit_for_bit() {
 }
 
 /// The instruction sets this build can run here (the AVX2 one needs a CPU with
-/// AVX2 and FMA; it is detected at run time in every build).
+/// AVX2 and FMA, the AVX-512 one AVX-512F; both are detected at run time in
+/// every build).
 fn isas() -> Vec<Isa> {
     let all: Vec<Isa> = [Isa::Portable, Isa::Avx2Fma, Isa::Avx512].into_iter().filter(|i| i.available()).collect();
     if all.len() < 3 {
@@ -114,8 +118,10 @@ fn avx2_and_avx512_lanes_match_the_portable_lanes() {
     // more than one group after the last pair; the AVX-512 lanes go 32 at a
     // time with masked ends (33, 65: one pixel past a pass), in Winograd's
     // F(2, 3) for stride 1 (other rounding: compared within the bound).
-    for &(w, h) in &[(18, 3), (19, 9), (30, 4), (33, 6), (40, 7), (46, 5), (65, 4), (257, 5)] {
-        let b = blob(5, 3, &[6, 13, 12], 12.0, w as u64);
+    for (&(w, h), widths) in
+        [(18, 3), (19, 9), (30, 4), (33, 6), (40, 7), (46, 5), (65, 4), (257, 5)].iter().zip([[6, 13, 12], [6, 27, 6]].iter().cycle())
+    {
+        let b = blob(5, 3, widths, 12.0, w as u64);
         let net = UNet::parse(&b).unwrap();
         let mut rng = Rng(w as u64);
         let input: Vec<f32> = (0..5 * w * h).map(|_| rng.f32() * 4.0 - 2.0).collect();
@@ -130,7 +136,7 @@ fn avx2_and_avx512_lanes_match_the_portable_lanes() {
             // fused against (in an SSE2 build) unfused multiply-adds: rounding
             // only, within the f64 reference test's bound
             let worst = o.iter().zip(&outs[0].1).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-            assert!(worst < 1e-4, "{isa:?} {w}x{h}: {worst}");
+            assert!(worst < 1e-4, "{isa:?} {w}x{h} {widths:?}: {worst}");
         }
     }
 }

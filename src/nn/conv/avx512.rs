@@ -53,7 +53,6 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
         }
     }
     let (base, wbase) = (g.lanes.as_ptr(), g.wts.as_ptr());
-    let ow = rows[0].len();
     let mut x = x0;
     while x < x1 {
         // per tap and group: where its 16 values start in a row, and which
@@ -104,16 +103,15 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
                 }
             }
         }
-        let end = x1.min(ow);
         let slope = _mm512_set1_ps(LEAKY_SLOPE);
         for (k, ak) in acc.iter().enumerate() {
             let px = x + 16 * k;
-            let keep = mask(px as isize, end);
             for (a, r) in ak.iter().zip(rows.iter_mut()) {
+                let keep = mask(px as isize, x1.min(r.len()));
                 let a =
                     if g.leaky { _mm512_mask_mul_ps(*a, _mm512_cmp_ps_mask::<_CMP_LT_OQ>(*a, _mm512_setzero_ps()), *a, slope) } else { *a };
                 // SAFETY: the mask keeps the lanes written inside `r` (px + j <
-                // end ≤ r.len()); AVX-512F is guaranteed by the caller.
+                // r.len()); AVX-512F is guaranteed by the caller.
                 unsafe { _mm512_mask_storeu_ps(r.as_mut_ptr().wrapping_add(px), keep, a) };
             }
         }
@@ -139,7 +137,9 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
 /// `CH` input channels are computed once into a buffer that every block of
 /// output channels reads; with more input channels, each further `CH` adds
 /// its outputs to the row. The rounding differs from the direct products'
-/// (both are within tests/nn.rs's f64 bound).
+/// (both are within tests/nn.rs's f64 bound). Pairs start at column 0, so a
+/// tile gives the frame's bits only where its columns start even (FLNR's
+/// tiles do). Uses 24 KiB of stack for the buffer.
 ///
 /// # Safety
 /// The CPU must support AVX-512F, `g.fits()` must hold, and no other live

@@ -4,8 +4,9 @@
 //! Rows are accumulated with slice arithmetic the compiler vectorises; the
 //! 3×3 layers' rows in 8-pixel lanes, with `wide` (any ISA, chosen at
 //! compile time) or, where the CPU has them, AVX2 + FMA intrinsics
-//! (`avx2`) or AVX-512F intrinsics in 16-pixel lanes (`avx512`), chosen at
-//! run time (see [`Isa`]).
+//! (`avx2`) or AVX-512F intrinsics in 16-pixel lanes (`avx512`: the
+//! stride-1 layers in Winograd's F(2, 3) along the row), chosen at run time
+//! (see [`Isa`]).
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -47,10 +48,10 @@ impl ConvDesc<'_> {
         }
     }
     /// f32 of `weights` scratch [`conv`] needs: `cout · cin · k · k` weights,
-    /// `cout` biases and, for a 3×3 layer, room for the weights transformed
-    /// for the AVX-512 lanes' Winograd products (`cout · cin · 12`).
+    /// `cout` biases and, for a stride-1 3×3 layer, room for the weights
+    /// transformed for the AVX-512 lanes' Winograd products (`cout · cin · 12`).
     pub fn weights_len(&self) -> usize {
-        let wino = if self.k == 3 { self.cout * self.cin * 12 } else { 0 };
+        let wino = if self.k == 3 && self.stride == 1 { self.cout * self.cin * 12 } else { 0 };
         self.cout * self.cin * self.k * self.k + self.cout + wino
     }
     /// Output size for a `w × h` input.
@@ -97,14 +98,15 @@ pub use crate::isa::Isa;
 /// the input's rows are rearranged as [even columns | odd columns], so the
 /// taps become contiguous 8-pixel loads (without it, or for narrow rows,
 /// stride 2 runs per pixel). `isa`: the lanes' instruction set;
-/// [`Isa::Portable`] where `isa` is not [`Isa::available`].
+/// [`Isa::detect`]'s where `isa` is not [`Isa::available`].
 ///
 /// Output rows are the outer loop, strips of `STRIP` pixels the next and
 /// blocks of `OB` output channels the inner one: the 3·cin input rows an
 /// output row reads are fetched into the cache once for all the blocks, and
 /// a strip's part of them stays in L1 across the blocks (blocks outermost
 /// re-streamed the whole input tensor from memory `cout / OB` times). The
-/// accumulators stay in registers across every input channel and tap.
+/// AVX-512 lanes of a stride-1 layer take a whole row at a time instead
+/// (Winograd's F(2, 3), see `avx512`).
 #[allow(clippy::too_many_arguments)]
 pub fn conv(
     isa: Isa,
@@ -201,7 +203,7 @@ impl<'a> Layer<'a> {
         weights: &'a mut [f32],
         split: Option<&'a [f32]>,
     ) -> Result<Self, Error> {
-        let isa = if isa.available() { isa } else { Isa::Portable };
+        let isa = if isa.available() { isa } else { Isa::detect() };
         let taps = d.cin * d.k * d.k;
         let ip = in_plane;
         if ip < w * h || input.len() < d.cin * ip || d.params.len() != 2 * (d.cout * taps + d.cout) {
