@@ -83,14 +83,7 @@ unsafe fn groups<const N: usize>(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
         // where the three taps' 8·N values start in a row
         let offs = if g.stride == 1 { [x0 - 1, x0, x0 + 1] } else { [ew + x0 - 1, x0, ew + x0] };
         // the rows inside the input: (ky, offset of row sy)
-        let mut valid = [(0, 0); 3];
-        let mut n = 0;
-        for (ky, r) in g.src_rows.iter().enumerate() {
-            if let Some(sy) = *r {
-                valid[n] = (ky, sy * w);
-                n += 1;
-            }
-        }
+        let (valid, n) = super::rows_inside(&g.src_rows, w);
         let (base, wbase) = (g.lanes.as_ptr(), g.wts.as_ptr());
         for i in 0..g.cin {
             for &(ky, ro) in &valid[..n] {

@@ -44,14 +44,7 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
     // split row [even (ew) | odd (w / 2)]
     let taps: [(usize, usize, isize); 3] =
         if g.stride == 1 { [(0, w, -1), (0, w, 0), (0, w, 1)] } else { [(ew, w / 2, -1), (0, ew, 0), (ew, w / 2, 0)] };
-    let mut valid = [(0, 0); 3];
-    let mut n = 0;
-    for (ky, r) in g.src_rows.iter().enumerate() {
-        if let Some(sy) = *r {
-            valid[n] = (ky, sy * w);
-            n += 1;
-        }
-    }
+    let (valid, n) = super::rows_inside(&g.src_rows, w);
     let (base, wbase) = (g.lanes.as_ptr(), g.wts.as_ptr());
     let mut x = x0;
     while x < x1 {
@@ -147,14 +140,7 @@ pub(super) unsafe fn conv3_lanes(g: &Lanes<'_>, rows: &mut [&mut [f32]; OB], x0:
 #[target_feature(enable = "avx512f")]
 pub(super) unsafe fn winograd_row(g: &WinogradRow<'_>, out: &Planes<'_>, y: usize) {
     let (w, plane, cin) = (g.w, g.plane, g.cin);
-    let mut valid = [(0, 0); 3];
-    let mut n = 0;
-    for (ky, r) in g.src_rows.iter().enumerate() {
-        if let Some(sy) = *r {
-            valid[n] = (ky, sy * w);
-            n += 1;
-        }
-    }
+    let (valid, n) = super::rows_inside(&g.src_rows, w);
     // SAFETY: plain loads of index tables (AVX-512F guaranteed by the caller).
     let (even_i, odd_i, lo_i, hi_i) = unsafe {
         (

@@ -503,6 +503,22 @@ fn src_rows(sy: usize, h: usize) -> [Option<usize>; 3] {
     [r(0), r(1), r(2)]
 }
 
+/// The first `n` entries of the result: the rows of `src_rows` inside the
+/// input, as (ky, offset of row sy in a plane of width `w`), for the
+/// intrinsics lanes' unchecked loads.
+#[cfg(target_arch = "x86_64")]
+fn rows_inside(src_rows: &[Option<usize>; 3], w: usize) -> ([(usize, usize); 3], usize) {
+    let mut valid = [(0, 0); 3];
+    let mut n = 0;
+    for (ky, r) in src_rows.iter().enumerate() {
+        if let Some(sy) = *r {
+            valid[n] = (ky, sy * w);
+            n += 1;
+        }
+    }
+    (valid, n)
+}
+
 /// Output pixels `x0..x1` of `OB` channels' rows (`rows`, whole output rows)
 /// of a 3×3 layer, from the bias: each 8-pixel load feeds `OB` accumulators.
 /// Stride 1 reads `g.lanes`, the input; stride 2 reads `g.lanes` as the input
