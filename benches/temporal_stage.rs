@@ -2,7 +2,7 @@
 //! (`Reprojection::accumulate`, with the firefly clamp) and step 3
 //! (`Reprojection::resolve`) on a frame with a history, a quarter-pixel pan
 //! (every pixel reprojects through 4 taps), normal + depth, one thread; the
-//! pixel groups in `wide`'s lanes and in AVX2's (where the CPU has it)
+//! pixel groups in `wide`'s lanes, AVX2's and AVX-512's (where the CPU has them)
 //! against the per-pixel reference, alternated; minimum and median of RUNS
 //! (default 15) each. Then both steps as temporal FLR runs them on one and
 //! on THREADS (default 2) workers (scoped std threads, each taking a
@@ -38,7 +38,7 @@ fn main() {
     };
     let fast = Reprojection::new(TemporalConfig::default(), GuideSet::NORMAL_DEPTH, w, h).unwrap();
     let mut stages = vec![("per pixel", fast.per_pixel())];
-    for (name, isa) in [("portable lanes", isa::Isa::Portable), ("AVX2 lanes", isa::Isa::Avx2Fma)] {
+    for (name, isa) in [("portable lanes", isa::Isa::Portable), ("AVX2 lanes", isa::Isa::Avx2Fma), ("AVX-512 lanes", isa::Isa::Avx512)] {
         if let Some(st) = fast.with_isa(isa) {
             stages.push((name, st));
         }

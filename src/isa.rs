@@ -8,7 +8,7 @@
 use core::sync::atomic::{AtomicU8, Ordering};
 
 /// The instruction set of a kernel's vector loops: the network's 3×3 layers
-/// (`nn::conv`, 8 lanes, or 16 with [`Isa::Avx512`]), the QR's column updates (`kernels::qr`), and FLR's block
+/// (`nn::conv`, 8 lanes, or 16 with [`Isa::Avx512`]), the temporal stage's pixel groups (likewise), the QR's column updates (`kernels::qr`), and FLR's block
 /// accumulation (`kernels::moments`), four-cell solve (`kernels::solve`, in
 /// `f64` lanes) and model application (`kernels::apply`).
 ///
@@ -28,7 +28,8 @@ pub enum Isa {
     /// `core::arch` AVX2 + FMA intrinsics (x86-64 only).
     Avx2Fma,
     /// AVX-512F intrinsics (x86-64 only) for the kernels that have an
-    /// AVX-512 version (the network's 3×3 layers, `nn::conv`); every other
+    /// AVX-512 version (the network's 3×3 layers, `nn::conv`, and the
+    /// temporal stage's pixel groups); every other
     /// kernel runs its AVX2 + FMA version. Chosen by [`Isa::detect_widest`].
     Avx512,
 }

@@ -293,7 +293,7 @@ impl Reprojection {
             normal: guides.normal,
             position: guides.position,
             depth: guides.depth,
-            lanes: Some(Isa::detect()),
+            lanes: Some(Isa::detect_widest()),
         })
     }
     /// The same stage with steps 1 and 3 run pixel by pixel: the reference
@@ -708,7 +708,7 @@ impl Reprojection {
                         x += done;
                         continue;
                     }
-                    let end = (x + lanes::MAX_LANES).min(w);
+                    let end = (x + lanes::PER_PIXEL_RUN).min(w);
                     for x in x..end {
                         self.accumulate_pixel(&row, x, out_row, px_row, &mut c);
                     }
@@ -978,7 +978,7 @@ impl Reprojection {
                     x += done;
                     continue;
                 }
-                let end = if x == 0 { 1 } else { (x + lanes::MAX_LANES).min(w) };
+                let end = if x == 0 { 1 } else { (x + lanes::PER_PIXEL_RUN).min(w) };
                 for x in x..end {
                     self.resolve_pixel(&r, x, wrow, out_row);
                 }

@@ -527,8 +527,8 @@ fn parallel_equals_one_thread() {
     }
 }
 
-/// Steps 1 and 3 on groups of pixels (SIMD lanes: `wide`'s, and AVX2's where
-/// the CPU has it) give the bits of the per-pixel reference
+/// Steps 1 and 3 on groups of pixels (SIMD lanes: `wide`'s, and AVX2's and
+/// AVX-512's where the CPU has them) give the bits of the per-pixel reference
 /// (`Reprojection::per_pixel`): awkward widths, motion that moves a
 /// group as one, pixel by pixel, and out of the frame, NaN/Inf light and
 /// motion, sky (no normal), negative light, with and without the firefly
@@ -551,7 +551,7 @@ fn pixel_groups_equal_the_per_pixel_reference() {
                     Some(_) => (TemporalConfig { clip_gamma: 1.0, output_alpha: 0.25, ..Default::default() }, false),
                 };
                 let slow = Reprojection::new(cfg, set, w, h).unwrap().per_pixel();
-                for fast in [isa::Isa::Portable, isa::Isa::Avx2Fma].into_iter().filter_map(|i| slow.with_isa(i)) {
+                for fast in [isa::Isa::Portable, isa::Isa::Avx2Fma, isa::Isa::Avx512].into_iter().filter_map(|i| slow.with_isa(i)) {
                     let (mut ha, mut hb) = (vec![0f32; fast.history_len()], vec![0f32; fast.history_len()]);
                     let (mut sa, mut sb) =
                         (vec![0f32; fast.frame_scratch_len(None).unwrap()], vec![0f32; fast.frame_scratch_len(None).unwrap()]);

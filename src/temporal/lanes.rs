@@ -6,9 +6,11 @@
 //!
 //! The kernels are written once over [`Lane`]: `wide`'s lanes (4 in a build
 //! without AVX, whose 8-lane type is two registers and would not hold a
-//! group's state; 8 with AVX; 4 NEON lanes on aarch64) and, chosen at run
-//! time by [`Isa`] in an x86-64 build without AVX2 + FMA, 8 AVX2 lanes
-//! ([`avx2`]).
+//! group's state; 8 with AVX; 4 NEON lanes on aarch64), chosen at run time by
+//! [`Isa`] in an x86-64 build without AVX2 + FMA, 8 AVX2 lanes ([`avx2`]),
+//! and with [`Isa::Avx512`], in every x86-64 build, 16 AVX-512F lanes
+//! ([`avx512`]). A 16-pixel group that does not qualify tries its first 8
+//! pixels in the 8-lane kernel before running them one by one.
 
 use super::{Reprojection, ResolveRow, Row, COUNT, LIGHT, OUTPUT};
 use crate::isa::Isa;
@@ -18,12 +20,14 @@ use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not,
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 
 /// Pixels ahead of a group whose history records it prefetches.
 const PREFETCH_AHEAD: usize = 64;
 
-/// The most pixels a group holds.
-pub(super) const MAX_LANES: usize = 8;
+/// Pixels run one by one where no group qualifies from a pixel.
+pub(super) const PER_PIXEL_RUN: usize = 8;
 
 /// A group of `N` f32 lanes; comparisons give masks (all bits set or clear
 /// per lane) that the bit operations combine.
@@ -72,9 +76,11 @@ pub(super) trait Lane:
     fn min(self, o: Self) -> Self;
     /// Bit `l` set where lane `l` of the mask is.
     fn bitmask(self) -> u32;
+    #[inline(always)]
     fn all(self) -> bool {
         self.bitmask() == (1 << Self::N) - 1
     }
+    #[inline(always)]
     fn any(self) -> bool {
         self.bitmask() != 0
     }
@@ -168,7 +174,7 @@ impl Lane for Portable {
     }
 }
 
-/// Pixels per group of [`accumulate`] and [`resolve`] with `isa`.
+/// Pixels per group of the 8-lane (or `wide`'s) kernels with `isa`.
 fn width(isa: Isa) -> usize {
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
@@ -176,6 +182,13 @@ fn width(isa: Isa) -> usize {
     }
     let _ = isa;
     Portable::N
+}
+
+/// Whether `isa` takes the 16-lane AVX-512F kernels on this CPU.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn wide16(isa: Isa) -> bool {
+    isa == Isa::Avx512 && isa.available()
 }
 
 /// Step 1 for the group of pixels from `x` ([`accumulate_with`]): the
@@ -190,6 +203,13 @@ pub(super) fn accumulate(
     px_row: &mut [f32],
 ) -> Option<(usize, u64)> {
     #[cfg(target_arch = "x86_64")]
+    if wide16(isa) {
+        // SAFETY: the CPU has AVX-512F (`wide16`).
+        if let Some(n) = unsafe { avx512::accumulate(st, r, x, out_row, px_row) } {
+            return Some((avx512::WIDTH, n));
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
         // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
         return unsafe { avx2::accumulate(st, r, x, out_row, px_row) }.map(|n| (width(isa), n));
@@ -200,6 +220,13 @@ pub(super) fn accumulate(
 /// Step 3 for the group of pixels from `x` ([`resolve_with`]): the pixels done.
 #[inline]
 pub(super) fn resolve(st: &Reprojection, isa: Isa, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) -> Option<usize> {
+    #[cfg(target_arch = "x86_64")]
+    if wide16(isa) {
+        // SAFETY: the CPU has AVX-512F (`wide16`).
+        if unsafe { avx512::resolve(st, r, x, wrow, out_row) }.is_some() {
+            return Some(avx512::WIDTH);
+        }
+    }
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
         // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
