@@ -547,6 +547,14 @@ impl<'a> ImageView<'a> {
                     deinterleave3::<4>(src, d0, d1, d2);
                 }
             }
+            Samples::F32(s) if cs == 1 && ps == 2 && N == 2 => {
+                // Interleaved pairs (motion vectors): a constant stride, as above.
+                let src = s.get(start..start + 2 * len)?;
+                let [d0, d1] = &mut dst[..] else { return None };
+                for ((px, a), b) in src.chunks_exact(2).zip(d0.iter_mut()).zip(d1.iter_mut()) {
+                    (*a, *b) = (px[0], px[1]);
+                }
+            }
             Samples::F32(s) => {
                 for i in 0..len {
                     for (c, d) in dst.iter_mut().enumerate() {
@@ -1131,5 +1139,28 @@ mod tests {
         let mut p = [[0f32; W]; 3];
         let [a, b, c] = &mut p;
         assert!(v.read_row_n(1, 290, [&mut a[..11], &mut b[..11], &mut c[..11]]).is_none(), "past the row's end");
+    }
+
+    /// `read_row_n` of two channels (motion vectors: the pairs' fast path,
+    /// and two channels of RGB / RGBA) gives `get`'s values, on buffers that
+    /// end right after the last value the view covers.
+    #[test]
+    fn read_row_n_pairs_equal_get() {
+        const W: usize = 257;
+        const H: usize = 2;
+        let data: [f32; W * H * 4] = core::array::from_fn(|i| i as f32 * 0.25 - 7.0);
+        for ps in [2usize, 3, 4] {
+            let n = (H - 1) * W * ps + (W - 1) * ps + 2;
+            let v = ImageView::new(Samples::F32(&data[..n]), W, H, 2, Layout::interleaved(W, ps)).unwrap();
+            for (x0, len) in [(0usize, 1usize), (0, 7), (1, 64), (5, 200), (0, W), (W - 1, 1)] {
+                let (mut a, mut b) = ([0f32; W], [0f32; W]);
+                v.read_row_n(H - 1, x0, [&mut a[..len], &mut b[..len]]).unwrap();
+                for i in 0..len {
+                    assert_eq!((Some(a[i]), Some(b[i])), (v.get(x0 + i, H - 1, 0), v.get(x0 + i, H - 1, 1)), "ps {ps} x0 {x0} i {i}");
+                }
+            }
+            let (mut a, mut b) = ([0f32; 8], [0f32; 8]);
+            assert!(v.read_row_n(1, W - 4, [&mut a[..], &mut b[..]]).is_none(), "past the row's end");
+        }
     }
 }

@@ -694,8 +694,14 @@ impl Reprojection {
                         continue;
                     }
                     let v = view.ok_or(Error::GuideMismatch)?;
-                    for k in 0..ch {
-                        v.read_row(y, k, 0, &mut out_row[(p + k) * w..(p + k + 1) * w]).ok_or(bad)?;
+                    let fields = &mut out_row[p * w..(p + ch) * w];
+                    if ch == 3 {
+                        // the 3 fields in one pass over the row (a de-interleave where the view is RGB)
+                        let (a, bc) = fields.split_at_mut(w);
+                        let (b, c) = bc.split_at_mut(w);
+                        v.read_row_n(y, 0, [a, b, c]).ok_or(bad)?;
+                    } else {
+                        v.read_row(y, 0, 0, fields).ok_or(bad)?;
                     }
                     p += ch;
                 }
