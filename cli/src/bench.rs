@@ -60,7 +60,11 @@ pub fn bench(
         b.label,
         lrdenoise::SIMD_LEVEL,
         lrdenoise::isa::Isa::detect(),
-        if method == "flnr" { format!(", network {:?}", lrdenoise::isa::Isa::detect_widest()) } else { String::new() },
+        match method {
+            "flnr" => format!(", network {:?}", lrdenoise::isa::Isa::detect_widest()),
+            _ if b.method.is_temporal() => format!(", temporal stage {:?}", lrdenoise::isa::Isa::detect_widest()),
+            _ => String::new(),
+        },
         all.len(),
         (w * h) as f64 / med / 1e3
     );
