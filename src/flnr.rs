@@ -837,29 +837,14 @@ fn tile_align(net: &UNet<'_>) -> usize {
     (1usize << net.levels()).max(2)
 }
 
-/// `ln(1 + v / scale)` of light (NaN/Inf → 0, negatives → 0), in place:
-/// eight values at a time with `wide`'s `ln_1p`, the tail padded to eight,
-/// so a value's result does not depend on its position in the row (tiles
-/// read rows from different columns).
+/// `ln(1 + v / scale)` of light (NaN/Inf → 0, negatives → 0), in place,
+/// with `wide`'s `ln_1p` ([`crate::nn::map8`]: a value's result does not
+/// depend on its position in the row, and tiles read rows from different
+/// columns).
 fn log_light(row: &mut [f32], scale: f32) {
     use wide::f32x8;
     let scale = f32x8::splat(scale);
-    let f = |a: [f32; 8]| -> [f32; 8] {
-        let x = f32x8::from(a);
-        let x = x.is_finite().select(x, f32x8::ZERO).max(f32x8::ZERO) / scale;
-        x.ln_1p().to_array()
-    };
-    let mut chunks = row.chunks_exact_mut(8);
-    for c in &mut chunks {
-        if let Ok(a) = <[f32; 8]>::try_from(&*c) {
-            c.copy_from_slice(&f(a));
-        }
-    }
-    let tail = chunks.into_remainder();
-    let mut a = [0f32; 8];
-    a[..tail.len()].copy_from_slice(tail);
-    let n = tail.len();
-    tail.copy_from_slice(&f(a)[..n]);
+    crate::nn::map8(row, |x| (x.is_finite().select(x, f32x8::ZERO).max(f32x8::ZERO) / scale).ln_1p());
 }
 
 /// NaN/Inf → 0.

@@ -293,3 +293,21 @@ pub(crate) fn run_layer(
     // SAFETY: `out` borrows the caller's tensor exclusively; each band writes its own rows.
     for_rows(threads, oh, &|y0, y1| unsafe { layer.rows(&out, y0, y1) })
 }
+
+/// `f` of every value of `row`, in place, eight at a time in `wide`'s lanes;
+/// the tail is padded to eight, so a value's result does not depend on its
+/// position in the row (`wide`'s transcendental functions may round a lane
+/// differently from a scalar call).
+pub(crate) fn map8(row: &mut [f32], f: impl Fn(wide::f32x8) -> wide::f32x8) {
+    let mut chunks = row.chunks_exact_mut(8);
+    for c in &mut chunks {
+        if let Ok(a) = <[f32; 8]>::try_from(&*c) {
+            c.copy_from_slice(&f(wide::f32x8::from(a)).to_array());
+        }
+    }
+    let tail = chunks.into_remainder();
+    let n = tail.len();
+    let mut a = [0f32; 8];
+    a[..n].copy_from_slice(tail);
+    tail.copy_from_slice(&f(wide::f32x8::from(a)).to_array()[..n]);
+}

@@ -477,21 +477,8 @@ fn activate(row: &mut [f32], act: Act) {
             }
         }
         Act::Sigmoid => {
-            // 8 at a time with `wide`'s `exp`, the tail padded to 8, so a
-            // value's result does not depend on its position in the row
             use wide::f32x8;
-            let f = |a: [f32; 8]| (f32x8::ONE / (f32x8::ONE + (-f32x8::from(a)).exp())).to_array();
-            let mut chunks = row.chunks_exact_mut(8);
-            for c in &mut chunks {
-                if let Ok(a) = <[f32; 8]>::try_from(&*c) {
-                    c.copy_from_slice(&f(a));
-                }
-            }
-            let tail = chunks.into_remainder();
-            let n = tail.len();
-            let mut a = [0f32; 8];
-            a[..n].copy_from_slice(tail);
-            tail.copy_from_slice(&f(a)[..n]);
+            super::map8(row, |x| f32x8::ONE / (f32x8::ONE + (-x).exp()));
         }
     }
 }
