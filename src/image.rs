@@ -547,6 +547,12 @@ impl<'a> ImageView<'a> {
                     deinterleave3::<4>(src, d0, d1, d2);
                 }
             }
+            Samples::F32(s) if ps == 1 => {
+                // planar: each channel's row is contiguous
+                for (c, d) in dst.iter_mut().enumerate() {
+                    d.copy_from_slice(s.get(start + c * cs..start + c * cs + len)?);
+                }
+            }
             Samples::F32(s) if cs == 1 && ps == 2 && N == 2 => {
                 // Interleaved pairs (motion vectors): a constant stride, as above.
                 let src = s.get(start..start + 2 * len)?;
@@ -1142,21 +1148,23 @@ mod tests {
     }
 
     /// `read_row_n` of two channels (motion vectors: the pairs' fast path,
-    /// and two channels of RGB / RGBA) gives `get`'s values, on buffers that
-    /// end right after the last value the view covers.
+    /// two channels of RGB / RGBA, and planar channels) gives `get`'s values,
+    /// at offsets into the buffer, on buffers that end right after the last
+    /// value the view covers.
     #[test]
     fn read_row_n_pairs_equal_get() {
         const W: usize = 257;
         const H: usize = 2;
-        let data: [f32; W * H * 4] = core::array::from_fn(|i| i as f32 * 0.25 - 7.0);
-        for ps in [2usize, 3, 4] {
-            let n = (H - 1) * W * ps + (W - 1) * ps + 2;
-            let v = ImageView::new(Samples::F32(&data[..n]), W, H, 2, Layout::interleaved(W, ps)).unwrap();
+        let data: [f32; W * H * 4 + 8] = core::array::from_fn(|i| i as f32 * 0.25 - 7.0);
+        let layouts = [2usize, 3, 4].map(|ps| Layout::interleaved(W, ps)).into_iter().chain([Layout::planar(W, H)]);
+        for layout in layouts.flat_map(|l| [0usize, 3].map(|offset| Layout { offset, ..l })) {
+            let last = layout.offset + (H - 1) * layout.row_stride + (W - 1) * layout.pixel_stride + layout.channel_stride;
+            let v = ImageView::new(Samples::F32(&data[..last + 1]), W, H, 2, layout).unwrap();
             for (x0, len) in [(0usize, 1usize), (0, 7), (1, 64), (5, 200), (0, W), (W - 1, 1)] {
                 let (mut a, mut b) = ([0f32; W], [0f32; W]);
                 v.read_row_n(H - 1, x0, [&mut a[..len], &mut b[..len]]).unwrap();
                 for i in 0..len {
-                    assert_eq!((Some(a[i]), Some(b[i])), (v.get(x0 + i, H - 1, 0), v.get(x0 + i, H - 1, 1)), "ps {ps} x0 {x0} i {i}");
+                    assert_eq!((Some(a[i]), Some(b[i])), (v.get(x0 + i, H - 1, 0), v.get(x0 + i, H - 1, 1)), "{layout:?} x0 {x0} i {i}");
                 }
             }
             let (mut a, mut b) = ([0f32; 8], [0f32; 8]);

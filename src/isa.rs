@@ -8,7 +8,9 @@
 use core::sync::atomic::{AtomicU8, Ordering};
 
 /// The instruction set of a kernel's vector loops: the network's 3×3 layers
-/// (`nn::conv`, 8 lanes, or 16 with [`Isa::Avx512`]), the temporal stage's pixel groups (likewise), the QR's column updates (`kernels::qr`), and FLR's block
+/// (`nn::conv`, 8 lanes, or 16 with [`Isa::Avx512`]), the temporal stage's
+/// pixel groups (`wide`'s 4 or 8 lanes, 8 AVX2 lanes, or 16 with
+/// [`Isa::Avx512`]), the QR's column updates (`kernels::qr`), and FLR's block
 /// accumulation (`kernels::moments`), four-cell solve (`kernels::solve`, in
 /// `f64` lanes) and model application (`kernels::apply`).
 ///
@@ -69,8 +71,8 @@ impl Isa {
     /// file: the build's `wide` lacks AVX2 + FMA (a plain x86-64 build, whose
     /// lanes are SSE2), `self` is [`Isa::Avx2Fma`] (or [`Isa::Avx512`], which implies it) and the CPU has it. The
     /// one rule of every kernel's dispatch (`qr`, `moments`, `solve`,
-    /// `apply`, `blur`, the temporal stage's lanes; `conv` runs its file in
-    /// every build). An `x86-64-v3`
+    /// `apply`, `blur`, the temporal stage's 8 lanes; `conv` and the temporal
+    /// stage's AVX-512 lanes run their files in every build). An `x86-64-v3`
     /// build keeps `wide`'s lanes, which compile to the same instructions and
     /// are faster there than the intrinsics files (whose functions do not
     /// inline into their callers). The call stays behind

@@ -62,7 +62,7 @@ pub fn bench(
         lrdenoise::isa::Isa::detect(),
         match method {
             "flnr" => format!(", network {:?}", lrdenoise::isa::Isa::detect_widest()),
-            _ if b.method.is_temporal() => format!(", temporal stage {:?}", lrdenoise::isa::Isa::detect_widest()),
+            _ if matches!(b.method, Method::Temporal(_)) => format!(", temporal stage {:?}", lrdenoise::isa::Isa::detect_widest()),
             _ => String::new(),
         },
         all.len(),

@@ -204,7 +204,7 @@ pub(super) fn accumulate(
 ) -> Option<(usize, u64)> {
     #[cfg(target_arch = "x86_64")]
     if wide16(isa) {
-        // SAFETY: the CPU has AVX-512F (`wide16`).
+        // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`wide16`: `Isa::Avx512.available()`).
         if let Some(n) = unsafe { avx512::accumulate(st, r, x, out_row, px_row) } {
             return Some((avx512::WIDTH, n));
         }
@@ -222,7 +222,7 @@ pub(super) fn accumulate(
 pub(super) fn resolve(st: &Reprojection, isa: Isa, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) -> Option<usize> {
     #[cfg(target_arch = "x86_64")]
     if wide16(isa) {
-        // SAFETY: the CPU has AVX-512F (`wide16`).
+        // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`wide16`: `Isa::Avx512.available()`).
         if unsafe { avx512::resolve(st, r, x, wrow, out_row) }.is_some() {
             return Some(avx512::WIDTH);
         }
