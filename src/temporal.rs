@@ -709,10 +709,13 @@ impl Reprojection {
                 let mut x = 0;
                 while x < w {
                     // a group of pixels at once where their taps allow; the next pixels one by one where not
-                    if let Some((done, rejected)) = self.lanes.and_then(|isa| lanes::accumulate(self, isa, &row, x, out_row, px_row)) {
+                    if let Some(isa) = self.lanes {
+                        let (next, rejected) = lanes::accumulate(self, isa, &row, x, out_row, px_row);
                         c.rejected += rejected;
-                        x += done;
-                        continue;
+                        if next > x {
+                            x = next;
+                            continue;
+                        }
                     }
                     let end = (x + lanes::PER_PIXEL_RUN).min(w);
                     for x in x..end {
@@ -980,9 +983,12 @@ impl Reprojection {
             let wrow = &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec];
             let mut x = 0;
             while x < w {
-                if let Some(done) = self.lanes.and_then(|isa| lanes::resolve(self, isa, &r, x, wrow, out_row)) {
-                    x += done;
-                    continue;
+                if let Some(isa) = self.lanes {
+                    let next = lanes::resolve(self, isa, &r, x, wrow, out_row);
+                    if next > x {
+                        x = next;
+                        continue;
+                    }
                 }
                 let end = if x == 0 { 1 } else { (x + lanes::PER_PIXEL_RUN).min(w) };
                 for x in x..end {

@@ -174,16 +174,6 @@ impl Lane for Portable {
     }
 }
 
-/// Pixels per group of the 8-lane (or `wide`'s) kernels with `isa`.
-fn width(isa: Isa) -> usize {
-    #[cfg(target_arch = "x86_64")]
-    if isa.intrinsics() {
-        return avx2::WIDTH;
-    }
-    let _ = isa;
-    Portable::N
-}
-
 /// Whether `isa` takes the 16-lane AVX-512F kernels on this CPU.
 #[cfg(target_arch = "x86_64")]
 #[inline]
@@ -191,48 +181,88 @@ fn wide16(isa: Isa) -> bool {
     isa == Isa::Avx512 && isa.available()
 }
 
-/// Step 1 for the group of pixels from `x` ([`accumulate_with`]): the
-/// pixels done and those of them without history.
+/// Step 1 on groups of pixels from `x`, while they qualify: the first pixel
+/// not done (`x` if no group qualified there) and the pixels done without
+/// history. With AVX-512, a 16-pixel group that does not qualify is tried as
+/// one 8-pixel group before the call returns.
 #[inline]
-pub(super) fn accumulate(
-    st: &Reprojection,
-    isa: Isa,
-    r: &Row<'_>,
-    x: usize,
-    out_row: &mut [f32],
-    px_row: &mut [f32],
-) -> Option<(usize, u64)> {
+pub(super) fn accumulate(st: &Reprojection, isa: Isa, r: &Row<'_>, x: usize, out_row: &mut [f32], px_row: &mut [f32]) -> (usize, u64) {
     #[cfg(target_arch = "x86_64")]
     if wide16(isa) {
         // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`wide16`: `Isa::Avx512.available()`).
-        if let Some(n) = unsafe { avx512::accumulate(st, r, x, out_row, px_row) } {
-            return Some((avx512::WIDTH, n));
-        }
+        let (x, n) = unsafe { avx512::accumulate(st, r, x, out_row, px_row, usize::MAX) };
+        // SAFETY: as above (AVX2 and FMA).
+        let (x, n8) = unsafe { avx2::accumulate(st, r, x, out_row, px_row, 1) };
+        return (x, n + n8);
     }
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
         // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
-        return unsafe { avx2::accumulate(st, r, x, out_row, px_row) }.map(|n| (width(isa), n));
+        return unsafe { avx2::accumulate(st, r, x, out_row, px_row, usize::MAX) };
     }
-    accumulate_with::<Portable>(st, r, x, out_row, px_row).map(|n| (width(isa), n))
+    let _ = isa;
+    accumulate_run::<Portable>(st, r, x, out_row, px_row, usize::MAX)
 }
 
-/// Step 3 for the group of pixels from `x` ([`resolve_with`]): the pixels done.
+/// Step 3 on groups of pixels from `x`, while they qualify: the first pixel
+/// not done (`x` if no group qualified there). With AVX-512 as [`accumulate`].
 #[inline]
-pub(super) fn resolve(st: &Reprojection, isa: Isa, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) -> Option<usize> {
+pub(super) fn resolve(st: &Reprojection, isa: Isa, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) -> usize {
     #[cfg(target_arch = "x86_64")]
     if wide16(isa) {
         // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`wide16`: `Isa::Avx512.available()`).
-        if unsafe { avx512::resolve(st, r, x, wrow, out_row) }.is_some() {
-            return Some(avx512::WIDTH);
-        }
+        let x = unsafe { avx512::resolve(st, r, x, wrow, out_row, usize::MAX) };
+        // SAFETY: as above (AVX2 and FMA).
+        return unsafe { avx2::resolve(st, r, x, wrow, out_row, 1) };
     }
     #[cfg(target_arch = "x86_64")]
     if isa.intrinsics() {
         // SAFETY: the CPU has AVX2 and FMA (`Isa::intrinsics`).
-        return unsafe { avx2::resolve(st, r, x, wrow, out_row) }.map(|_| width(isa));
+        return unsafe { avx2::resolve(st, r, x, wrow, out_row, usize::MAX) };
     }
-    resolve_with::<Portable>(st, r, x, wrow, out_row).map(|_| width(isa))
+    let _ = isa;
+    resolve_run::<Portable>(st, r, x, wrow, out_row, usize::MAX)
+}
+
+/// At most `max` groups of [`accumulate_with`] from `x`, while they qualify:
+/// the first pixel not done and the pixels done without history. The loop
+/// sits in the caller's instruction set, so the groups' set-up inlines into it.
+#[inline(always)]
+pub(super) fn accumulate_run<L: Lane>(
+    st: &Reprojection,
+    r: &Row<'_>,
+    mut x: usize,
+    out_row: &mut [f32],
+    px_row: &mut [f32],
+    max: usize,
+) -> (usize, u64) {
+    let mut rejected = 0;
+    for _ in 0..max {
+        let Some(n) = accumulate_with::<L>(st, r, x, out_row, px_row) else { break };
+        rejected += n;
+        x += L::N;
+    }
+    (x, rejected)
+}
+
+/// At most `max` groups of [`resolve_with`] from `x`, while they qualify: the
+/// first pixel not done.
+#[inline(always)]
+pub(super) fn resolve_run<L: Lane>(
+    st: &Reprojection,
+    r: &ResolveRow<'_>,
+    mut x: usize,
+    wrow: &mut [f32],
+    out_row: &mut [f32],
+    max: usize,
+) -> usize {
+    for _ in 0..max {
+        if resolve_with::<L>(st, r, x, wrow, out_row).is_none() {
+            break;
+        }
+        x += L::N;
+    }
+    x
 }
 
 /// The lanes where every value of `v` is finite: `0 · v` is ±0 for a finite

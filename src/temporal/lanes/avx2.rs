@@ -4,34 +4,41 @@
 //! as single instructions. Each operation is the one `wide` does in an AVX
 //! build (`max`/`min` included), so both give the same bits.
 
-use super::{accumulate_with, resolve_with, Lane, Reprojection, ResolveRow, Row};
+use super::{accumulate_run, resolve_run, Lane, Reprojection, ResolveRow, Row};
 use core::arch::x86_64::*;
 use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not, Sub};
 
 /// Pixels per group.
-pub(super) const WIDTH: usize = 8;
+const WIDTH: usize = 8;
 
 /// 8 f32 lanes in an AVX register. Private to this file: only the entries
 /// below, which the caller runs on a CPU with AVX2 and FMA, make one.
 #[derive(Clone, Copy)]
 struct Avx(__m256);
 
-/// Step 1 for 8 pixels ([`accumulate_with`]).
+/// Step 1 on at most `max` groups of 8 pixels ([`accumulate_run`]).
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn accumulate(st: &Reprojection, r: &Row<'_>, x: usize, out_row: &mut [f32], px_row: &mut [f32]) -> Option<u64> {
-    accumulate_with::<Avx>(st, r, x, out_row, px_row)
+pub(super) unsafe fn accumulate(
+    st: &Reprojection,
+    r: &Row<'_>,
+    x: usize,
+    out_row: &mut [f32],
+    px_row: &mut [f32],
+    max: usize,
+) -> (usize, u64) {
+    accumulate_run::<Avx>(st, r, x, out_row, px_row, max)
 }
 
-/// Step 3 for 8 pixels ([`resolve_with`]).
+/// Step 3 on at most `max` groups of 8 pixels ([`resolve_run`]).
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn resolve(st: &Reprojection, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) -> Option<()> {
-    resolve_with::<Avx>(st, r, x, wrow, out_row)
+pub(super) unsafe fn resolve(st: &Reprojection, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32], max: usize) -> usize {
+    resolve_run::<Avx>(st, r, x, wrow, out_row, max)
 }
 
 // SAFETY (every `unsafe` block below): an `Avx` exists only inside the

@@ -9,34 +9,41 @@
 //! Masks are lanes with every bit set or clear, as the trait asks; the
 //! compiler turns a comparison feeding a `select` into an opmask.
 
-use super::{accumulate_with, resolve_with, Lane, Reprojection, ResolveRow, Row};
+use super::{accumulate_run, resolve_run, Lane, Reprojection, ResolveRow, Row};
 use core::arch::x86_64::*;
 use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not, Sub};
 
 /// Pixels per group.
-pub(super) const WIDTH: usize = 16;
+const WIDTH: usize = 16;
 
 /// 16 f32 lanes in a ZMM register. Private to this file: only the entries
 /// below, which the caller runs on a CPU with AVX-512F, make one.
 #[derive(Clone, Copy)]
 struct Zmm(__m512);
 
-/// Step 1 for 16 pixels ([`accumulate_with`]).
+/// Step 1 on at most `max` groups of 16 pixels ([`accumulate_run`]).
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA (`Isa::Avx512.available()`).
 #[target_feature(enable = "avx512f,avx2,fma")]
-pub(super) unsafe fn accumulate(st: &Reprojection, r: &Row<'_>, x: usize, out_row: &mut [f32], px_row: &mut [f32]) -> Option<u64> {
-    accumulate_with::<Zmm>(st, r, x, out_row, px_row)
+pub(super) unsafe fn accumulate(
+    st: &Reprojection,
+    r: &Row<'_>,
+    x: usize,
+    out_row: &mut [f32],
+    px_row: &mut [f32],
+    max: usize,
+) -> (usize, u64) {
+    accumulate_run::<Zmm>(st, r, x, out_row, px_row, max)
 }
 
-/// Step 3 for 16 pixels ([`resolve_with`]).
+/// Step 3 on at most `max` groups of 16 pixels ([`resolve_run`]).
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA (`Isa::Avx512.available()`).
 #[target_feature(enable = "avx512f,avx2,fma")]
-pub(super) unsafe fn resolve(st: &Reprojection, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32]) -> Option<()> {
-    resolve_with::<Zmm>(st, r, x, wrow, out_row)
+pub(super) unsafe fn resolve(st: &Reprojection, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32], max: usize) -> usize {
+    resolve_run::<Zmm>(st, r, x, wrow, out_row, max)
 }
 
 // SAFETY (every `unsafe` block below): a `Zmm` exists only inside the
