@@ -18,6 +18,96 @@ use crate::kernels::LUMA;
 use crate::reproject::floor;
 use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not, Sub};
 
+/// What each intrinsics lane type (`avx2`, `avx512`) writes the same way: the
+/// two entries that compile the runs of groups for its instruction set
+/// (`$features`), and the assigning operators over its `+` and `&`.
+#[cfg(target_arch = "x86_64")]
+macro_rules! intrinsics_entries {
+    ($t:ident, $features:literal) => {
+        /// Step 1 on at most `max` groups ([`super::accumulate_run`]).
+        ///
+        /// # Safety
+        #[doc = concat!("The CPU must support ", $features, ".")]
+        #[target_feature(enable = $features)]
+        pub(super) unsafe fn accumulate(
+            st: &Reprojection,
+            r: &Row<'_>,
+            x: usize,
+            out_row: &mut [f32],
+            px_row: &mut [f32],
+            max: usize,
+        ) -> (usize, u64) {
+            super::accumulate_run::<$t>(st, r, x, out_row, px_row, max)
+        }
+
+        /// Step 3 on at most `max` groups ([`super::resolve_run`]).
+        ///
+        /// # Safety
+        #[doc = concat!("The CPU must support ", $features, ".")]
+        #[target_feature(enable = $features)]
+        pub(super) unsafe fn resolve(
+            st: &Reprojection,
+            r: &ResolveRow<'_>,
+            x: usize,
+            wrow: &mut [f32],
+            out_row: &mut [f32],
+            max: usize,
+        ) -> usize {
+            super::resolve_run::<$t>(st, r, x, wrow, out_row, max)
+        }
+
+        impl core::ops::AddAssign for $t {
+            #[inline(always)]
+            fn add_assign(&mut self, o: $t) {
+                *self = *self + o;
+            }
+        }
+        impl core::ops::BitAndAssign for $t {
+            #[inline(always)]
+            fn bitand_assign(&mut self, o: $t) {
+                *self = *self & o;
+            }
+        }
+    };
+}
+
+/// The [`Lane`] comparisons and NaN tests of an intrinsics lane type, over
+/// its `cmp::<PREDICATE>` (the `_CMP_*` predicates of `core::arch`), `abs`
+/// and `splat`.
+#[cfg(target_arch = "x86_64")]
+macro_rules! intrinsics_compares {
+    () => {
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            self.cmp::<_CMP_LE_OQ>(o)
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> Self {
+            self.cmp::<_CMP_LT_OQ>(o)
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            self.cmp::<_CMP_GE_OQ>(o)
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            self.cmp::<_CMP_GT_OQ>(o)
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            self.cmp::<_CMP_EQ_OQ>(o)
+        }
+        #[inline(always)]
+        fn is_nan(self) -> Self {
+            self.cmp::<_CMP_UNORD_Q>(self)
+        }
+        #[inline(always)]
+        fn is_finite(self) -> Self {
+            self.abs().lt(Self::splat(f32::INFINITY))
+        }
+    };
+}
+
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 #[cfg(target_arch = "x86_64")]

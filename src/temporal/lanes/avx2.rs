@@ -4,42 +4,19 @@
 //! as single instructions. Each operation is the one `wide` does in an AVX
 //! build (`max`/`min` included), so both give the same bits.
 
-use super::{accumulate_run, resolve_run, Lane, Reprojection, ResolveRow, Row};
+use super::{Lane, Reprojection, ResolveRow, Row};
 use core::arch::x86_64::*;
-use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not, Sub};
+use core::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
 /// Pixels per group.
 const WIDTH: usize = 8;
 
 /// 8 f32 lanes in an AVX register. Private to this file: only the entries
-/// below, which the caller runs on a CPU with AVX2 and FMA, make one.
+/// (`intrinsics_entries!`), which the caller runs on a CPU with AVX2 and FMA, make one.
 #[derive(Clone, Copy)]
 struct Avx(__m256);
 
-/// Step 1 on at most `max` groups of 8 pixels ([`accumulate_run`]).
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn accumulate(
-    st: &Reprojection,
-    r: &Row<'_>,
-    x: usize,
-    out_row: &mut [f32],
-    px_row: &mut [f32],
-    max: usize,
-) -> (usize, u64) {
-    accumulate_run::<Avx>(st, r, x, out_row, px_row, max)
-}
-
-/// Step 3 on at most `max` groups of 8 pixels ([`resolve_run`]).
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn resolve(st: &Reprojection, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32], max: usize) -> usize {
-    resolve_run::<Avx>(st, r, x, wrow, out_row, max)
-}
+intrinsics_entries!(Avx, "avx2,fma");
 
 // SAFETY (every `unsafe` block below): an `Avx` exists only inside the
 // entries above, which run on a CPU with AVX2 (their callers check
@@ -75,18 +52,6 @@ impl Not for Avx {
     #[inline(always)]
     fn not(self) -> Avx {
         Avx(unsafe { _mm256_xor_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(-1))) })
-    }
-}
-impl AddAssign for Avx {
-    #[inline(always)]
-    fn add_assign(&mut self, o: Avx) {
-        *self = *self + o;
-    }
-}
-impl BitAndAssign for Avx {
-    #[inline(always)]
-    fn bitand_assign(&mut self, o: Avx) {
-        *self = *self & o;
     }
 }
 
@@ -127,26 +92,7 @@ impl Lane for Avx {
     fn first(self) -> f32 {
         unsafe { _mm256_cvtss_f32(self.0) }
     }
-    #[inline(always)]
-    fn le(self, o: Self) -> Self {
-        self.cmp::<_CMP_LE_OQ>(o)
-    }
-    #[inline(always)]
-    fn lt(self, o: Self) -> Self {
-        self.cmp::<_CMP_LT_OQ>(o)
-    }
-    #[inline(always)]
-    fn ge(self, o: Self) -> Self {
-        self.cmp::<_CMP_GE_OQ>(o)
-    }
-    #[inline(always)]
-    fn gt(self, o: Self) -> Self {
-        self.cmp::<_CMP_GT_OQ>(o)
-    }
-    #[inline(always)]
-    fn eq(self, o: Self) -> Self {
-        self.cmp::<_CMP_EQ_OQ>(o)
-    }
+    intrinsics_compares!();
     #[inline(always)]
     fn select(self, t: Self, f: Self) -> Self {
         Avx(unsafe { _mm256_blendv_ps(f.0, t.0, self.0) })
@@ -158,14 +104,6 @@ impl Lane for Avx {
     #[inline(always)]
     fn sqrt(self) -> Self {
         Avx(unsafe { _mm256_sqrt_ps(self.0) })
-    }
-    #[inline(always)]
-    fn is_nan(self) -> Self {
-        self.cmp::<_CMP_UNORD_Q>(self)
-    }
-    #[inline(always)]
-    fn is_finite(self) -> Self {
-        self.abs().lt(Avx::splat(f32::INFINITY))
     }
     #[inline(always)]
     fn max(self, o: Self) -> Self {

@@ -3,48 +3,26 @@
 //! of [`super`] with AVX-512F enabled. Twice the pixels of the AVX2 lanes per
 //! instruction, and 32 registers: step 1's kernel keeps a group's sums and
 //! guides in them (12 vector loads and stores on the stack in the generated
-//! code, against 66 in the AVX2 kernel's). Each operation is the IEEE operation of the AVX2 lanes
-//! (`max`/`min` with the same NaN rule), so both give the per-pixel bits.
+//! code, against 66 in the AVX2 kernel's). Each operation is the IEEE
+//! operation of the AVX2 lanes (`max`/`min` with the same NaN rule), so both
+//! give the per-pixel bits.
 //!
 //! Masks are lanes with every bit set or clear, as the trait asks; the
 //! compiler turns a comparison feeding a `select` into an opmask.
 
-use super::{accumulate_run, resolve_run, Lane, Reprojection, ResolveRow, Row};
+use super::{Lane, Reprojection, ResolveRow, Row};
 use core::arch::x86_64::*;
-use core::ops::{Add, AddAssign, BitAnd, BitAndAssign, BitOr, Div, Mul, Neg, Not, Sub};
+use core::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
 /// Pixels per group.
 const WIDTH: usize = 16;
 
 /// 16 f32 lanes in a ZMM register. Private to this file: only the entries
-/// below, which the caller runs on a CPU with AVX-512F, make one.
+/// (`intrinsics_entries!`), which the caller runs on a CPU with AVX-512F, make one.
 #[derive(Clone, Copy)]
 struct Zmm(__m512);
 
-/// Step 1 on at most `max` groups of 16 pixels ([`accumulate_run`]).
-///
-/// # Safety
-/// The CPU must support AVX-512F, AVX2 and FMA (`Isa::Avx512.available()`).
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(super) unsafe fn accumulate(
-    st: &Reprojection,
-    r: &Row<'_>,
-    x: usize,
-    out_row: &mut [f32],
-    px_row: &mut [f32],
-    max: usize,
-) -> (usize, u64) {
-    accumulate_run::<Zmm>(st, r, x, out_row, px_row, max)
-}
-
-/// Step 3 on at most `max` groups of 16 pixels ([`resolve_run`]).
-///
-/// # Safety
-/// The CPU must support AVX-512F, AVX2 and FMA (`Isa::Avx512.available()`).
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(super) unsafe fn resolve(st: &Reprojection, r: &ResolveRow<'_>, x: usize, wrow: &mut [f32], out_row: &mut [f32], max: usize) -> usize {
-    resolve_run::<Zmm>(st, r, x, wrow, out_row, max)
-}
+intrinsics_entries!(Zmm, "avx512f,avx2,fma");
 
 // SAFETY (every `unsafe` block below): a `Zmm` exists only inside the
 // entries above, which run on a CPU with AVX-512F (their callers check
@@ -93,18 +71,6 @@ impl Not for Zmm {
     #[inline(always)]
     fn not(self) -> Zmm {
         Zmm(unsafe { _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(self.0), _mm512_set1_epi32(-1))) })
-    }
-}
-impl AddAssign for Zmm {
-    #[inline(always)]
-    fn add_assign(&mut self, o: Zmm) {
-        *self = *self + o;
-    }
-}
-impl BitAndAssign for Zmm {
-    #[inline(always)]
-    fn bitand_assign(&mut self, o: Zmm) {
-        *self = *self & o;
     }
 }
 
@@ -156,26 +122,7 @@ impl Lane for Zmm {
     fn first(self) -> f32 {
         unsafe { _mm512_cvtss_f32(self.0) }
     }
-    #[inline(always)]
-    fn le(self, o: Self) -> Self {
-        self.cmp::<_CMP_LE_OQ>(o)
-    }
-    #[inline(always)]
-    fn lt(self, o: Self) -> Self {
-        self.cmp::<_CMP_LT_OQ>(o)
-    }
-    #[inline(always)]
-    fn ge(self, o: Self) -> Self {
-        self.cmp::<_CMP_GE_OQ>(o)
-    }
-    #[inline(always)]
-    fn gt(self, o: Self) -> Self {
-        self.cmp::<_CMP_GT_OQ>(o)
-    }
-    #[inline(always)]
-    fn eq(self, o: Self) -> Self {
-        self.cmp::<_CMP_EQ_OQ>(o)
-    }
+    intrinsics_compares!();
     #[inline(always)]
     fn select(self, t: Self, f: Self) -> Self {
         Zmm(unsafe { _mm512_mask_blend_ps(self.mask(), f.0, t.0) })
@@ -187,14 +134,6 @@ impl Lane for Zmm {
     #[inline(always)]
     fn sqrt(self) -> Self {
         Zmm(unsafe { _mm512_sqrt_ps(self.0) })
-    }
-    #[inline(always)]
-    fn is_nan(self) -> Self {
-        self.cmp::<_CMP_UNORD_Q>(self)
-    }
-    #[inline(always)]
-    fn is_finite(self) -> Self {
-        self.abs().lt(Zmm::splat(f32::INFINITY))
     }
     #[inline(always)]
     fn max(self, o: Self) -> Self {
