@@ -16,9 +16,13 @@
 //! over σ = 12 alone. Estimating `r_s` needs the energy moment, so this mode
 //! costs three blurs and three solves instead of one.
 
-use crate::kernels::cholesky::F64Lanes;
+use crate::isa::Isa;
+use crate::kernels::cholesky::{F64Lanes, Lanes4};
 use crate::kernels::{model_len, CellLayout, LUMA};
 use wide::{f32x4, f64x4};
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 
 /// `K`: the share of the variance difference `v₀ − v_s` that `d_s²` is taken
 /// to contain (0.5 measured best of 0.25 / 0.5 / 1 on the training scenes;
@@ -86,13 +90,62 @@ pub fn variances4<const Q: usize, const F: usize>(
     area: f64,
     min_weight: f64,
 ) -> [[f64; 4]; F] {
+    variances4_on::<Q, F>(Isa::detect(), cells, models, coefficients, norm, area, min_weight)
+}
+
+/// [`variances4`] on the given instruction set (AVX2's lanes where
+/// [`Isa::intrinsics`], otherwise `wide`'s; the same bits).
+pub fn variances4_on<const Q: usize, const F: usize>(
+    isa: Isa,
+    cells: &[f64],
+    models: [[&[f32]; F]; 4],
+    coefficients: [usize; F],
+    norm: f64,
+    area: f64,
+    min_weight: f64,
+) -> [[f64; 4]; F] {
+    #[cfg(target_arch = "x86_64")]
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 (`Isa::intrinsics`).
+        return unsafe { avx2::variances4::<Q, F>(cells, models, coefficients, norm, area, min_weight) };
+    }
+    let _ = isa;
+    variances4_in::<f64x4, Q, F>(cells, models, coefficients, norm, area, min_weight)
+}
+
+/// [`variances4`] in `wide`'s lanes.
+fn variances4_in<T: Lanes4, const Q: usize, const F: usize>(
+    cells: &[f64],
+    models: [[&[f32]; F]; 4],
+    coefficients: [usize; F],
+    norm: f64,
+    area: f64,
+    min_weight: f64,
+) -> [[f64; 4]; F] {
     let k = CellLayout::new(Q).k;
-    let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let lanes = model_lanes::<Q, F>(&models);
+    let cell = |m: usize| T::from_array([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    to_arrays(variance_lanes::<T, Q, F>(cell, |f, j| T::from_f32(lanes[f][j]), coefficients, norm, area, min_weight))
+}
+
+/// The lanes of each of `v`.
+#[inline(always)]
+fn to_arrays<T: Lanes4, const F: usize>(v: [T; F]) -> [[f64; 4]; F] {
+    let mut out = [[0f64; 4]; F];
+    for f in 0..F {
+        out[f] = v[f].to_array();
+    }
+    out
+}
+
+/// Each of the `F` models' values of the four cells, lane-major ([`transpose_values`]).
+#[inline(always)]
+fn model_lanes<const Q: usize, const F: usize>(models: &[[&[f32]; F]; 4]) -> [[[f32; 4]; GAP_VALUES]; F] {
     let mut lanes = [[[0f32; 4]; GAP_VALUES]; F];
     for (f, lanes) in lanes.iter_mut().enumerate() {
-        transpose_values::<Q>(core::array::from_fn(|l| models[l][f]), lanes);
+        transpose_values::<Q>([models[0][f], models[1][f], models[2][f], models[3][f]], lanes);
     }
-    variance_lanes::<f64x4, Q, F>(cell, |f, j| lane_values(&lanes[f], j), coefficients, norm, area, min_weight).map(|v| v.to_array())
+    lanes
 }
 
 /// [`variance`] of one cell (`T = f64`) or four (`f64x4`) for `F` models at
@@ -126,12 +179,14 @@ fn variance_lanes<T: F64Lanes, const Q: usize, const F: usize>(
     // min(n · norm, 1) as −max(−n · norm, −1) (exact; NaN → 1)
     let valid = s(0.0) - (s(0.0) - n * s(norm)).max_(s(-1.0));
     let samples = (s(area) * valid).max_(s(1.0));
-    core::array::from_fn(|f| {
+    let mut out = [s(0.0); F];
+    for f in 0..F {
         let residual = (spread - explained[f]).max_(s(0.0));
         let v = residual * s(coefficients[f] as f64) / samples;
         // v ≥ 0 where finite: "not above −1" means not finite
-        v.set_where(empty | v.not_above(s(-1.0)), f64::INFINITY)
-    })
+        out[f] = v.set_where(empty | v.not_above(s(-1.0)), f64::INFINITY);
+    }
+    out
 }
 
 /// The luminance of moments `at..at + 3`, times `inv`. A function, not a
@@ -166,7 +221,10 @@ fn gaps_lanes<T: F64Lanes, const Q: usize, const N: usize>(
     let n = cell(0);
     let empty = n.not_above(s(min_weight));
     let inv = s(1.0) / n;
-    let mu: [T; crate::MAX_GUIDES] = core::array::from_fn(|a| if a < Q { cell(lay.s + a) * inv } else { s(0.0) });
+    let mut mu = [s(0.0); crate::MAX_GUIDES];
+    for (a, m) in mu.iter_mut().enumerate().take(Q) {
+        *m = cell(lay.s + a) * inv;
+    }
     // Candidates 1..N side by side (independent chains; the sums are the
     // same, in the same order, as one candidate at a time). Slot `w` is
     // candidate `w + 1`; slots past `N − 1` stay unused.
@@ -237,7 +295,10 @@ fn weights_lanes<T: F64Lanes, const N: usize>(variances: [T; N], gaps: [T; N]) -
         total = total + *x;
     }
     let fallback = total.not_above(s(0.0));
-    (w.map(|x| x / total), fallback)
+    for x in w.iter_mut() {
+        *x = *x / total;
+    }
+    (w, fallback)
 }
 
 /// Blends the `N` candidates' models of one cell (the three windows, then
@@ -306,11 +367,6 @@ impl ModelLanes {
             transpose_values::<Q>(models.map(|m| m[w]), lanes);
         }
     }
-    /// Value `j` of window `w` at the four cells.
-    #[inline(always)]
-    fn get(&self, w: usize, j: usize) -> f64x4 {
-        lane_values(&self.0[w], j)
-    }
 }
 
 /// Transposes values `0..3(Q + 1)` (the constant and guide coefficients) of
@@ -332,13 +388,6 @@ fn transpose_values<const Q: usize>(models: [&[f32]; 4], lanes: &mut [[f32; 4]; 
     }
 }
 
-/// Value `j` of the four cells in `lanes`, as f64.
-#[inline(always)]
-fn lane_values(lanes: &[[f32; 4]; GAP_VALUES], j: usize) -> f64x4 {
-    let v = lanes[j];
-    f64x4::from([v[0] as f64, v[1] as f64, v[2] as f64, v[3] as f64])
-}
-
 /// [`prediction_gaps`] and [`blend`] of four cells at once, one per `f64x4`
 /// lane: `cells` holds 4 × `k` moments, `models[l]` cell `l`'s `N` candidate
 /// models, `variances[w]` candidate `w`'s four variances, `out` 4 ×
@@ -352,15 +401,70 @@ pub fn blend4<const Q: usize, const N: usize>(
     lanes: &mut ModelLanes,
     out: &mut [f32],
 ) {
-    let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
-    let cell = |m: usize| f64x4::from([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    blend4_on::<Q, N>(Isa::detect(), cells, models, variances, min_weight, lanes, out)
+}
+
+/// [`blend4`] on the given instruction set (AVX2's lanes where
+/// [`Isa::intrinsics`], otherwise `wide`'s; the same bits).
+pub fn blend4_on<const Q: usize, const N: usize>(
+    isa: Isa,
+    cells: &[f64],
+    models: [[&[f32]; N]; 4],
+    variances: [[f64; 4]; N],
+    min_weight: f64,
+    lanes: &mut ModelLanes,
+    out: &mut [f32],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if isa.intrinsics() {
+        // SAFETY: the CPU has AVX2 (`Isa::intrinsics`).
+        return unsafe { avx2::blend4::<Q, N>(cells, models, variances, min_weight, lanes, out) };
+    }
+    let _ = isa;
+    blend4_in::<f64x4, Q, N>(cells, models, variances, min_weight, lanes, out)
+}
+
+/// [`blend4`] in `wide`'s lanes.
+fn blend4_in<T: Lanes4, const Q: usize, const N: usize>(
+    cells: &[f64],
+    models: [[&[f32]; N]; 4],
+    variances: [[f64; 4]; N],
+    min_weight: f64,
+    lanes: &mut ModelLanes,
+    out: &mut [f32],
+) {
+    let k = CellLayout::new(Q).k;
     lanes.fill::<Q, N>(&models);
-    let gaps = gaps_lanes::<f64x4, Q, N>(cell, |w, j| lanes.get(w, j), min_weight);
-    let (w, fallback) = weights_lanes::<f64x4, N>(variances.map(f64x4::from), gaps);
-    let w = w.map(|x| x.to_array());
-    for (l, o) in out.chunks_exact_mut(ml).take(4).enumerate() {
-        let wl = (fallback >> l & 1 == 0).then(|| core::array::from_fn(|i| w[i][l]));
-        blend_with(models[l], wl, o);
+    let cell = |m: usize| T::from_array([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let gaps = gaps_lanes::<T, Q, N>(cell, |w, j| T::from_f32(lanes.0[w][j]), min_weight);
+    blend_weighted::<T, Q, N>(&models, variances, gaps, out);
+}
+
+/// The end of [`blend4`]: the candidates' weights from their variances and
+/// gaps, and the four blended models. (Loops, not closures: this is inlined
+/// into the AVX2 entries, and a closure would compile without their features.)
+#[inline(always)]
+fn blend_weighted<T: Lanes4, const Q: usize, const N: usize>(
+    models: &[[&[f32]; N]; 4],
+    variances: [[f64; 4]; N],
+    gaps: [T; N],
+    out: &mut [f32],
+) {
+    let mut v = [T::splat(0.0); N];
+    for i in 0..N {
+        v[i] = T::from_array(variances[i]);
+    }
+    let (w, fallback) = weights_lanes::<T, N>(v, gaps);
+    let mut wa = [[0f64; 4]; N];
+    for i in 0..N {
+        wa[i] = w[i].to_array();
+    }
+    for (l, o) in out.chunks_exact_mut(model_len(Q)).take(4).enumerate() {
+        let mut wl = [0f64; N];
+        for i in 0..N {
+            wl[i] = wa[i][l];
+        }
+        blend_with(models[l], (fallback >> l & 1 == 0).then_some(wl), o);
     }
 }
 
@@ -436,35 +540,37 @@ mod tests {
     fn check<const Q: usize, const N: usize>() {
         let (k, ml) = (CellLayout::new(Q).k, model_len(Q));
         let mut lanes = ModelLanes::default();
-        for seed in 0..64 {
+        // the portable lanes, and AVX2's where the CPU has them
+        let isas = [Isa::Portable, Isa::detect()];
+        for (seed, isa) in (0..128).map(|i| (i / 2, isas[i as usize % 2])) {
             let (cells, models, var) = cases::<Q>(seed);
             let flat: [f32; 4 * ML] = core::array::from_fn(|i| models[(i / ml) % 4][0][i % ml]);
             // one model per cell, and two (the second as the AO-free fit's, one coefficient fewer)
             let each: [[&[f32]; 1]; 4] = core::array::from_fn(|l| [&flat[l * ml..(l + 1) * ml]]);
-            let [got] = variances4::<Q, 1>(&cells, each, [Q + 1], 0.01, 1800.0, 1e-9);
+            let [got] = variances4_on::<Q, 1>(isa, &cells, each, [Q + 1], 0.01, 1800.0, 1e-9);
             let pairs: [[&[f32]; 2]; 4] = core::array::from_fn(|l| [&models[l][0][..ml], &models[l][1][..ml]]);
-            let two = variances4::<Q, 2>(&cells, pairs, [Q + 1, Q], 0.01, 1800.0, 1e-9);
+            let two = variances4_on::<Q, 2>(isa, &cells, pairs, [Q + 1, Q], 0.01, 1800.0, 1e-9);
             for l in 0..4 {
                 let cell = &cells[l * k..(l + 1) * k];
                 let want = variance::<Q>(cell, each[l][0], Q + 1, 0.01, 1800.0, 1e-9);
-                assert_eq!(got[l].to_bits(), want.to_bits(), "Q {Q} seed {seed} lane {l}");
+                assert_eq!(got[l].to_bits(), want.to_bits(), "{isa:?} Q {Q} seed {seed} lane {l}");
                 for f in 0..2 {
                     let want = variance::<Q>(cell, pairs[l][f], Q + 1 - f, 0.01, 1800.0, 1e-9);
-                    assert_eq!(two[f][l].to_bits(), want.to_bits(), "Q {Q} seed {seed} lane {l} fit {f}");
+                    assert_eq!(two[f][l].to_bits(), want.to_bits(), "{isa:?} Q {Q} seed {seed} lane {l} fit {f}");
                 }
             }
             let m: [[&[f32]; N]; 4] = core::array::from_fn(|l| core::array::from_fn(|w| &models[l][w][..ml]));
             let var: [[f64; 4]; N] = core::array::from_fn(|w| var[w]);
             let mut out = [0f32; 4 * ML];
             // (`lanes` reused from the previous seed, as `Flr` does)
-            blend4::<Q, N>(&cells, m, var, 1e-9, &mut lanes, &mut out[..4 * ml]);
+            blend4_on::<Q, N>(isa, &cells, m, var, 1e-9, &mut lanes, &mut out[..4 * ml]);
             for l in 0..4 {
                 let cell = &cells[l * k..(l + 1) * k];
                 let gaps = prediction_gaps::<Q, N>(cell, m[l], 1e-9);
                 let mut want = [0f32; ML];
                 blend::<N>(m[l], core::array::from_fn(|w| var[w][l]), gaps, &mut want[..ml]);
                 for (a, b) in out[l * ml..(l + 1) * ml].iter().zip(&want[..ml]) {
-                    assert_eq!(a.to_bits(), b.to_bits(), "Q {Q} N {N} seed {seed} lane {l}");
+                    assert_eq!(a.to_bits(), b.to_bits(), "{isa:?} Q {Q} N {N} seed {seed} lane {l}");
                 }
             }
         }

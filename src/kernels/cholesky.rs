@@ -161,6 +161,33 @@ impl F64Lanes for wide::f64x4 {
     }
 }
 
+/// Four [`F64Lanes`] lanes read from and written to memory: the lane types
+/// of the four-cell kernels (`wide::f64x4`, and the AVX2 lanes of
+/// [`crate::kernels::f64x4_avx2`]). Conversions are exact.
+pub trait Lanes4: F64Lanes {
+    /// The four values, lane `l` from `a[l]`.
+    fn from_array(a: [f64; 4]) -> Self;
+    /// The four f32 values widened to f64.
+    fn from_f32(a: [f32; 4]) -> Self;
+    /// The four lanes.
+    fn to_array(self) -> [f64; 4];
+}
+
+impl Lanes4 for wide::f64x4 {
+    #[inline(always)]
+    fn from_array(a: [f64; 4]) -> Self {
+        wide::f64x4::from(a)
+    }
+    #[inline(always)]
+    fn from_f32(a: [f32; 4]) -> Self {
+        wide::f64x4::from(a.map(f64::from))
+    }
+    #[inline(always)]
+    fn to_array(self) -> [f64; 4] {
+        wide::f64x4::to_array(self)
+    }
+}
+
 /// [`factor`] for a compile-time size, on one cell (`f64`) or four (`f64x4`):
 /// fully unrollable, no zeroed scratch. `inv_diag[j]` = 1 / L_jj (0 for dropped
 /// pivots), so the substitutions multiply instead of dividing (divisions are

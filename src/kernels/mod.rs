@@ -15,6 +15,8 @@ pub mod apply;
 pub mod blur;
 pub mod cholesky;
 pub mod demodulation;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod f64x4_avx2;
 pub mod moments;
 pub mod qr;
 pub mod solve;
