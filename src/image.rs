@@ -312,6 +312,12 @@ fn deinterleave3<const PS: usize>(src: &[f32], d0: &mut [f32], d1: &mut [f32], d
     }
 }
 
+/// Interleaved RGB `src` (`3 · r.len()` values) into the planes `r`, `g`, `b`
+/// ([`deinterleave3`]).
+pub(crate) fn deinterleave_rgb(src: &[f32], r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
+    deinterleave3::<3>(src, r, g, b)
+}
+
 /// Largest width or height accepted (keeps every index computation far from overflow).
 pub const MAX_DIM: usize = 1 << 16;
 

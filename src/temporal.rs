@@ -1009,20 +1009,17 @@ impl Reprojection {
         let w = self.width;
         let slot = &mut ring[(y % 3) * RING_PLANES * w..(y % 3 + 1) * RING_PLANES * w];
         let (rgb_planes, sum_planes) = slot.split_at_mut(3 * w);
-        let src = &current[3 * y * w..3 * (y + 1) * w];
-        for (x, px) in src.chunks_exact(3).enumerate() {
-            for ch in 0..3 {
-                rgb_planes[ch * w + x] = px[ch];
-            }
-        }
+        let (r, gb) = rgb_planes.split_at_mut(w);
+        let (g, b) = gb.split_at_mut(w);
+        crate::image::deinterleave_rgb(&current[3 * y * w..3 * (y + 1) * w], r, g, b);
         if !sums {
             return;
         }
-        for x in 0..w {
-            let c = ycocg([rgb_planes[x], rgb_planes[w + x], rgb_planes[2 * w + x]]);
-            for ch in 0..3 {
-                tmp[ch * w + x] = c[ch];
-            }
+        let (t0, t12) = tmp[..3 * w].split_at_mut(w);
+        let (t1, t2) = t12.split_at_mut(w);
+        // zipped planes (no index checks), so that it vectorises
+        for (((y, co), cg), ((r, g), b)) in t0.iter_mut().zip(t1.iter_mut()).zip(t2.iter_mut()).zip(r.iter().zip(g.iter()).zip(b.iter())) {
+            [*y, *co, *cg] = ycocg([*r, *g, *b]);
         }
         let (s1, s2) = sum_planes.split_at_mut(3 * w);
         for ch in 0..3 {
