@@ -66,7 +66,8 @@ pub struct TemporalConfig {
     /// Half-width of the output's clip box in standard deviations (default 1.5).
     pub clip_gamma: f32,
     /// Lowest blend weight of the new output frame in [`Reprojection::resolve`]
-    /// (default 0.5; 1 turns the output accumulation off).
+    /// (default 0.5; 1 turns the output accumulation off: step 1 then gathers
+    /// no previous output and [`Reprojection::run_frame`] skips step 3).
     pub output_alpha: f32,
     /// A frame where more than this fraction of pixels has no usable history
     /// is a camera cut: the history restarts (default 0.5; 1 turns it off).
@@ -513,7 +514,11 @@ impl Reprojection {
     /// into `out` (step 3). `parallel`: the workers and executor of both
     /// passes (the fit brings its own). The report holds the stage's counts
     /// and the fit's, but for its NaN/Inf noisy samples (the stage counted,
-    /// and bridged, those).
+    /// and bridged, those). Without output accumulation
+    /// ([`Reprojection::accumulates_output`] false) step 3 would copy the
+    /// fit's output unchanged, so it is skipped: the fit writes `out`, whose
+    /// values are then the fit's as they are (`clamp_negative` is the fit's
+    /// to apply, as every method here does).
     #[allow(clippy::too_many_arguments)]
     pub fn run_frame(
         &self,
@@ -549,6 +554,15 @@ impl Reprojection {
         rep.nonfinite_noisy = c.nonfinite;
         rep.clamped_fireflies = c.clamped;
         let index = history.frames;
+        if !self.accumulates_output() {
+            // step 3 would only copy the fit's output (finite, clamped as the
+            // method is): the fit writes `out` itself
+            let (acc, lengths) = self.accumulated_and_lengths(history)?;
+            let r = fit(acc, lengths, index, out)?;
+            history.frames = next_frame(history.frames);
+            rep += Report { nonfinite_noisy: 0, ..r };
+            return Ok(rep);
+        }
         {
             let (acc, lengths) = self.accumulated_and_lengths(history)?;
             let mut fit_out = ImageViewMut::interleaved(fitted, w, h, 3)?;
@@ -753,6 +767,7 @@ impl Reprojection {
     fn accumulate_pixel(&self, r: &Row<'_>, x: usize, out_row: &mut [f32], px_row: &mut [f32], c: &mut Counts) {
         let (w, h, rec, cfg) = (self.width, self.height, self.record(), &self.cfg);
         let (n_at, p_at, d_at) = self.guide_fields();
+        let gather = self.accumulates_output();
         // field `f` of this pixel's record
         let at = |f: usize| f * w + x;
         let rawc = [r.raw[x], r.raw[w + x], r.raw[2 * w + x]];
@@ -811,7 +826,7 @@ impl Reprojection {
                         prev[ch] += wt * pl[ch];
                     }
                     let po = [t(OUTPUT), t(OUTPUT + 1), t(OUTPUT + 2)];
-                    if po.iter().all(|v| v.is_finite()) {
+                    if gather && po.iter().all(|v| v.is_finite()) {
                         ow += wt;
                         for ch in 0..3 {
                             out[ch] += wt * po[ch];
@@ -840,6 +855,9 @@ impl Reprojection {
             out_row[at(LIGHT + ch)] = v;
         }
         out_row[at(COUNT)] = count;
+        if !gather {
+            return;
+        }
         let pv = if ow > 0.0 {
             let inv = 1.0 / ow;
             [out[0] * inv, out[1] * inv, out[2] * inv]
@@ -934,7 +952,14 @@ impl Reprojection {
     }
 
     fn blends(&self, history: &History<'_>, cut: bool) -> bool {
-        history.frames > 0 && !cut && self.cfg.output_alpha < 1.0
+        history.frames > 0 && !cut && self.accumulates_output()
+    }
+
+    /// Whether the output is accumulated ([`TemporalConfig::output_alpha`] < 1).
+    /// Without, step 1 gathers no previous output (its per-pixel values are
+    /// left as they were) and [`Reprojection::run_frame`] skips step 3.
+    pub fn accumulates_output(&self) -> bool {
+        self.cfg.output_alpha < 1.0
     }
 
     /// Step 3 for rows `y0..` (as many as `write` holds records of): `pixels`

@@ -116,6 +116,58 @@ fn static_camera_converges_to_the_multi_sample_result() {
     assert!(gain > p + 3.0, "{n} frames: {gain:.2} dB against per-frame {p:.2} dB (mean {pm:.2}, noisy {pn:.2})");
 }
 
+/// Without output accumulation `run_frame` skips step 3 and the fit writes the
+/// output: bit for bit what the steps called one by one give (step 3 then
+/// copies the fit's output), over a pan with a disocclusion, for the frame
+/// counter and the next frame's accumulated light too.
+#[test]
+fn without_output_accumulation_the_fit_is_the_output() {
+    let (w, h) = (37, 19);
+    let st = Reprojection::new(TemporalConfig { output_alpha: 1.0, ..Default::default() }, SET, w, h).unwrap();
+    assert!(!st.accumulates_output());
+    let (mut ha, mut hb) = (vec![0f32; st.history_len()], vec![0f32; st.history_len()]);
+    let mut sa = vec![f32::NAN; st.frame_scratch_len(None).unwrap()];
+    let mut sb = vec![f32::NAN; st.scratch_len()];
+    // the fit: half the accumulated light plus a ramp, clamped at 0 (as the methods clamp)
+    let fit = |acc: &ImageView<'_>, o: &mut ImageViewMut<'_>| {
+        for y in 0..h {
+            for c in 0..3 {
+                let row: Vec<f32> = (0..w).map(|x| (0.5 * acc.get(x, y, c).unwrap() + 0.01 * x as f32 - 0.1).max(0.0)).collect();
+                o.write_row(y, c, 0, &row).unwrap();
+            }
+        }
+    };
+    let mv: Vec<f32> = (0..w * h).flat_map(|i| [if i % w < 3 { -5.0 } else { 1.25 }, 0.5]).collect();
+    for k in 0..3u32 {
+        let f = frame_at(w, h, k as u64);
+        let (noisy, motion) = (ImageView::interleaved(&f.noisy, w, h, 3).unwrap(), ImageView::interleaved(&mv, w, h, 2).unwrap());
+        let guides = f.guides(SET);
+        let mut a = vec![f32::NAN; 3 * w * h];
+        {
+            let mut history = History::resume(&mut ha, k);
+            let mut ov = ImageViewMut::interleaved(&mut a, w, h, 3).unwrap();
+            st.run_frame(noisy, guides, Some(motion), Some(4.0), true, &mut history, &mut sa, None, &mut ov, |acc, _, _, o| {
+                fit(&acc, o);
+                Ok(Report::default())
+            })
+            .unwrap();
+            assert_eq!(history.frames(), k + 1);
+        }
+        let mut b = vec![f32::NAN; 3 * w * h];
+        {
+            let mut history = History::resume(&mut hb, k);
+            let inputs = Inputs { noisy, fireflies: Some(4.0), guides, motion: Some(motion) };
+            let c = st.accumulate(&inputs, &mut history, &mut sb).unwrap();
+            let mut fitted = vec![0f32; 3 * w * h];
+            fit(&st.accumulated(&mut history).unwrap(), &mut ImageViewMut::interleaved(&mut fitted, w, h, 3).unwrap());
+            let mut ov = ImageViewMut::interleaved(&mut b, w, h, 3).unwrap();
+            st.resolve(&fitted, &mut history, &mut sb, c.cut != 0, true, &mut ov).unwrap();
+            assert_eq!(history.frames(), k + 1);
+        }
+        assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()), "frame {k}");
+    }
+}
+
 /// The stage on its own: a pixel whose motion leaves the frame has no history
 /// and restarts from its own sample (count 1); the others average.
 #[test]
@@ -544,12 +596,13 @@ fn pixel_groups_equal_the_per_pixel_reference() {
     ];
     for (w, h) in [(1, 1), (7, 3), (9, 9), (17, 5), (255, 12), (256, 9), (257, 17)] {
         for set in sets {
-            for clamp in [None, Some(fireflies::DEFAULT_STRENGTH)] {
-                // the default settings, and a narrow clip with a slow blend and negative results kept
-                let (cfg, clamp_negative) = match clamp {
-                    None => (TemporalConfig::default(), true),
-                    Some(_) => (TemporalConfig { clip_gamma: 1.0, output_alpha: 0.25, ..Default::default() }, false),
-                };
+            // the default settings; a narrow clip with a slow blend and negative results kept;
+            // no output accumulation (step 1 gathers no previous output, step 3 is skipped)
+            let narrow = TemporalConfig { clip_gamma: 1.0, output_alpha: 0.25, ..Default::default() };
+            let no_output = TemporalConfig { output_alpha: 1.0, ..Default::default() };
+            let cases =
+                [(None, TemporalConfig::default(), true), (Some(fireflies::DEFAULT_STRENGTH), narrow, false), (None, no_output, false)];
+            for (clamp, cfg, clamp_negative) in cases {
                 let slow = Reprojection::new(cfg, set, w, h).unwrap().per_pixel();
                 for fast in [isa::Isa::Portable, isa::Isa::Avx2Fma, isa::Isa::Avx512].into_iter().filter_map(|i| slow.with_isa(i)) {
                     let (mut ha, mut hb) = (vec![0f32; fast.history_len()], vec![0f32; fast.history_len()]);

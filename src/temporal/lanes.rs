@@ -470,9 +470,13 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
     let records = r.read.get(iy * w * rec..(iy + 2) * w * rec)?;
     // row iy + 1 is new to this output row (row iy was the previous row's
     // second): its fields some groups ahead, a stream each
+    let gather = st.accumulates_output();
     if bx % 16 < L::N {
         for f in 0..rec {
-            crate::image::prefetch(records, (rec + f) * w + bx + PREFETCH_AHEAD);
+            // (the previous output's fields only where they are read)
+            if gather || !(OUTPUT..OUTPUT + 3).contains(&f) {
+                crate::image::prefetch(records, (rec + f) * w + bx + PREFETCH_AHEAD);
+            }
         }
     }
     // SAFETY (each `tap`, `tap3` below): the fields read are fields of the
@@ -519,10 +523,12 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
         for ch in 0..3 {
             prev[ch] += keep(ok, wt * pl[ch]);
         }
-        let po = unsafe { tap3::<L>(records, (dy * rec + OUTPUT) * w + tx, w) };
-        ow += keep(ok, wt);
-        for ch in 0..3 {
-            out[ch] += keep(ok, wt * po[ch]);
+        if gather {
+            let po = unsafe { tap3::<L>(records, (dy * rec + OUTPUT) * w + tx, w) };
+            ow += keep(ok, wt);
+            for ch in 0..3 {
+                out[ch] += keep(ok, wt * po[ch]);
+            }
         }
     }
     // every accepted tap was finite (the per-pixel code skips the others, taking the
@@ -542,9 +548,11 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
         has.select(old + a * (cur[ch] - old), cur[ch]).store(out_row, (LIGHT + ch) * w + x)?;
     }
     count.store(out_row, COUNT * w + x)?;
-    let (seen, inv) = (ow.gt(zero), one / ow);
-    for (ch, o) in out.into_iter().enumerate() {
-        seen.select(o * inv, L::splat(f32::NAN)).store(px_row, ch * w + x)?;
+    if gather {
+        let (seen, inv) = (ow.gt(zero), one / ow);
+        for (ch, o) in out.into_iter().enumerate() {
+            seen.select(o * inv, L::splat(f32::NAN)).store(px_row, ch * w + x)?;
+        }
     }
     Some((!has.bitmask() & ((1 << L::N) - 1)).count_ones() as u64)
 }
