@@ -1,8 +1,11 @@
 //! The caller-owned state of a temporal pipeline (BMFR's or WALR's).
 
 /// The temporal state, owned by the caller: a buffer of the pipeline's
-/// `history_len()` f32 and a frame counter. Keep one per sequence;
-/// [`History::reset`] after a camera cut.
+/// `history_len()` f32 and a frame counter. Keep one per sequence and
+/// configuration; [`History::reset`] after a camera cut, and before a
+/// history written by one configuration is continued with another (one
+/// without the temporal output accumulation leaves no previous output for
+/// one with it).
 #[derive(Debug)]
 pub struct History<'h> {
     pub(crate) data: &'h mut [f32],

@@ -12,7 +12,8 @@ use core::sync::atomic::{AtomicU8, Ordering};
 /// pixel groups (`wide`'s 4 or 8 lanes, 8 AVX2 lanes, or 16 with
 /// [`Isa::Avx512`]), the QR's column updates (`kernels::qr`), and FLR's block
 /// accumulation (`kernels::moments`), four-cell solve (`kernels::solve`, in
-/// `f64` lanes) and model application (`kernels::apply`).
+/// `f64` lanes), the adaptive window's four-cell variances and blend
+/// (`flr::adaptive`, `f64` lanes) and model application (`kernels::apply`).
 ///
 /// `wide` picks SSE2/AVX/NEON at compile time, so a plain x86-64 build runs
 /// them in SSE2 without fused multiply-adds. [`Isa::detect`] therefore chooses AVX2 + FMA whenever
@@ -70,8 +71,8 @@ impl Isa {
     /// Whether a kernel asked to run on `self` takes its `avx2.rs` intrinsics
     /// file: the build's `wide` lacks AVX2 + FMA (a plain x86-64 build, whose
     /// lanes are SSE2), `self` is [`Isa::Avx2Fma`] (or [`Isa::Avx512`], which implies it) and the CPU has it. The
-    /// one rule of every kernel's dispatch (`qr`, `moments`, `solve`,
-    /// `apply`, `blur`, the temporal stage's 8 lanes; `conv` and the temporal
+    /// one rule of every kernel's dispatch (`qr`, `moments`, `solve`, the
+    /// adaptive window's blend, `apply`, `blur`, the temporal stage's 8 lanes; `conv` and the temporal
     /// stage's AVX-512 lanes run their files in every build). An `x86-64-v3`
     /// build keeps `wide`'s lanes, which compile to the same instructions and
     /// are faster there than the intrinsics files (whose functions do not

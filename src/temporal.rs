@@ -67,7 +67,9 @@ pub struct TemporalConfig {
     pub clip_gamma: f32,
     /// Lowest blend weight of the new output frame in [`Reprojection::resolve`]
     /// (default 0.5; 1 turns the output accumulation off: step 1 then gathers
-    /// no previous output and [`Reprojection::run_frame`] skips step 3).
+    /// no previous output and [`Reprojection::run_frame`] skips step 3, so the
+    /// history holds none; [`History::reset`] before turning it on for a
+    /// history written without it).
     pub output_alpha: f32,
     /// A frame where more than this fraction of pixels has no usable history
     /// is a camera cut: the history restarts (default 0.5; 1 turns it off).
@@ -422,8 +424,8 @@ impl Reprojection {
 
     /// Step 1 for the whole frame: reads the inputs, writes the accumulated
     /// light, the history length and the guides into the history's write slot
-    /// and the reprojected previous output into `scratch`
-    /// ([`Reprojection::scratch_len`]). A camera cut is detected here (and
+    /// and, with the output accumulation on, the reprojected previous output
+    /// into `scratch` ([`Reprojection::scratch_len`]). A camera cut is detected here (and
     /// the pass rerun without history).
     pub fn accumulate(&self, inp: &Inputs<'_>, history: &mut History<'_>, scratch: &mut [f32]) -> Result<Counts, Error> {
         self.check_inputs(inp)?;
@@ -515,10 +517,13 @@ impl Reprojection {
     /// passes (the fit brings its own). The report holds the stage's counts
     /// and the fit's, but for its NaN/Inf noisy samples (the stage counted,
     /// and bridged, those). Without output accumulation
-    /// ([`Reprojection::accumulates_output`] false) step 3 would copy the
-    /// fit's output unchanged, so it is skipped: the fit writes `out`, whose
-    /// values are then the fit's as they are (`clamp_negative` is the fit's
-    /// to apply, as every method here does).
+    /// ([`Reprojection::accumulates_output`] false) step 3 would only copy
+    /// the fit's output, zeroing non-finite values and, with
+    /// `clamp_negative`, negative ones; it is skipped, and the fit writes
+    /// `out`, whose values are then the fit's as they are: `clamp_negative`
+    /// does not apply and non-finite values pass (FLR's, BMFR's and WALR's
+    /// fits clamp with the same setting and write finite values, so their
+    /// output is step 3's but for the sign of a zero).
     #[allow(clippy::too_many_arguments)]
     pub fn run_frame(
         &self,
@@ -554,20 +559,24 @@ impl Reprojection {
         rep.nonfinite_noisy = c.nonfinite;
         rep.clamped_fireflies = c.clamped;
         let index = history.frames;
-        if !self.accumulates_output() {
-            // step 3 would only copy the fit's output (finite, clamped as the
-            // method is): the fit writes `out` itself
-            let (acc, lengths) = self.accumulated_and_lengths(history)?;
-            let r = fit(acc, lengths, index, out)?;
-            history.frames = next_frame(history.frames);
-            rep += Report { nonfinite_noisy: 0, ..r };
-            return Ok(rep);
+        // without output accumulation step 3 would only copy the fit's
+        // output: the fit writes `out` itself
+        let accumulates = self.accumulates_output();
+        if !accumulates {
+            self.check_output(out)?;
         }
         {
             let (acc, lengths) = self.accumulated_and_lengths(history)?;
-            let mut fit_out = ImageViewMut::interleaved(fitted, w, h, 3)?;
-            let r = fit(acc, lengths, index, &mut fit_out)?;
+            let r = if accumulates {
+                fit(acc, lengths, index, &mut ImageViewMut::interleaved(fitted, w, h, 3)?)?
+            } else {
+                fit(acc, lengths, index, out)?
+            };
             rep += Report { nonfinite_noisy: 0, ..r };
+        }
+        if !accumulates {
+            history.frames = next_frame(history.frames);
+            return Ok(rep);
         }
         match parallel {
             Some((workers, for_each)) => {
@@ -825,11 +834,13 @@ impl Reprojection {
                     for ch in 0..3 {
                         prev[ch] += wt * pl[ch];
                     }
-                    let po = [t(OUTPUT), t(OUTPUT + 1), t(OUTPUT + 2)];
-                    if gather && po.iter().all(|v| v.is_finite()) {
-                        ow += wt;
-                        for ch in 0..3 {
-                            out[ch] += wt * po[ch];
+                    if gather {
+                        let po = [t(OUTPUT), t(OUTPUT + 1), t(OUTPUT + 2)];
+                        if po.iter().all(|v| v.is_finite()) {
+                            ow += wt;
+                            for ch in 0..3 {
+                                out[ch] += wt * po[ch];
+                            }
                         }
                     }
                 }
@@ -938,10 +949,15 @@ impl Reprojection {
 
     fn check_resolve(&self, current: &[f32], history: &History<'_>, out: &ImageViewMut<'_>) -> Result<(), Error> {
         self.check_history(history)?;
-        let (w, h) = (self.width, self.height);
         if current.len() < 3 * self.plane() {
             return Err(Error::BufferTooSmall { arg: Arg::Scratch, needed: 3 * self.plane(), len: current.len() });
         }
+        self.check_output(out)
+    }
+
+    /// Refuses an output of another size or with fewer than 3 channels.
+    fn check_output(&self, out: &ImageViewMut<'_>) -> Result<(), Error> {
+        let (w, h) = (self.width, self.height);
         if (out.width(), out.height()) != (w, h) {
             return Err(Error::SizeMismatch { arg: Arg::Output, expected: (w, h), got: (out.width(), out.height()) });
         }
@@ -1043,8 +1059,10 @@ impl Reprojection {
         let (t0, t12) = tmp[..3 * w].split_at_mut(w);
         let (t1, t2) = t12.split_at_mut(w);
         // zipped planes (no index checks), so that it vectorises
-        for (((y, co), cg), ((r, g), b)) in t0.iter_mut().zip(t1.iter_mut()).zip(t2.iter_mut()).zip(r.iter().zip(g.iter()).zip(b.iter())) {
-            [*y, *co, *cg] = ycocg([*r, *g, *b]);
+        for (((luma, co), cg), ((red, green), blue)) in
+            t0.iter_mut().zip(t1.iter_mut()).zip(t2.iter_mut()).zip(r.iter().zip(g.iter()).zip(b.iter()))
+        {
+            [*luma, *co, *cg] = ycocg([*red, *green, *blue]);
         }
         let (s1, s2) = sum_planes.split_at_mut(3 * w);
         for ch in 0..3 {

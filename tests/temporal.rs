@@ -118,16 +118,28 @@ fn static_camera_converges_to_the_multi_sample_result() {
 
 /// Without output accumulation `run_frame` skips step 3 and the fit writes the
 /// output: bit for bit what the steps called one by one give (step 3 then
-/// copies the fit's output), over a pan with a disocclusion, for the frame
-/// counter and the next frame's accumulated light too.
+/// copies the fit's output), over a pan with a disocclusion, on one thread
+/// and on two; the frame counter and every history field but the previous
+/// output's (which only step 3 writes) too.
 #[test]
 fn without_output_accumulation_the_fit_is_the_output() {
     let (w, h) = (37, 19);
     let st = Reprojection::new(TemporalConfig { output_alpha: 1.0, ..Default::default() }, SET, w, h).unwrap();
     assert!(!st.accumulates_output());
-    let (mut ha, mut hb) = (vec![0f32; st.history_len()], vec![0f32; st.history_len()]);
+    let (mut ha, mut hb, mut hc) = (vec![0f32; st.history_len()], vec![0f32; st.history_len()], vec![0f32; st.history_len()]);
     let mut sa = vec![f32::NAN; st.frame_scratch_len(None).unwrap()];
     let mut sb = vec![f32::NAN; st.scratch_len()];
+    let mut sc = vec![f32::NAN; st.frame_scratch_len(Some(2)).unwrap()];
+    let exec = |n: usize, body: &(dyn Fn(usize, usize) + Sync)| {
+        std::thread::scope(|s| {
+            for wk in 0..2 {
+                s.spawn(move || (wk..n).step_by(2).for_each(|i| body(i, wk)));
+            }
+        })
+    };
+    // the record's fields of each history value (row y, field f, pixel x at (y · rec + f) · w + x, two slots)
+    let rec = st.slot_len() / (w * h);
+    let field = |i: usize| (i % st.slot_len()) / w % rec;
     // the fit: half the accumulated light plus a ramp, clamped at 0 (as the methods clamp)
     let fit = |acc: &ImageView<'_>, o: &mut ImageViewMut<'_>| {
         for y in 0..h {
@@ -153,6 +165,16 @@ fn without_output_accumulation_the_fit_is_the_output() {
             .unwrap();
             assert_eq!(history.frames(), k + 1);
         }
+        let mut c = vec![f32::NAN; 3 * w * h];
+        {
+            let mut history = History::resume(&mut hc, k);
+            let mut ov = ImageViewMut::interleaved(&mut c, w, h, 3).unwrap();
+            st.run_frame(noisy, guides, Some(motion), Some(4.0), true, &mut history, &mut sc, Some((2, &exec)), &mut ov, |acc, _, _, o| {
+                fit(&acc, o);
+                Ok(Report::default())
+            })
+            .unwrap();
+        }
         let mut b = vec![f32::NAN; 3 * w * h];
         {
             let mut history = History::resume(&mut hb, k);
@@ -165,6 +187,11 @@ fn without_output_accumulation_the_fit_is_the_output() {
             assert_eq!(history.frames(), k + 1);
         }
         assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()), "frame {k}");
+        assert!(a.iter().zip(&c).all(|(x, y)| x.to_bits() == y.to_bits()), "frame {k}, two threads");
+        // fields 4..7 are the previous output's
+        let same =
+            |x: &[f32], y: &[f32]| x.iter().zip(y).enumerate().all(|(i, (x, y))| (4..7).contains(&field(i)) || x.to_bits() == y.to_bits());
+        assert!(same(&ha, &hb) && same(&ha, &hc), "frame {k}: the history");
     }
 }
 

@@ -17,7 +17,7 @@
 //! costs three blurs and three solves instead of one.
 
 use crate::isa::Isa;
-use crate::kernels::cholesky::{F64Lanes, Lanes4};
+use crate::kernels::cholesky::{quad, F64Lanes, Lanes4};
 use crate::kernels::{model_len, CellLayout, LUMA};
 use wide::{f32x4, f64x4};
 
@@ -124,7 +124,7 @@ fn variances4_in<T: Lanes4, const Q: usize, const F: usize>(
 ) -> [[f64; 4]; F] {
     let k = CellLayout::new(Q).k;
     let lanes = model_lanes::<Q, F>(&models);
-    let cell = |m: usize| T::from_array([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let cell = |m: usize| quad::<T>(cells, k, m);
     to_arrays(variance_lanes::<T, Q, F>(cell, |f, j| T::from_f32(lanes[f][j]), coefficients, norm, area, min_weight))
 }
 
@@ -263,12 +263,18 @@ fn gaps_lanes<T: F64Lanes, const Q: usize, const N: usize>(
 
 /// The luminance of the difference between window `w`'s and window 0's
 /// coefficient triple `j..j + 3`: `0 + L₀Δ₀ + L₁Δ₁ + L₂Δ₂`, in that order.
-/// (A function rather than a closure, which the compiler had left as a call
-/// per coefficient.)
+/// (Functions rather than closures: the compiler had left a closure as a
+/// call per coefficient, and a closure made here would not compile with the
+/// AVX2 entries' features.)
 #[inline(always)]
 fn luma_gap<T: F64Lanes>(model: &impl Fn(usize, usize) -> T, w: usize, j: usize) -> T {
-    let d = |c: usize| T::splat(L[c]) * (model(w, j + c) - model(0, j + c));
-    T::splat(0.0) + d(0) + d(1) + d(2)
+    T::splat(0.0) + gap_term(model, w, j, 0) + gap_term(model, w, j, 1) + gap_term(model, w, j, 2)
+}
+
+/// `L_c · (model(w, j + c) − model(0, j + c))`.
+#[inline(always)]
+fn gap_term<T: F64Lanes>(model: &impl Fn(usize, usize) -> T, w: usize, j: usize, c: usize) -> T {
+    T::splat(L[c]) * (model(w, j + c) - model(0, j + c))
 }
 
 /// The blend weights `1 / (b_s² + v_s)` of the `N` candidates from their
@@ -435,7 +441,7 @@ fn blend4_in<T: Lanes4, const Q: usize, const N: usize>(
 ) {
     let k = CellLayout::new(Q).k;
     lanes.fill::<Q, N>(&models);
-    let cell = |m: usize| T::from_array([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let cell = |m: usize| quad::<T>(cells, k, m);
     let gaps = gaps_lanes::<T, Q, N>(cell, |w, j| T::from_f32(lanes.0[w][j]), min_weight);
     blend_weighted::<T, Q, N>(&models, variances, gaps, out);
 }

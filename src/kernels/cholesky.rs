@@ -163,7 +163,7 @@ impl F64Lanes for wide::f64x4 {
 
 /// Four [`F64Lanes`] lanes read from and written to memory: the lane types
 /// of the four-cell kernels (`wide::f64x4`, and the AVX2 lanes of
-/// [`crate::kernels::f64x4_avx2`]). Conversions are exact.
+/// `kernels::f64x4_avx2`). Conversions are exact.
 pub trait Lanes4: F64Lanes {
     /// The four values, lane `l` from `a[l]`.
     fn from_array(a: [f64; 4]) -> Self;
@@ -171,6 +171,12 @@ pub trait Lanes4: F64Lanes {
     fn from_f32(a: [f32; 4]) -> Self;
     /// The four lanes.
     fn to_array(self) -> [f64; 4];
+}
+
+/// Value `m` of four cells stored back to back, `k` values each: cell `l`'s in lane `l`.
+#[inline(always)]
+pub fn quad<T: Lanes4>(cells: &[f64], k: usize, m: usize) -> T {
+    T::from_array([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]])
 }
 
 impl Lanes4 for wide::f64x4 {

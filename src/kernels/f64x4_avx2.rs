@@ -2,23 +2,25 @@
 //! a private type of the module that invokes it, for the generic f64 code of
 //! the four-cell kernels ([`F64Lanes`](super::cholesky::F64Lanes),
 //! [`Lanes4`](super::cholesky::Lanes4)) run inside that module's
-//! `#[target_feature(enable = "avx2")]` functions. Every operation is the
+//! `#[target_feature(enable = "avx2")]` entries. Every operation is the
 //! IEEE one per lane (no fused multiply-adds), so the lanes give the
 //! portable lanes' bits.
 //!
 //! A macro rather than a shared type: its safe methods run AVX instructions,
-//! which is sound only because the type is private to one module whose
-//! functions make values of it only where AVX2 is enabled. Each file that
-//! needs the lanes states that for itself.
+//! which is sound only because no value of it can exist outside a call of
+//! the invoking module's `unsafe` AVX2 entries, whose contract is that the
+//! CPU has AVX2: the type is private to that module, and the entries return
+//! plain arrays. Each file that invokes the macro keeps to that.
 
 /// Defines the private `F64x4` lane type in the invoking module (see the module).
 macro_rules! avx2_f64x4 {
     () => {
-        /// Four f64 lanes in one AVX register. Private to this module, and
-        /// made only inside its `#[target_feature(enable = "avx2")]`
-        /// functions, which run only where the CPU has AVX2: that is what
+        /// Four f64 lanes in one AVX register. Private to this module; a
+        /// value exists only during a call of its `unsafe`
+        /// `#[target_feature(enable = "avx2")]` entries, whose contract is
+        /// that the CPU has AVX2 (they return plain arrays): that is what
         /// makes its safe methods (AVX instructions) sound. They are
-        /// `#[inline(always)]`, so they compile into those functions.
+        /// `#[inline(always)]`, so they compile into those entries.
         #[derive(Clone, Copy)]
         struct F64x4(core::arch::x86_64::__m256d);
 
@@ -26,7 +28,7 @@ macro_rules! avx2_f64x4 {
             type Output = F64x4;
             #[inline(always)]
             fn add(self, o: F64x4) -> F64x4 {
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { core::arch::x86_64::_mm256_add_pd(self.0, o.0) })
             }
         }
@@ -34,7 +36,7 @@ macro_rules! avx2_f64x4 {
             type Output = F64x4;
             #[inline(always)]
             fn sub(self, o: F64x4) -> F64x4 {
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { core::arch::x86_64::_mm256_sub_pd(self.0, o.0) })
             }
         }
@@ -42,7 +44,7 @@ macro_rules! avx2_f64x4 {
             type Output = F64x4;
             #[inline(always)]
             fn mul(self, o: F64x4) -> F64x4 {
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { core::arch::x86_64::_mm256_mul_pd(self.0, o.0) })
             }
         }
@@ -50,7 +52,7 @@ macro_rules! avx2_f64x4 {
             type Output = F64x4;
             #[inline(always)]
             fn div(self, o: F64x4) -> F64x4 {
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { core::arch::x86_64::_mm256_div_pd(self.0, o.0) })
             }
         }
@@ -59,31 +61,31 @@ macro_rules! avx2_f64x4 {
             const LANES: usize = 4;
             #[inline(always)]
             fn splat(v: f64) -> Self {
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { core::arch::x86_64::_mm256_set1_pd(v) })
             }
             #[inline(always)]
             fn abs_(self) -> Self {
                 use core::arch::x86_64::{_mm256_andnot_pd, _mm256_set1_pd};
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { _mm256_andnot_pd(_mm256_set1_pd(-0.0), self.0) })
             }
             #[inline(always)]
             fn max_(self, o: Self) -> Self {
                 use core::arch::x86_64::{_mm256_blendv_pd, _mm256_cmp_pd, _CMP_GT_OQ};
                 // `self` where `self > o` (ordered: NaN → `o`), as the portable lanes
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { _mm256_blendv_pd(o.0, self.0, _mm256_cmp_pd::<_CMP_GT_OQ>(self.0, o.0)) })
             }
             #[inline(always)]
             fn sqrt_(self) -> Self {
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { core::arch::x86_64::_mm256_sqrt_pd(self.0) })
             }
             #[inline(always)]
             fn not_above(self, floor: Self) -> u32 {
                 use core::arch::x86_64::{_mm256_and_pd, _mm256_cmp_pd, _mm256_movemask_pd, _mm256_set1_pd, _CMP_GT_OQ, _CMP_LE_OQ};
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 unsafe {
                     let gt = _mm256_cmp_pd::<_CMP_GT_OQ>(self.0, floor.0);
                     let finite = _mm256_cmp_pd::<_CMP_LE_OQ>(self.abs_().0, _mm256_set1_pd(f64::MAX));
@@ -97,7 +99,7 @@ macro_rules! avx2_f64x4 {
                     return self;
                 }
                 let m = |l: u32| if mask >> l & 1 != 0 { f64::from_bits(u64::MAX) } else { 0.0 };
-                // SAFETY: made only where AVX2 is enabled (see the type).
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type).
                 F64x4(unsafe { _mm256_blendv_pd(self.0, _mm256_set1_pd(v), _mm256_setr_pd(m(0), m(1), m(2), m(3))) })
             }
         }
@@ -105,19 +107,19 @@ macro_rules! avx2_f64x4 {
         impl $crate::kernels::cholesky::Lanes4 for F64x4 {
             #[inline(always)]
             fn from_array(a: [f64; 4]) -> Self {
-                // SAFETY: made only where AVX2 is enabled (see the type); reads 4 f64.
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type); reads 4 f64.
                 F64x4(unsafe { core::arch::x86_64::_mm256_loadu_pd(a.as_ptr()) })
             }
             #[inline(always)]
             fn from_f32(a: [f32; 4]) -> Self {
                 use core::arch::x86_64::{_mm256_cvtps_pd, _mm_loadu_ps};
-                // SAFETY: made only where AVX2 is enabled (see the type); reads 4 f32.
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type); reads 4 f32.
                 F64x4(unsafe { _mm256_cvtps_pd(_mm_loadu_ps(a.as_ptr())) })
             }
             #[inline(always)]
             fn to_array(self) -> [f64; 4] {
                 let mut a = [0f64; 4];
-                // SAFETY: made only where AVX2 is enabled (see the type); writes 4 f64.
+                // SAFETY: a value exists only while the CPU is known to have AVX2 (see the type); writes 4 f64.
                 unsafe { core::arch::x86_64::_mm256_storeu_pd(a.as_mut_ptr(), self.0) };
                 a
             }

@@ -7,7 +7,7 @@
 //! checks both.
 
 use super::ModelLanes;
-use crate::kernels::cholesky::Lanes4;
+use crate::kernels::cholesky::{quad, Lanes4};
 use crate::kernels::f64x4_avx2::avx2_f64x4;
 use crate::kernels::CellLayout;
 
@@ -29,7 +29,7 @@ pub(super) unsafe fn variances4<const Q: usize, const F: usize>(
     // (the closures are made here, so that they compile with AVX2 enabled)
     let k = CellLayout::new(Q).k;
     let lanes = super::model_lanes::<Q, F>(&models);
-    let cell = |m: usize| F64x4::from_array([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let cell = |m: usize| quad::<F64x4>(cells, k, m);
     let model = |f: usize, j: usize| F64x4::from_f32(lanes[f][j]);
     super::to_arrays(super::variance_lanes::<F64x4, Q, F>(cell, model, coefficients, norm, area, min_weight))
 }
@@ -50,7 +50,7 @@ pub(super) unsafe fn blend4<const Q: usize, const N: usize>(
     // (the closures are made here, so that they compile with AVX2 enabled)
     let k = CellLayout::new(Q).k;
     lanes.fill::<Q, N>(&models);
-    let cell = |m: usize| F64x4::from_array([cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]]);
+    let cell = |m: usize| quad::<F64x4>(cells, k, m);
     let model = |w: usize, j: usize| F64x4::from_f32(lanes.0[w][j]);
     let gaps = super::gaps_lanes::<F64x4, Q, N>(cell, model, min_weight);
     super::blend_weighted::<F64x4, Q, N>(&models, variances, gaps, out)

@@ -7,9 +7,9 @@
 //! portable lanes and to the scalar path; `solve::tests` checks it.
 
 use super::{Fit, SolveParams, Solved};
+use crate::kernels::cholesky::quad;
 use crate::kernels::f64x4_avx2::avx2_f64x4;
 use crate::kernels::CellLayout;
-use core::arch::x86_64::_mm256_setr_pd;
 use wide::f64x4;
 
 avx2_f64x4!();
@@ -21,7 +21,8 @@ avx2_f64x4!();
 /// The CPU must support AVX2 ([`crate::isa::Isa::Avx2Fma`] available).
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn normalized4<const Q: usize>(cells: &[f64], p: &SolveParams, eps_mul: f64, eps_add: f64) -> (Fit<f64x4, Q>, [u32; 4]) {
-    let (full, dropped, _) = super::normalized::<F64x4, Q, false>(lanes(cells, CellLayout::new(Q).k), p, eps_mul, eps_add, 0);
+    let (full, dropped, _) =
+        super::normalized::<F64x4, Q, false>(|m| quad::<F64x4>(cells, CellLayout::new(Q).k, m), p, eps_mul, eps_add, 0);
     (full.map(wide), dropped)
 }
 
@@ -38,15 +39,9 @@ pub(super) unsafe fn normalized4_without<const Q: usize>(
     eps_add: f64,
     drop: usize,
 ) -> Solved<f64x4, Q> {
-    let (full, dropped, sub) = super::normalized::<F64x4, Q, true>(lanes(cells, CellLayout::new(Q).k), p, eps_mul, eps_add, drop);
+    let (full, dropped, sub) =
+        super::normalized::<F64x4, Q, true>(|m| quad::<F64x4>(cells, CellLayout::new(Q).k, m), p, eps_mul, eps_add, drop);
     (full.map(wide), dropped, sub.map(wide))
-}
-
-/// Moment `m` of the four cells as one register.
-#[inline(always)]
-fn lanes(cells: &[f64], k: usize) -> impl Fn(usize) -> F64x4 + '_ {
-    // SAFETY: only called inside `normalized4*`, where AVX2 is enabled (see `F64x4`).
-    move |m: usize| F64x4(unsafe { _mm256_setr_pd(cells[m], cells[k + m], cells[2 * k + m], cells[3 * k + m]) })
 }
 
 /// `wide` lanes of the same four values (`f64x4` and `__m256d` are both 32
