@@ -346,19 +346,31 @@ impl Reprojection {
         2 * self.slot_len()
     }
     /// f32 values of the scratch [`Reprojection::accumulate`] and
-    /// [`Reprojection::resolve`] share: 3 values per pixel and a worker's rows.
+    /// [`Reprojection::resolve`] share: 3 values per pixel (none without
+    /// output accumulation) and a worker's rows.
     pub fn scratch_len(&self) -> usize {
-        PIXEL_VALUES * self.plane() + self.rows_len()
+        self.pixel_values() * self.plane() + self.rows_len()
+    }
+    /// Values per pixel step 1 leaves for step 3 in the scratch
+    /// ([`PIXEL_VALUES`]); none without output accumulation, which gathers
+    /// no previous output.
+    fn pixel_values(&self) -> usize {
+        if self.accumulates_output() {
+            PIXEL_VALUES
+        } else {
+            0
+        }
     }
     /// f32 of working space per worker.
     fn rows_len(&self) -> usize {
         ROWS * self.width + fireflies::work_len(self.width) + fireflies::cells(self.width)
     }
     /// f32 values of the scratch of the `_parallel` entries with `workers`:
-    /// 3 values per pixel, rows per worker and the run's bookkeeping.
+    /// 3 values per pixel (none without output accumulation), rows per
+    /// worker and the run's bookkeeping.
     pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
         let runs = crate::parallel::TileRun::scratch_len(self.bands(workers), workers, self.rows_len())?;
-        (PIXEL_VALUES * self.plane()).checked_add(runs)
+        (self.pixel_values() * self.plane()).checked_add(runs)
     }
     /// Rows per band of a parallel run: whole bands of the firefly clamp.
     fn band_rows(&self, workers: usize) -> usize {
@@ -434,7 +446,7 @@ impl Reprojection {
             return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
         }
         let has_history = history.frames > 0;
-        let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (pixels, rows) = scratch.split_at_mut(self.pixel_values() * self.plane());
         let (read, read_cells, write, write_cells) = self.slots_and_cells(history);
         let prev = Previous { records: read, cells: read_cells };
         let c = self.accumulate_rows(inp, prev, 0, write, write_cells, pixels, rows, has_history)?;
@@ -464,12 +476,12 @@ impl Reprojection {
         let has_history = history.frames > 0;
         let (w, rec) = (self.width, self.record());
         let (rows, nb) = (self.band_rows(workers), self.bands(workers));
-        let (pixels, runs) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (pixels, runs) = scratch.split_at_mut(self.pixel_values() * self.plane());
         let (read, read_cells, write, write_cells) = self.slots_and_cells(history);
         let prev = Previous { records: read, cells: read_cells };
         let nc = fireflies::cells(w);
         let mut pass = |has_history: bool| -> Result<Counts, Error> {
-            let (wb, pb) = (Bands::new(&mut *write, rows * w * rec), Bands::new(&mut *pixels, rows * w * PIXEL_VALUES));
+            let (wb, pb) = (Bands::new(&mut *write, rows * w * rec), Bands::new(&mut *pixels, rows * w * self.pixel_values()));
             let cb = Bands::new(&mut *write_cells, 2 * rows / fireflies::CELL * nc);
             // SAFETY: `run_tiles` runs each band once, and a band writes only its own rows of each buffer.
             let r = run_tiles(runs, nb, workers, self.rows_len(), for_each, &|b, buf| {
@@ -499,14 +511,23 @@ impl Reprojection {
     }
 
     /// f32 values a pipeline frame ([`Reprojection::run_frame`]) needs: the
-    /// stage's scratch (for `workers`, or one thread with `None`) and the
-    /// fit's RGB output. `None` if it overflows.
+    /// stage's scratch (for `workers`, or one thread with `None`) and, with
+    /// output accumulation, the fit's RGB output (without, the fit writes the
+    /// output itself). `None` if it overflows.
     pub fn frame_scratch_len(&self, workers: Option<usize>) -> Option<usize> {
         let stage = match workers {
             Some(n) => self.parallel_scratch_len(n)?,
             None => self.scratch_len(),
         };
-        stage.checked_add(3 * self.plane())
+        stage.checked_add(self.fitted_len())
+    }
+    /// f32 values of the fit's RGB output in a pipeline frame's scratch.
+    fn fitted_len(&self) -> usize {
+        if self.accumulates_output() {
+            3 * self.plane()
+        } else {
+            0
+        }
     }
 
     /// One frame of a temporal pipeline around a single-frame denoiser:
@@ -538,15 +559,15 @@ impl Reprojection {
         out: &mut ImageViewMut<'_>,
         fit: impl FnOnce(ImageView<'_>, ImageView<'_>, u32, &mut ImageViewMut<'_>) -> Result<Report, Error>,
     ) -> Result<Report, Error> {
-        let (w, h, np) = (self.width, self.height, self.plane());
+        let (w, h) = (self.width, self.height);
         self.check_history(history)?;
         let overflow = Error::InvalidConfig("workers: scratch size overflows");
         let needed = self.frame_scratch_len(parallel.map(|p| p.0)).ok_or(overflow)?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let (stage, rest) = scratch.split_at_mut(needed - 3 * np);
-        let fitted = &mut rest[..3 * np];
+        let (stage, rest) = scratch.split_at_mut(needed - self.fitted_len());
+        let fitted = &mut rest[..self.fitted_len()];
         let mut rep = Report::default();
         let inputs = Inputs { noisy, fireflies, guides, motion };
         let c = match parallel {
@@ -637,12 +658,13 @@ impl Reprojection {
         has_history: bool,
     ) -> Result<Counts, Error> {
         let read = prev.records;
+        let pv = self.pixel_values();
         const CELL: usize = fireflies::CELL;
         let (w, h) = (self.width, self.height);
         let cfg = &self.cfg;
         let rec = self.record();
         let n_rows = write.len() / (w * rec);
-        let short = pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < self.rows_len();
+        let short = pixels.len() < n_rows * w * self.pixel_values() || rows.len() < self.rows_len();
         // the clamp measures whole bands of CELL rows: a band of rows starts on one
         if y0 + n_rows > h || !y0.is_multiple_of(CELL) || short {
             return Err(Error::InvalidTile { index: y0, count: h });
@@ -695,10 +717,8 @@ impl Reprojection {
             }
             // rows of the band this call writes (a band of rows may end inside the clamp's band)
             for y in band..(band + band_rows).min(y0 + n_rows) {
-                let (out_row, px_row) = (
-                    &mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec],
-                    &mut pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES],
-                );
+                let (out_row, px_row) =
+                    (&mut write[(y - y0) * w * rec..(y - y0 + 1) * w * rec], &mut pixels[(y - y0) * w * pv..(y - y0 + 1) * w * pv]);
                 let raw = &raw[3 * (y - band) * w..3 * (y - band + 1) * w];
                 let cur_row = if inp.fireflies.is_some() { &light[3 * (y - band) * w..3 * (y - band + 1) * w] } else { raw };
                 match inp.motion {
@@ -900,7 +920,7 @@ impl Reprojection {
             return Err(Error::ScratchTooSmall { needed: self.scratch_len(), got: scratch.len() });
         }
         let blend = self.blends(history, cut);
-        let (pixels, rows) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (pixels, rows) = scratch.split_at_mut(self.pixel_values() * self.plane());
         let (_, write) = self.slots(history);
         self.resolve_rows(current, 0, pixels, write, rows, blend, clamp_negative, out)?;
         history.frames = next_frame(history.frames);
@@ -929,7 +949,7 @@ impl Reprojection {
         let blend = self.blends(history, cut);
         let (w, h, rec) = (self.width, self.height, self.record());
         let (rows, nb) = (self.band_rows(workers), self.bands(workers));
-        let (pixels, runs) = scratch.split_at_mut(PIXEL_VALUES * self.plane());
+        let (pixels, runs) = scratch.split_at_mut(self.pixel_values() * self.plane());
         let (_, write) = self.slots(history);
         let bands = RowBands::new(out).ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap"))?;
         let wb = Bands::new(write, rows * w * rec);
@@ -939,7 +959,7 @@ impl Reprojection {
         run_tiles(runs, nb, workers, self.rows_len(), for_each, &|b, buf| {
             let y0 = b * rows;
             let mut ob = unsafe { bands.band(y0, rows.min(h - y0))? };
-            let pb = &pixels[(y0 * w * PIXEL_VALUES).min(pixels.len())..];
+            let pb = &pixels[(y0 * w * self.pixel_values()).min(pixels.len())..];
             unsafe { self.resolve_rows(current, y0, pb, wb.get(b), buf, blend, clamp_negative, &mut ob)? };
             Ok(Report::default())
         })?;
@@ -993,9 +1013,9 @@ impl Reprojection {
         out: &mut ImageViewMut<'_>,
     ) -> Result<(), Error> {
         let (w, h) = (self.width, self.height);
-        let rec = self.record();
+        let (rec, pv) = (self.record(), self.pixel_values());
         let n_rows = write.len() / (w * rec);
-        if y0 + n_rows > h || pixels.len() < n_rows * w * PIXEL_VALUES || rows.len() < RESOLVE_ROWS * w || out.height() < n_rows {
+        if y0 + n_rows > h || pixels.len() < n_rows * w * pv || rows.len() < RESOLVE_ROWS * w || out.height() < n_rows {
             return Err(Error::InvalidTile { index: y0, count: h });
         }
         let (ring, rest) = rows.split_at_mut(3 * RING_PLANES * w);
@@ -1017,7 +1037,7 @@ impl Reprojection {
                 slots: [ya, ya + 1, yb - 1].map(|sy| (sy % 3) * RING_PLANES * w),
                 rows: yb - ya,
                 cur: (y % 3) * RING_PLANES * w,
-                prev: &pixels[(y - y0) * w * PIXEL_VALUES..(y - y0 + 1) * w * PIXEL_VALUES],
+                prev: &pixels[(y - y0) * w * pv..(y - y0 + 1) * w * pv],
                 blend,
                 clamp_negative,
             };

@@ -120,12 +120,18 @@ fn static_camera_converges_to_the_multi_sample_result() {
 /// output: bit for bit what the steps called one by one give (step 3 then
 /// copies the fit's output), over a pan with a disocclusion, on one thread
 /// and on two; the frame counter and every history field but the previous
-/// output's (which only step 3 writes) too.
+/// output's (which only step 3 writes) too, with 6 values per pixel less
+/// scratch than with the accumulation.
 #[test]
 fn without_output_accumulation_the_fit_is_the_output() {
     let (w, h) = (37, 19);
     let st = Reprojection::new(TemporalConfig { output_alpha: 1.0, ..Default::default() }, SET, w, h).unwrap();
     assert!(!st.accumulates_output());
+    // no previous output gathered and no fitted image kept: 6 values per pixel less scratch
+    let with = Reprojection::new(TemporalConfig::default(), SET, w, h).unwrap();
+    assert_eq!(with.scratch_len(), st.scratch_len() + 3 * w * h);
+    assert_eq!(with.frame_scratch_len(None), st.frame_scratch_len(None).map(|n| n + 6 * w * h));
+    assert_eq!(with.frame_scratch_len(Some(2)), st.frame_scratch_len(Some(2)).map(|n| n + 6 * w * h));
     let (mut ha, mut hb, mut hc) = (vec![0f32; st.history_len()], vec![0f32; st.history_len()], vec![0f32; st.history_len()]);
     let mut sa = vec![f32::NAN; st.frame_scratch_len(None).unwrap()];
     let mut sb = vec![f32::NAN; st.scratch_len()];
