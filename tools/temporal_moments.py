@@ -1,0 +1,201 @@
+"""Temporal FLR that accumulates FLR's cell moments instead of the light, in numpy
+on top of tools/flr_mirror.py (FLR's defaults op for op), to measure the design
+before it is built: a history of one moment vector per 8×8 cell instead of one
+record per pixel, so that a frame costs about one FLR.
+
+Per frame:
+1. FLR's block moments of the AO-demodulated noisy light, in this frame's guide
+   normalisation (z = (g − mean) / std per guide).
+2. The accumulated moments of the previous frame are moved into this frame's
+   normalisation (an affine map of each guide: the moments map exactly) and
+   reprojected per cell: bilinear over the previous cell grid at the cell's
+   mean motion (previous − current, pixels). Each of the 4 taps is kept where
+   its cells' mean normal is within `--normal-limit` (cosine) of the current
+   cell's and its mean depth within `--depth-limit` (relative).
+3. Depth changes as the camera moves (a dolly): each reprojected cell's depth
+   moments are rescaled by the ratio of the current cell's mean depth to the
+   history's (clamped to 0.5–2), so its samples sit at this frame's depth.
+4. Blend: H = (1 − a) H_reprojected + a M with a = 1 / n, n the history
+   length (the accepted taps' mean plus one, at most `--max-history`).
+5. FLR's blur, solve, adaptive blend and apply on H; each window's variance is
+   divided by the (window-blurred) history length, the samples it averages.
+
+    python3 tools/temporal_moments.py SEQ_DIR... [--sigmas 3,6,12] [--per-frame]
+        [--normal-limit 0.8] [--depth-limit 0.1] [--max-history 16] [--no-depth-rescale]
+
+Prints the mean PSNR of each sequence's last 4 frames (docs/DATA.md's metric,
+`lrd eval`'s sequence table) and their mean. `--per-frame` is FLR per frame on
+the same code (σ as given). Sequences as `tools/render.py --seq` writes them.
+Choose settings on training sequences only.
+"""
+import argparse
+import glob
+import os
+import sys
+
+import numpy as np
+import OpenEXR
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import flr_mirror as fm  # noqa: E402
+from flr_mirror import B  # noqa: E402
+
+DEPTH = 3  # the depth's index among the guides (normal x, y, z, depth, ao)
+
+
+def load(path):
+    fr = fm.load(path)
+    with OpenEXR.File(path) as f:
+        ch = f.channels()
+        if "motion.X" in ch:
+            fr["motion"] = np.stack([np.asarray(ch[f"motion.{c}"].pixels, dtype=np.float32) for c in "XY"], 0)
+    return fr
+
+
+def affine(m, q, a, b):
+    """The moments (fm.moments' layout, C × gh × gw) of z' = a z + b, from those
+    of z; `a`, `b`: per guide, shaped (q, 1, 1) or per cell (q, gh, gw)."""
+    n = m[0]
+    s = m[1:1 + q]
+    ss = m[1 + q:1 + q + q * q].reshape(q, q, *m.shape[1:])
+    y = m[1 + q + q * q:4 + q + q * q]
+    zy = m[4 + q + q * q:4 + 4 * q + q * q].reshape(q, 3, *m.shape[1:])
+    e = m[4 + 4 * q + q * q]
+    s2 = a * s + b * n
+    ss2 = a[:, None] * a[None] * ss + a[:, None] * b[None] * s[:, None] + b[:, None] * a[None] * s[None] + b[:, None] * b[None] * n
+    zy2 = a[:, None] * zy + b[:, None] * y[None]
+    return np.concatenate([n[None], s2, ss2.reshape(q * q, *m.shape[1:]), y, zy2.reshape(q * 3, *m.shape[1:]), e[None]], 0)
+
+
+def guide_means(m, q, mean, std):
+    """Each cell's mean guides in raw units (q × gh × gw)."""
+    return m[1:1 + q] / np.maximum(m[0], 1e-6) * std + mean
+
+
+def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit):
+    """The history H (in this frame's normalisation) and its lengths nH at each
+    current cell: bilinear over the previous grid at the cell's mean motion,
+    taps judged by their mean normal and depth. Cells without a kept tap get 0."""
+    gh, gw = m.shape[1:]
+    mv = fm.block_sum(motion, B) / (B * B)
+    cy, cx = np.meshgrid(np.arange(gh), np.arange(gw), indexing="ij")
+    px, py = cx + mv[0] / B, cy + mv[1] / B
+    x0, y0 = np.floor(px).astype(int), np.floor(py).astype(int)
+    fx, fy = px - x0, py - y0
+    cur, hist = guide_means(m, q, mean, std), guide_means(H, q, mean, std)
+    unit = lambda v: v / np.maximum(np.linalg.norm(v, axis=0), 1e-6)
+    nc = unit(cur[:3])
+    out, n_out, wsum = np.zeros_like(H), np.zeros((gh, gw)), np.zeros((gh, gw))
+    for dy, dx, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)), (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
+        tx, ty = x0 + dx, y0 + dy
+        inside = (tx >= 0) & (tx < gw) & (ty >= 0) & (ty < gh) & (w > 0)
+        tx, ty = np.clip(tx, 0, gw - 1), np.clip(ty, 0, gh - 1)
+        th = hist[:, ty, tx]
+        ok = inside & ((nc * unit(th[:3])).sum(0) >= normal_limit)
+        ok &= np.abs(th[DEPTH] - cur[DEPTH]) <= depth_limit * np.abs(cur[DEPTH])
+        w = np.where(ok, w, 0.0)
+        out += w[None] * H[:, ty, tx]
+        n_out += w * nH[ty, tx]
+        wsum += w
+    has = wsum > 1e-3
+    return np.where(has[None], out / np.maximum(wsum, 1e-9)[None], 0.0), np.where(has, n_out / np.maximum(wsum, 1e-9), 0.0)
+
+
+def rescale_depth(R, m, q, mean, std):
+    """R's depth moments scaled per cell by the current cell's mean depth over R's."""
+    hd, cd = guide_means(R, q, mean, std)[DEPTH], guide_means(m, q, mean, std)[DEPTH]
+    ok = (R[0] > 1e-6) & (np.abs(hd) > 1e-6)
+    r = np.clip(np.where(ok, cd / np.where(ok, hd, 1.0), 1.0), 0.5, 2.0)
+    a, b = np.ones((q, *r.shape)), np.zeros((q, *r.shape))
+    # depth' = r · depth in raw units, in z units: z' = r z + (r − 1) mean / std
+    a[DEPTH], b[DEPTH] = r, (r - 1) * mean[DEPTH, 0, 0] / std[DEPTH, 0, 0]
+    return affine(R, q, a, b)
+
+
+def blurred_mean(v, sigma):
+    """v (gh × gw) under FLR's window blur, normalised at the edges."""
+    return fm.blur(v[None], sigma)[0] / fm.blur(np.ones_like(v)[None], sigma)[0]
+
+
+def fit(m, z, sigmas, frames):
+    """fm.flr's adaptive window from the moments `m` (in z's normalisation),
+    each window's variance divided by its blurred history length `frames`."""
+    q, h, w = z.shape
+    gh, gw = m.shape[1:]
+    fits, v = [], []
+    for k, sg in enumerate(sigmas):
+        if not (k > 0 and sg >= 1.5 * B):
+            f = fm.solve(fm.blur(m, sg), q, 1e-3, 1e-2)
+            v.append(fm.variance(f, q, sg) / np.maximum(blurred_mean(frames, sg), 1.0))
+            fits.append(f)
+            continue
+        mp, fp = fm.block_sum(m, 2), fm.block_sum(frames[None], 2)[0] / 4
+        f = fm.solve(fm.blur(mp, sg / 2), q, 1e-3, 1e-2, cell=4 * B * B)
+        vp = fm.variance(f, q, sg, cell=4 * B * B) / np.maximum(blurred_mean(fp, sg / 2), 1.0)
+        pgh, pgw = mp.shape[1:]
+        cb = np.concatenate([f["c0"], f["beta"].reshape(pgh, pgw, q * 3), vp[..., None]], -1)
+        cb = np.moveaxis(fm.resize_bilinear(np.moveaxis(cb, -1, 0), gh, gw, 2, 2), 0, -1)
+        fits.append(dict(c0=cb[..., :3], beta=cb[..., 3:3 + 3 * q].reshape(gh, gw, q, 3)))
+        v.append(cb[..., 3 + 3 * q])
+    mse = [v[0]]
+    for k in range(1, len(sigmas)):
+        seen = np.maximum(v[0] - v[k], 0.0)
+        mse.append(np.maximum(fm.gap(fits[k], fits[0]) - fm.BIAS_DISCOUNT * seen, 0.0) + v[k])
+    wts = [1.0 / np.maximum(x, 1e-30) for x in mse]
+    tot = sum(wts)
+    c0 = sum(wk[..., None] * f["c0"] for wk, f in zip(wts, fits)) / tot[..., None]
+    beta = sum(wk[..., None, None] * f["beta"] for wk, f in zip(wts, fits)) / tot[..., None, None]
+    model = np.concatenate([c0, beta.reshape(gh, gw, q * 3)], -1).astype(np.float32)
+    model = fm.resize_bilinear(np.moveaxis(model, -1, 0), h, w, B, B)
+    return np.maximum(model[:3] + (model[3:].reshape(q, 3, h, w) * z[:, None]).sum(0), 0)
+
+
+def sequence(paths, a):
+    """PSNR of each frame of one sequence."""
+    scores, H, nH, prev = [], None, None, None
+    for path in paths:
+        fr = load(path)
+        y, g = fm.prep(fr)
+        ao = np.nan_to_num(fr["ao"][0].astype(np.float64), nan=1.0, posinf=1.0, neginf=1.0)
+        s = np.sqrt(np.clip(ao, 0, 1) + 0.1)[None]
+        mean = g.mean(axis=(1, 2), keepdims=True)
+        std = np.maximum(g.std(axis=(1, 2), ddof=1, keepdims=True), 1e-6)
+        z = (g - mean) / std
+        q = z.shape[0]
+        m = fm.moments(y / s, z)
+        if a.per_frame or H is None or "motion" not in fr:
+            H, nH = m, np.ones(m.shape[1:])
+        else:
+            pm, ps = prev
+            H = affine(H, q, ps / std, (pm - mean) / std)
+            motion = np.nan_to_num(fr["motion"].astype(np.float64))
+            R, nR = reproject(H, nH, m, motion, q, mean, std, a.normal_limit, a.depth_limit)
+            if not a.no_depth_rescale:
+                R = rescale_depth(R, m, q, mean, std)
+            nH = np.minimum(nR + 1.0, a.max_history)
+            H = (1 - 1 / nH)[None] * R + (1 / nH)[None] * m
+        prev = (mean, std)
+        scores.append(fm.psnr(fit(H, z, a.sigmas, nH) * s, fr))
+    return scores
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("seqs", nargs="+")
+    ap.add_argument("--sigmas", default="3,6,12", type=lambda v: tuple(float(x) for x in v.split(",")))
+    ap.add_argument("--per-frame", action="store_true")
+    ap.add_argument("--normal-limit", type=float, default=0.8)
+    ap.add_argument("--depth-limit", type=float, default=0.1)
+    ap.add_argument("--max-history", type=float, default=16.0)
+    ap.add_argument("--no-depth-rescale", action="store_true")
+    a = ap.parse_args()
+    last4 = []
+    for d in a.seqs:
+        sc = sequence(sorted(glob.glob(os.path.join(d, "frame_*.exr"))), a)
+        last4.append(float(np.mean(sc[-4:])))
+        print(f"{os.path.basename(d.rstrip('/'))}: last 4 {last4[-1]:.2f} dB, all {np.mean(sc):.2f} dB", flush=True)
+    print(f"mean of the last 4 frames over {len(last4)} sequences: {np.mean(last4):.2f} dB")
+
+
+if __name__ == "__main__":
+    main()
