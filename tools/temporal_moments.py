@@ -11,7 +11,8 @@ Per frame:
    reprojected per cell: bilinear over the previous cell grid at the cell's
    mean motion (previous − current, pixels). Each of the 4 taps is kept where
    its cells' mean normal is within `--normal-limit` (cosine) of the current
-   cell's and its mean depth within `--depth-limit` (relative).
+   cell's and its mean depth within `--depth-limit` (relative), or both cells
+   have no geometry (sky continues sky, as in the library's stage).
 3. Depth changes as the camera moves (a dolly): each reprojected cell's depth
    moments are rescaled by the ratio of the current cell's mean depth to the
    history's (clamped to 0.5–2), so its samples sit at this frame's depth.
@@ -84,6 +85,7 @@ def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit):
     fx, fy = px - x0, py - y0
     cur, hist = guide_means(m, q, mean, std), guide_means(H, q, mean, std)
     unit = lambda v: v / np.maximum(np.linalg.norm(v, axis=0), 1e-6)
+    empty = lambda v: np.linalg.norm(v, axis=0) < 1e-6
     nc = unit(cur[:3])
     out, n_out, wsum = np.zeros_like(H), np.zeros((gh, gw)), np.zeros((gh, gw))
     for dy, dx, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)), (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
@@ -91,8 +93,10 @@ def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit):
         inside = (tx >= 0) & (tx < gw) & (ty >= 0) & (ty < gh) & (w > 0)
         tx, ty = np.clip(tx, 0, gw - 1), np.clip(ty, 0, gh - 1)
         th = hist[:, ty, tx]
-        ok = inside & ((nc * unit(th[:3])).sum(0) >= normal_limit)
-        ok &= np.abs(th[DEPTH] - cur[DEPTH]) <= depth_limit * np.abs(cur[DEPTH])
+        # (no geometry on both sides: sky continues sky)
+        sky = empty(cur[:3]) & empty(th[:3])
+        ok = inside & (((nc * unit(th[:3])).sum(0) >= normal_limit) | sky)
+        ok &= (np.abs(th[DEPTH] - cur[DEPTH]) <= depth_limit * np.abs(cur[DEPTH])) | sky
         w = np.where(ok, w, 0.0)
         out += w[None] * H[:, ty, tx]
         n_out += w * nH[ty, tx]
