@@ -24,8 +24,8 @@ Per frame:
     python3 tools/temporal_moments.py SEQ_DIR... [--sigmas 3,6,12] [--per-frame]
         [--normal-limit 0.8] [--depth-limit 0.1] [--max-history 16] [--no-depth-rescale]
 
-Prints the mean PSNR of each sequence's last 4 frames (docs/DATA.md's metric,
-`lrd eval`'s sequence table) and their mean. `--per-frame` is FLR per frame on
+Prints the mean PSNR and flicker of each sequence's last 4 frames (docs/DATA.md's
+metrics, as `lrd eval`'s sequence table has them) and their means. `--per-frame` is FLR per frame on
 the same code (σ as given). Sequences as `tools/render.py --seq` writes them.
 Choose settings on training sequences only.
 """
@@ -154,9 +154,39 @@ def fit(m, z, sigmas, frames):
     return np.maximum(model[:3] + (model[3:].reshape(q, 3, h, w) * z[:, None]).sum(0), 0)
 
 
+def tone_mapped(est, fr):
+    """The albedo-modulated image and reference, tone mapped as scored (docs/DATA.md)."""
+    albedo, ref = fr["albedo"].astype(np.float64), fr["reference"].astype(np.float64)
+    i, r = albedo * est, albedo * ref
+    lum = np.mean(fm.LUMA[0] * r[0] + fm.LUMA[1] * r[1] + fm.LUMA[2] * r[2])
+    k = 0.5 / lum if lum > 0 else 1.0
+    tm = lambda v: (np.maximum(v, 0) * k / (1 + np.maximum(v, 0) * k)) ** (1 / 2.2)
+    return tm(i), tm(r)
+
+
+def warp(img, motion):
+    """`img` (3 × h × w) at each pixel's previous position, bilinear; NaN where a tap leaves it."""
+    _, h, w = img.shape
+    ys, xs = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    px, py = xs + motion[0], ys + motion[1]
+    fx, fy = np.floor(px), np.floor(py)
+    inside = (fx >= 0) & (fy >= 0) & (fx + 1 < w) & (fy + 1 < h)
+    x, y = np.clip(fx, 0, w - 2).astype(int), np.clip(fy, 0, h - 2).astype(int)
+    ax, ay = px - fx, py - fy
+    out = (1 - ay) * ((1 - ax) * img[:, y, x] + ax * img[:, y, x + 1]) + ay * ((1 - ax) * img[:, y + 1, x] + ax * img[:, y + 1, x + 1])
+    return np.where(inside[None], out, np.nan)
+
+
+def flicker(o, r, prev, motion):
+    """`lrd eval`'s flicker (`metrics::flicker`): the RMS of (O − W O') − (R − W R')."""
+    po, pr = warp(prev[0], motion), warp(prev[1], motion)
+    d = (o - po) - (r - pr)
+    return float(np.sqrt(np.nanmean(d * d)))
+
+
 def sequence(paths, a):
-    """PSNR of each frame of one sequence."""
-    scores, H, nH, prev = [], None, None, None
+    """PSNR and flicker (None for the first frame) of each frame of one sequence."""
+    scores, flickers, H, nH, prev, prev_tm = [], [], None, None, None, None
     for path in paths:
         fr = load(path)
         y, g = fm.prep(fr)
@@ -179,8 +209,12 @@ def sequence(paths, a):
             nH = np.minimum(nR + 1.0, a.max_history)
             H = (1 - 1 / nH)[None] * R + (1 / nH)[None] * m
         prev = (mean, std)
-        scores.append(fm.psnr(fit(H, z, a.sigmas, nH) * s, fr))
-    return scores
+        est = fit(H, z, a.sigmas, nH) * s
+        scores.append(fm.psnr(est, fr))
+        tm = tone_mapped(est, fr)
+        flickers.append(flicker(*tm, prev_tm, np.nan_to_num(fr["motion"].astype(np.float64))) if prev_tm and "motion" in fr else None)
+        prev_tm = tm
+    return scores, flickers
 
 
 def main():
@@ -193,12 +227,13 @@ def main():
     ap.add_argument("--max-history", type=float, default=16.0)
     ap.add_argument("--no-depth-rescale", action="store_true")
     a = ap.parse_args()
-    last4 = []
+    last4, fl4 = [], []
     for d in a.seqs:
-        sc = sequence(sorted(glob.glob(os.path.join(d, "frame_*.exr"))), a)
+        sc, fl = sequence(sorted(glob.glob(os.path.join(d, "frame_*.exr"))), a)
         last4.append(float(np.mean(sc[-4:])))
-        print(f"{os.path.basename(d.rstrip('/'))}: last 4 {last4[-1]:.2f} dB, all {np.mean(sc):.2f} dB", flush=True)
-    print(f"mean of the last 4 frames over {len(last4)} sequences: {np.mean(last4):.2f} dB")
+        fl4.append(float(np.mean([f for f in fl[-4:] if f is not None])))
+        print(f"{os.path.basename(d.rstrip('/'))}: last 4 {last4[-1]:.2f} dB, all {np.mean(sc):.2f} dB, flicker of the last 4 {fl4[-1]:.4f}", flush=True)
+    print(f"mean of the last 4 frames over {len(last4)} sequences: {np.mean(last4):.2f} dB, flicker {np.mean(fl4):.4f}")
 
 
 if __name__ == "__main__":
