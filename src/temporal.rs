@@ -664,7 +664,7 @@ impl Reprojection {
         let cfg = &self.cfg;
         let rec = self.record();
         let n_rows = write.len() / (w * rec);
-        let short = pixels.len() < n_rows * w * self.pixel_values() || rows.len() < self.rows_len();
+        let short = pixels.len() < n_rows * w * pv || rows.len() < self.rows_len();
         // the clamp measures whole bands of CELL rows: a band of rows starts on one
         if y0 + n_rows > h || !y0.is_multiple_of(CELL) || short {
             return Err(Error::InvalidTile { index: y0, count: h });
@@ -992,8 +992,8 @@ impl Reprojection {
     }
 
     /// Whether the output is accumulated ([`TemporalConfig::output_alpha`] < 1).
-    /// Without, step 1 gathers no previous output (its per-pixel values are
-    /// left as they were) and [`Reprojection::run_frame`] skips step 3.
+    /// Without, step 1 gathers no previous output (the scratch holds none) and
+    /// [`Reprojection::run_frame`] skips step 3.
     pub fn accumulates_output(&self) -> bool {
         self.cfg.output_alpha < 1.0
     }

@@ -1,7 +1,7 @@
 """Temporal FLR that accumulates FLR's cell moments instead of the light, in numpy
-on top of tools/flr_mirror.py (FLR's defaults op for op), to measure the design
-before it is built: a history of one moment vector per 8×8 cell instead of one
-record per pixel, so that a frame costs about one FLR.
+on top of tools/flr_mirror.py (FLR's defaults op for op, without the firefly
+clamp), to measure the design before it is built: a history of one moment vector
+per 8×8 cell instead of one record per pixel, so that a frame costs about one FLR.
 
 Per frame:
 1. FLR's block moments of the AO-demodulated noisy light, in this frame's guide
@@ -170,8 +170,8 @@ def warp(img, motion):
     ys, xs = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
     px, py = xs + motion[0], ys + motion[1]
     fx, fy = np.floor(px), np.floor(py)
-    inside = (fx >= 0) & (fy >= 0) & (fx + 1 < w) & (fy + 1 < h)
-    x, y = np.clip(fx, 0, w - 2).astype(int), np.clip(fy, 0, h - 2).astype(int)
+    inside = (fx >= 0) & (fy >= 0) & (fx + 1 < w) & (fy + 1 < h)  # false for NaN motion
+    x, y = (np.clip(np.nan_to_num(v), 0, n - 2).astype(int) for v, n in ((fx, w), (fy, h)))
     ax, ay = px - fx, py - fy
     out = (1 - ay) * ((1 - ax) * img[:, y, x] + ax * img[:, y, x + 1]) + ay * ((1 - ax) * img[:, y + 1, x] + ax * img[:, y + 1, x + 1])
     return np.where(inside[None], out, np.nan)
@@ -212,7 +212,7 @@ def sequence(paths, a):
         est = fit(H, z, a.sigmas, nH) * s
         scores.append(fm.psnr(est, fr))
         tm = tone_mapped(est, fr)
-        flickers.append(flicker(*tm, prev_tm, np.nan_to_num(fr["motion"].astype(np.float64))) if prev_tm and "motion" in fr else None)
+        flickers.append(flicker(*tm, prev_tm, fr["motion"].astype(np.float64)) if prev_tm and "motion" in fr else None)
         prev_tm = tm
     return scores, flickers
 

@@ -602,7 +602,7 @@ typedef struct LrdTemporalConfig {
   float clip_gamma;
   /**
    * Lowest blend weight of the new output frame, (0, 1]; 1 turns the output
-   * accumulation off, and its work and most of its scratch with it (default 0.5).
+   * accumulation off, and its work and 6 f32 per pixel of scratch with it (default 0.5).
    */
   float output_alpha;
   /**

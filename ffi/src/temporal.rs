@@ -50,7 +50,7 @@ pub struct LrdTemporalConfig {
     /// Half-width of the output's clip box in standard deviations (default 1.5).
     pub clip_gamma: f32,
     /// Lowest blend weight of the new output frame, (0, 1]; 1 turns the output
-    /// accumulation off, and its work and most of its scratch with it (default 0.5).
+    /// accumulation off, and its work and 6 f32 per pixel of scratch with it (default 0.5).
     pub output_alpha: f32,
     /// Fraction of pixels without history above which a frame is a camera cut
     /// and the history restarts, (0, 1] (default 0.5).
