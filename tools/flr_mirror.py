@@ -238,8 +238,22 @@ def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, eps_windows=
     mean = gs.mean(axis=(1, 2), keepdims=True)
     std = np.maximum(gs.std(axis=(1, 2), ddof=1, keepdims=True), 1e-6)
     z = (g - mean) / std
-    m = moments(y, z)
+    return fit_moments(moments(y, z), z, sigmas, eps_mul, eps_add, eps_windows, shared_residual, shrink, basis, use_f, mse_blur, K, wpow, chroma, subsets, subset_windows)
+
+
+def blurred_mean(v, sigma):
+    """v (gh × gw) under the window blur of σ pixels, normalised at the edges."""
+    return blur(v[None], sigma)[0] / blur(np.ones_like(v)[None], sigma)[0]
+
+
+def fit_moments(m, z, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, eps_windows=None, shared_residual=False, shrink=(0.0, 0.0, 0.0), basis="chol", use_f=False, mse_blur=0.0, K=BIAS_DISCOUNT, wpow=1.0, chroma=None, subsets=(), subset_windows=(0, 1, 2), frames=None):
+    """FLR from the block moments `m` of the normalised guides `z`: blur, solve,
+    adaptive blend and apply. `frames` (gh × gw, optional): the frames each
+    cell's moments average (tools/temporal_moments.py); each window's variance
+    is divided by their window-blurred mean."""
+    q, h, w = z.shape
     gh, gw = m.shape[1:]
+    shrink = tuple(shrink) + (0.0,) * (len(sigmas) - len(shrink))
     fits, v = [], []
     cands = [(k, sg, tuple(range(q))) for k, sg in enumerate(sigmas)]
     for keep in subsets:
@@ -252,6 +266,8 @@ def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, eps_windows=
         if not pooled:
             f = solve(blur(mm, sg), qq, eps_mul, ea, shrink[k], sg, basis=basis)
             vv = variance(f, qq, sg, use_f=use_f)
+            if frames is not None:
+                vv = vv / np.maximum(blurred_mean(frames, sg), 1.0)
             if LEVERAGE:
                 mu_c, cov_c = cell_stats(mm, qq)
                 vv = vv / (qq + 1) * LEV_SCALE * (1 + leverage(f["mu"], f["M"], mu_c, cov_c))
@@ -261,6 +277,8 @@ def flr(y, g, sigmas=(6.0, 12.0, 20.0), eps_mul=1e-3, eps_add=1e-2, eps_windows=
         mp = block_sum(mm, 2)
         f = solve(blur(mp, sg / 2), qq, eps_mul, ea, shrink[k], sg, cell=4 * B * B, basis=basis)
         vp = variance(f, qq, sg, cell=4 * B * B, use_f=use_f)
+        if frames is not None:
+            vp = vp / np.maximum(blurred_mean(block_sum(frames[None], 2)[0] / 4, sg / 2), 1.0)
         fM, fmu = f["M"], f["mu"]
         f = f if qq == q else expand(f, q, keep)
         pgh, pgw = mp.shape[1:]

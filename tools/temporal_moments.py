@@ -116,44 +116,6 @@ def rescale_depth(R, m, q, mean, std):
     return affine(R, q, a, b)
 
 
-def blurred_mean(v, sigma):
-    """v (gh × gw) under FLR's window blur, normalised at the edges."""
-    return fm.blur(v[None], sigma)[0] / fm.blur(np.ones_like(v)[None], sigma)[0]
-
-
-def fit(m, z, sigmas, frames):
-    """fm.flr's adaptive window from the moments `m` (in z's normalisation),
-    each window's variance divided by its blurred history length `frames`."""
-    q, h, w = z.shape
-    gh, gw = m.shape[1:]
-    fits, v = [], []
-    for k, sg in enumerate(sigmas):
-        if not (k > 0 and sg >= 1.5 * B):
-            f = fm.solve(fm.blur(m, sg), q, 1e-3, 1e-2)
-            v.append(fm.variance(f, q, sg) / np.maximum(blurred_mean(frames, sg), 1.0))
-            fits.append(f)
-            continue
-        mp, fp = fm.block_sum(m, 2), fm.block_sum(frames[None], 2)[0] / 4
-        f = fm.solve(fm.blur(mp, sg / 2), q, 1e-3, 1e-2, cell=4 * B * B)
-        vp = fm.variance(f, q, sg, cell=4 * B * B) / np.maximum(blurred_mean(fp, sg / 2), 1.0)
-        pgh, pgw = mp.shape[1:]
-        cb = np.concatenate([f["c0"], f["beta"].reshape(pgh, pgw, q * 3), vp[..., None]], -1)
-        cb = np.moveaxis(fm.resize_bilinear(np.moveaxis(cb, -1, 0), gh, gw, 2, 2), 0, -1)
-        fits.append(dict(c0=cb[..., :3], beta=cb[..., 3:3 + 3 * q].reshape(gh, gw, q, 3)))
-        v.append(cb[..., 3 + 3 * q])
-    mse = [v[0]]
-    for k in range(1, len(sigmas)):
-        seen = np.maximum(v[0] - v[k], 0.0)
-        mse.append(np.maximum(fm.gap(fits[k], fits[0]) - fm.BIAS_DISCOUNT * seen, 0.0) + v[k])
-    wts = [1.0 / np.maximum(x, 1e-30) for x in mse]
-    tot = sum(wts)
-    c0 = sum(wk[..., None] * f["c0"] for wk, f in zip(wts, fits)) / tot[..., None]
-    beta = sum(wk[..., None, None] * f["beta"] for wk, f in zip(wts, fits)) / tot[..., None, None]
-    model = np.concatenate([c0, beta.reshape(gh, gw, q * 3)], -1).astype(np.float32)
-    model = fm.resize_bilinear(np.moveaxis(model, -1, 0), h, w, B, B)
-    return np.maximum(model[:3] + (model[3:].reshape(q, 3, h, w) * z[:, None]).sum(0), 0)
-
-
 def tone_mapped(est, fr):
     """The albedo-modulated image and reference, tone mapped as scored (docs/DATA.md)."""
     albedo, ref = fr["albedo"].astype(np.float64), fr["reference"].astype(np.float64)
@@ -209,7 +171,7 @@ def sequence(paths, a):
             nH = np.minimum(nR + 1.0, a.max_history)
             H = (1 - 1 / nH)[None] * R + (1 / nH)[None] * m
         prev = (mean, std)
-        est = fit(H, z, a.sigmas, nH) * s
+        est = fm.fit_moments(H, z, a.sigmas, frames=nH) * s
         scores.append(fm.psnr(est, fr))
         tm = tone_mapped(est, fr)
         flickers.append(flicker(*tm, prev_tm, fr["motion"].astype(np.float64)) if prev_tm and "motion" in fr else None)
