@@ -102,6 +102,9 @@ pub struct FlrArgs {
     /// flr-temporal: the fit weighs each pixel by its history length, the samples its accumulated light averages (default off)
     #[arg(long)]
     pub history_weights: bool,
+    /// flr-temporal: what the history accumulates: "light" (default: the noisy light per pixel, then FLR on it) or "moments" (FLR's cell moments: about 1.2x FLR's time, below light's quality; reads --history only of the temporal flags)
+    #[arg(long, value_name = "light|moments")]
+    pub accumulate: Option<String>,
 }
 
 impl FlrArgs {
@@ -119,7 +122,7 @@ impl FlrArgs {
     /// method because `eval`, `report` and `bench` take one flag set for
     /// several methods at once, `--methods flr,bmfr`; this table gives clap's
     /// refusal instead, naming whose flag it is and what the method takes.)
-    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 26] {
+    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 27] {
         use Family::*;
         [
             ("--guides", self.guides.is_some(), &[Flr, Bmfr, Walr]),
@@ -149,6 +152,7 @@ impl FlrArgs {
             ("--clip-gamma", self.clip_gamma.is_some(), &[Flr]),
             ("--firefly-history", self.firefly_history.is_some(), &[Flr, Bmfr, Walr]),
             ("--history-weights", self.history_weights, &[Flr]),
+            ("--accumulate", self.accumulate.is_some(), &[Flr]),
         ]
     }
 
@@ -311,6 +315,30 @@ impl FlrArgs {
     /// The configuration for a frame (default guides depend on what it has).
     /// `cfg` with temporal FLR's window ([`FlrConfig::temporal`]) unless a
     /// window flag (`--sigma`, `--radius`, `--box`) chose one.
+    /// `--accumulate`: false for light (default), true for moments; refuses
+    /// the temporal flags the moments do not read.
+    pub fn accumulate_moments(&self) -> Result<bool, String> {
+        match self.accumulate.as_deref() {
+            None | Some("light") => Ok(false),
+            Some("moments") => {
+                let unread = [
+                    ("--output-alpha", self.output_alpha.is_some()),
+                    ("--clip-gamma", self.clip_gamma.is_some()),
+                    ("--firefly-history", self.firefly_history.is_some()),
+                    ("--history-weights", self.history_weights),
+                    ("--device", self.device.as_deref().is_some_and(|d| d != "cpu")),
+                ];
+                match unread.iter().find(|(_, given)| *given) {
+                    Some((flag, _)) => {
+                        Err(format!("flr-temporal --accumulate moments does not take {flag} (it accumulates no light; CPU only)"))
+                    }
+                    None => Ok(true),
+                }
+            }
+            Some(a) => Err(format!("--accumulate: '{a}' is not light or moments")),
+        }
+    }
+
     pub fn temporal_window(&self, mut cfg: FlrConfig) -> FlrConfig {
         if self.sigma.is_none() && self.radius.is_none() && self.box_radius.is_none() {
             cfg.blur = FlrConfig::temporal().blur;
@@ -692,6 +720,23 @@ impl Method {
                 let u = cfg.upsample.max(1);
                 let min_bytes = Some(one_pass_bytes(w, h, w.div_ceil(u) * h.div_ceil(u), cfg.guides.channels()));
                 Ok(Built { method: Method::flr(cfg, inputs, threads)?, label: label(&cfg), flags: flag_line(&cfg), min_bytes })
+            }
+            "flr-temporal" if a.accumulate_moments()? => {
+                let mut cfg = a.config(inputs)?;
+                if a.sigma.is_none() && a.radius.is_none() && a.box_radius.is_none() {
+                    cfg.blur = FlrConfig::temporal_moments().blur;
+                }
+                let temporal = a.temporal_config()?;
+                let runner = TemporalRunner::moments(cfg, temporal, w, h, threads)?;
+                let (mut label, mut flags) =
+                    (format!("{} temporal moments", label(&cfg)), flag_line(&cfg).replacen("--method flr", "--method flr-temporal", 1));
+                if temporal.max_history != lrdenoise::temporal::TemporalConfig::default().max_history {
+                    label += &format!(" h{}", temporal.max_history);
+                    flags += &format!(" --history {}", temporal.max_history);
+                }
+                flags += " --accumulate moments";
+                let min_bytes = Some(temporal_bytes(w, h, cfg.guides.channels(), &runner));
+                Ok(Built { method: Method::Temporal(Box::new(runner)), label, flags, min_bytes })
             }
             "flr-temporal" if a.gpu()? => {
                 let cfg = a.temporal_window(a.config(inputs)?);

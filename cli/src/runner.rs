@@ -2,6 +2,7 @@
 //! threads (each stage's tiles split into one contiguous group per thread).
 
 use lrdenoise::bmfr::Report as BmfrReport;
+use lrdenoise::flr::moment_history::MomentFlr;
 use lrdenoise::flr::temporal::TemporalFlr;
 use lrdenoise::temporal::TemporalConfig;
 use lrdenoise::walr::Report as WalrReport;
@@ -426,6 +427,13 @@ impl WalrRunner {
 pub enum Pipeline {
     Bmfr(Bmfr),
     Walr(Walr),
+    /// Temporal FLR on accumulated cell moments, its scratch and its threads.
+    Moments {
+        plan: Box<MomentFlr>,
+        scratch: Vec<f64>,
+        threads: usize,
+        pool: Option<rayon::ThreadPool>,
+    },
     /// Temporal FLR, its FLR scratch and its threads.
     Flr {
         plan: Box<TemporalFlr>,
@@ -475,6 +483,14 @@ impl TemporalRunner {
         let (scratch, history) = (plan.parallel_scratch_len(threads).max(plan.scratch_len()), plan.history_len());
         Ok(Self::with(scratch, history, Pipeline::Flr { plan: Box::new(plan), flr_scratch, threads, pool: pool(threads)? }))
     }
+    /// Temporal FLR on accumulated cell moments.
+    pub fn moments(cfg: FlrConfig, temporal: TemporalConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+        let plan = MomentFlr::new(cfg, &temporal, w, h).map_err(|e| format!("flr-temporal --accumulate moments: {e}"))?;
+        let threads = threads.max(1);
+        let scratch = vec![0f64; plan.parallel_scratch_len(threads).ok_or("flr-temporal: too many threads")?];
+        let history = plan.history_len();
+        Ok(Self::with(0, history, Pipeline::Moments { plan: Box::new(plan), scratch, threads, pool: pool(threads)? }))
+    }
     fn with(scratch: usize, history: usize, pipeline: Pipeline) -> Self {
         TemporalRunner { scratch: vec![0f32; scratch], history: vec![0f32; history], pipeline, frames: 0, saved: None }
     }
@@ -497,6 +513,7 @@ impl TemporalRunner {
             Pipeline::Bmfr(b) => b.config().guides,
             Pipeline::Walr(w) => w.config().guides,
             Pipeline::Flr { plan, .. } => plan.frame_guides(),
+            Pipeline::Moments { plan, .. } => plan.config().guides,
         };
         let (w, h) = (inputs.w, inputs.h);
         let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;
@@ -508,6 +525,20 @@ impl TemporalRunner {
         let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
         let mut history = History::resume(&mut self.history, self.frames);
         let r = match &mut self.pipeline {
+            Pipeline::Moments { plan, scratch, threads, pool } => match pool {
+                Some(pool) => plan.denoise_parallel(
+                    &frame,
+                    motion.as_ref(),
+                    &mut history,
+                    scratch,
+                    &mut ov,
+                    *threads,
+                    &for_each_in_groups(pool, *threads),
+                ),
+                None => plan.denoise(&frame, motion.as_ref(), &mut history, scratch, &mut ov),
+            }
+            .map(|_| ())
+            .map_err(|e| format!("flr-temporal --accumulate moments: {e}")),
             Pipeline::Flr { plan, flr_scratch, threads, pool } => match pool {
                 Some(pool) => plan.denoise_parallel(
                     &frame,

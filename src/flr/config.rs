@@ -120,6 +120,9 @@ pub const DEFAULT_SIGMAS: [f32; 3] = [6.0, 12.0, 20.0];
 /// fit it better (chosen on the training sequences: +0.28 dB over
 /// [`DEFAULT_SIGMAS`] there, last 4 frames, and higher on each of the 5).
 pub const TEMPORAL_SIGMAS: [f32; 3] = [3.0, 6.0, 12.0];
+/// Window of temporal FLR on accumulated moments ([`FlrConfig::temporal_moments`]):
+/// σ 6 pixels, chosen on the training sequences.
+pub const TEMPORAL_MOMENTS_SIGMA: f32 = 6.0;
 /// Default ε (multiplicative regulariser).
 pub const DEFAULT_EPS_MUL: f64 = 1e-3;
 /// Default ϵ (additive regulariser).
@@ -156,6 +159,15 @@ impl FlrConfig {
     /// [`FlrConfig::default`].
     pub fn temporal() -> Self {
         FlrConfig { blur: Blur::Adaptive { sigmas: TEMPORAL_SIGMAS }, ..Self::default() }
+    }
+
+    /// The defaults for temporal FLR on accumulated moments
+    /// ([`crate::flr::moment_history::MomentFlr`]): one Gaussian window of
+    /// σ = [`TEMPORAL_MOMENTS_SIGMA`] pixels, the rest as [`FlrConfig::default`].
+    /// The accumulated cells are less noisy than a frame's, so one window
+    /// scores as the adaptive one there (`docs/METHODS.md`) for less work.
+    pub fn temporal_moments() -> Self {
+        FlrConfig { blur: Blur::Gaussian { sigma: TEMPORAL_MOMENTS_SIGMA, radius: None }, ..Self::default() }
     }
 
     /// Checks every field.

@@ -25,6 +25,7 @@
 pub mod adaptive;
 pub mod config;
 pub mod gpu;
+pub mod moment_history;
 pub mod schedule;
 pub mod temporal;
 
@@ -262,6 +263,13 @@ pub struct Flr {
     taps: [Taps; MAX_SCALES],
     /// The grid each window is fitted on.
     grids: [Grid; MAX_SCALES],
+    /// Most samples per pixel the adaptive window's variances count: 1 for a
+    /// frame; the history cap for cells that hold sums over several frames
+    /// (`moment_history`).
+    sample_cap: f64,
+    /// Whether the `Moments` stage also sums the pooled cells (not when a
+    /// later pass changes the cells and pools them itself: `moment_history`).
+    pool_in_moments: bool,
 }
 
 impl Flr {
@@ -309,7 +317,23 @@ impl Flr {
             ml: model_len(q),
             taps,
             grids,
+            sample_cap: 1.0,
+            pool_in_moments: true,
         })
+    }
+
+    /// The same plan for cells that hold sums over up to `cap` frames
+    /// (`moment_history`): the adaptive window's variances count up to `cap`
+    /// samples per pixel. 1 is a single frame's plan.
+    pub(crate) fn with_sample_cap(mut self, cap: f64) -> Self {
+        self.sample_cap = if cap.is_finite() { cap.max(1.0) } else { 1.0 };
+        self
+    }
+
+    /// The same plan whose `Moments` stage leaves the pooled cells to the caller.
+    pub(crate) fn without_pooling_in_moments(mut self) -> Self {
+        self.pool_in_moments = false;
+        self
     }
 
     /// The configuration.
@@ -1181,7 +1205,10 @@ impl Flr {
         }
         if !variances_tile.is_empty() {
             let (area, simd) = (self.window_area(s), self.kernel_simd());
-            dispatch_q!(self.q, variances_of(cells_tile, models_tile, fits, &p, area, simd, variances_tile));
+            // samples = area · min(n · norm, 1) counts at most `sample_cap` per
+            // pixel as (area · cap) · min(n · norm / cap, 1): the same values at 1
+            let (area, vp) = (area * self.sample_cap, SolveParams { weight_norm: p.weight_norm / self.sample_cap, ..p });
+            dispatch_q!(self.q, variances_of(cells_tile, models_tile, fits, &vp, area, simd, variances_tile));
         }
         Ok(rep)
     }

@@ -150,18 +150,51 @@ impl Flr {
     pub(crate) fn denoise_checked(&self, f: &CheckedFrame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
         self.check_output(out)?;
         let tiled = self.tiled(scratch, 1)?;
-        let mut rep = Report::default();
-        for stage in Stage::ALL {
-            for tile in 0..self.stage_tiles(stage) {
-                rep += if stage == Stage::Apply {
-                    let (y0, y1) = self.tile_pixel_rows(tile)?;
-                    tiled.run(f, stage, tile, 0, Some(&mut out.rows(y0, y1 - y0)?))?
-                } else {
-                    tiled.run(f, stage, tile, 0, None)?
-                };
+        self.run_stages(&tiled, f, out, &Stage::ALL, None)
+    }
+
+    /// Every tile of `stages` (consecutive, in run order) of the frame on
+    /// `tiled`: on the calling thread as worker 0, or over `for_each` (then
+    /// `out` must have rows that do not overlap in memory).
+    pub(crate) fn run_stages(
+        &self,
+        tiled: &Tiled<'_>,
+        f: &CheckedFrame<'_>,
+        out: &mut ImageViewMut<'_>,
+        stages: &[Stage],
+        for_each: Option<Executor<'_>>,
+    ) -> Result<Report, Error> {
+        let Some(for_each) = for_each else {
+            let mut rep = Report::default();
+            for &stage in stages {
+                for tile in 0..self.stage_tiles(stage) {
+                    rep += if stage == Stage::Apply {
+                        let (y0, y1) = self.tile_pixel_rows(tile)?;
+                        tiled.run(f, stage, tile, 0, Some(&mut out.rows(y0, y1 - y0)?))?
+                    } else {
+                        tiled.run(f, stage, tile, 0, None)?
+                    };
+                }
+            }
+            return Ok(rep);
+        };
+        let bands = crate::image::RowBands::new(out)
+            .ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use Flr::denoise)"))?;
+        let shared = Shared { tiled, out: bands, result: ResultCell::new() };
+        for &stage in stages {
+            let n = self.stage_tiles(stage);
+            let run = |tile: usize, worker: usize| shared.run(f, stage, tile, worker);
+            if n == 1 {
+                run(0, 0);
+            } else {
+                for_each(n, &run);
+            }
+            shared.result.error()?;
+            if !tiled.completed(stage) {
+                return Err(Error::StageOrder { stage: stage.index() as u8, tile: 0 });
             }
         }
-        Ok(rep)
+        Ok(shared.result.report())
     }
 
     /// Scratch length in f64 elements for [`Flr::denoise`] (one worker).
@@ -386,6 +419,27 @@ impl<'s> Tiled<'s> {
         r
     }
 
+    /// Between [`Stage::Stats`] and [`Stage::BlurRows`]: the block cells, the
+    /// pooled cells (empty without a pooled window) and the frame's
+    /// statistics, for a caller that changes the moments before they are
+    /// blurred (`moment_history`). Refused unless every `Stats` tile has
+    /// completed and no `BlurRows` tile has started.
+    pub(crate) fn cells_before_blur(&mut self) -> Result<(&mut [f64], &mut [f64], Stats), Error> {
+        let blur = Stage::BlurRows;
+        let started = self.word(DONE_AT + blur.index()).load(Ordering::Acquire) != 0
+            || (0..self.tile_words)
+                .any(|i| self.word(BITS_AT + self.worker_words + blur.index() * self.tile_words + i).load(Ordering::Acquire) != 0);
+        if !self.completed(Stage::Stats) || started {
+            return Err(Error::StageOrder { stage: blur.index() as u8, tile: 0 });
+        }
+        let (cells, pooled) = (self.layout.cells.clone(), self.layout.pooled.clone());
+        // SAFETY: `&mut self`: no call through this `Tiled` is in flight, and
+        // between Stats and BlurRows no tile reads or writes the two regions,
+        // which are disjoint and inside the buffer (`tiled_raw`); Stats is
+        // written only by Prepare and Stats.
+        unsafe { Ok((self.f64s_mut(cells.start, cells.len()), self.f64s_mut(pooled.start, pooled.len()), self.stats_ptr().read())) }
+    }
+
     fn stats_ptr(&self) -> *mut Stats {
         // SAFETY: `stats_at + STATS_LEN` is inside the buffer (checked in `tiled_raw`).
         unsafe { self.base.add(self.stats_at) as *mut Stats }
@@ -461,7 +515,7 @@ impl<'s> Tiled<'s> {
             Stage::Moments => {
                 let cells = band(l.cells.start, flr.cells_tile_range(tile)?);
                 let rep = flr.moments_tile(frame, &stats, tile, cells, worker_buf())?;
-                if let Some(s) = flr.pooled_window() {
+                if let Some(s) = flr.pooled_window().filter(|_| flr.pool_in_moments) {
                     flr.pool_tile(tile, cells, band(l.pooled.start, flr.window_cells_tile_range(s, tile)?))?;
                 }
                 rep
@@ -560,23 +614,7 @@ impl Flr {
     ) -> Result<Report, Error> {
         let tiled = self.tiled(scratch, workers)?;
         self.check_output(out)?;
-        let bands = crate::image::RowBands::new(out)
-            .ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use Flr::denoise)"))?;
-        let shared = Shared { tiled: &tiled, out: bands, result: ResultCell::new() };
-        for stage in Stage::ALL {
-            let n = self.stage_tiles(stage);
-            let run = |tile: usize, worker: usize| shared.run(f, stage, tile, worker);
-            if n == 1 {
-                run(0, 0);
-            } else {
-                for_each(n, &run);
-            }
-            shared.result.error()?;
-            if !tiled.completed(stage) {
-                return Err(Error::StageOrder { stage: stage.index() as u8, tile: 0 });
-            }
-        }
-        Ok(shared.result.report())
+        self.run_stages(&tiled, f, out, &Stage::ALL, Some(for_each))
     }
 }
 

@@ -1,0 +1,954 @@
+//! Temporal FLR on accumulated cell moments: the history is FLR's block
+//! moments, not the light, so that a frame costs one FLR plus one pass over
+//! the cells (`docs/METHODS.md`, Temporal FLR).
+//!
+//! A frame runs FLR's [`Stage::Prepare`], [`Stage::Moments`] and
+//! [`Stage::Stats`]; then two passes over the tiles:
+//! - **history**: each cell's mean motion; the previous frame's cells
+//!   sampled bilinearly there, a tap kept where its mean normal and depth
+//!   match the cell's ([`TapTest`]); the taps moved into this frame's guide
+//!   references, their depth rescaled to the cell's, and blended with the
+//!   cell as a running mean over up to `max_history` frames;
+//! - **commit**: the fit's cells become the sums over those frames (or, when
+//!   more than `cut_fraction` of the cells kept no tap, a camera cut, every
+//!   cell restarts from its own frame), and the pooled window is summed again;
+//!
+//! then FLR's remaining stages. The adaptive window counts up to
+//! `max_history` samples per pixel in its variances.
+//!
+//! The caller-owned [`History`] holds two slots (the previous frame's, and
+//! the one this frame writes), each the frame's guide references and, per
+//! cell, its moments (a running mean, relative to the references), its
+//! history length and its mean guides. The values are f64, stored as two
+//! 32-bit words each in the history's f32 buffer (bit patterns, never used
+//! as f32).
+
+use core::sync::atomic::{AtomicU64, Ordering};
+
+use super::schedule::Stage;
+use super::{Flr, FlrConfig, Stats};
+use crate::error::{Arg, Error};
+use crate::guides::{Frame, MAX_GUIDES};
+use crate::history::History;
+use crate::image::{ImageView, ImageViewMut};
+use crate::kernels::CellLayout;
+use crate::parallel::{run_tiles, Executor};
+use crate::report::Report;
+use crate::temporal::TemporalConfig;
+
+/// Smallest cosine between the mean normals of a cell and a history tap.
+pub const NORMAL_LIMIT: f64 = 0.8;
+/// Largest relative difference between the mean depths of a cell and a history tap.
+pub const DEPTH_LIMIT: f64 = 0.1;
+
+/// f64 value `i` of a history slot stored as two words.
+#[inline]
+fn get(words: &[u32], i: usize) -> f64 {
+    f64::from_bits(u64::from(words[2 * i]) | (u64::from(words[2 * i + 1]) << 32))
+}
+/// Stores f64 value `i` of a history slot as two words.
+#[inline]
+fn put(words: &mut [u32], i: usize, v: f64) {
+    let b = v.to_bits();
+    words[2 * i] = b as u32;
+    words[2 * i + 1] = (b >> 32) as u32;
+}
+
+/// The moments of `g' = a g + b` (per guide) from the moments of `g`, in
+/// place: exact, since every moment is a polynomial of degree ≤ 2 in `g`.
+/// `n`, the light sums and the energy do not change.
+pub(crate) fn affine(cell: &mut [f64], lay: &CellLayout, a: &[f64], b: &[f64]) {
+    let q = lay.q;
+    let n = cell[0];
+    let mut s = [0f64; MAX_GUIDES];
+    s[..q].copy_from_slice(&cell[lay.s..lay.s + q]);
+    let t = [cell[lay.t], cell[lay.t + 1], cell[lay.t + 2]];
+    let mut p = lay.ss;
+    for i in 0..q {
+        for j in i..q {
+            cell[p] = a[i] * a[j] * cell[p] + a[i] * b[j] * s[i] + b[i] * a[j] * s[j] + b[i] * b[j] * n;
+            p += 1;
+        }
+    }
+    for i in 0..q {
+        cell[lay.s + i] = a[i] * s[i] + b[i] * n;
+        for (c, tc) in t.iter().enumerate() {
+            let at = lay.p + 3 * i + c;
+            cell[at] = a[i] * cell[at] + b[i] * tc;
+        }
+    }
+}
+
+/// A cell's mean guides in raw units (`s / n + reference`); `None` for an empty cell.
+pub(crate) fn mean_guides(cell: &[f64], lay: &CellLayout, reference: &[f32]) -> Option<[f64; MAX_GUIDES]> {
+    let n = cell[0];
+    if n.is_nan() || n <= 0.0 {
+        return None;
+    }
+    let mut m = [0f64; MAX_GUIDES];
+    for (i, v) in m.iter_mut().enumerate().take(lay.q) {
+        *v = cell[lay.s + i] / n + reference[i] as f64;
+    }
+    Some(m)
+}
+
+/// How a history tap is judged against the current cell: the cosine between
+/// their mean normals (guides 0..3) and the relative difference of their mean
+/// depths (guide `depth`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TapTest {
+    pub normal_limit: f64,
+    pub depth_limit: f64,
+    /// The depth's guide index, if the guides have one.
+    pub depth: Option<usize>,
+}
+
+impl TapTest {
+    /// Whether a tap whose mean guides are `tap` may feed a cell whose mean
+    /// guides are `cur` (guides 0..3 are the normal).
+    pub(crate) fn accepts(&self, cur: &[f64; MAX_GUIDES], tap: &[f64; MAX_GUIDES]) -> bool {
+        let norm = |v: &[f64; MAX_GUIDES]| crate::kernels::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        let (nc, nt) = (norm(cur), norm(tap));
+        if nc < 1e-6 && nt < 1e-6 {
+            // no geometry on both sides: sky continues sky
+            return true;
+        }
+        let dot = cur[0] * tap[0] + cur[1] * tap[1] + cur[2] * tap[2];
+        if !(nc > 0.0 && nt > 0.0 && dot >= self.normal_limit * nc * nt) {
+            return false;
+        }
+        match self.depth {
+            Some(d) => (tap[d] - cur[d]).abs() <= self.depth_limit * cur[d].abs(),
+            None => true,
+        }
+    }
+}
+
+/// One cell of the reprojected history. `prev` holds the previous frame's
+/// cell records (`rec` f64 each, stored as word pairs: `lay.k` moments, the
+/// history length, `MAX_GUIDES` mean guides, NaN for an empty cell) on a
+/// `cx × cy` grid; they are sampled bilinearly at the cell centre `(x, y)`
+/// moved by `motion` (previous − current, in cells), each of the 4 taps kept
+/// where `test` accepts its mean guides against `cur`. Writes the kept taps'
+/// weighted mean into `out` and returns their mean history length (0 and
+/// zeros when no tap is kept).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn reproject_cell(
+    prev: &[u32],
+    rec: usize,
+    (cx, cy): (usize, usize),
+    lay: &CellLayout,
+    (x, y): (usize, usize),
+    motion: (f64, f64),
+    cur: &[f64; MAX_GUIDES],
+    test: &TapTest,
+    out: &mut [f64],
+) -> f64 {
+    let k = lay.k;
+    out[..k].fill(0.0);
+    let (px, py) = (x as f64 + motion.0, y as f64 + motion.1);
+    if !(px.is_finite() && py.is_finite()) {
+        return 0.0;
+    }
+    let (fx, fy) = (libm::floor(px), libm::floor(py));
+    let (ax, ay) = (px - fx, py - fy);
+    let (mut wsum, mut nsum) = (0f64, 0f64);
+    for (dx, dy, w) in [(0, 0, (1.0 - ax) * (1.0 - ay)), (1, 0, ax * (1.0 - ay)), (0, 1, (1.0 - ax) * ay), (1, 1, ax * ay)] {
+        let (tx, ty) = (fx + dx as f64, fy + dy as f64);
+        if !(w > 0.0 && tx >= 0.0 && ty >= 0.0 && tx < cx as f64 && ty < cy as f64) {
+            continue;
+        }
+        let at = (ty as usize * cx + tx as usize) * rec;
+        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|i| get(prev, at + k + 1 + i));
+        if tm[0].is_nan() || !test.accepts(cur, &tm) {
+            continue;
+        }
+        for (j, o) in out[..k].iter_mut().enumerate() {
+            *o += w * get(prev, at + j);
+        }
+        nsum += w * get(prev, at + k);
+        wsum += w;
+    }
+    if wsum <= 1e-3 {
+        out[..k].fill(0.0);
+        return 0.0;
+    }
+    for o in out[..k].iter_mut() {
+        *o /= wsum;
+    }
+    nsum / wsum
+}
+
+/// The depth moments of `hist` (the reprojected history) scaled so that its
+/// mean depth is the current cell's: `d' = r d` in raw units, `r` the ratio
+/// of the current mean depth to the history's, clamped to 0.5–2 (a dolly
+/// moves every surface's depth).
+pub(crate) fn rescale_depth(hist: &mut [f64], lay: &CellLayout, cur: &[f64; MAX_GUIDES], reference: &[f32], depth: usize) {
+    let Some(h) = mean_guides(hist, lay, reference) else { return };
+    if h[depth].is_nan() || h[depth].abs() <= 1e-6 {
+        return;
+    }
+    let r = (cur[depth] / h[depth]).clamp(0.5, 2.0);
+    if !r.is_finite() {
+        return;
+    }
+    let (mut a, mut b) = ([1f64; MAX_GUIDES], [0f64; MAX_GUIDES]);
+    // g − ref ↦ r (g − ref) + (r − 1) ref, so that g ↦ r g
+    a[depth] = r;
+    b[depth] = (r - 1.0) * reference[depth] as f64;
+    affine(hist, lay, &a, &b);
+}
+
+/// Settings of the moment history.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Blend {
+    pub test: TapTest,
+    /// Longest history, in frames.
+    pub max_history: f64,
+}
+
+/// One cell of a frame: the current cell's moments `cell` (in this frame's
+/// `reference`) blended with the previous records `prev` (in
+/// `prev_reference`; see [`reproject_cell`]) reprojected at it. Writes the
+/// history's new moments (the running mean of the frames' moments) into
+/// `hist` and returns the new length `n` (1, and `hist` the cell's own
+/// moments, when no tap was kept). The fit takes `hist · n`, the sums over
+/// `n` frames, so that its sample counts are frames × pixels.
+/// `work`: `lay.k` values of working space.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn blend_cell(
+    cell: &[f64],
+    hist: &mut [f64],
+    prev: &[u32],
+    rec: usize,
+    grid: (usize, usize),
+    lay: &CellLayout,
+    at: (usize, usize),
+    motion: (f64, f64),
+    reference: &[f32],
+    prev_reference: &[f32],
+    blend: &Blend,
+    work: &mut [f64],
+) -> f64 {
+    let k = lay.k;
+    let Some(cur) = mean_guides(cell, lay, reference) else {
+        hist[..k].copy_from_slice(&cell[..k]);
+        return 1.0;
+    };
+    let n_prev = reproject_cell(prev, rec, grid, lay, at, motion, &cur, &blend.test, work);
+    if n_prev <= 0.0 {
+        hist[..k].copy_from_slice(&cell[..k]);
+        return 1.0;
+    }
+    // into this frame's references: g − ref' = (g − ref) + (ref − ref'), a
+    // map linear in the moments, so the taps' mean maps as each tap would
+    let (a, mut b) = ([1f64; MAX_GUIDES], [0f64; MAX_GUIDES]);
+    for (i, v) in b.iter_mut().enumerate().take(lay.q) {
+        *v = prev_reference[i] as f64 - reference[i] as f64;
+    }
+    affine(&mut work[..k], lay, &a, &b);
+    if let Some(d) = blend.test.depth {
+        rescale_depth(&mut work[..k], lay, &cur, reference, d);
+    }
+    let n = (n_prev + 1.0).min(blend.max_history);
+    let w = 1.0 / n;
+    for ((h, c), r) in hist[..k].iter_mut().zip(&cell[..k]).zip(&work[..k]) {
+        *h = (1.0 - w) * r + w * c;
+    }
+    n
+}
+
+/// A raw pointer the tiles of one pass share; each tile takes its own band.
+#[derive(Clone, Copy)]
+struct Shared<T>(*mut T);
+// SAFETY: the tiles that use it take disjoint bands ([`run_tiles`] runs each
+// tile once) and the pointee outlives the pass.
+unsafe impl<T> Sync for Shared<T> {}
+// SAFETY: as for `Sync`.
+unsafe impl<T> Send for Shared<T> {}
+
+impl<T> Shared<T> {
+    /// `len` values at `at`.
+    ///
+    /// # Safety
+    /// Inside the pointee, and no other live reference overlaps them.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn band(&self, at: usize, len: usize) -> &mut [T] {
+        // SAFETY: the caller's contract.
+        unsafe { core::slice::from_raw_parts_mut(self.0.add(at), len) }
+    }
+}
+
+/// Temporal FLR on accumulated cell moments (the module's doc): one plan per
+/// frame size and configuration. It needs the normal guide (the history's
+/// taps are judged by their mean normal, and by their mean depth where the
+/// guides have depth) and no joint upsampling.
+#[derive(Clone, Debug)]
+pub struct MomentFlr {
+    flr: Flr,
+    blend: Blend,
+    /// A frame with more than this fraction of fresh cells is a camera cut.
+    cut_fraction: f64,
+}
+
+impl MomentFlr {
+    /// Plans `width × height` frames; of `temporal` it reads `max_history`
+    /// and `cut_fraction`. [`FlrConfig::temporal_moments`] is the default
+    /// configuration for it.
+    pub fn new(cfg: FlrConfig, temporal: &TemporalConfig, width: usize, height: usize) -> Result<Self, Error> {
+        temporal.validate()?;
+        if cfg.upsample != 1 {
+            return Err(Error::Unsupported("temporal FLR on moments with joint upsampling (upsample > 1)"));
+        }
+        if !cfg.guides.normal {
+            return Err(Error::Unsupported("temporal FLR on moments needs the normal guide (taps are judged by their mean normal)"));
+        }
+        let max_history = temporal.max_history as f64;
+        let flr = Flr::new(cfg, width, height)?.with_sample_cap(max_history).without_pooling_in_moments();
+        // the normal is guides 0..3, so the depth is guide 3
+        let test = TapTest { normal_limit: NORMAL_LIMIT, depth_limit: DEPTH_LIMIT, depth: cfg.guides.depth.then_some(3) };
+        Ok(MomentFlr { flr, blend: Blend { test, max_history }, cut_fraction: temporal.cut_fraction as f64 })
+    }
+    /// The FLR configuration it fits with.
+    pub fn config(&self) -> &FlrConfig {
+        self.flr.config()
+    }
+    /// Output size.
+    pub fn size(&self) -> (usize, usize) {
+        self.flr.size()
+    }
+    fn cells(&self) -> usize {
+        let (cx, cy) = self.flr.cells();
+        cx * cy
+    }
+    /// f64 values per cell record: moments, length, mean guides.
+    fn record(&self) -> usize {
+        self.flr.lay.k + 1 + MAX_GUIDES
+    }
+    /// f64 values of one slot: the references, then the cell records.
+    fn slot_len(&self) -> usize {
+        MAX_GUIDES + self.cells() * self.record()
+    }
+    /// f32 values of the [`History`] buffer (two slots of f64 values).
+    pub fn history_len(&self) -> usize {
+        4 * self.slot_len()
+    }
+    /// f64 values of a worker's buffer: a motion row (two f32 planes), the
+    /// cell row's mean motion, two cells of working space.
+    fn worker_len(&self) -> usize {
+        self.flr.size().0 + 3 * self.flr.cells().0 + 2 * self.flr.lay.k
+    }
+    /// f64 values of the scratch of [`MomentFlr::denoise_parallel`] with `workers`.
+    pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let own = crate::parallel::TileRun::scratch_len(self.flr.tile_count(), workers, 2 * self.worker_len())?;
+        self.flr.tiled_scratch_len(workers)?.checked_add(own.div_ceil(2))
+    }
+    /// f64 values of the scratch of [`MomentFlr::denoise`].
+    pub fn scratch_len(&self) -> usize {
+        self.parallel_scratch_len(1).unwrap_or(usize::MAX)
+    }
+
+    /// One frame of the sequence on the calling thread; advances `history`
+    /// (a [`History`] of [`MomentFlr::history_len`] f32: its frame count 0
+    /// starts afresh). `motion` (2 channels, previous − current pixel
+    /// position) may be `None` for a static camera. Allocates nothing.
+    pub fn denoise(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        self.run(frame, motion, history, scratch, out, None)
+    }
+
+    /// [`MomentFlr::denoise`] with the tiles spread by the caller's executor
+    /// (as [`Flr::denoise_parallel`]); the same bits.
+    #[allow(clippy::too_many_arguments)]
+    pub fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        self.run(frame, motion, history, scratch, out, Some((workers, for_each)))
+    }
+
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        parallel: Option<(usize, Executor<'_>)>,
+    ) -> Result<Report, Error> {
+        if frame.sample_weights.is_some() || frame.guides_low.is_some() {
+            return Err(Error::Unsupported("temporal FLR on moments with sample weights or a low-resolution guide set"));
+        }
+        let f = self.flr.check_frame(frame)?;
+        self.flr.check_output(out)?;
+        if history.data.len() != self.history_len() {
+            return Err(Error::BufferTooSmall { arg: Arg::History, needed: self.history_len(), len: history.data.len() });
+        }
+        let (w, h) = self.flr.size();
+        if let Some(m) = motion {
+            if m.width() != w || m.height() != h || m.channel_count() < 2 {
+                return Err(Error::SizeMismatch { arg: Arg::Motion, expected: (w, h), got: (m.width(), m.height()) });
+            }
+        }
+        let workers = parallel.map_or(1, |p| p.0);
+        let needed = self.parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let flr_len = self.flr.tiled_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        let (flr_scratch, own) = scratch.split_at_mut(flr_len);
+        let own: &mut [f32] = bytemuck::cast_slice_mut(own);
+        let sequential = |n: usize, body: &(dyn Fn(usize, usize) + Sync)| (0..n).for_each(|i| body(i, 0));
+        let for_each: Executor<'_> = parallel.map_or(&sequential, |p| p.1);
+        let mut tiled = self.flr.tiled(flr_scratch, workers)?;
+        let stages = parallel.map(|p| p.1);
+        let mut rep = self.flr.run_stages(&tiled, &f, out, &Stage::ALL[..3], stages)?;
+        let index = history.frames;
+        {
+            let (cells, pooled, stats) = tiled.cells_before_blur()?;
+            let words: &mut [u32] = bytemuck::cast_slice_mut(&mut *history.data);
+            rep += self.history_passes(cells, pooled, &stats, motion, words, index, own, workers, for_each)?;
+        }
+        rep += self.flr.run_stages(&tiled, &f, out, &Stage::ALL[3..], stages)?;
+        // the slots alternate with the count's parity: past u32::MAX it goes
+        // on at 2 (even, like u32::MAX + 1) rather than stopping
+        history.frames = index.checked_add(1).unwrap_or(2);
+        Ok(rep)
+    }
+
+    /// The history and commit passes (the module's doc) over `cells` (this
+    /// frame's block moments, relative to `stats.reference`) and the two
+    /// history slots in `words`; frame `index` reads slot `(index + 1) % 2`
+    /// and writes slot `index % 2`.
+    #[allow(clippy::too_many_arguments)]
+    fn history_passes(
+        &self,
+        cells: &mut [f64],
+        pooled: &mut [f64],
+        stats: &Stats,
+        motion: Option<&ImageView<'_>>,
+        words: &mut [u32],
+        index: u32,
+        own: &mut [f32],
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let (flr, lay, rec) = (&self.flr, self.flr.lay, self.record());
+        let (cx, cy) = flr.cells();
+        let k = lay.k;
+        let sw = 2 * self.slot_len();
+        let (s0, s1) = words.split_at_mut(sw);
+        let (read, write) = if index % 2 == 1 { (&*s0, &mut s1[..sw]) } else { (&*s1, s0) };
+        let prev_reference: [f32; MAX_GUIDES] = core::array::from_fn(|i| get(read, i) as f32);
+        for (i, r) in stats.reference.iter().enumerate() {
+            put(write, i, *r as f64);
+        }
+        let (prev, write) = (&read[2 * MAX_GUIDES..], &mut write[2 * MAX_GUIDES..]);
+        let (tiles, wl) = (flr.tile_count(), 2 * self.worker_len());
+        let (cells_at, write_at) = (Shared(cells.as_mut_ptr()), Shared(write.as_mut_ptr()));
+        // a tile's cells: `cells_tile_range` of `cells`, records at the same cell indices
+        let band = |t: usize| -> Result<(usize, usize), Error> {
+            let r = flr.cells_tile_range(t)?;
+            Ok((r.start / k, r.len() / k))
+        };
+        let (fresh, filled) = (AtomicU64::new(0), AtomicU64::new(0));
+        let history = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
+            let (c0, n) = band(t)?;
+            // SAFETY: tile t's cells and records, disjoint from every other
+            // tile's (`cells_tile_range`); each tile runs once (`run_tiles`).
+            let (cells_t, write_t) = unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec)) };
+            let buf: &mut [f64] = bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Unsupported("a misaligned worker buffer"))?;
+            let (row, rest) = buf.split_at_mut(self.flr.size().0);
+            let (means, rest) = rest.split_at_mut(3 * cx);
+            let (work, rest) = rest.split_at_mut(k);
+            let hist = &mut rest[..k];
+            let mut rep = Report::default();
+            let (mut fr, mut fi) = (0u64, 0u64);
+            for y in c0 / cx..(c0 + n) / cx {
+                rep.invalid_motion += self.motion_means(motion, y, row, means)?;
+                for x in 0..cx {
+                    let c = y * cx + x - c0;
+                    let cell = &cells_t[c * k..(c + 1) * k];
+                    let len = if index > 0 {
+                        let m = (means[3 * x], means[3 * x + 1]);
+                        let r = &stats.reference;
+                        blend_cell(cell, hist, prev, rec, (cx, cy), &lay, (x, y), m, r, &prev_reference, &self.blend, work)
+                    } else {
+                        hist.copy_from_slice(cell);
+                        1.0
+                    };
+                    if cell[0] > 0.0 {
+                        fi += 1;
+                        if index > 0 && len <= 1.0 {
+                            fr += 1;
+                            rep.history_rejected += cell[0] as u64;
+                        }
+                    }
+                    for (j, v) in hist.iter().enumerate() {
+                        put(write_t, c * rec + j, *v);
+                    }
+                    put(write_t, c * rec + k, len);
+                }
+            }
+            fresh.fetch_add(fr, Ordering::Relaxed);
+            filled.fetch_add(fi, Ordering::Relaxed);
+            Ok(rep)
+        };
+        let mut rep = run_tiles(own, tiles, workers, wl, for_each, &history)?;
+        let cut = index > 0 && fresh.load(Ordering::Relaxed) as f64 > self.cut_fraction * filled.load(Ordering::Relaxed) as f64;
+        rep.history_resets += cut as u64;
+        if cut {
+            rep.history_rejected = 0;
+        }
+        let (pooled_at, pooled_window) = (Shared(pooled.as_mut_ptr()), flr.pooled_window());
+        let commit = |t: usize, _: &mut [f32]| -> Result<Report, Error> {
+            let (c0, n) = band(t)?;
+            // SAFETY: as in the history pass.
+            let (cells_t, write_t) = unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec)) };
+            for (c, cell) in cells_t.chunks_exact_mut(k).enumerate() {
+                if cut {
+                    for (j, v) in cell.iter().enumerate() {
+                        put(write_t, c * rec + j, *v);
+                    }
+                    put(write_t, c * rec + k, 1.0);
+                } else {
+                    let len = get(write_t, c * rec + k);
+                    for (j, v) in cell.iter_mut().enumerate() {
+                        *v = get(write_t, c * rec + j) * len;
+                    }
+                }
+                let means = mean_guides(cell, &lay, &stats.reference).unwrap_or([f64::NAN; MAX_GUIDES]);
+                for (i, m) in means.iter().enumerate() {
+                    put(write_t, c * rec + k + 1 + i, *m);
+                }
+            }
+            if let Some(s) = pooled_window {
+                let r = flr.window_cells_tile_range(s, t)?;
+                // SAFETY: tile t's band of the pooled grid, disjoint from every other tile's.
+                flr.pool_tile(t, cells_t, unsafe { pooled_at.band(r.start, r.len()) })?;
+            }
+            Ok(Report::default())
+        };
+        run_tiles(own, tiles, workers, 0, for_each, &commit)?;
+        Ok(rep)
+    }
+
+    /// Cell row `y`'s mean motion in cells, `[x, y, count]` per cell (values
+    /// within twice the frame's size only; 0 without any or without `motion`) into `means`; `row`:
+    /// a row of working space. Returns the pixels whose motion was left out.
+    fn motion_means(&self, motion: Option<&ImageView<'_>>, y: usize, row: &mut [f64], means: &mut [f64]) -> Result<u64, Error> {
+        means.fill(0.0);
+        let Some(m) = motion else { return Ok(0) };
+        let (w, h) = self.flr.size();
+        let b = self.flr.bin;
+        let buf: &mut [f32] = bytemuck::cast_slice_mut(&mut row[..w]);
+        let (mx, my) = buf.split_at_mut(w);
+        // motion beyond twice the frame's size is as unusable as NaN
+        let limit = 2.0 * w.max(h) as f32;
+        let mut invalid = 0u64;
+        for py in y * b..((y + 1) * b).min(h) {
+            m.read_row_n(py, 0, [&mut mx[..w], &mut my[..w]]).ok_or(Error::SizeMismatch {
+                arg: Arg::Motion,
+                expected: (w, h),
+                got: (m.width(), m.height()),
+            })?;
+            for (cell, (xs, ys)) in means.chunks_exact_mut(3).zip(mx.chunks(b).zip(my.chunks(b))) {
+                let (mut sx, mut sy, mut n) = (0f32, 0f32, 0f32);
+                for (&a, &c) in xs.iter().zip(ys) {
+                    let ok = a.abs() <= limit && c.abs() <= limit;
+                    sx += if ok { a } else { 0.0 };
+                    sy += if ok { c } else { 0.0 };
+                    n += ok as u8 as f32;
+                }
+                invalid += (xs.len() - n as usize) as u64;
+                cell[0] += sx as f64;
+                cell[1] += sy as f64;
+                cell[2] += n as f64;
+            }
+        }
+        for v in means.chunks_exact_mut(3) {
+            if v[2] > 0.0 {
+                // pixels → cells
+                v[0] /= v[2] * b as f64;
+                v[1] /= v[2] * b as f64;
+            }
+        }
+        Ok(invalid)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    extern crate std;
+    use std::{vec, vec::Vec};
+
+    /// The moments of pixels `(g, y)` in the library's layout, in f64.
+    fn moments(px: &[([f64; 5], [f64; 3])], lay: &CellLayout) -> Vec<f64> {
+        let mut m = vec![0f64; lay.k];
+        for (g, y) in px {
+            m[0] += 1.0;
+            let mut p = lay.ss;
+            for i in 0..lay.q {
+                m[lay.s + i] += g[i];
+                for j in i..lay.q {
+                    m[p] += g[i] * g[j];
+                    p += 1;
+                }
+                for c in 0..3 {
+                    m[lay.p + 3 * i + c] += g[i] * y[c];
+                }
+            }
+            for c in 0..3 {
+                m[lay.t + c] += y[c];
+            }
+            let l = 0.2126 * y[0] + 0.7152 * y[1] + 0.0722 * y[2];
+            m[lay.e] += l * l;
+        }
+        m
+    }
+
+    fn pixels(seed: u64, n: usize) -> Vec<([f64; 5], [f64; 3])> {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut r = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        (0..n).map(|_| (core::array::from_fn(|_| 4.0 * r() - 2.0), core::array::from_fn(|_| r()))).collect()
+    }
+
+    /// Cell records as the history stores them (`reproject_cell`'s `prev`).
+    fn records(cells: &[Vec<f64>], lengths: &[f64], lay: &CellLayout, reference: &[f32]) -> Vec<u32> {
+        let rec = lay.k + 1 + MAX_GUIDES;
+        let mut w = vec![0u32; 2 * rec * cells.len()];
+        for (c, (m, n)) in cells.iter().zip(lengths).enumerate() {
+            let means = mean_guides(m, lay, reference).unwrap_or([f64::NAN; MAX_GUIDES]);
+            for (j, v) in m.iter().chain([*n].iter()).chain(means.iter()).enumerate() {
+                put(&mut w, c * rec + j, *v);
+            }
+        }
+        w
+    }
+
+    /// The affine map equals the moments of the mapped guides, on awkward
+    /// scales and offsets (large offsets, a negative and a zero scale).
+    #[test]
+    fn affine_equals_moments_of_mapped_guides() {
+        let lay = CellLayout::new(5);
+        for seed in 0..8 {
+            let px = pixels(seed, 37);
+            let a = [1.0, -0.5, 3.0, 0.0, 1e-3];
+            let b = [0.0, 1e3, -2.0, 7.0, -1e4];
+            let mapped: Vec<_> = px.iter().map(|(g, y)| (core::array::from_fn(|i| a[i] * g[i] + b[i]), *y)).collect();
+            let mut m = moments(&px, &lay);
+            affine(&mut m, &lay, &a, &b);
+            let want = moments(&mapped, &lay);
+            for (i, (x, y)) in m.iter().zip(&want).enumerate() {
+                assert!((x - y).abs() <= 1e-9 * y.abs().max(1.0), "seed {seed} moment {i}: {x} against {y}");
+            }
+        }
+    }
+
+    /// A static camera keeps every cell's history; a tap whose mean normal
+    /// turned away, or whose depth moved by more than the limit, is dropped;
+    /// a motion off the grid or NaN finds none.
+    #[test]
+    fn reprojection_keeps_matching_taps_only() {
+        let lay = CellLayout::new(5);
+        let (cx, cy) = (3, 2);
+        let cell = |normal: [f64; 3], depth: f64| {
+            let px: Vec<_> = (0..64).map(|i| ([normal[0], normal[1], normal[2], depth, 0.5], [0.1 * (i % 8) as f64, 0.2, 0.3])).collect();
+            moments(&px, &lay)
+        };
+        let up = cell([0.0, 1.0, 0.0], 2.0);
+        let cells: Vec<_> = (0..cx * cy)
+            .map(|i| match i {
+                4 => cell([1.0, 0.0, 0.0], 2.0),
+                5 => cell([0.0, 1.0, 0.0], 3.0),
+                _ => up.clone(),
+            })
+            .collect();
+        let lengths = [4f64, 5.0, 6.0, 7.0, 8.0, 9.0];
+        let reference = [0f32; MAX_GUIDES];
+        let prev = records(&cells, &lengths, &lay, &reference);
+        let rec = lay.k + 1 + MAX_GUIDES;
+        let test = TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) };
+        let cur = mean_guides(&up, &lay, &reference).unwrap();
+        let mut out = vec![0f64; lay.k];
+        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.0), &cur, &test, &mut out);
+        assert_eq!(n, 5.0);
+        assert!(out.iter().zip(&up).all(|(a, b)| (a - b).abs() < 1e-12));
+        // halfway to cell 4 (normal turned): only the kept taps, renormalised
+        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.5), &cur, &test, &mut out);
+        assert_eq!(n, 5.0);
+        // towards cell 5 (depth 3 against 2): dropped too
+        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (2, 0), (0.0, 1.0), &cur, &test, &mut out);
+        assert_eq!(n, 0.0);
+        assert!(out.iter().all(|&v| v == 0.0));
+        for motion in [(-5.0, 0.0), (f64::NAN, 0.0), (0.0, f64::INFINITY)] {
+            assert_eq!(reproject_cell(&prev, rec, (cx, cy), &lay, (0, 0), motion, &cur, &test, &mut out), 0.0);
+        }
+    }
+
+    /// A static cell's history is the running mean of its frames' moments
+    /// (the mean of all while fewer than `max_history`), its length counts the
+    /// frames up to the cap; a frame whose references moved reads the same
+    /// history; a cell whose
+    /// normal turned restarts.
+    #[test]
+    fn a_static_cell_averages_its_frames() {
+        let lay = CellLayout::new(5);
+        let blend = Blend { test: TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) }, max_history: 4.0 };
+        let rec = lay.k + 1 + MAX_GUIDES;
+        let frame = |f: u64, reference: &[f32; MAX_GUIDES]| {
+            let px: Vec<([f64; 5], [f64; 3])> = (0..64)
+                .map(|i| {
+                    let g = [0.0, 1.0, 0.0, 2.0 + 0.001 * i as f64, 0.5];
+                    (core::array::from_fn(|q| g[q] - reference[q] as f64), [0.1 + 0.01 * ((i + f as usize) % 7) as f64, 0.2, 0.3])
+                })
+                .collect();
+            moments(&px, &lay)
+        };
+        let refs = [[0f32; MAX_GUIDES], [0.5, 0.25, -0.25, 1.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]];
+        let mut prev = records(&[frame(0, &refs[0])], &[1.0], &lay, &refs[0]);
+        let mut sum = frame(0, &refs[0]);
+        let mut work = vec![0f64; lay.k];
+        for f in 1..6u64 {
+            let (r, pr) = (&refs[f as usize % 2], &refs[(f as usize - 1) % 2]);
+            let cell = frame(f, r);
+            let mut hist = vec![0f64; lay.k];
+            let n = blend_cell(&cell, &mut hist, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), r, pr, &blend, &mut work);
+            assert_eq!(n, (f as f64 + 1.0).min(4.0), "frame {f}");
+            // the light sums do not depend on the references: the mean of the frames' while n counts every frame
+            let m = frame(f, r);
+            for c in 0..3 {
+                sum[lay.t + c] += m[lay.t + c];
+            }
+            if f < 4 {
+                let want = sum[lay.t] / (f as f64 + 1.0);
+                assert!((hist[lay.t] - want).abs() < 1e-12, "frame {f}: {} against {want}", hist[lay.t]);
+            }
+            // the mean guides are this frame's
+            let (mh, mc) = (mean_guides(&hist, &lay, r).unwrap(), mean_guides(&m, &lay, r).unwrap());
+            assert!((mh[3] - mc[3]).abs() < 1e-9 && (mh[1] - 1.0).abs() < 1e-12, "frame {f}");
+            prev = records(&[hist], &[n], &lay, r);
+        }
+        // a cell whose normal turned restarts from its own moments
+        let px: Vec<([f64; 5], [f64; 3])> = (0..64).map(|_| ([1.0, 0.0, 0.0, 2.0, 0.5], [0.4, 0.4, 0.4])).collect();
+        let cell = moments(&px, &lay);
+        let own = cell.clone();
+        let mut hist = vec![0f64; lay.k];
+        let n = blend_cell(&cell, &mut hist, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), &refs[0], &refs[1], &blend, &mut work);
+        assert_eq!(n, 1.0);
+        assert_eq!(hist, own);
+    }
+
+    struct Scene {
+        w: usize,
+        h: usize,
+        normal: Vec<f32>,
+        depth: Vec<f32>,
+        ao: Vec<f32>,
+        clean: Vec<f32>,
+    }
+
+    fn scene(w: usize, h: usize, flip: bool) -> Scene {
+        let n = w * h;
+        let left = |i: usize| (i % w) < w / 2;
+        let normal = (0..n)
+            .flat_map(|i| match (left(i), flip) {
+                (true, false) => [0.0, 1.0, 0.0],
+                (false, false) => [0.6, 0.0, 0.8],
+                (true, true) => [0.0, -1.0, 0.0],
+                (false, true) => [-0.6, 0.0, -0.8],
+            })
+            .collect();
+        let depth = (0..n).map(|i| 2.0 + 0.01 * (i / w) as f32).collect();
+        let ao = (0..n).map(|i| 0.6 + 0.3 * ((i % w) as f32 / w as f32)).collect();
+        let clean = (0..3 * n).map(|i| if left(i / 3) { 0.5 } else { 0.2 } * (1.0 + 0.1 * (i % 3) as f32)).collect();
+        Scene { w, h, normal, depth, ao, clean }
+    }
+
+    fn noisy(s: &Scene, seed: u64) -> Vec<f32> {
+        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        s.clean
+            .iter()
+            .map(|v| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                v * 2.0 * ((x >> 40) as f32 / (1u64 << 24) as f32)
+            })
+            .collect()
+    }
+
+    fn frame<'a>(s: &'a Scene, noisy: &'a [f32]) -> Frame<'a> {
+        use crate::guides::Guides;
+        let (w, h) = (s.w, s.h);
+        let g = Guides {
+            normal: Some(ImageView::interleaved(&s.normal, w, h, 3).unwrap()),
+            depth: Some(ImageView::interleaved(&s.depth, w, h, 1).unwrap()),
+            ao: Some(ImageView::interleaved(&s.ao, w, h, 1).unwrap()),
+            ..Default::default()
+        };
+        Frame::new(ImageView::interleaved(noisy, w, h, 3).unwrap(), g)
+    }
+
+    fn mse(a: &[f32], b: &[f32]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>() / a.len() as f64
+    }
+
+    /// The first frame, and a frame after a camera cut, are FLR's bit for bit
+    /// (the sample cap is a power of two); a static camera's frames average,
+    /// so that the eighth frame's error is well under FLR's on that frame.
+    #[test]
+    fn static_frames_average_and_a_cut_restarts() {
+        let (w, h) = (64, 48);
+        let (st, flipped) = (scene(w, h, false), scene(w, h, true));
+        let cfg = FlrConfig::default();
+        let (mf, flr) = (MomentFlr::new(cfg, &TemporalConfig::default(), w, h).unwrap(), Flr::new(cfg, w, h).unwrap());
+        let (mut data, mut scratch) = (vec![0f32; mf.history_len()], vec![0f64; mf.scratch_len()]);
+        let mut history = History::new(&mut data);
+        let mut fs = vec![0f64; flr.scratch_len()];
+        let (mut out, mut single) = (vec![0f32; 3 * w * h], vec![0f32; 3 * w * h]);
+        let motion = vec![0f32; 2 * w * h];
+        let mv = ImageView::interleaved(&motion, w, h, 2).unwrap();
+        for k in 0..8u64 {
+            let n = noisy(&st, k);
+            let f = frame(&st, &n);
+            let rep =
+                mf.denoise(&f, Some(&mv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+            assert_eq!((rep.history_resets, rep.history_rejected, rep.invalid_motion), (0, 0, 0));
+            flr.denoise(&f, &mut fs, &mut ImageViewMut::interleaved(&mut single, w, h, 3).unwrap()).unwrap();
+            if k == 0 {
+                assert!(out.iter().zip(&single).all(|(a, b)| a.to_bits() == b.to_bits()), "the first frame is FLR's");
+            }
+        }
+        assert_eq!(history.frames(), 8);
+        let (m, s) = (mse(&out, &st.clean), mse(&single, &st.clean));
+        assert!(m < 0.5 * s, "eight frames: {m:.3e} against FLR's {s:.3e}");
+        // every normal turned: a cut
+        let n = noisy(&flipped, 99);
+        let f = frame(&flipped, &n);
+        let rep =
+            mf.denoise(&f, Some(&mv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+        assert_eq!(rep.history_resets, 1);
+        flr.denoise(&f, &mut fs, &mut ImageViewMut::interleaved(&mut single, w, h, 3).unwrap()).unwrap();
+        assert!(out.iter().zip(&single).all(|(a, b)| a.to_bits() == b.to_bits()), "after a cut: FLR's");
+    }
+
+    /// A panning sequence (awkward sizes, one to three workers on real
+    /// threads, with a pooled window and without): the parallel runs give
+    /// the sequential run's bits, frame after frame.
+    #[test]
+    fn threads_give_the_sequential_bits() {
+        use crate::flr::config::Blur;
+        for (w, h) in [(37, 29), (129, 70)] {
+            let st = scene(w, h, false);
+            let motion: Vec<f32> = (0..w * h).flat_map(|i| [1.5 + 0.01 * (i % 7) as f32, -0.25]).collect();
+            let mv = ImageView::interleaved(&motion, w, h, 2).unwrap();
+            for blur in [Blur::Gaussian { sigma: 6.0, radius: None }, FlrConfig::temporal().blur] {
+                let cfg = FlrConfig { blur, block: 4, ..FlrConfig::default() };
+                let mf = MomentFlr::new(cfg, &TemporalConfig::default(), w, h).unwrap();
+                let mut want: Vec<Vec<f32>> = Vec::new();
+                for workers in 1..=3usize {
+                    let mut data = vec![0f32; mf.history_len()];
+                    let mut history = History::new(&mut data);
+                    let mut scratch = vec![0f64; mf.parallel_scratch_len(workers).unwrap()];
+                    let mut out = vec![0f32; 3 * w * h];
+                    for k in 0..4u64 {
+                        let n = noisy(&st, k);
+                        let f = frame(&st, &n);
+                        let mut o = ImageViewMut::interleaved(&mut out, w, h, 3).unwrap();
+                        if workers == 1 {
+                            mf.denoise(&f, Some(&mv), &mut history, &mut scratch, &mut o).unwrap();
+                            want.push(out.clone());
+                        } else {
+                            let exec = |count: usize, body: &(dyn Fn(usize, usize) + Sync)| {
+                                std::thread::scope(|sc| {
+                                    for wk in 0..workers {
+                                        sc.spawn(move || (wk..count).step_by(workers).for_each(|i| body(i, wk)));
+                                    }
+                                })
+                            };
+                            mf.denoise_parallel(&f, Some(&mv), &mut history, &mut scratch, &mut o, workers, &exec).unwrap();
+                            let same = out.iter().zip(&want[k as usize]).all(|(a, b)| a.to_bits() == b.to_bits());
+                            assert!(same, "{w}x{h} {blur:?}: {workers} workers, frame {k}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// A history of another size, a motion image of another size and a
+    /// short scratch are refused with typed errors; NaN, infinite and absurd
+    /// motion vectors are left out and counted, and the output stays finite.
+    #[test]
+    fn bad_history_and_motion() {
+        let (w, h) = (40, 24);
+        let st = scene(w, h, false);
+        let n = noisy(&st, 1);
+        let f = frame(&st, &n);
+        let mf = MomentFlr::new(FlrConfig::temporal_moments(), &TemporalConfig::default(), w, h).unwrap();
+        let other = MomentFlr::new(FlrConfig::temporal_moments(), &TemporalConfig::default(), w, h + 8).unwrap();
+        let mut out = vec![0f32; 3 * w * h];
+        let mut scratch = vec![0f64; mf.scratch_len()];
+        let mut wrong = vec![0f32; other.history_len()];
+        let e =
+            mf.denoise(&f, None, &mut History::new(&mut wrong), &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap());
+        assert!(matches!(e, Err(Error::BufferTooSmall { arg: Arg::History, .. })), "{e:?}");
+        let mut data = vec![0f32; mf.history_len()];
+        let mut history = History::new(&mut data);
+        let small = vec![0f32; 2 * w * (h - 1)];
+        let sv = ImageView::interleaved(&small, w, h - 1, 2).unwrap();
+        let e = mf.denoise(&f, Some(&sv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap());
+        assert!(matches!(e, Err(Error::SizeMismatch { arg: Arg::Motion, .. })), "{e:?}");
+        let mut short = vec![0f64; mf.scratch_len() - 1];
+        let e = mf.denoise(&f, None, &mut history, &mut short, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap());
+        assert!(matches!(e, Err(Error::ScratchTooSmall { .. })), "{e:?}");
+        assert_eq!(history.frames(), 0, "a refused frame leaves the history alone");
+        let bad = [f32::NAN, f32::INFINITY, 1e30, -1e9];
+        let motion: Vec<f32> = (0..w * h).flat_map(|i| if i % 5 == 0 { [bad[i % 4], 0.0] } else { [0.5, 0.0] }).collect();
+        let mv = ImageView::interleaved(&motion, w, h, 2).unwrap();
+        for _ in 0..3 {
+            let rep =
+                mf.denoise(&f, Some(&mv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+            assert_eq!(rep.invalid_motion, (0..w * h).filter(|i| i % 5 == 0).count() as u64);
+        }
+        assert!(out.iter().all(|v| v.is_finite()));
+    }
+
+    /// The depth rescale moves the history's mean depth onto the current one
+    /// and keeps its depth spread relative to its mean.
+    #[test]
+    fn depth_rescale_matches_the_current_depth() {
+        let lay = CellLayout::new(5);
+        let reference = [0.25f32, 0.5, -0.5, 1.5, 0.5];
+        let px: Vec<_> = (0..64).map(|i| ([0.0, 1.0, 0.0, 2.0 + 0.01 * i as f64, 0.5], [0.2, 0.2, 0.2])).collect();
+        let shifted: Vec<_> =
+            px.iter().map(|(g, y)| (core::array::from_fn(|i| g[i] - reference[i] as f64), *y)).collect::<Vec<([f64; 5], [f64; 3])>>();
+        let mut hist = moments(&shifted, &lay);
+        let h = mean_guides(&hist, &lay, &reference).unwrap();
+        let mut cur = h;
+        cur[3] = 1.1 * h[3];
+        rescale_depth(&mut hist, &lay, &cur, &reference, 3);
+        let after = mean_guides(&hist, &lay, &reference).unwrap();
+        assert!((after[3] - cur[3]).abs() < 1e-9, "{} against {}", after[3], cur[3]);
+        assert!((after[1] - h[1]).abs() < 1e-12, "other guides unchanged");
+    }
+}
