@@ -4,14 +4,16 @@
 //!
 //! A frame runs FLR's [`Stage::Prepare`], [`Stage::Moments`] and
 //! [`Stage::Stats`]; then two passes over the tiles:
-//! - **history**: each cell's mean motion; the previous frame's cells
+//! - **find**: each cell's mean motion (over its middle pixel row), and
+//!   whether any history tap is kept for it: the previous frame's cells
 //!   sampled bilinearly there, a tap kept where its mean normal and depth
-//!   match the cell's ([`TapTest`]); the taps moved into this frame's guide
-//!   references, their depth rescaled to the cell's, and blended with the
-//!   cell as a running mean over up to `max_history` frames;
-//! - **commit**: the fit's cells become the sums over those frames (or, when
-//!   more than `cut_fraction` of the cells kept no tap, a camera cut, every
-//!   cell restarts from its own frame), and the pooled window is summed again;
+//!   match the cell's ([`TapTest`]). When more than `cut_fraction` of the
+//!   cells keep none, the frame is a camera cut and every cell restarts;
+//! - **blend**: the kept taps moved into this frame's guide references,
+//!   their depth rescaled to the cell's, and blended with the cell as a
+//!   running mean over up to `max_history` frames; the history written, the
+//!   fit's cells made the sums over those frames, the pooled window summed
+//!   again;
 //!
 //! then FLR's remaining stages. The adaptive window counts up to
 //! `max_history` samples per pixel in its variances.
@@ -146,20 +148,10 @@ pub(crate) fn reproject_cell(
 ) -> f64 {
     let k = lay.k;
     out[..k].fill(0.0);
-    let (px, py) = (x as f64 + motion.0, y as f64 + motion.1);
-    if !(px.is_finite() && py.is_finite()) {
-        return 0.0;
-    }
-    let (fx, fy) = (libm::floor(px), libm::floor(py));
-    let (ax, ay) = (px - fx, py - fy);
     let (mut wsum, mut nsum) = (0f64, 0f64);
-    for (dx, dy, w) in [(0, 0, (1.0 - ax) * (1.0 - ay)), (1, 0, ax * (1.0 - ay)), (0, 1, (1.0 - ax) * ay), (1, 1, ax * ay)] {
-        let (tx, ty) = (fx + dx as f64, fy + dy as f64);
-        if !(w > 0.0 && tx >= 0.0 && ty >= 0.0 && tx < cx as f64 && ty < cy as f64) {
-            continue;
-        }
-        let at = (ty as usize * cx + tx as usize) * rec;
-        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|i| get(prev, at + k + 1 + i));
+    for (i, w) in taps(x, y, motion, cx, cy).into_iter().flatten() {
+        let at = i * rec;
+        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| get(prev, at + k + 1 + g));
         if tm[0].is_nan() || !test.accepts(cur, &tm) {
             continue;
         }
@@ -173,29 +165,76 @@ pub(crate) fn reproject_cell(
         out[..k].fill(0.0);
         return 0.0;
     }
+    let inv = 1.0 / wsum;
     for o in out[..k].iter_mut() {
-        *o /= wsum;
+        *o *= inv;
     }
-    nsum / wsum
+    nsum * inv
 }
 
-/// The depth moments of `hist` (the reprojected history) scaled so that its
-/// mean depth is the current cell's: `d' = r d` in raw units, `r` the ratio
-/// of the current mean depth to the history's, clamped to 0.5–2 (a dolly
-/// moves every surface's depth).
-pub(crate) fn rescale_depth(hist: &mut [f64], lay: &CellLayout, cur: &[f64; MAX_GUIDES], reference: &[f32], depth: usize) {
-    let Some(h) = mean_guides(hist, lay, reference) else { return };
-    if h[depth].is_nan() || h[depth].abs() <= 1e-6 {
-        return;
+/// Whether [`reproject_cell`] would keep any tap (the same test, without the moments).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn any_tap_kept(
+    prev: &[u32],
+    rec: usize,
+    (cx, cy): (usize, usize),
+    lay: &CellLayout,
+    (x, y): (usize, usize),
+    motion: (f64, f64),
+    cur: &[f64; MAX_GUIDES],
+    test: &TapTest,
+) -> bool {
+    taps(x, y, motion, cx, cy).into_iter().flatten().any(|(i, w)| {
+        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| get(prev, i * rec + lay.k + 1 + g));
+        w > 0.0 && !tm[0].is_nan() && test.accepts(cur, &tm)
+    })
+}
+
+/// The 4 bilinear taps (cell index, weight) at cell `(x, y)` moved by
+/// `motion`, `None` off the `cx × cy` grid (all `None` for a motion that is
+/// not finite).
+fn taps(x: usize, y: usize, motion: (f64, f64), cx: usize, cy: usize) -> [Option<(usize, f64)>; 4] {
+    let (px, py) = (x as f64 + motion.0, y as f64 + motion.1);
+    if !(px.is_finite() && py.is_finite()) {
+        return [None; 4];
     }
-    let r = (cur[depth] / h[depth]).clamp(0.5, 2.0);
-    if !r.is_finite() {
-        return;
-    }
+    let (fx, fy) = (libm::floor(px), libm::floor(py));
+    let (ax, ay) = (px - fx, py - fy);
+    let at = |dx: f64, dy: f64, w: f64| {
+        let (tx, ty) = (fx + dx, fy + dy);
+        (w > 0.0 && tx >= 0.0 && ty >= 0.0 && tx < cx as f64 && ty < cy as f64).then(|| (ty as usize * cx + tx as usize, w))
+    };
+    [at(0.0, 0.0, (1.0 - ax) * (1.0 - ay)), at(1.0, 0.0, ax * (1.0 - ay)), at(0.0, 1.0, (1.0 - ax) * ay), at(1.0, 1.0, ax * ay)]
+}
+
+/// The reprojected history `hist` (moments relative to `prev_reference`)
+/// moved into this frame's `reference`, in place: `g − ref' = (g − ref) +
+/// (ref − ref')`, a map linear in the moments, so the taps' mean maps as each
+/// tap would. With a `depth` guide, its moments are also scaled so that the
+/// history's mean depth is the current cell's (`cur`, raw units): `d ↦ r d`,
+/// `r` the ratio of the two means clamped to 0.5–2 (a dolly moves every
+/// surface's depth). One affine map ([`affine`]) does both.
+pub(crate) fn into_current_frame(
+    hist: &mut [f64],
+    lay: &CellLayout,
+    prev_reference: &[f32],
+    reference: &[f32],
+    cur: &[f64; MAX_GUIDES],
+    depth: Option<usize>,
+) {
     let (mut a, mut b) = ([1f64; MAX_GUIDES], [0f64; MAX_GUIDES]);
-    // g − ref ↦ r (g − ref) + (r − 1) ref, so that g ↦ r g
-    a[depth] = r;
-    b[depth] = (r - 1.0) * reference[depth] as f64;
+    for (i, v) in b.iter_mut().enumerate().take(lay.q) {
+        *v = prev_reference[i] as f64 - reference[i] as f64;
+    }
+    if let Some(d) = depth {
+        let mean = hist[lay.s + d] / hist[0] + prev_reference[d] as f64;
+        let r = (cur[d] / mean).clamp(0.5, 2.0);
+        if mean.abs() > 1e-6 && r.is_finite() {
+            // g − ref' ↦ r (g − ref) + (r − 1) ref, so that g ↦ r g
+            a[d] = r;
+            b[d] = r * b[d] + (r - 1.0) * reference[d] as f64;
+        }
+    }
     affine(hist, lay, &a, &b);
 }
 
@@ -240,16 +279,7 @@ pub(crate) fn blend_cell(
         hist[..k].copy_from_slice(&cell[..k]);
         return 1.0;
     }
-    // into this frame's references: g − ref' = (g − ref) + (ref − ref'), a
-    // map linear in the moments, so the taps' mean maps as each tap would
-    let (a, mut b) = ([1f64; MAX_GUIDES], [0f64; MAX_GUIDES]);
-    for (i, v) in b.iter_mut().enumerate().take(lay.q) {
-        *v = prev_reference[i] as f64 - reference[i] as f64;
-    }
-    affine(&mut work[..k], lay, &a, &b);
-    if let Some(d) = blend.test.depth {
-        rescale_depth(&mut work[..k], lay, &cur, reference, d);
-    }
+    into_current_frame(&mut work[..k], lay, prev_reference, reference, &cur, blend.test.depth);
     let n = (n_prev + 1.0).min(blend.max_history);
     let w = 1.0 / n;
     for ((h, c), r) in hist[..k].iter_mut().zip(&cell[..k]).zip(&work[..k]) {
@@ -333,15 +363,16 @@ impl MomentFlr {
     pub fn history_len(&self) -> usize {
         4 * self.slot_len()
     }
-    /// f64 values of a worker's buffer: a motion row (two f32 planes), the
-    /// cell row's mean motion, two cells of working space.
+    /// f64 values of a worker's buffer: a motion row (two f32 planes), or
+    /// two cells of working space.
     fn worker_len(&self) -> usize {
-        self.flr.size().0 + 3 * self.flr.cells().0 + 2 * self.flr.lay.k
+        self.flr.size().0.max(2 * self.flr.lay.k)
     }
-    /// f64 values of the scratch of [`MomentFlr::denoise_parallel`] with `workers`.
+    /// f64 values of the scratch of [`MomentFlr::denoise_parallel`] with
+    /// `workers`: FLR's, each cell's mean motion, the workers' buffers.
     pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
         let own = crate::parallel::TileRun::scratch_len(self.flr.tile_count(), workers, 2 * self.worker_len())?;
-        self.flr.tiled_scratch_len(workers)?.checked_add(own.div_ceil(2))
+        self.flr.tiled_scratch_len(workers)?.checked_add(3 * self.cells())?.checked_add(own.div_ceil(2))
     }
     /// f64 values of the scratch of [`MomentFlr::denoise`].
     pub fn scratch_len(&self) -> usize {
@@ -409,6 +440,7 @@ impl MomentFlr {
         }
         let flr_len = self.flr.tiled_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
         let (flr_scratch, own) = scratch.split_at_mut(flr_len);
+        let (means, own) = own.split_at_mut(3 * self.cells());
         let own: &mut [f32] = bytemuck::cast_slice_mut(own);
         let sequential = |n: usize, body: &(dyn Fn(usize, usize) + Sync)| (0..n).for_each(|i| body(i, 0));
         let for_each: Executor<'_> = parallel.map_or(&sequential, |p| p.1);
@@ -419,7 +451,7 @@ impl MomentFlr {
         {
             let (cells, pooled, stats) = tiled.cells_before_blur()?;
             let words: &mut [u32] = bytemuck::cast_slice_mut(&mut *history.data);
-            rep += self.history_passes(cells, pooled, &stats, motion, words, index, own, workers, for_each)?;
+            rep += self.history_passes(cells, pooled, &stats, motion, words, index, means, own, workers, for_each)?;
         }
         rep += self.flr.run_stages(&tiled, &f, out, &Stage::ALL[3..], stages)?;
         // the slots alternate with the count's parity: past u32::MAX it goes
@@ -428,10 +460,13 @@ impl MomentFlr {
         Ok(rep)
     }
 
-    /// The history and commit passes (the module's doc) over `cells` (this
-    /// frame's block moments, relative to `stats.reference`) and the two
-    /// history slots in `words`; frame `index` reads slot `(index + 1) % 2`
-    /// and writes slot `index % 2`.
+    /// The history passes (the module's doc) over `cells` (this frame's
+    /// block moments, relative to `stats.reference`) and the two history
+    /// slots in `words`; frame `index` reads slot `(index + 1) % 2` and
+    /// writes slot `index % 2`. The first pass finds each cell's mean motion
+    /// (into `means`) and whether any history tap is kept, for the cut test;
+    /// the second blends, writes the history and leaves the fit's sums in
+    /// `cells` (and `pooled`).
     #[allow(clippy::too_many_arguments)]
     fn history_passes(
         &self,
@@ -441,6 +476,7 @@ impl MomentFlr {
         motion: Option<&ImageView<'_>>,
         words: &mut [u32],
         index: u32,
+        means: &mut [f64],
         own: &mut [f32],
         workers: usize,
         for_each: Executor<'_>,
@@ -457,76 +493,75 @@ impl MomentFlr {
         }
         let (prev, write) = (&read[2 * MAX_GUIDES..], &mut write[2 * MAX_GUIDES..]);
         let (tiles, wl) = (flr.tile_count(), 2 * self.worker_len());
-        let (cells_at, write_at) = (Shared(cells.as_mut_ptr()), Shared(write.as_mut_ptr()));
-        // a tile's cells: `cells_tile_range` of `cells`, records at the same cell indices
+        let (cells_at, write_at, means_at) = (Shared(cells.as_mut_ptr()), Shared(write.as_mut_ptr()), Shared(means.as_mut_ptr()));
+        // a tile's cells: `cells_tile_range` of `cells`; records and means at the same cell indices
         let band = |t: usize| -> Result<(usize, usize), Error> {
             let r = flr.cells_tile_range(t)?;
             Ok((r.start / k, r.len() / k))
         };
         let (fresh, filled) = (AtomicU64::new(0), AtomicU64::new(0));
-        let history = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
+        let find = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
-            // SAFETY: tile t's cells and records, disjoint from every other
-            // tile's (`cells_tile_range`); each tile runs once (`run_tiles`).
-            let (cells_t, write_t) = unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec)) };
-            let buf: &mut [f64] = bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Unsupported("a misaligned worker buffer"))?;
-            let (row, rest) = buf.split_at_mut(self.flr.size().0);
-            let (means, rest) = rest.split_at_mut(3 * cx);
-            let (work, rest) = rest.split_at_mut(k);
-            let hist = &mut rest[..k];
+            // SAFETY: tile t's means, disjoint from every other tile's
+            // (`cells_tile_range`); each tile runs once (`run_tiles`).
+            let means_t = unsafe { means_at.band(3 * c0, 3 * n) };
+            let row: &mut [f64] = bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Unsupported("a misaligned worker buffer"))?;
             let mut rep = Report::default();
             let (mut fr, mut fi) = (0u64, 0u64);
             for y in c0 / cx..(c0 + n) / cx {
-                rep.invalid_motion += self.motion_means(motion, y, row, means)?;
+                let row_means = &mut means_t[3 * (y * cx - c0)..3 * ((y + 1) * cx - c0)];
+                rep.invalid_motion += self.motion_means(motion, y, row, row_means)?;
+                if index == 0 {
+                    continue;
+                }
                 for x in 0..cx {
-                    let c = y * cx + x - c0;
-                    let cell = &cells_t[c * k..(c + 1) * k];
-                    let len = if index > 0 {
-                        let m = (means[3 * x], means[3 * x + 1]);
-                        let r = &stats.reference;
-                        blend_cell(cell, hist, prev, rec, (cx, cy), &lay, (x, y), m, r, &prev_reference, &self.blend, work)
-                    } else {
-                        hist.copy_from_slice(cell);
-                        1.0
-                    };
-                    if cell[0] > 0.0 {
-                        fi += 1;
-                        if index > 0 && len <= 1.0 {
-                            fr += 1;
-                            rep.history_rejected += cell[0] as u64;
-                        }
-                    }
-                    for (j, v) in hist.iter().enumerate() {
-                        put(write_t, c * rec + j, *v);
-                    }
-                    put(write_t, c * rec + k, len);
+                    let c = y * cx + x;
+                    let Some(cur) = mean_guides(&cells[c * k..(c + 1) * k], &lay, &stats.reference) else { continue };
+                    fi += 1;
+                    let m = (row_means[3 * x], row_means[3 * x + 1]);
+                    fr += !any_tap_kept(prev, rec, (cx, cy), &lay, (x, y), m, &cur, &self.blend.test) as u64;
                 }
             }
             fresh.fetch_add(fr, Ordering::Relaxed);
             filled.fetch_add(fi, Ordering::Relaxed);
             Ok(rep)
         };
-        let mut rep = run_tiles(own, tiles, workers, wl, for_each, &history)?;
+        // `find` reads `cells` shared: no band of it is borrowed mutably until it returns
+        let mut rep = run_tiles(own, tiles, workers, wl, for_each, &find)?;
         let cut = index > 0 && fresh.load(Ordering::Relaxed) as f64 > self.cut_fraction * filled.load(Ordering::Relaxed) as f64;
         rep.history_resets += cut as u64;
-        if cut {
-            rep.history_rejected = 0;
-        }
+        let blend = index > 0 && !cut;
         let (pooled_at, pooled_window) = (Shared(pooled.as_mut_ptr()), flr.pooled_window());
-        let commit = |t: usize, _: &mut [f32]| -> Result<Report, Error> {
+        let rejected = AtomicU64::new(0);
+        let commit = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
-            // SAFETY: as in the history pass.
-            let (cells_t, write_t) = unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec)) };
+            // SAFETY: tile t's cells, records and means, disjoint from every
+            // other tile's; each tile runs once (`run_tiles`).
+            let (cells_t, write_t, means_t) =
+                unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec), means_at.band(3 * c0, 3 * n)) };
+            let buf: &mut [f64] = bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Unsupported("a misaligned worker buffer"))?;
+            let (work, hist) = buf.split_at_mut(k);
+            let hist = &mut hist[..k];
+            let mut rej = 0u64;
             for (c, cell) in cells_t.chunks_exact_mut(k).enumerate() {
-                if cut {
-                    for (j, v) in cell.iter().enumerate() {
-                        put(write_t, c * rec + j, *v);
-                    }
-                    put(write_t, c * rec + k, 1.0);
+                let len = if blend {
+                    let (x, y) = ((c0 + c) % cx, (c0 + c) / cx);
+                    let (m, r) = ((means_t[3 * c], means_t[3 * c + 1]), &stats.reference);
+                    blend_cell(cell, hist, prev, rec, (cx, cy), &lay, (x, y), m, r, &prev_reference, &self.blend, work)
                 } else {
-                    let len = get(write_t, c * rec + k);
-                    for (j, v) in cell.iter_mut().enumerate() {
-                        *v = get(write_t, c * rec + j) * len;
+                    hist.copy_from_slice(cell);
+                    1.0
+                };
+                if blend && len <= 1.0 && cell[0] > 0.0 {
+                    rej += cell[0] as u64;
+                }
+                for (j, v) in hist.iter().enumerate() {
+                    put(write_t, c * rec + j, *v);
+                }
+                put(write_t, c * rec + k, len);
+                if len != 1.0 {
+                    for (v, h) in cell.iter_mut().zip(hist.iter()) {
+                        *v = h * len;
                     }
                 }
                 let means = mean_guides(cell, &lay, &stats.reference).unwrap_or([f64::NAN; MAX_GUIDES]);
@@ -534,6 +569,7 @@ impl MomentFlr {
                     put(write_t, c * rec + k + 1 + i, *m);
                 }
             }
+            rejected.fetch_add(rej, Ordering::Relaxed);
             if let Some(s) = pooled_window {
                 let r = flr.window_cells_tile_range(s, t)?;
                 // SAFETY: tile t's band of the pooled grid, disjoint from every other tile's.
@@ -541,13 +577,16 @@ impl MomentFlr {
             }
             Ok(Report::default())
         };
-        run_tiles(own, tiles, workers, 0, for_each, &commit)?;
+        run_tiles(own, tiles, workers, wl, for_each, &commit)?;
+        rep.history_rejected += rejected.load(Ordering::Relaxed);
         Ok(rep)
     }
 
-    /// Cell row `y`'s mean motion in cells, `[x, y, count]` per cell (values
-    /// within twice the frame's size only; 0 without any or without `motion`) into `means`; `row`:
-    /// a row of working space. Returns the pixels whose motion was left out.
+    /// Cell row `y`'s mean motion in cells, `[x, y, count]` per cell, over
+    /// the cell's middle pixel row (as good as all its rows on the training
+    /// sequences, at an eighth of the reads; values within twice the frame's
+    /// size only; 0 without any or without `motion`) into `means`; `row`:
+    /// a row of working space. Returns the pixels read whose motion was left out.
     fn motion_means(&self, motion: Option<&ImageView<'_>>, y: usize, row: &mut [f64], means: &mut [f64]) -> Result<u64, Error> {
         means.fill(0.0);
         let Some(m) = motion else { return Ok(0) };
@@ -557,32 +596,23 @@ impl MomentFlr {
         let (mx, my) = buf.split_at_mut(w);
         // motion beyond twice the frame's size is as unusable as NaN
         let limit = 2.0 * w.max(h) as f32;
+        let py = y * b + (((y + 1) * b).min(h) - y * b) / 2;
+        let missing = Error::SizeMismatch { arg: Arg::Motion, expected: (w, h), got: (m.width(), m.height()) };
+        m.read_row_n(py, 0, [&mut mx[..w], &mut my[..w]]).ok_or(missing)?;
         let mut invalid = 0u64;
-        for py in y * b..((y + 1) * b).min(h) {
-            m.read_row_n(py, 0, [&mut mx[..w], &mut my[..w]]).ok_or(Error::SizeMismatch {
-                arg: Arg::Motion,
-                expected: (w, h),
-                got: (m.width(), m.height()),
-            })?;
-            for (cell, (xs, ys)) in means.chunks_exact_mut(3).zip(mx.chunks(b).zip(my.chunks(b))) {
-                let (mut sx, mut sy, mut n) = (0f32, 0f32, 0f32);
-                for (&a, &c) in xs.iter().zip(ys) {
-                    let ok = a.abs() <= limit && c.abs() <= limit;
-                    sx += if ok { a } else { 0.0 };
-                    sy += if ok { c } else { 0.0 };
-                    n += ok as u8 as f32;
-                }
-                invalid += (xs.len() - n as usize) as u64;
-                cell[0] += sx as f64;
-                cell[1] += sy as f64;
-                cell[2] += n as f64;
+        for (cell, (xs, ys)) in means.chunks_exact_mut(3).zip(mx.chunks(b).zip(my.chunks(b))) {
+            let (mut sx, mut sy, mut n) = (0f32, 0f32, 0usize);
+            for (&a, &c) in xs.iter().zip(ys) {
+                let ok = a.abs() <= limit && c.abs() <= limit;
+                sx += if ok { a } else { 0.0 };
+                sy += if ok { c } else { 0.0 };
+                n += ok as usize;
             }
-        }
-        for v in means.chunks_exact_mut(3) {
-            if v[2] > 0.0 {
+            invalid += (xs.len() - n) as u64;
+            if n > 0 {
                 // pixels → cells
-                v[0] /= v[2] * b as f64;
-                v[1] /= v[2] * b as f64;
+                let scale = 1.0 / (n * b) as f64;
+                (cell[0], cell[1], cell[2]) = (sx as f64 * scale, sy as f64 * scale, n as f64);
             }
         }
         Ok(invalid)
@@ -928,27 +958,34 @@ mod tests {
         for _ in 0..3 {
             let rep =
                 mf.denoise(&f, Some(&mv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
-            assert_eq!(rep.invalid_motion, (0..w * h).filter(|i| i % 5 == 0).count() as u64);
+            // the history reads each cell row's middle pixel row (4, 12, 20)
+            assert_eq!(rep.invalid_motion, (0..w * h).filter(|i| i % 5 == 0 && (i / w) % 8 == 4).count() as u64);
         }
         assert!(out.iter().all(|v| v.is_finite()));
     }
 
-    /// The depth rescale moves the history's mean depth onto the current one
-    /// and keeps its depth spread relative to its mean.
+    /// Moving a history into the current frame gives the moments of its
+    /// pixels measured from the current references, with its mean depth
+    /// scaled onto the current cell's and the other guides unchanged.
     #[test]
-    fn depth_rescale_matches_the_current_depth() {
+    fn a_history_moves_into_the_current_frame() {
         let lay = CellLayout::new(5);
-        let reference = [0.25f32, 0.5, -0.5, 1.5, 0.5];
+        let (prev_reference, reference) = ([0.25f32, 0.5, -0.5, 1.5, 0.5], [-0.1f32, 0.2, 0.3, 2.5, 0.4]);
         let px: Vec<_> = (0..64).map(|i| ([0.0, 1.0, 0.0, 2.0 + 0.01 * i as f64, 0.5], [0.2, 0.2, 0.2])).collect();
-        let shifted: Vec<_> =
-            px.iter().map(|(g, y)| (core::array::from_fn(|i| g[i] - reference[i] as f64), *y)).collect::<Vec<([f64; 5], [f64; 3])>>();
-        let mut hist = moments(&shifted, &lay);
-        let h = mean_guides(&hist, &lay, &reference).unwrap();
-        let mut cur = h;
-        cur[3] = 1.1 * h[3];
-        rescale_depth(&mut hist, &lay, &cur, &reference, 3);
-        let after = mean_guides(&hist, &lay, &reference).unwrap();
-        assert!((after[3] - cur[3]).abs() < 1e-9, "{} against {}", after[3], cur[3]);
-        assert!((after[1] - h[1]).abs() < 1e-12, "other guides unchanged");
+        let from = |r: &[f32; 5], scale: f64| -> Vec<([f64; 5], [f64; 3])> {
+            px.iter().map(|(g, y)| (core::array::from_fn(|i| if i == 3 { scale * g[i] } else { g[i] } - r[i] as f64), *y)).collect()
+        };
+        let mut hist = moments(&from(&prev_reference, 1.0), &lay);
+        let mut cur = mean_guides(&hist, &lay, &prev_reference).unwrap();
+        // without depth: only the references move
+        let mut shifted = hist.clone();
+        into_current_frame(&mut shifted, &lay, &prev_reference, &reference, &cur, None);
+        let want = moments(&from(&reference, 1.0), &lay);
+        assert!(shifted.iter().zip(&want).all(|(a, b)| (a - b).abs() <= 1e-9 * b.abs().max(1.0)), "{shifted:?}\n{want:?}");
+        // with depth: the depth scaled by 1.1, exactly the moments of the scaled pixels
+        cur[3] *= 1.1;
+        into_current_frame(&mut hist, &lay, &prev_reference, &reference, &cur, Some(3));
+        let want = moments(&from(&reference, 1.1), &lay);
+        assert!(hist.iter().zip(&want).all(|(a, b)| (a - b).abs() <= 1e-9 * b.abs().max(1.0)), "{hist:?}\n{want:?}");
     }
 }
