@@ -726,6 +726,9 @@ impl Method {
                 if a.sigma.is_none() && a.radius.is_none() && a.box_radius.is_none() {
                     cfg.blur = FlrConfig::temporal_moments().blur;
                 }
+                if a.regularization.is_none() {
+                    cfg.regularization = FlrConfig::temporal_moments().regularization;
+                }
                 let temporal = a.temporal_config()?;
                 let runner = TemporalRunner::moments(cfg, temporal, w, h, threads)?;
                 let (mut label, mut flags) =

@@ -982,6 +982,13 @@ struct LrdFlrConfig lrd_flr_config_default(void);
 struct LrdFlrConfig lrd_flr_config_temporal_default(void);
 
 /**
+ * The defaults for temporal FLR on accumulated moments
+ * (`lrd_flr_denoise_temporal_moments`): those of `lrd_flr_config_default`
+ * with one Gaussian window of sigma 6 and the additive epsilon at 1e-3.
+ */
+struct LrdFlrConfig lrd_flr_config_temporal_moments_default(void);
+
+/**
  * Scratch bytes `lrd_flr_denoise` needs for `width`×`height` output frames.
  */
 LrdStatus lrd_flr_scratch_size(const struct LrdFlrConfig *config,
@@ -1066,6 +1073,39 @@ LrdStatus lrd_flr_stage_tile_count(const struct LrdFlrConfig *config,
                                    uint32_t height,
                                    uint32_t stage,
                                    uint32_t *count);
+
+/**
+ * Scratch and history bytes of temporal FLR on accumulated moments
+ * (`lrd_flr_denoise_temporal_moments`) for `width`x`height` frames.
+ * `config->guides` must hold the normal and `config->upsample` must be 1.
+ */
+LrdStatus lrd_flr_temporal_moments_sizes(const struct LrdFlrConfig *config,
+                                         const struct LrdTemporalConfig *temporal,
+                                         uint32_t width,
+                                         uint32_t height,
+                                         size_t *scratch_bytes,
+                                         size_t *history_bytes);
+
+/**
+ * One frame of temporal FLR on accumulated moments, on the calling thread:
+ * FLR's block moments are blended with the previous frames' (reprojected
+ * per 8x8 cell with `motion`, a cell's history kept where its mean normal
+ * and depth match) and FLR is fitted on the sums; about 1.1-1.2x FLR's time
+ * (`docs/PERFORMANCE.md`), below `lrd_flr_denoise_temporal`'s quality. Of
+ * `temporal` it reads `max_history` and `cut_fraction`;
+ * `temporal->rejection_guides` must be 0. `motion`, `history`, `scratch`,
+ * `report` and the frame are as for `lrd_flr_denoise_temporal`, with the
+ * sizes from `lrd_flr_temporal_moments_sizes`.
+ */
+LrdStatus lrd_flr_denoise_temporal_moments(const struct LrdFlrConfig *config,
+                                           const struct LrdTemporalConfig *temporal,
+                                           const struct LrdFrame *frame,
+                                           const struct LrdImage *motion,
+                                           struct LrdHistory *history,
+                                           const struct LrdImageMut *out,
+                                           void *scratch,
+                                           size_t scratch_bytes,
+                                           struct LrdReport *report);
 
 /**
  * Scratch and history bytes of temporal FLR (`lrd_flr_denoise_temporal`)

@@ -8,6 +8,7 @@ use crate::images::{
 use crate::status::{guard, status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
 use crate::temporal::{denoise_temporal, temporal_config_and_rejection, temporal_sizes, LrdHistory, LrdTemporalConfig};
 use core::ffi::c_void;
+use lrdenoise_core::flr::moment_history::MomentFlr;
 use lrdenoise_core::flr::temporal::TemporalFlr;
 use lrdenoise_core::{Blur, Flr, FlrConfig, Kernel, Regularization};
 
@@ -178,6 +179,14 @@ pub extern "C" fn lrd_flr_config_default() -> LrdFlrConfig {
 #[no_mangle]
 pub extern "C" fn lrd_flr_config_temporal_default() -> LrdFlrConfig {
     lrd_flr_config_of(&FlrConfig::temporal())
+}
+
+/// The defaults for temporal FLR on accumulated moments
+/// (`lrd_flr_denoise_temporal_moments`): those of `lrd_flr_config_default`
+/// with one Gaussian window of sigma 6 and the additive epsilon at 1e-3.
+#[no_mangle]
+pub extern "C" fn lrd_flr_config_temporal_moments_default() -> LrdFlrConfig {
+    lrd_flr_config_of(&FlrConfig::temporal_moments())
 }
 
 /// The C form of the default-guide configuration `d`.
@@ -423,6 +432,60 @@ fn temporal_plan(c: *const LrdFlrConfig, t: *const LrdTemporalConfig, width: u32
         Some(guides) => plan.with_rejection_guides(guides).map_err(status_of),
         None => Ok(plan),
     }
+}
+
+fn moments_plan(c: *const LrdFlrConfig, t: *const LrdTemporalConfig, width: u32, height: u32) -> Result<MomentFlr, LrdStatus> {
+    // SAFETY: checked for NULL; the caller passes a valid config pointer.
+    let c = unsafe { c.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    let (t, reject) = temporal_config_and_rejection(t)?;
+    if reject.is_some() {
+        // the moments judge history by the fit's own normal and depth
+        return Err(LRD_STATUS_INVALID_CONFIG);
+    }
+    MomentFlr::new(config(c)?, &t, width as usize, height as usize).map_err(status_of)
+}
+
+/// Scratch and history bytes of temporal FLR on accumulated moments
+/// (`lrd_flr_denoise_temporal_moments`) for `width`x`height` frames.
+/// `config->guides` must hold the normal and `config->upsample` must be 1.
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flr_temporal_moments_sizes(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    width: u32,
+    height: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| temporal_sizes(moments_plan(config, temporal, width, height)?, scratch_bytes, history_bytes))
+}
+
+/// One frame of temporal FLR on accumulated moments, on the calling thread:
+/// FLR's block moments are blended with the previous frames' (reprojected
+/// per 8x8 cell with `motion`, a cell's history kept where its mean normal
+/// and depth match) and FLR is fitted on the sums; about 1.1-1.2x FLR's time
+/// (`docs/PERFORMANCE.md`), below `lrd_flr_denoise_temporal`'s quality. Of
+/// `temporal` it reads `max_history` and `cut_fraction`;
+/// `temporal->rejection_guides` must be 0. `motion`, `history`, `scratch`,
+/// `report` and the frame are as for `lrd_flr_denoise_temporal`, with the
+/// sizes from `lrd_flr_temporal_moments_sizes`.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_flr_denoise_temporal_moments(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    // SAFETY: forwarded contract (see `denoise_temporal`).
+    guard(|| unsafe {
+        denoise_temporal(|w, h| moments_plan(config, temporal, w, h), frame, motion, history, out, scratch, scratch_bytes, report)
+    })
 }
 
 /// Scratch and history bytes of temporal FLR (`lrd_flr_denoise_temporal`)

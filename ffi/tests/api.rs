@@ -410,6 +410,74 @@ fn flr_temporal_matches_the_rust_api() {
     }
 }
 
+/// Temporal FLR on accumulated moments through the C ABI gives exactly the
+/// Rust API's output over three frames, and refuses rejection guides, a
+/// configuration without normals and a short history.
+#[test]
+fn flr_temporal_moments_match_the_rust_api() {
+    use lrdenoise_core::flr::moment_history::MomentFlr;
+    use lrdenoise_core::temporal::{History, TemporalConfig};
+    use lrdenoise_core::{FlrConfig, ImageView, ImageViewMut};
+    let (w, h) = (67u32, 38u32);
+    let (wu, hu, n) = (w as usize, h as usize, (w * h) as usize);
+    let planes = GuidePlanes {
+        w,
+        h,
+        normal: (0..3 * n).map(|i| if i % 3 == (i / 3 / 500) % 3 { 1.0 } else { 0.0 }).collect(),
+        depth: (0..n).map(|i| 2.0 + (i / wu) as f32 * 0.02).collect(),
+        ao: (0..n).map(|i| 0.5 + ((i * 31) % 50) as f32 / 100.0).collect(),
+        position: None,
+    };
+    let motion: Vec<f32> = (0..2 * n).map(|i| if i % 2 == 0 { 12.0 } else { -0.3 }).collect();
+    let cfg = lrd_flr_config_temporal_moments_default();
+    let tc = lrd_temporal_config_default();
+    let plan = MomentFlr::new(FlrConfig::temporal_moments(), &TemporalConfig::default(), wu, hu).unwrap();
+    let (mut sb, mut hb) = (0usize, 0usize);
+    let mut rhd = vec![0f32; plan.history_len()];
+    let mut rh = History::new(&mut rhd);
+    let mut rs = vec![0f64; plan.scratch_len()];
+    unsafe {
+        assert_eq!(lrd_flr_temporal_moments_sizes(&cfg, &tc, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_OK);
+        assert_eq!((hb, sb), (4 * plan.history_len(), 8 * plan.scratch_len()));
+        let mut ts = vec![0f64; sb / 8];
+        let mut hd = vec![0f32; hb / 4];
+        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let (mut out, mut want) = (vec![0f32; 3 * n], vec![0f32; 3 * n]);
+        let o = packed_out(&mut out, w, h);
+        let (mut rep, mut rrep) = (LrdReport::default(), lrdenoise_core::Report::default());
+        for k in 0..3usize {
+            let noisy: Vec<f32> = (0..3 * n).map(|i| (((i + 977 * k) * 7919) % 1000) as f32 / 500.0).collect();
+            let frame = planes.c_frame(&noisy, false);
+            let mv = img(motion.as_ptr(), w, h, 2);
+            let m = if k == 0 { null() } else { &mv as *const LrdImage };
+            let sp = ts.as_mut_ptr() as *mut _;
+            let status = lrd_flr_denoise_temporal_moments(&cfg, &tc, &frame, m, &mut hist, &o, sp, sb, &mut rep);
+            assert_eq!(status, LrdStatus::LRD_STATUS_OK);
+            let rframe = planes.rust_frame(&noisy);
+            let rmv = ImageView::interleaved(&motion, wu, hu, 2).unwrap();
+            let mut ov = ImageViewMut::interleaved(&mut want, wu, hu, 3).unwrap();
+            rrep += plan.denoise(&rframe, (k > 0).then_some(&rmv), &mut rh, &mut rs, &mut ov).unwrap();
+            assert_eq!(out, want, "frame {k}");
+            assert_eq!(hist.frames as usize, k + 1);
+            let mut short = hist;
+            short.bytes -= 4;
+            assert_eq!(
+                lrd_flr_denoise_temporal_moments(&cfg, &tc, &frame, m, &mut short, &o, sp, sb, null_mut()),
+                LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL
+            );
+            assert_eq!(hist.frames as usize, k + 1, "a refused call leaves the history as it was");
+        }
+        assert_eq!((rep.history_rejected, rep.history_resets), (rrep.history_rejected, rrep.history_resets));
+        assert!(rep.history_rejected > 0 && rep.history_resets == 0, "the pan uncovers a border");
+        let mut reject = tc;
+        reject.rejection_guides = LRD_GUIDE_NORMAL;
+        assert_eq!(lrd_flr_temporal_moments_sizes(&cfg, &reject, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_INVALID_CONFIG);
+        let mut no_normal = cfg;
+        no_normal.guides = LRD_GUIDE_DEPTH | LRD_GUIDE_AO;
+        assert_eq!(lrd_flr_temporal_moments_sizes(&no_normal, &tc, w, h, &mut sb, &mut hb), LrdStatus::LRD_STATUS_UNSUPPORTED);
+    }
+}
+
 /// Temporal FLR with `rejection_guides` (normal + position) gives exactly the
 /// Rust API's `with_rejection_guides` output, the history size follows, and
 /// the field refuses AO or user bits, a frame without the positions, and

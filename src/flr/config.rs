@@ -123,6 +123,9 @@ pub const TEMPORAL_SIGMAS: [f32; 3] = [3.0, 6.0, 12.0];
 /// Window of temporal FLR on accumulated moments ([`FlrConfig::temporal_moments`]):
 /// σ 6 pixels, chosen on the training sequences.
 pub const TEMPORAL_MOMENTS_SIGMA: f32 = 6.0;
+/// Additive ϵ of temporal FLR on accumulated moments
+/// ([`FlrConfig::temporal_moments`]; chosen on the training sequences).
+pub const TEMPORAL_MOMENTS_EPS_ADD: f64 = 1e-3;
 /// Default ε (multiplicative regulariser).
 pub const DEFAULT_EPS_MUL: f64 = 1e-3;
 /// Default ϵ (additive regulariser).
@@ -163,11 +166,16 @@ impl FlrConfig {
 
     /// The defaults for temporal FLR on accumulated moments
     /// ([`crate::flr::moment_history::MomentFlr`]): one Gaussian window of
-    /// σ = [`TEMPORAL_MOMENTS_SIGMA`] pixels, the rest as [`FlrConfig::default`].
-    /// The accumulated cells are less noisy than a frame's, so one window
-    /// scores as the adaptive one there (`docs/METHODS.md`) for less work.
+    /// σ = [`TEMPORAL_MOMENTS_SIGMA`] pixels and the additive ϵ at [`TEMPORAL_MOMENTS_EPS_ADD`], the rest as
+    /// [`FlrConfig::default`]. The accumulated cells are less noisy than a
+    /// frame's: one window scores as the adaptive one there, and a smaller ϵ
+    /// fits them better (`docs/METHODS.md`).
     pub fn temporal_moments() -> Self {
-        FlrConfig { blur: Blur::Gaussian { sigma: TEMPORAL_MOMENTS_SIGMA, radius: None }, ..Self::default() }
+        FlrConfig {
+            blur: Blur::Gaussian { sigma: TEMPORAL_MOMENTS_SIGMA, radius: None },
+            regularization: Regularization::Normalized { eps_mul: DEFAULT_EPS_MUL, eps_add: TEMPORAL_MOMENTS_EPS_ADD },
+            ..Self::default()
+        }
     }
 
     /// Checks every field.

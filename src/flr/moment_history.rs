@@ -25,7 +25,7 @@
 //! 32-bit words each in the history's f32 buffer (bit patterns, never used
 //! as f32).
 
-use core::sync::atomic::{AtomicU64, Ordering};
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use super::schedule::Stage;
 use super::{Flr, FlrConfig, Stats};
@@ -128,7 +128,7 @@ impl TapTest {
 
 /// One cell of the reprojected history. `prev` holds the previous frame's
 /// cell records (`rec` f64 each, stored as word pairs: `lay.k` moments, the
-/// history length, `MAX_GUIDES` mean guides, NaN for an empty cell) on a
+/// history length, `lay.q` mean guides, NaN for an empty cell) on a
 /// `cx × cy` grid; they are sampled bilinearly at the cell centre `(x, y)`
 /// moved by `motion` (previous − current, in cells), each of the 4 taps kept
 /// where `test` accepts its mean guides against `cur`. Writes the kept taps'
@@ -151,7 +151,7 @@ pub(crate) fn reproject_cell(
     let (mut wsum, mut nsum) = (0f64, 0f64);
     for (i, w) in taps(x, y, motion, cx, cy).into_iter().flatten() {
         let at = i * rec;
-        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| get(prev, at + k + 1 + g));
+        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, at + k + 1 + g) } else { 0.0 });
         if tm[0].is_nan() || !test.accepts(cur, &tm) {
             continue;
         }
@@ -185,7 +185,7 @@ pub(crate) fn any_tap_kept(
     test: &TapTest,
 ) -> bool {
     taps(x, y, motion, cx, cy).into_iter().flatten().any(|(i, w)| {
-        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| get(prev, i * rec + lay.k + 1 + g));
+        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, i * rec + lay.k + 1 + g) } else { 0.0 });
         w > 0.0 && !tm[0].is_nan() && test.accepts(cur, &tm)
     })
 }
@@ -315,7 +315,11 @@ impl<T> Shared<T> {
 /// guides have depth) and no joint upsampling.
 #[derive(Clone, Debug)]
 pub struct MomentFlr {
+    /// FLR on the blended cells (variances counting up to `max_history`
+    /// samples per pixel; the pooled window summed after the blend).
     flr: Flr,
+    /// FLR as configured: what a single frame (`Denoiser::denoise`) runs.
+    single: Flr,
     blend: Blend,
     /// A frame with more than this fraction of fresh cells is a camera cut.
     cut_fraction: f64,
@@ -334,10 +338,11 @@ impl MomentFlr {
             return Err(Error::Unsupported("temporal FLR on moments needs the normal guide (taps are judged by their mean normal)"));
         }
         let max_history = temporal.max_history as f64;
-        let flr = Flr::new(cfg, width, height)?.with_sample_cap(max_history).without_pooling_in_moments();
+        let single = Flr::new(cfg, width, height)?;
+        let flr = single.with_sample_cap(max_history).without_pooling_in_moments();
         // the normal is guides 0..3, so the depth is guide 3
         let test = TapTest { normal_limit: NORMAL_LIMIT, depth_limit: DEPTH_LIMIT, depth: cfg.guides.depth.then_some(3) };
-        Ok(MomentFlr { flr, blend: Blend { test, max_history }, cut_fraction: temporal.cut_fraction as f64 })
+        Ok(MomentFlr { flr, single, blend: Blend { test, max_history }, cut_fraction: temporal.cut_fraction as f64 })
     }
     /// The FLR configuration it fits with.
     pub fn config(&self) -> &FlrConfig {
@@ -353,7 +358,7 @@ impl MomentFlr {
     }
     /// f64 values per cell record: moments, length, mean guides.
     fn record(&self) -> usize {
-        self.flr.lay.k + 1 + MAX_GUIDES
+        self.flr.lay.k + 1 + self.flr.lay.q
     }
     /// f64 values of one slot: the references, then the cell records.
     fn slot_len(&self) -> usize {
@@ -499,7 +504,7 @@ impl MomentFlr {
             let r = flr.cells_tile_range(t)?;
             Ok((r.start / k, r.len() / k))
         };
-        let (fresh, filled) = (AtomicU64::new(0), AtomicU64::new(0));
+        let (fresh, filled) = (AtomicU32::new(0), AtomicU32::new(0));
         let find = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
             // SAFETY: tile t's means, disjoint from every other tile's
@@ -522,8 +527,8 @@ impl MomentFlr {
                     fr += !any_tap_kept(prev, rec, (cx, cy), &lay, (x, y), m, &cur, &self.blend.test) as u64;
                 }
             }
-            fresh.fetch_add(fr, Ordering::Relaxed);
-            filled.fetch_add(fi, Ordering::Relaxed);
+            fresh.fetch_add(fr as u32, Ordering::Relaxed);
+            filled.fetch_add(fi as u32, Ordering::Relaxed);
             Ok(rep)
         };
         // `find` reads `cells` shared: no band of it is borrowed mutably until it returns
@@ -532,7 +537,7 @@ impl MomentFlr {
         rep.history_resets += cut as u64;
         let blend = index > 0 && !cut;
         let (pooled_at, pooled_window) = (Shared(pooled.as_mut_ptr()), flr.pooled_window());
-        let rejected = AtomicU64::new(0);
+        let rejected = AtomicU32::new(0);
         let commit = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
             // SAFETY: tile t's cells, records and means, disjoint from every
@@ -565,11 +570,11 @@ impl MomentFlr {
                     }
                 }
                 let means = mean_guides(cell, &lay, &stats.reference).unwrap_or([f64::NAN; MAX_GUIDES]);
-                for (i, m) in means.iter().enumerate() {
+                for (i, m) in means[..lay.q].iter().enumerate() {
                     put(write_t, c * rec + k + 1 + i, *m);
                 }
             }
-            rejected.fetch_add(rej, Ordering::Relaxed);
+            rejected.fetch_add(rej as u32, Ordering::Relaxed);
             if let Some(s) = pooled_window {
                 let r = flr.window_cells_tile_range(s, t)?;
                 // SAFETY: tile t's band of the pooled grid, disjoint from every other tile's.
@@ -578,7 +583,7 @@ impl MomentFlr {
             Ok(Report::default())
         };
         run_tiles(own, tiles, workers, wl, for_each, &commit)?;
-        rep.history_rejected += rejected.load(Ordering::Relaxed);
+        rep.history_rejected += u64::from(rejected.load(Ordering::Relaxed));
         Ok(rep)
     }
 
@@ -616,6 +621,51 @@ impl MomentFlr {
             }
         }
         Ok(invalid)
+    }
+}
+
+impl crate::Denoiser for MomentFlr {
+    fn size(&self) -> (usize, usize) {
+        self.single.size()
+    }
+    /// A single frame is FLR's.
+    fn scratch_len(&self) -> usize {
+        self.single.scratch_len()
+    }
+    fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
+        self.single.denoise(frame, scratch, out)
+    }
+    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        self.single.tiled_scratch_len(workers)
+    }
+    fn denoise_parallel(
+        &self,
+        frame: &Frame<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        self.single.denoise_parallel(frame, scratch, out, workers, for_each)
+    }
+}
+
+impl crate::TemporalDenoiser for MomentFlr {
+    fn history_len(&self) -> usize {
+        MomentFlr::history_len(self)
+    }
+    fn temporal_scratch_len(&self) -> usize {
+        self.scratch_len()
+    }
+    fn denoise_temporal(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+    ) -> Result<Report, Error> {
+        self.denoise(frame, motion, history, scratch, out)
     }
 }
 
@@ -663,11 +713,11 @@ mod tests {
 
     /// Cell records as the history stores them (`reproject_cell`'s `prev`).
     fn records(cells: &[Vec<f64>], lengths: &[f64], lay: &CellLayout, reference: &[f32]) -> Vec<u32> {
-        let rec = lay.k + 1 + MAX_GUIDES;
+        let rec = lay.k + 1 + lay.q;
         let mut w = vec![0u32; 2 * rec * cells.len()];
         for (c, (m, n)) in cells.iter().zip(lengths).enumerate() {
             let means = mean_guides(m, lay, reference).unwrap_or([f64::NAN; MAX_GUIDES]);
-            for (j, v) in m.iter().chain([*n].iter()).chain(means.iter()).enumerate() {
+            for (j, v) in m.iter().chain([*n].iter()).chain(means[..lay.q].iter()).enumerate() {
                 put(&mut w, c * rec + j, *v);
             }
         }
@@ -715,7 +765,7 @@ mod tests {
         let lengths = [4f64, 5.0, 6.0, 7.0, 8.0, 9.0];
         let reference = [0f32; MAX_GUIDES];
         let prev = records(&cells, &lengths, &lay, &reference);
-        let rec = lay.k + 1 + MAX_GUIDES;
+        let rec = lay.k + 1 + lay.q;
         let test = TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) };
         let cur = mean_guides(&up, &lay, &reference).unwrap();
         let mut out = vec![0f64; lay.k];
@@ -743,7 +793,7 @@ mod tests {
     fn a_static_cell_averages_its_frames() {
         let lay = CellLayout::new(5);
         let blend = Blend { test: TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) }, max_history: 4.0 };
-        let rec = lay.k + 1 + MAX_GUIDES;
+        let rec = lay.k + 1 + lay.q;
         let frame = |f: u64, reference: &[f32; MAX_GUIDES]| {
             let px: Vec<([f64; 5], [f64; 3])> = (0..64)
                 .map(|i| {
