@@ -1139,7 +1139,7 @@ impl Reprojection {
 }
 
 /// The frame counter after a frame (its parity picks the slots: kept when it wraps).
-fn next_frame(frames: u32) -> u32 {
+pub(crate) fn next_frame(frames: u32) -> u32 {
     if frames == u32::MAX {
         2
     } else {

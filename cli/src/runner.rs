@@ -563,7 +563,8 @@ impl TemporalRunner {
                 .map(|_| ())
                 .map_err(|e| format!("walr: {e}")),
         };
-        self.frames = self.frames.saturating_add(1);
+        // the library advances the count (its parity picks the history slots)
+        self.frames = history.frames();
         r
     }
 }

@@ -1089,11 +1089,12 @@ LrdStatus lrd_flr_temporal_moments_sizes(const struct LrdFlrConfig *config,
 /**
  * One frame of temporal FLR on accumulated moments, on the calling thread:
  * FLR's block moments are blended with the previous frames' (reprojected
- * per 8x8 cell with `motion`, a cell's history kept where its mean normal
- * and depth match) and FLR is fitted on the sums; about 1.1-1.2x FLR's time
- * (`docs/PERFORMANCE.md`), below `lrd_flr_denoise_temporal`'s quality. Of
- * `temporal` it reads `max_history` and `cut_fraction`;
- * `temporal->rejection_guides` must be 0. `motion`, `history`, `scratch`,
+ * per cell of `config->block` pixels with `motion`, a cell's history kept
+ * where its mean normal and depth match) and FLR is fitted on the sums;
+ * about 1.1-1.2x FLR's time (`docs/PERFORMANCE.md`), below
+ * `lrd_flr_denoise_temporal`'s quality. Of `temporal` it reads
+ * `max_history` and `cut_fraction` (every field is validated);
+ * `temporal->rejection_guides` must be 0 and `frame.sample_weights` absent. `motion`, `history`, `scratch`,
  * `report` and the frame are as for `lrd_flr_denoise_temporal`, with the
  * sizes from `lrd_flr_temporal_moments_sizes`.
  */

@@ -161,7 +161,7 @@ pub(crate) fn reproject_cell(
         nsum += w * get(prev, at + k);
         wsum += w;
     }
-    if wsum <= 1e-3 {
+    if wsum <= MIN_TAP_WEIGHT {
         out[..k].fill(0.0);
         return 0.0;
     }
@@ -172,7 +172,10 @@ pub(crate) fn reproject_cell(
     nsum * inv
 }
 
-/// Whether [`reproject_cell`] would keep any tap (the same test, without the moments).
+/// Least bilinear weight of the kept taps for a cell to keep its history.
+const MIN_TAP_WEIGHT: f64 = 1e-3;
+
+/// Whether [`reproject_cell`] would keep the history (the same test, without the moments).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn any_tap_kept(
     prev: &[u32],
@@ -184,10 +187,16 @@ pub(crate) fn any_tap_kept(
     cur: &[f64; MAX_GUIDES],
     test: &TapTest,
 ) -> bool {
-    taps(x, y, motion, cx, cy).into_iter().flatten().any(|(i, w)| {
-        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, i * rec + lay.k + 1 + g) } else { 0.0 });
-        w > 0.0 && !tm[0].is_nan() && test.accepts(cur, &tm)
-    })
+    let kept: f64 = taps(x, y, motion, cx, cy)
+        .into_iter()
+        .flatten()
+        .filter(|&(i, _)| {
+            let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, i * rec + lay.k + 1 + g) } else { 0.0 });
+            !tm[0].is_nan() && test.accepts(cur, &tm)
+        })
+        .map(|(_, w)| w)
+        .sum();
+    kept > MIN_TAP_WEIGHT
 }
 
 /// The 4 bilinear taps (cell index, weight) at cell `(x, y)` moved by
@@ -250,8 +259,8 @@ pub(crate) struct Blend {
 /// `reference`) blended with the previous records `prev` (in
 /// `prev_reference`; see [`reproject_cell`]) reprojected at it. Writes the
 /// history's new moments (the running mean of the frames' moments) into
-/// `hist` and returns the new length `n` (1, and `hist` the cell's own
-/// moments, when no tap was kept). The fit takes `hist · n`, the sums over
+/// `hist` and returns the new length `n` and whether a history was kept
+/// (`(1, false)`, and `hist` the cell's own moments, when no tap was). The fit takes `hist · n`, the sums over
 /// `n` frames, so that its sample counts are frames × pixels.
 /// `work`: `lay.k` values of working space.
 #[allow(clippy::too_many_arguments)]
@@ -268,16 +277,16 @@ pub(crate) fn blend_cell(
     prev_reference: &[f32],
     blend: &Blend,
     work: &mut [f64],
-) -> f64 {
+) -> (f64, bool) {
     let k = lay.k;
     let Some(cur) = mean_guides(cell, lay, reference) else {
         hist[..k].copy_from_slice(&cell[..k]);
-        return 1.0;
+        return (1.0, false);
     };
     let n_prev = reproject_cell(prev, rec, grid, lay, at, motion, &cur, &blend.test, work);
     if n_prev <= 0.0 {
         hist[..k].copy_from_slice(&cell[..k]);
-        return 1.0;
+        return (1.0, false);
     }
     into_current_frame(&mut work[..k], lay, prev_reference, reference, &cur, blend.test.depth);
     let n = (n_prev + 1.0).min(blend.max_history);
@@ -285,7 +294,7 @@ pub(crate) fn blend_cell(
     for ((h, c), r) in hist[..k].iter_mut().zip(&cell[..k]).zip(&work[..k]) {
         *h = (1.0 - w) * r + w * c;
     }
-    n
+    (n, true)
 }
 
 /// A raw pointer the tiles of one pass share; each tile takes its own band.
@@ -293,9 +302,9 @@ pub(crate) fn blend_cell(
 struct Shared<T>(*mut T);
 // SAFETY: the tiles that use it take disjoint bands ([`run_tiles`] runs each
 // tile once) and the pointee outlives the pass.
-unsafe impl<T> Sync for Shared<T> {}
+unsafe impl<T: Send> Sync for Shared<T> {}
 // SAFETY: as for `Sync`.
-unsafe impl<T> Send for Shared<T> {}
+unsafe impl<T: Send> Send for Shared<T> {}
 
 impl<T> Shared<T> {
     /// `len` values at `at`.
@@ -434,8 +443,11 @@ impl MomentFlr {
         }
         let (w, h) = self.flr.size();
         if let Some(m) = motion {
-            if m.width() != w || m.height() != h || m.channel_count() < 2 {
+            if m.width() != w || m.height() != h {
                 return Err(Error::SizeMismatch { arg: Arg::Motion, expected: (w, h), got: (m.width(), m.height()) });
+            }
+            if m.channel_count() < 2 {
+                return Err(Error::ChannelCount { arg: Arg::Motion, expected: 2, got: m.channel_count() });
             }
         }
         let workers = parallel.map_or(1, |p| p.0);
@@ -459,9 +471,8 @@ impl MomentFlr {
             rep += self.history_passes(cells, pooled, &stats, motion, words, index, means, own, workers, for_each)?;
         }
         rep += self.flr.run_stages(&tiled, &f, out, &Stage::ALL[3..], stages)?;
-        // the slots alternate with the count's parity: past u32::MAX it goes
-        // on at 2 (even, like u32::MAX + 1) rather than stopping
-        history.frames = index.checked_add(1).unwrap_or(2);
+        // the slots alternate with the count's parity (past u32::MAX it goes on at 2)
+        history.frames = crate::temporal::next_frame(index);
         Ok(rep)
     }
 
@@ -515,10 +526,11 @@ impl MomentFlr {
             let (mut fr, mut fi) = (0u64, 0u64);
             for y in c0 / cx..(c0 + n) / cx {
                 let row_means = &mut means_t[3 * (y * cx - c0)..3 * ((y + 1) * cx - c0)];
-                rep.invalid_motion += self.motion_means(motion, y, row, row_means)?;
+                let invalid = self.motion_means(motion, y, row, row_means)?;
                 if index == 0 {
                     continue;
                 }
+                rep.invalid_motion += invalid;
                 for x in 0..cx {
                     let c = y * cx + x;
                     let Some(cur) = mean_guides(&cells[c * k..(c + 1) * k], &lay, &stats.reference) else { continue };
@@ -549,15 +561,15 @@ impl MomentFlr {
             let hist = &mut hist[..k];
             let mut rej = 0u64;
             for (c, cell) in cells_t.chunks_exact_mut(k).enumerate() {
-                let len = if blend {
+                let (len, kept) = if blend {
                     let (x, y) = ((c0 + c) % cx, (c0 + c) / cx);
                     let (m, r) = ((means_t[3 * c], means_t[3 * c + 1]), &stats.reference);
                     blend_cell(cell, hist, prev, rec, (cx, cy), &lay, (x, y), m, r, &prev_reference, &self.blend, work)
                 } else {
                     hist.copy_from_slice(cell);
-                    1.0
+                    (1.0, false)
                 };
-                if blend && len <= 1.0 && cell[0] > 0.0 {
+                if blend && !kept && cell[0] > 0.0 {
                     rej += cell[0] as u64;
                 }
                 for (j, v) in hist.iter().enumerate() {
@@ -590,7 +602,8 @@ impl MomentFlr {
     /// Cell row `y`'s mean motion in cells, `[x, y, count]` per cell, over
     /// the cell's middle pixel row (as good as all its rows on the training
     /// sequences, at an eighth of the reads; values within twice the frame's
-    /// size only; 0 without any or without `motion`) into `means`; `row`:
+    /// size only; NaN without any, so that the cell finds no history; 0
+    /// without `motion`) into `means`; `row`:
     /// a row of working space. Returns the pixels read whose motion was left out.
     fn motion_means(&self, motion: Option<&ImageView<'_>>, y: usize, row: &mut [f64], means: &mut [f64]) -> Result<u64, Error> {
         means.fill(0.0);
@@ -618,6 +631,9 @@ impl MomentFlr {
                 // pixels → cells
                 let scale = 1.0 / (n * b) as f64;
                 (cell[0], cell[1], cell[2]) = (sx as f64 * scale, sy as f64 * scale, n as f64);
+            } else {
+                // no usable vector: the cell finds no history
+                (cell[0], cell[1]) = (f64::NAN, f64::NAN);
             }
         }
         Ok(invalid)
@@ -811,7 +827,7 @@ mod tests {
             let (r, pr) = (&refs[f as usize % 2], &refs[(f as usize - 1) % 2]);
             let cell = frame(f, r);
             let mut hist = vec![0f64; lay.k];
-            let n = blend_cell(&cell, &mut hist, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), r, pr, &blend, &mut work);
+            let (n, _) = blend_cell(&cell, &mut hist, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), r, pr, &blend, &mut work);
             assert_eq!(n, (f as f64 + 1.0).min(4.0), "frame {f}");
             // the light sums do not depend on the references: the mean of the frames' while n counts every frame
             let m = frame(f, r);
@@ -833,7 +849,7 @@ mod tests {
         let own = cell.clone();
         let mut hist = vec![0f64; lay.k];
         let n = blend_cell(&cell, &mut hist, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), &refs[0], &refs[1], &blend, &mut work);
-        assert_eq!(n, 1.0);
+        assert_eq!(n, (1.0, false));
         assert_eq!(hist, own);
     }
 
@@ -1005,13 +1021,26 @@ mod tests {
         let bad = [f32::NAN, f32::INFINITY, 1e30, -1e9];
         let motion: Vec<f32> = (0..w * h).flat_map(|i| if i % 5 == 0 { [bad[i % 4], 0.0] } else { [0.5, 0.0] }).collect();
         let mv = ImageView::interleaved(&motion, w, h, 2).unwrap();
-        for _ in 0..3 {
+        for k in 0..3 {
             let rep =
                 mf.denoise(&f, Some(&mv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
-            // the history reads each cell row's middle pixel row (4, 12, 20)
-            assert_eq!(rep.invalid_motion, (0..w * h).filter(|i| i % 5 == 0 && (i / w) % 8 == 4).count() as u64);
+            // with a history, the vectors read (each cell row's middle pixel row: 4, 12, 20) are counted
+            let want = if k == 0 { 0 } else { (0..w * h).filter(|i| i % 5 == 0 && (i / w) % 8 == 4).count() as u64 };
+            assert_eq!((rep.invalid_motion, rep.history_resets), (want, 0));
         }
         assert!(out.iter().all(|v| v.is_finite()));
+        // no usable vector anywhere: no cell keeps its history, a cut
+        let nan = vec![f32::NAN; 2 * w * h];
+        let nv = ImageView::interleaved(&nan, w, h, 2).unwrap();
+        let rep =
+            mf.denoise(&f, Some(&nv), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap()).unwrap();
+        assert_eq!(rep.history_resets, 1);
+        assert!(out.iter().all(|v| v.is_finite()));
+        // a one-channel motion image is refused by its channel count
+        let one = vec![0f32; w * h];
+        let ov = ImageView::interleaved(&one, w, h, 1).unwrap();
+        let e = mf.denoise(&f, Some(&ov), &mut history, &mut scratch, &mut ImageViewMut::interleaved(&mut out, w, h, 3).unwrap());
+        assert!(matches!(e, Err(Error::ChannelCount { arg: Arg::Motion, expected: 2, got: 1 })), "{e:?}");
     }
 
     /// Moving a history into the current frame gives the moments of its

@@ -8,7 +8,7 @@
 //! | stage | tiles | reads | writes |
 //! |---|---|---|---|
 //! | `Prepare` | 1 | a few guide samples | progress (reset), `Stats` references |
-//! | `Moments` | per band | frame rows of the band | `cells` band (and `pooled` band) |
+//! | `Moments` | per band | frame rows of the band | `cells` band (and `pooled` band, unless the moment history pools after its blend) |
 //! | `Stats` | 1 | all `cells` | `Stats` mean / scale |
 //! | `BlurRows` | per band | `cells` / `pooled` band | each window's `tmp` band |
 //! | `BlurColsSolve` | per band | all `tmp` | blurred band, models (and variances) band |
@@ -214,6 +214,9 @@ impl Flr {
     /// f64 values of a [`Tiled`] scratch for `workers` concurrent workers
     /// (`workers` ≥ 1); `None` if it overflows.
     pub fn tiled_scratch_len(&self, workers: usize) -> Option<usize> {
+        // `scratch_len_for`'s terms, checked (a huge worker count must not wrap)
+        let workers_len = workers.max(1).checked_mul(self.worker_len())?;
+        2usize.checked_mul(self.grid_len())?.checked_add(self.models_len())?.checked_add(workers_len)?.checked_add(self.adaptive_len())?;
         let n = self.scale_count();
         let extra: usize = (1..n).chain(2..n).map(|s| self.window_grid_len(s)).sum();
         header_len(workers.max(1), self.tile_count()).checked_add(STATS_LEN)?.checked_add(self.scratch_len_for(workers))?.checked_add(extra)
@@ -423,7 +426,8 @@ impl<'s> Tiled<'s> {
     /// pooled cells (empty without a pooled window) and the frame's
     /// statistics, for a caller that changes the moments before they are
     /// blurred (`moment_history`). Refused unless every `Stats` tile has
-    /// completed and no `BlurRows` tile has started.
+    /// completed and no `BlurRows` tile has started. Only for a `Tiled` made
+    /// by [`Flr::tiled`] (over an exclusive slice), never by `tiled_raw`.
     pub(crate) fn cells_before_blur(&mut self) -> Result<(&mut [f64], &mut [f64], Stats), Error> {
         let blur = Stage::BlurRows;
         let started = self.word(DONE_AT + blur.index()).load(Ordering::Acquire) != 0
@@ -433,8 +437,10 @@ impl<'s> Tiled<'s> {
             return Err(Error::StageOrder { stage: blur.index() as u8, tile: 0 });
         }
         let (cells, pooled) = (self.layout.cells.clone(), self.layout.pooled.clone());
-        // SAFETY: `&mut self`: no call through this `Tiled` is in flight, and
-        // between Stats and BlurRows no tile reads or writes the two regions,
+        // SAFETY: `&mut self`: no call through this `Tiled` is in flight; its
+        // only caller made it with `Flr::tiled` over an exclusive slice, so no
+        // other `Tiled` shares the memory; between Stats and BlurRows no tile
+        // reads or writes the two regions,
         // which are disjoint and inside the buffer (`tiled_raw`); Stats is
         // written only by Prepare and Stats.
         unsafe { Ok((self.f64s_mut(cells.start, cells.len()), self.f64s_mut(pooled.start, pooled.len()), self.stats_ptr().read())) }
