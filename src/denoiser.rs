@@ -70,6 +70,32 @@ pub trait TemporalDenoiser: Denoiser {
         scratch: &mut [f64],
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error>;
+    /// f64 values of scratch [`TemporalDenoiser::denoise_temporal_parallel`]
+    /// needs for `workers` workers (`None` if it overflows).
+    fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let _ = workers;
+        Some(self.temporal_scratch_len())
+    }
+    /// [`TemporalDenoiser::denoise_temporal`] with the work spread by the
+    /// caller's executor over `workers` workers (see [`Executor`]);
+    /// bit-identical to it. Temporal FLR (light and moments) runs its tiles
+    /// on the executor; the default, for a pipeline without a parallel run
+    /// (BMFR's, WALR's), runs [`TemporalDenoiser::denoise_temporal`] on the
+    /// calling thread.
+    #[allow(clippy::too_many_arguments)]
+    fn denoise_temporal_parallel(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let _ = (workers, for_each);
+        self.denoise_temporal(frame, motion, history, scratch, out)
+    }
 }
 
 #[cfg(any(feature = "flr", feature = "bmfr", feature = "walr"))]
@@ -108,6 +134,45 @@ impl Denoiser for crate::flr::Flr {
         crate::flr::Flr::denoise_parallel(self, frame, scratch, out, workers, for_each)
     }
 }
+
+/// The [`Denoiser`] of a temporal FLR (`$ty` with a `single: Flr` field):
+/// a single frame is FLR's as configured.
+#[cfg(feature = "flr")]
+macro_rules! single_frame_is_flr {
+    ($ty:ty) => {
+        impl crate::Denoiser for $ty {
+            fn size(&self) -> (usize, usize) {
+                self.single.size()
+            }
+            fn scratch_len(&self) -> usize {
+                self.single.scratch_len()
+            }
+            fn denoise(
+                &self,
+                frame: &crate::guides::Frame<'_>,
+                scratch: &mut [f64],
+                out: &mut crate::image::ImageViewMut<'_>,
+            ) -> Result<crate::report::Report, crate::error::Error> {
+                self.single.denoise(frame, scratch, out)
+            }
+            fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+                self.single.tiled_scratch_len(workers)
+            }
+            fn denoise_parallel(
+                &self,
+                frame: &crate::guides::Frame<'_>,
+                scratch: &mut [f64],
+                out: &mut crate::image::ImageViewMut<'_>,
+                workers: usize,
+                for_each: crate::parallel::Executor<'_>,
+            ) -> Result<crate::report::Report, crate::error::Error> {
+                self.single.denoise_parallel(frame, scratch, out, workers, for_each)
+            }
+        }
+    };
+}
+#[cfg(feature = "flr")]
+pub(crate) use single_frame_is_flr;
 
 /// BMFR and WALR: the single frame is frame index 0 of their grid offsets;
 /// after `;`, more items of the `Denoiser` impl (their parallel runs).

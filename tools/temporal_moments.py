@@ -73,7 +73,7 @@ def guide_means(m, q, mean, std):
     return m[1:1 + q] / np.maximum(m[0], 1e-6) * std + mean
 
 
-def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit):
+def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=False):
     """The history H (in this frame's normalisation) and its lengths nH at each
     current cell: bilinear over the previous grid at the cell's mean motion,
     taps judged by their mean normal and depth. Cells without a kept tap get 0."""
@@ -88,15 +88,28 @@ def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit):
     empty = lambda v: np.linalg.norm(v, axis=0) < 1e-6
     nc = unit(cur[:3])
     out, n_out, wsum = np.zeros_like(H), np.zeros((gh, gw)), np.zeros((gh, gw))
+    taps = []
     for dy, dx, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)), (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
         tx, ty = x0 + dx, y0 + dy
         inside = (tx >= 0) & (tx < gw) & (ty >= 0) & (ty < gh) & (w > 0)
         tx, ty = np.clip(tx, 0, gw - 1), np.clip(ty, 0, gh - 1)
-        th = hist[:, ty, tx]
+        taps.append((tx, ty, np.where(inside, w, 0.0)))
+
+    def ok_of(th):
         # (no geometry on both sides: sky continues sky)
         sky = empty(cur[:3]) & empty(th[:3])
-        ok = inside & (((nc * unit(th[:3])).sum(0) >= normal_limit) | sky)
-        ok &= (np.abs(th[DEPTH] - cur[DEPTH]) <= depth_limit * np.abs(cur[DEPTH])) | sky
+        ok = ((nc * unit(th[:3])).sum(0) >= normal_limit) | sky
+        return ok & ((np.abs(th[DEPTH] - cur[DEPTH]) <= depth_limit * np.abs(cur[DEPTH])) | sky)
+
+    mix_ok = np.zeros((gh, gw), bool)
+    if mix:
+        # the taps' mixture, judged as a whole: a cell whose normals vary keeps a
+        # history that covers the same mix of surfaces though no single tap matches
+        mx = sum(w[None] * H[:, ty, tx] for tx, ty, w in taps)
+        mix_ok = (sum(taps_w for _, _, taps_w in taps) > 1e-3) & ok_of(guide_means(mx, q, mean, std))
+    for tx, ty, w in taps:
+        th = hist[:, ty, tx]
+        ok = (w > 0) & (ok_of(th) | mix_ok)
         w = np.where(ok, w, 0.0)
         out += w[None] * H[:, ty, tx]
         n_out += w * nH[ty, tx]
@@ -165,7 +178,7 @@ def sequence(paths, a):
             pm, ps = prev
             H = affine(H, q, ps / std, (pm - mean) / std)
             motion = np.nan_to_num(fr["motion"].astype(np.float64))
-            R, nR = reproject(H, nH, m, motion, q, mean, std, a.normal_limit, a.depth_limit)
+            R, nR = reproject(H, nH, m, motion, q, mean, std, a.normal_limit, a.depth_limit, a.mix)
             if not a.no_depth_rescale:
                 R = rescale_depth(R, m, q, mean, std)
             nH = np.minimum(nR + 1.0, a.max_history)
@@ -188,6 +201,7 @@ def main():
     ap.add_argument("--depth-limit", type=float, default=0.1)
     ap.add_argument("--max-history", type=float, default=16.0)
     ap.add_argument("--no-depth-rescale", action="store_true")
+    ap.add_argument("--mix", action="store_true", help="keep every tap where the taps' mixture passes the test")
     a = ap.parse_args()
     last4, fl4 = [], []
     for d in a.seqs:

@@ -155,6 +155,42 @@ static void *run_tiles(void *arg) {
     return NULL;
 }
 
+/* A thread pool for the `..._parallel` entry points (LrdExecutor): for_each
+   starts WORKERS threads that take the task indices from a shared counter;
+   each passes its own worker index. An engine hands its job system here. */
+typedef struct {
+    LrdTask task;
+    void *task_data;
+    uint32_t count;
+    uint32_t next; /* the next index, taken with an atomic add */
+} PoolJob;
+
+typedef struct {
+    PoolJob *job;
+    uint32_t worker;
+} PoolThread;
+
+static void *pool_thread(void *arg) {
+    PoolThread *t = (PoolThread *)arg;
+    for (;;) {
+        uint32_t i = __atomic_fetch_add(&t->job->next, 1, __ATOMIC_RELAXED);
+        if (i >= t->job->count) break;
+        t->job->task(t->job->task_data, i, t->worker);
+    }
+    return NULL;
+}
+
+static void pool_for_each(void *pool, uint32_t count, LrdTask task, void *task_data) {
+    (void)pool;
+    PoolJob job = {task, task_data, count, 0};
+    PoolThread threads[WORKERS];
+    pthread_t th[WORKERS];
+    for (uint32_t w = 0; w < WORKERS; w++) threads[w] = (PoolThread){&job, w};
+    for (uint32_t w = 1; w < WORKERS; w++) pthread_create(&th[w], NULL, pool_thread, &threads[w]);
+    pool_thread(&threads[0]);
+    for (uint32_t w = 1; w < WORKERS; w++) pthread_join(th[w], NULL);
+}
+
 int main(int argc, char **argv) {
     printf("lrdenoise %s, features 0x%x, simd %s\n", lrd_version(), lrd_features(), lrd_simd_level());
     float *noisy = malloc(sizeof(float) * 3 * W * H), *normal = malloc(sizeof(float) * 3 * W * H);
@@ -378,6 +414,50 @@ int main(int argc, char **argv) {
         printf("FLR temporal: 3 frames, %zu + %zu bytes of scratch + history, %llu pixels without history\n", sbytes, hbytes,
                (unsigned long long)trep.history_rejected);
         free(tscratch); free(hdata); free(tout); free(mv);
+    }
+
+    /* Temporal FLR on accumulated cell moments, on the calling thread and on
+       the pool (LrdExecutor): the same bits. A pan of 5.5 px a frame. */
+    {
+        LrdFlrConfig mcfg = lrd_flr_config_temporal_moments_default();
+        LrdTemporalConfig tc = lrd_temporal_config_default();
+        LrdExecutor pool = {pool_for_each, NULL, WORKERS};
+        size_t sb1 = 0, sbn = 0, hbytes = 0, hb2 = 0;
+        CHECK(lrd_flr_temporal_moments_sizes(&mcfg, &tc, W, H, &sb1, &hbytes));
+        CHECK(lrd_flr_temporal_moments_parallel_sizes(&mcfg, &tc, W, H, WORKERS, &sbn, &hb2));
+        if (hb2 != hbytes) return 6; /* one history serves both calls */
+        void *s1 = malloc(sb1), *sn = malloc(sbn), *h1 = malloc(hbytes), *hn = malloc(hbytes);
+        float *o1 = malloc(sizeof(float) * 3 * W * H), *on = malloc(sizeof(float) * 3 * W * H);
+        float *mv = malloc(sizeof(float) * 2 * W * H);
+        if (!s1 || !sn || !h1 || !hn || !o1 || !on || !mv) return 2;
+        for (size_t i = 0; i < (size_t)W * H; i++) {
+            mv[2 * i] = 5.5f;
+            mv[2 * i + 1] = 0.0f;
+        }
+        LrdImage motion = image(mv, 2);
+        LrdHistory hist1 = {h1, hbytes, 0}, histn = {hn, hbytes, 0};
+        LrdImageMut out1 = out, outn = out;
+        out1.data = o1;
+        outn.data = on;
+        LrdReport mrep;
+        memset(&mrep, 0, sizeof mrep);
+        for (int k = 0; k < 3; k++) {
+            const LrdImage *m = k ? &motion : NULL;
+            CHECK(lrd_flr_denoise_temporal_moments(&mcfg, &tc, &frame, m, &hist1, &out1, s1, sb1, &mrep));
+            CHECK(lrd_flr_denoise_temporal_moments_parallel(&mcfg, &tc, &frame, m, &histn, &outn, sn, sbn, &pool, NULL));
+            if (memcmp(o1, on, sizeof(float) * 3 * W * H) != 0) {
+                fprintf(stderr, "moments frame %d: the pool's output differs from the calling thread's\n", k);
+                return 6;
+            }
+        }
+        if (histn.frames != 3) return 6;
+        if (lrd_flr_denoise_temporal_moments_parallel(&mcfg, &tc, &frame, &motion, &histn, &outn, sn, sbn, NULL, NULL) !=
+            LRD_STATUS_NULL_POINTER)
+            return 3;
+        printf("FLR temporal moments: 3 frames on %d threads equal to the calling thread's, %zu + %zu bytes of scratch + "
+               "history, %llu cells without history\n",
+               WORKERS, sbn, hbytes, (unsigned long long)mrep.history_rejected);
+        free(s1); free(sn); free(h1); free(hn); free(o1); free(on); free(mv);
     }
 
     /* BMFR's temporal pipeline: caller-owned scratch and history, static camera

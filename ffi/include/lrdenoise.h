@@ -574,6 +574,39 @@ typedef struct LrdReport {
 } LrdReport;
 
 /**
+ * One task of a parallel run: `task(task_data, index, worker)`.
+ */
+typedef void (*LrdTask)(void *task_data, uint32_t index, uint32_t worker);
+
+/**
+ * The caller's threads, for the `..._parallel` entry points.
+ *
+ * `for_each(pool, count, task, task_data)` must call
+ * `task(task_data, i, worker)` once for every `i < count` and return when
+ * every call has returned. Calls may run concurrently if each call in flight
+ * passes its own `worker` in [0, `workers`) (e.g. the index of the pool's
+ * thread). A sequential executor calls `task(task_data, i, 0)` for i = 0,
+ * 1, ... A `for_each` that skips an index, calls one twice, or passes a
+ * busy or out-of-range worker makes the entry point return a status
+ * (LRD_STATUS_UNSUPPORTED, LRD_STATUS_STAGE_ORDER or LRD_STATUS_INVALID_TILE)
+ * instead of racing; the output is then undefined.
+ */
+typedef struct LrdExecutor {
+  /**
+   * Runs the tasks; not NULL.
+   */
+  void (*for_each)(void *pool, uint32_t count, LrdTask task, void *task_data);
+  /**
+   * Passed to `for_each` unchanged (the caller's pool); may be NULL.
+   */
+  void *pool;
+  /**
+   * Workers that may run at once: at least 1; the scratch size depends on it.
+   */
+  uint32_t workers;
+} LrdExecutor;
+
+/**
  * Settings of the temporal stage temporal FLR runs (`lrd_temporal_config_default`
  * gives the defaults; see the core's `temporal::TemporalConfig`).
  */
@@ -1027,6 +1060,22 @@ LrdStatus lrd_flr_denoise(const struct LrdFlrConfig *config,
                           struct LrdReport *report);
 
 /**
+ * lrd_flr_denoise with the tiles run on the caller's threads (`executor`,
+ * see LrdExecutor); bit-identical to it. `scratch` (8-byte aligned) must
+ * hold at least `lrd_flr_tiled_scratch_size(.., executor->workers, ..)`
+ * bytes, and `out` rows that do not overlap in memory (planar outputs return
+ * LRD_STATUS_UNSUPPORTED). For a job system that cannot take a `for_each`
+ * call, lrd_flr_run_tile gives the same run stage by stage.
+ */
+LrdStatus lrd_flr_denoise_parallel(const struct LrdFlrConfig *config,
+                                   const struct LrdFrame *frame,
+                                   const struct LrdImageMut *out,
+                                   void *scratch,
+                                   size_t scratch_bytes,
+                                   const struct LrdExecutor *executor,
+                                   struct LrdReport *report);
+
+/**
  * Runs one tile of one stage of a tiled FLR run.
  *
  * Rules (they make concurrent calls safe; breaking one returns a status):
@@ -1109,6 +1158,36 @@ LrdStatus lrd_flr_denoise_temporal_moments(const struct LrdFlrConfig *config,
                                            struct LrdReport *report);
 
 /**
+ * Scratch bytes of `lrd_flr_denoise_temporal_moments_parallel` with
+ * `workers` workers, and history bytes (those of
+ * `lrd_flr_temporal_moments_sizes`: one history serves both calls).
+ */
+LrdStatus lrd_flr_temporal_moments_parallel_sizes(const struct LrdFlrConfig *config,
+                                                  const struct LrdTemporalConfig *temporal,
+                                                  uint32_t width,
+                                                  uint32_t height,
+                                                  uint32_t workers,
+                                                  size_t *scratch_bytes,
+                                                  size_t *history_bytes);
+
+/**
+ * lrd_flr_denoise_temporal_moments with the tiles run on the caller's
+ * threads (`executor`, see LrdExecutor); bit-identical to it. The scratch
+ * size is from `lrd_flr_temporal_moments_parallel_sizes` with
+ * `executor->workers`; `out` needs rows that do not overlap in memory.
+ */
+LrdStatus lrd_flr_denoise_temporal_moments_parallel(const struct LrdFlrConfig *config,
+                                                    const struct LrdTemporalConfig *temporal,
+                                                    const struct LrdFrame *frame,
+                                                    const struct LrdImage *motion,
+                                                    struct LrdHistory *history,
+                                                    const struct LrdImageMut *out,
+                                                    void *scratch,
+                                                    size_t scratch_bytes,
+                                                    const struct LrdExecutor *executor,
+                                                    struct LrdReport *report);
+
+/**
  * Scratch and history bytes of temporal FLR (`lrd_flr_denoise_temporal`)
  * for `width`x`height` frames. `config->upsample` must be 1.
  */
@@ -1141,6 +1220,35 @@ LrdStatus lrd_flr_denoise_temporal(const struct LrdFlrConfig *config,
                                    void *scratch,
                                    size_t scratch_bytes,
                                    struct LrdReport *report);
+
+/**
+ * Scratch bytes of `lrd_flr_denoise_temporal_parallel` with `workers`
+ * workers, and history bytes (those of `lrd_flr_temporal_sizes`).
+ */
+LrdStatus lrd_flr_temporal_parallel_sizes(const struct LrdFlrConfig *config,
+                                          const struct LrdTemporalConfig *temporal,
+                                          uint32_t width,
+                                          uint32_t height,
+                                          uint32_t workers,
+                                          size_t *scratch_bytes,
+                                          size_t *history_bytes);
+
+/**
+ * lrd_flr_denoise_temporal with the tiles run on the caller's threads
+ * (`executor`, see LrdExecutor); bit-identical to it. The scratch size is
+ * from `lrd_flr_temporal_parallel_sizes` with `executor->workers`; `out`
+ * needs rows that do not overlap in memory.
+ */
+LrdStatus lrd_flr_denoise_temporal_parallel(const struct LrdFlrConfig *config,
+                                            const struct LrdTemporalConfig *temporal,
+                                            const struct LrdFrame *frame,
+                                            const struct LrdImage *motion,
+                                            struct LrdHistory *history,
+                                            const struct LrdImageMut *out,
+                                            void *scratch,
+                                            size_t scratch_bytes,
+                                            const struct LrdExecutor *executor,
+                                            struct LrdReport *report);
 
 /**
  * The temporal stage's defaults (temporal FLR's and WALR's; BMFR's differ:

@@ -1,12 +1,15 @@
 //! FLR: its configuration, the whole-frame entry point and the tiled API
 //! (`lrd_flr_run_tile` and its sizes).
 
+use crate::executor::{self, LrdExecutor};
 use crate::images::{
     check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, images, view_mut, LrdFrame, LrdImage, LrdImageMut,
     LRD_GUIDE_AO, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL,
 };
 use crate::status::{guard, status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
-use crate::temporal::{denoise_temporal, temporal_config_and_rejection, temporal_sizes, LrdHistory, LrdTemporalConfig};
+use crate::temporal::{
+    denoise_temporal, temporal_config_and_rejection, temporal_parallel_sizes, temporal_sizes, LrdHistory, LrdTemporalConfig,
+};
 use core::ffi::c_void;
 use lrdenoise_core::flr::moment_history::MomentFlr;
 use lrdenoise_core::flr::temporal::TemporalFlr;
@@ -300,6 +303,51 @@ pub unsafe extern "C" fn lrd_flr_denoise(
     })
 }
 
+/// lrd_flr_denoise with the tiles run on the caller's threads (`executor`,
+/// see LrdExecutor); bit-identical to it. `scratch` (8-byte aligned) must
+/// hold at least `lrd_flr_tiled_scratch_size(.., executor->workers, ..)`
+/// bytes, and `out` rows that do not overlap in memory (planar outputs return
+/// LRD_STATUS_UNSUPPORTED). For a job system that cannot take a `for_each`
+/// call, lrd_flr_run_tile gives the same run stage by stage.
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flr_denoise_parallel(
+    config: *const LrdFlrConfig,
+    frame: *const LrdFrame,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    executor: *const LrdExecutor,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    guard(|| {
+        // SAFETY: the caller passes valid (or NULL) pointers.
+        let (frame, out) = unsafe { frame_and_out(frame, out)? };
+        let flr = plan(config, out.width, out.height)?;
+        // SAFETY: the caller passes a valid (or NULL) executor.
+        let workers = unsafe { executor::workers(executor)? };
+        check_scratch(scratch)?;
+        let needed = tiled_scratch_bytes(&flr, workers)?;
+        if scratch_bytes < needed {
+            return Err(LRD_STATUS_BUFFER_TOO_SMALL);
+        }
+        check_output_disjoint(out, frame, &[(scratch as usize, scratch_bytes)])?;
+        // SAFETY: the caller's frame images satisfy the LrdImage contract; the
+        // scratch is aligned and at least `needed` bytes; `out` is exclusively
+        // ours; the executor keeps LrdExecutor's contract.
+        let r = unsafe {
+            let f = frame_views(frame, true)?;
+            let s = core::slice::from_raw_parts_mut(scratch as *mut f64, needed / 8);
+            let mut o = view_mut(out, 0, out.height as usize)?;
+            if !o.rows_are_separable() {
+                return Err(LRD_STATUS_UNSUPPORTED);
+            }
+            executor::run(executor, |for_each| flr.denoise_parallel(&f, s, &mut o, workers, for_each))?.map_err(status_of)?
+        };
+        write_report(report, r);
+        Ok(())
+    })
+}
+
 /// Runs one tile of one stage of a tiled FLR run.
 ///
 /// Rules (they make concurrent calls safe; breaking one returns a status):
@@ -485,7 +533,60 @@ pub unsafe extern "C" fn lrd_flr_denoise_temporal_moments(
 ) -> LrdStatus {
     // SAFETY: forwarded contract (see `denoise_temporal`).
     guard(|| unsafe {
-        denoise_temporal(|w, h| moments_plan(config, temporal, w, h), frame, motion, history, out, scratch, scratch_bytes, report)
+        denoise_temporal(
+            |w, h| moments_plan(config, temporal, w, h),
+            frame,
+            motion,
+            history,
+            out,
+            scratch,
+            scratch_bytes,
+            core::ptr::null(),
+            report,
+        )
+    })
+}
+
+/// Scratch bytes of `lrd_flr_denoise_temporal_moments_parallel` with
+/// `workers` workers, and history bytes (those of
+/// `lrd_flr_temporal_moments_sizes`: one history serves both calls).
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flr_temporal_moments_parallel_sizes(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    width: u32,
+    height: u32,
+    workers: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| temporal_parallel_sizes(moments_plan(config, temporal, width, height)?, workers, scratch_bytes, history_bytes))
+}
+
+/// lrd_flr_denoise_temporal_moments with the tiles run on the caller's
+/// threads (`executor`, see LrdExecutor); bit-identical to it. The scratch
+/// size is from `lrd_flr_temporal_moments_parallel_sizes` with
+/// `executor->workers`; `out` needs rows that do not overlap in memory.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_flr_denoise_temporal_moments_parallel(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    executor: *const LrdExecutor,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    if executor.is_null() {
+        return LRD_STATUS_NULL_POINTER;
+    }
+    // SAFETY: forwarded contract (see `denoise_temporal`).
+    guard(|| unsafe {
+        denoise_temporal(|w, h| moments_plan(config, temporal, w, h), frame, motion, history, out, scratch, scratch_bytes, executor, report)
     })
 }
 
@@ -529,6 +630,68 @@ pub unsafe extern "C" fn lrd_flr_denoise_temporal(
 ) -> LrdStatus {
     // SAFETY: forwarded contract (see `denoise_temporal`).
     guard(|| unsafe {
-        denoise_temporal(|w, h| temporal_plan(config, temporal, w, h), frame, motion, history, out, scratch, scratch_bytes, report)
+        denoise_temporal(
+            |w, h| temporal_plan(config, temporal, w, h),
+            frame,
+            motion,
+            history,
+            out,
+            scratch,
+            scratch_bytes,
+            core::ptr::null(),
+            report,
+        )
+    })
+}
+
+/// Scratch bytes of `lrd_flr_denoise_temporal_parallel` with `workers`
+/// workers, and history bytes (those of `lrd_flr_temporal_sizes`).
+#[no_mangle]
+pub unsafe extern "C" fn lrd_flr_temporal_parallel_sizes(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    width: u32,
+    height: u32,
+    workers: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| temporal_parallel_sizes(temporal_plan(config, temporal, width, height)?, workers, scratch_bytes, history_bytes))
+}
+
+/// lrd_flr_denoise_temporal with the tiles run on the caller's threads
+/// (`executor`, see LrdExecutor); bit-identical to it. The scratch size is
+/// from `lrd_flr_temporal_parallel_sizes` with `executor->workers`; `out`
+/// needs rows that do not overlap in memory.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_flr_denoise_temporal_parallel(
+    config: *const LrdFlrConfig,
+    temporal: *const LrdTemporalConfig,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    executor: *const LrdExecutor,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    if executor.is_null() {
+        return LRD_STATUS_NULL_POINTER;
+    }
+    // SAFETY: forwarded contract (see `denoise_temporal`).
+    guard(|| unsafe {
+        denoise_temporal(
+            |w, h| temporal_plan(config, temporal, w, h),
+            frame,
+            motion,
+            history,
+            out,
+            scratch,
+            scratch_bytes,
+            executor,
+            report,
+        )
     })
 }

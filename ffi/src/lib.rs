@@ -13,6 +13,8 @@
 // constants and functions in the header.
 mod images;
 
+mod executor;
+
 mod flr;
 
 mod temporal;
@@ -34,6 +36,7 @@ mod status;
 
 #[cfg(feature = "bmfr")]
 pub use bmfr::*;
+pub use executor::*;
 #[cfg(feature = "flnr")]
 pub use flnr::*;
 pub use flr::*;

@@ -3,8 +3,9 @@
 //! the scratch and history buffers, and the single-frame and temporal runs
 //! over the core's [`TemporalDenoiser`].
 
+use crate::executor::{self, LrdExecutor};
 use crate::images::{
-    byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, view, view_mut, LrdFrame, LrdImage,
+    byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, images, view, view_mut, LrdFrame, LrdImage,
     LrdImageMut, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL, LRD_GUIDE_POSITION,
 };
 use crate::status::{status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
@@ -240,11 +241,35 @@ pub(crate) unsafe fn denoise_single<M: AtIndex>(
     Ok(())
 }
 
-/// One frame of a temporal pipeline; advances `history.frames`.
+/// Scratch bytes (for `workers` workers of a `..._parallel` call) and
+/// history bytes of a temporal method.
+pub(crate) fn temporal_parallel_sizes<M: TemporalDenoiser>(
+    plan: M,
+    workers: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> Result<(), LrdStatus> {
+    if workers == 0 {
+        return Err(LRD_STATUS_INVALID_ARGUMENT);
+    }
+    let s = plan.temporal_parallel_scratch_len(workers as usize).ok_or(LRD_STATUS_INVALID_ARGUMENT)?;
+    let (s, h) = (f64_bytes(s)?, f32_bytes(plan.history_len())?);
+    // SAFETY: checked for NULL; caller passes valid pointers.
+    unsafe {
+        *scratch_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = s;
+        *history_bytes.as_mut().ok_or(LRD_STATUS_NULL_POINTER)? = h;
+    }
+    Ok(())
+}
+
+/// One frame of a temporal pipeline; advances `history.frames`. With an
+/// `executor` (not NULL) the frame's tiles run on it
+/// ([`TemporalDenoiser::denoise_temporal_parallel`]) and the scratch is that
+/// of its worker count.
 ///
 /// # Safety
 /// The pointers satisfy the contracts of the `lrd_*_denoise_temporal` entry
-/// points; the history buffer must not overlap the scratch or the images.
+/// points (and `executor` that of [`LrdExecutor`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) unsafe fn denoise_temporal<M: TemporalDenoiser>(
     plan: impl FnOnce(u32, u32) -> Result<M, LrdStatus>,
@@ -254,6 +279,7 @@ pub(crate) unsafe fn denoise_temporal<M: TemporalDenoiser>(
     out: *const LrdImageMut,
     scratch: *mut c_void,
     scratch_bytes: usize,
+    executor: *const LrdExecutor,
     report: *mut LrdReport,
 ) -> Result<(), LrdStatus> {
     // SAFETY: as in `denoise_single`; the history buffer is checked the same way.
@@ -262,33 +288,49 @@ pub(crate) unsafe fn denoise_temporal<M: TemporalDenoiser>(
         let out = out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?;
         let hist = history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?;
         let m = plan(out.width, out.height)?;
+        let workers = if executor.is_null() { None } else { Some(executor::workers(executor)?) };
         let ranges = [(scratch as usize, scratch_bytes), (hist.data as usize, hist.bytes)];
         check_output_disjoint(out, frame, &ranges)?;
-        if !motion.is_null() {
-            let mi = &*motion;
-            let mr = byte_range(mi.data, mi.format, mi.width, mi.height, 2, (mi.pixel_stride, mi.row_stride, mi.channel_stride));
-            let o = byte_range(out.data, out.format, out.width, out.height, 3, (out.pixel_stride, out.row_stride, out.channel_stride));
-            if let (Some((a, b)), Some((c, d))) = (mr, o) {
-                if a < d && c < b {
-                    return Err(LRD_STATUS_INVALID_ARGUMENT);
-                }
+        let motion_range = motion
+            .as_ref()
+            .and_then(|mi| byte_range(mi.data, mi.format, mi.width, mi.height, 2, (mi.pixel_stride, mi.row_stride, mi.channel_stride)));
+        let o = byte_range(out.data, out.format, out.width, out.height, 3, (out.pixel_stride, out.row_stride, out.channel_stride));
+        let overlap = |(a, b): (usize, usize), (c, d): (usize, usize)| a < d && c < b;
+        if let (Some(mr), Some(o)) = (motion_range, o) {
+            if overlap(mr, o) {
+                return Err(LRD_STATUS_INVALID_ARGUMENT);
             }
         }
-        // the history is written too: it must not overlap the scratch either
-        let (s0, h0) = (scratch as usize, hist.data as usize);
-        if !hist.data.is_null() && s0 < h0.saturating_add(hist.bytes) && h0 < s0.saturating_add(scratch_bytes) {
-            return Err(LRD_STATUS_INVALID_ARGUMENT);
+        // the history is written too: it must not overlap the scratch, the
+        // motion or an input image
+        if !hist.data.is_null() && hist.bytes > 0 {
+            let h = (hist.data as usize, (hist.data as usize).saturating_add(hist.bytes));
+            let inputs = images(frame).filter_map(|(i, ch)| {
+                byte_range(i.data, i.format, i.width, i.height, ch, (i.pixel_stride, i.row_stride, i.channel_stride))
+            });
+            let scratch_range = (scratch as usize, (scratch as usize).saturating_add(scratch_bytes));
+            if inputs.chain(motion_range).chain(core::iter::once(scratch_range)).any(|r| overlap(r, h)) {
+                return Err(LRD_STATUS_INVALID_ARGUMENT);
+            }
         }
         let f = frame_views(frame, false)?;
         let mv = match motion.as_ref() {
             Some(mi) => view(mi, 2)?,
             None => None,
         };
-        let s = f64_buffer(scratch, scratch_bytes, f64_bytes(m.temporal_scratch_len())?)?;
+        let needed = match workers {
+            None => m.temporal_scratch_len(),
+            Some(w) => m.temporal_parallel_scratch_len(w).ok_or(LRD_STATUS_INVALID_ARGUMENT)?,
+        };
+        let s = f64_buffer(scratch, scratch_bytes, f64_bytes(needed)?)?;
         let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(m.history_len())?)?;
         let mut h = lrdenoise_core::History::resume(hd, hist.frames);
         let mut o = view_mut(out, 0, out.height as usize)?;
-        let r = m.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o).map_err(status_of)?;
+        let r = match workers {
+            None => m.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o),
+            Some(w) => executor::run(executor, |for_each| m.denoise_temporal_parallel(&f, mv.as_ref(), &mut h, s, &mut o, w, for_each))?,
+        }
+        .map_err(status_of)?;
         hist.frames = h.frames();
         write_report(report, r);
     }

@@ -176,5 +176,7 @@ pub unsafe extern "C" fn lrd_walr_denoise_temporal(
     report: *mut LrdReport,
 ) -> LrdStatus {
     // SAFETY: forwarded contract (see `denoise_temporal`).
-    guard(|| unsafe { denoise_temporal(|w, h| walr_plan(config, w, h), frame, motion, history, out, scratch, scratch_bytes, report) })
+    guard(|| unsafe {
+        denoise_temporal(|w, h| walr_plan(config, w, h), frame, motion, history, out, scratch, scratch_bytes, core::ptr::null(), report)
+    })
 }

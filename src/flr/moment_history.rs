@@ -640,31 +640,7 @@ impl MomentFlr {
     }
 }
 
-impl crate::Denoiser for MomentFlr {
-    fn size(&self) -> (usize, usize) {
-        self.single.size()
-    }
-    /// A single frame is FLR's.
-    fn scratch_len(&self) -> usize {
-        self.single.scratch_len()
-    }
-    fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
-        self.single.denoise(frame, scratch, out)
-    }
-    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
-        self.single.tiled_scratch_len(workers)
-    }
-    fn denoise_parallel(
-        &self,
-        frame: &Frame<'_>,
-        scratch: &mut [f64],
-        out: &mut ImageViewMut<'_>,
-        workers: usize,
-        for_each: Executor<'_>,
-    ) -> Result<Report, Error> {
-        self.single.denoise_parallel(frame, scratch, out, workers, for_each)
-    }
-}
+crate::denoiser::single_frame_is_flr!(MomentFlr);
 
 impl crate::TemporalDenoiser for MomentFlr {
     fn history_len(&self) -> usize {
@@ -682,6 +658,21 @@ impl crate::TemporalDenoiser for MomentFlr {
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
         self.denoise(frame, motion, history, scratch, out)
+    }
+    fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        self.parallel_scratch_len(workers)
+    }
+    fn denoise_temporal_parallel(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        self.denoise_parallel(frame, motion, history, scratch, out, workers, for_each)
     }
 }
 

@@ -224,31 +224,7 @@ impl TemporalFlr {
     }
 }
 
-impl crate::Denoiser for TemporalFlr {
-    fn size(&self) -> (usize, usize) {
-        self.single.size()
-    }
-    /// A single frame is FLR's.
-    fn scratch_len(&self) -> usize {
-        self.single.scratch_len()
-    }
-    fn denoise(&self, frame: &Frame<'_>, scratch: &mut [f64], out: &mut ImageViewMut<'_>) -> Result<Report, Error> {
-        self.single.denoise(frame, scratch, out)
-    }
-    fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
-        self.single.tiled_scratch_len(workers)
-    }
-    fn denoise_parallel(
-        &self,
-        frame: &Frame<'_>,
-        scratch: &mut [f64],
-        out: &mut ImageViewMut<'_>,
-        workers: usize,
-        for_each: Executor<'_>,
-    ) -> Result<Report, Error> {
-        self.single.denoise_parallel(frame, scratch, out, workers, for_each)
-    }
-}
+crate::denoiser::single_frame_is_flr!(TemporalFlr);
 
 impl crate::TemporalDenoiser for TemporalFlr {
     fn history_len(&self) -> usize {
@@ -273,5 +249,30 @@ impl crate::TemporalDenoiser for TemporalFlr {
         let (flr, own) = scratch.split_at_mut(self.flr_scratch_len());
         let own = &mut bytemuck::cast_slice_mut::<f64, f32>(own)[..self.scratch_len()];
         self.denoise(frame, motion, history, own, flr, out)
+    }
+    /// FLR's tiled f64 scratch, then the pipeline's f32 scratch packed two per f64.
+    fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let flr = self.flr.tiled_scratch_len(workers)?;
+        let own = self.stage.frame_scratch_len(Some(workers))?;
+        flr.checked_add(own.div_ceil(2))
+    }
+    fn denoise_temporal_parallel(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f64],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let too_many = Error::InvalidConfig("too many workers for the scratch size to fit a usize");
+        let needed = crate::TemporalDenoiser::temporal_parallel_scratch_len(self, workers).ok_or(too_many)?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let (flr, own) = scratch.split_at_mut(self.parallel_flr_scratch_len(workers));
+        let own = &mut bytemuck::cast_slice_mut::<f64, f32>(own)[..self.parallel_scratch_len(workers)];
+        self.denoise_parallel(frame, motion, history, own, flr, out, workers, for_each)
     }
 }
