@@ -325,3 +325,40 @@ fn a_history_over_an_input_is_refused() {
         assert_eq!(status, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
     }
 }
+
+/// A planar output (rows of one channel interleaved with the others'
+/// planes) cannot be split into row bands: the parallel calls refuse it.
+#[test]
+fn a_planar_output_is_refused() {
+    let (w, h) = (67u32, 38u32);
+    let p = Planes::new(w, h);
+    let noisy = p.noisy(0);
+    let frame = p.frame(&noisy);
+    let mut out = vec![0f32; (3 * w * h) as usize];
+    let planar = LrdImageMut {
+        data: out.as_mut_ptr() as *mut _,
+        format: 0,
+        width: w,
+        height: h,
+        pixel_stride: 4,
+        row_stride: 4 * w as usize,
+        channel_stride: 4 * (w * h) as usize,
+    };
+    let pool = Pool { workers: 2, mode: Mode::Threads };
+    let ex = executor(&pool);
+    unsafe {
+        let (cfg, tc) = (lrd_flr_config_temporal_moments_default(), lrd_temporal_config_default());
+        let (sb, hb) = Temporal::Moments.sizes(&cfg, &tc, w, h, Some(2));
+        let mut s = vec![0f64; sb / 8];
+        let mut hd = vec![0f32; hb / 4];
+        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &planar, &mut s, sb, Some(&ex));
+        assert_eq!(status, LrdStatus::LRD_STATUS_UNSUPPORTED);
+        let cfg = lrd_flr_config_default();
+        let mut sb = 0usize;
+        assert_eq!(lrd_flr_tiled_scratch_size(&cfg, w, h, 2, &mut sb), LrdStatus::LRD_STATUS_OK);
+        let mut s = vec![0f64; sb / 8];
+        let status = lrd_flr_denoise_parallel(&cfg, &frame, &planar, s.as_mut_ptr() as *mut c_void, sb, &ex, null_mut());
+        assert_eq!(status, LrdStatus::LRD_STATUS_UNSUPPORTED);
+    }
+}
