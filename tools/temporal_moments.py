@@ -73,7 +73,7 @@ def guide_means(m, q, mean, std):
     return m[1:1 + q] / np.maximum(m[0], 1e-6) * std + mean
 
 
-def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=False):
+def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=False, sharpen=1.0):
     """The history H (in this frame's normalisation) and its lengths nH at each
     current cell: bilinear over the previous grid at the cell's mean motion,
     taps judged by their mean normal and depth. Cells without a kept tap get 0."""
@@ -83,6 +83,10 @@ def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=Fal
     px, py = cx + mv[0] / B, cy + mv[1] / B
     x0, y0 = np.floor(px).astype(int), np.floor(py).astype(int)
     fx, fy = px - x0, py - y0
+    if sharpen != 1.0:
+        # bilinear weights raised to a power per axis and renormalised: less blur per frame
+        fx = fx**sharpen / (fx**sharpen + (1 - fx) ** sharpen)
+        fy = fy**sharpen / (fy**sharpen + (1 - fy) ** sharpen)
     cur, hist = guide_means(m, q, mean, std), guide_means(H, q, mean, std)
     unit = lambda v: v / np.maximum(np.linalg.norm(v, axis=0), 1e-6)
     empty = lambda v: np.linalg.norm(v, axis=0) < 1e-6
@@ -178,7 +182,7 @@ def sequence(paths, a):
             pm, ps = prev
             H = affine(H, q, ps / std, (pm - mean) / std)
             motion = np.nan_to_num(fr["motion"].astype(np.float64))
-            R, nR = reproject(H, nH, m, motion, q, mean, std, a.normal_limit, a.depth_limit, a.mix)
+            R, nR = reproject(H, nH, m, motion, q, mean, std, a.normal_limit, a.depth_limit, a.mix, a.sharpen)
             if not a.no_depth_rescale:
                 R = rescale_depth(R, m, q, mean, std)
             nH = np.minimum(nR + 1.0, a.max_history)
@@ -201,6 +205,7 @@ def main():
     ap.add_argument("--depth-limit", type=float, default=0.1)
     ap.add_argument("--max-history", type=float, default=16.0)
     ap.add_argument("--no-depth-rescale", action="store_true")
+    ap.add_argument("--sharpen", type=float, default=1.0, help="bilinear weights per axis raised to this power, renormalised")
     ap.add_argument("--mix", action="store_true", help="keep every tap where the taps' mixture passes the test")
     a = ap.parse_args()
     last4, fl4 = [], []

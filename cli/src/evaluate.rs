@@ -55,6 +55,7 @@ impl Variant {
         add("storage", a.storage.clone());
         add("ao-demodulation", a.ao_demodulation.clone());
         add("fireflies", a.fireflies.clone());
+        add("accumulate", a.accumulate.clone());
         if a.without_ao {
             s += " --without-ao";
         }

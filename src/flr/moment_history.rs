@@ -138,9 +138,9 @@ impl TapTest {
 pub(crate) fn reproject_cell(
     prev: &[u32],
     rec: usize,
-    (cx, cy): (usize, usize),
+    grid: (usize, usize),
     lay: &CellLayout,
-    (x, y): (usize, usize),
+    at: (usize, usize),
     motion: (f64, f64),
     cur: &[f64; MAX_GUIDES],
     test: &TapTest,
@@ -149,12 +149,8 @@ pub(crate) fn reproject_cell(
     let k = lay.k;
     out[..k].fill(0.0);
     let (mut wsum, mut nsum) = (0f64, 0f64);
-    for (i, w) in taps(x, y, motion, cx, cy).into_iter().flatten() {
+    for (i, w) in kept_taps(prev, rec, grid, lay, at, motion, cur, test) {
         let at = i * rec;
-        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, at + k + 1 + g) } else { 0.0 });
-        if tm[0].is_nan() || !test.accepts(cur, &tm) {
-            continue;
-        }
         for (j, o) in out[..k].iter_mut().enumerate() {
             *o += w * get(prev, at + j);
         }
@@ -175,28 +171,39 @@ pub(crate) fn reproject_cell(
 /// Least bilinear weight of the kept taps for a cell to keep its history.
 const MIN_TAP_WEIGHT: f64 = 1e-3;
 
-/// Whether [`reproject_cell`] would keep the history (the same test, without the moments).
+/// Whether [`reproject_cell`] would keep the history (the same taps, without the moments).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn any_tap_kept(
     prev: &[u32],
     rec: usize,
-    (cx, cy): (usize, usize),
+    grid: (usize, usize),
     lay: &CellLayout,
-    (x, y): (usize, usize),
+    at: (usize, usize),
     motion: (f64, f64),
     cur: &[f64; MAX_GUIDES],
     test: &TapTest,
 ) -> bool {
-    let kept: f64 = taps(x, y, motion, cx, cy)
-        .into_iter()
-        .flatten()
-        .filter(|&(i, _)| {
-            let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, i * rec + lay.k + 1 + g) } else { 0.0 });
-            !tm[0].is_nan() && test.accepts(cur, &tm)
-        })
-        .map(|(_, w)| w)
-        .sum();
-    kept > MIN_TAP_WEIGHT
+    kept_taps(prev, rec, grid, lay, at, motion, cur, test).map(|(_, w)| w).sum::<f64>() > MIN_TAP_WEIGHT
+}
+
+/// The bilinear taps (previous cell index, weight) at cell `(x, y)` moved by
+/// `motion` whose records are not empty and whose mean guides `test` accepts
+/// against `cur`.
+#[allow(clippy::too_many_arguments)]
+fn kept_taps<'a>(
+    prev: &'a [u32],
+    rec: usize,
+    (cx, cy): (usize, usize),
+    lay: &'a CellLayout,
+    (x, y): (usize, usize),
+    motion: (f64, f64),
+    cur: &'a [f64; MAX_GUIDES],
+    test: &'a TapTest,
+) -> impl Iterator<Item = (usize, f64)> + 'a {
+    taps(x, y, motion, cx, cy).into_iter().flatten().filter(move |&(i, _)| {
+        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, i * rec + lay.k + 1 + g) } else { 0.0 });
+        !tm[0].is_nan() && test.accepts(cur, &tm)
+    })
 }
 
 /// The 4 bilinear taps (cell index, weight) at cell `(x, y)` moved by
