@@ -78,10 +78,10 @@ pub trait TemporalDenoiser: Denoiser {
     }
     /// [`TemporalDenoiser::denoise_temporal`] with the work spread by the
     /// caller's executor over `workers` workers (see [`Executor`]);
-    /// bit-identical to it. Temporal FLR (light and moments) runs its tiles
-    /// on the executor; the default, for a pipeline without a parallel run
-    /// (BMFR's, WALR's), runs [`TemporalDenoiser::denoise_temporal`] on the
-    /// calling thread.
+    /// bit-identical to it. Every pipeline here (FLR's on light and on
+    /// moments, BMFR's, WALR's) runs its tiles or bands on the executor; the
+    /// default, for a pipeline without a parallel run, runs
+    /// [`TemporalDenoiser::denoise_temporal`] on the calling thread.
     #[allow(clippy::too_many_arguments)]
     fn denoise_temporal_parallel(
         &self,
@@ -208,6 +208,23 @@ macro_rules! temporal_method {
             ) -> Result<Report, Error> {
                 let s = as_f32(scratch, <$ty>::temporal_scratch_len(self))?;
                 <$ty>::denoise_temporal(self, frame, motion, history, s, out)
+            }
+            fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+                Some(<$ty>::temporal_parallel_scratch_len(self, workers)?.div_ceil(2))
+            }
+            fn denoise_temporal_parallel(
+                &self,
+                frame: &Frame<'_>,
+                motion: Option<&ImageView<'_>>,
+                history: &mut History<'_>,
+                scratch: &mut [f64],
+                out: &mut ImageViewMut<'_>,
+                workers: usize,
+                for_each: Executor<'_>,
+            ) -> Result<Report, Error> {
+                let overflow = Error::InvalidConfig("workers: scratch size overflows");
+                let len = <$ty>::temporal_parallel_scratch_len(self, workers).ok_or(overflow)?;
+                <$ty>::denoise_temporal_parallel(self, frame, motion, history, as_f32(scratch, len)?, out, workers, for_each)
             }
         }
     };

@@ -803,7 +803,7 @@ impl Method {
                 let (method, min_bytes) = if name == "walr" {
                     (Method::Walr(Box::new(WalrRunner::new(cfg, w, h, threads)?)), one_pass_bytes(w, h, w * h, cfg.guides.channels()))
                 } else {
-                    let runner = TemporalRunner::walr(cfg, w, h)?;
+                    let runner = TemporalRunner::walr(cfg, w, h, threads)?;
                     let bytes = temporal_bytes(w, h, cfg.guides.channels(), &runner);
                     (Method::Temporal(Box::new(runner)), bytes)
                 };
@@ -826,7 +826,7 @@ impl Method {
                     (label, flags) = firefly_history_label(label, flags, cfg.temporal.firefly_history);
                 }
                 let (method, min_bytes) = if temporal {
-                    let runner = TemporalRunner::new(cfg, w, h)?;
+                    let runner = TemporalRunner::new(cfg, w, h, threads)?;
                     let bytes = temporal_bytes(w, h, cfg.guides.channels(), &runner);
                     (Method::Temporal(Box::new(runner)), bytes)
                 } else {

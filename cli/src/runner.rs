@@ -7,7 +7,8 @@ use lrdenoise::flr::temporal::TemporalFlr;
 use lrdenoise::temporal::TemporalConfig;
 use lrdenoise::walr::Report as WalrReport;
 use lrdenoise::{
-    Bmfr, BmfrConfig, Error, Flr, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Report, Walr, WalrConfig,
+    Bmfr, BmfrConfig, Error, Flr, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Report, TemporalDenoiser, Walr,
+    WalrConfig,
 };
 use lrdenoise_cli::exrio::ExrFrame;
 use std::path::Path;
@@ -423,46 +424,37 @@ impl WalrRunner {
     }
 }
 
-/// The pipeline a [`TemporalRunner`] drives.
-pub enum Pipeline {
-    Bmfr(Bmfr),
-    Walr(Walr),
-    /// Temporal FLR on accumulated cell moments, its scratch and its threads.
-    Moments {
-        plan: Box<MomentFlr>,
-        scratch: Vec<f64>,
-        threads: usize,
-        pool: Option<rayon::ThreadPool>,
-    },
-    /// Temporal FLR, its FLR scratch and its threads.
-    Flr {
-        plan: Box<TemporalFlr>,
-        flr_scratch: Vec<f64>,
-        threads: usize,
-        pool: Option<rayon::ThreadPool>,
-    },
-}
-
-/// A temporal pipeline (FLR's, BMFR's or WALR's) over a sequence: the plan, its scratch and the
-/// history. [`TemporalRunner::save`] / [`TemporalRunner::restore`] let a
-/// benchmark repeat one frame without advancing the sequence.
+/// A temporal pipeline (FLR's on light or on cell moments, BMFR's or WALR's)
+/// over a sequence: the plan behind [`TemporalDenoiser`], its scratch, its
+/// threads and the history. [`TemporalRunner::save`] /
+/// [`TemporalRunner::restore`] let a benchmark repeat one frame without
+/// advancing the sequence.
 pub struct TemporalRunner {
-    pub pipeline: Pipeline,
-    scratch: Vec<f32>,
+    plan: Box<dyn TemporalDenoiser + Sync>,
+    /// What errors are prefixed with (the method's name).
+    name: &'static str,
+    /// The guides the frames must carry.
+    guides: GuideSet,
+    scratch: Vec<f64>,
     history: Vec<f32>,
+    threads: usize,
+    pool: Option<rayon::ThreadPool>,
     frames: u32,
     saved: Option<(Vec<f32>, u32)>,
 }
 
 impl TemporalRunner {
-    pub fn new(cfg: BmfrConfig, w: usize, h: usize) -> Result<Self, String> {
-        let bmfr = Bmfr::new(cfg, w, h).map_err(|e| format!("bmfr: {e}"))?;
-        Ok(Self::with(bmfr.temporal_scratch_len(), bmfr.history_len(), Pipeline::Bmfr(bmfr)))
+    /// BMFR's pipeline.
+    pub fn new(cfg: BmfrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+        let bmfr = Bmfr::new(cfg, w, h).map_err(|e| format!("bmfr-temporal: {e}"))?;
+        Self::with(Box::new(bmfr), "bmfr-temporal", cfg.guides, threads)
     }
-    pub fn walr(cfg: WalrConfig, w: usize, h: usize) -> Result<Self, String> {
-        let walr = Walr::new(cfg, w, h).map_err(|e| format!("walr: {e}"))?;
-        Ok(Self::with(walr.temporal_scratch_len(), walr.history_len(), Pipeline::Walr(walr)))
+    /// WALR's pipeline.
+    pub fn walr(cfg: WalrConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
+        let walr = Walr::new(cfg, w, h).map_err(|e| format!("walr-temporal: {e}"))?;
+        Self::with(Box::new(walr), "walr-temporal", cfg.guides, threads)
     }
+    /// Temporal FLR on the accumulated light.
     pub fn flr(
         cfg: FlrConfig,
         temporal: TemporalConfig,
@@ -478,21 +470,33 @@ impl TemporalRunner {
             .with_history_weights(history_weights)
             .with_rejection_guides(reject)
             .map_err(err)?;
-        let threads = threads.max(1);
-        let flr_scratch = vec![0f64; plan.parallel_flr_scratch_len(threads)];
-        let (scratch, history) = (plan.parallel_scratch_len(threads).max(plan.scratch_len()), plan.history_len());
-        Ok(Self::with(scratch, history, Pipeline::Flr { plan: Box::new(plan), flr_scratch, threads, pool: pool(threads)? }))
+        let guides = plan.frame_guides();
+        Self::with(Box::new(plan), "flr-temporal", guides, threads)
     }
     /// Temporal FLR on accumulated cell moments.
     pub fn moments(cfg: FlrConfig, temporal: TemporalConfig, w: usize, h: usize, threads: usize) -> Result<Self, String> {
         let plan = MomentFlr::new(cfg, &temporal, w, h).map_err(|e| format!("flr-temporal --accumulate moments: {e}"))?;
-        let threads = threads.max(1);
-        let scratch = vec![0f64; plan.parallel_scratch_len(threads).ok_or("flr-temporal: too many threads")?];
-        let history = plan.history_len();
-        Ok(Self::with(0, history, Pipeline::Moments { plan: Box::new(plan), scratch, threads, pool: pool(threads)? }))
+        Self::with(Box::new(plan), "flr-temporal --accumulate moments", cfg.guides, threads)
     }
-    fn with(scratch: usize, history: usize, pipeline: Pipeline) -> Self {
-        TemporalRunner { scratch: vec![0f32; scratch], history: vec![0f32; history], pipeline, frames: 0, saved: None }
+    fn with(plan: Box<dyn TemporalDenoiser + Sync>, name: &'static str, guides: GuideSet, threads: usize) -> Result<Self, String> {
+        let threads = threads.max(1);
+        let scratch = if threads > 1 {
+            plan.temporal_parallel_scratch_len(threads).ok_or_else(|| format!("{name}: too many threads"))?
+        } else {
+            plan.temporal_scratch_len()
+        };
+        let history = plan.history_len();
+        Ok(TemporalRunner {
+            plan,
+            name,
+            guides,
+            scratch: vec![0f64; scratch],
+            history: vec![0f32; history],
+            threads,
+            pool: pool(threads)?,
+            frames: 0,
+            saved: None,
+        })
     }
     /// f32 values of the history (both slots).
     pub fn history_len(&self) -> usize {
@@ -509,63 +513,30 @@ impl TemporalRunner {
     }
     /// The next frame of the sequence (its `motion` layer is used when present).
     pub fn run(&mut self, inputs: &Inputs, out: &mut [f32]) -> Result<(), String> {
-        let set = match &self.pipeline {
-            Pipeline::Bmfr(b) => b.config().guides,
-            Pipeline::Walr(w) => w.config().guides,
-            Pipeline::Flr { plan, .. } => plan.frame_guides(),
-            Pipeline::Moments { plan, .. } => plan.config().guides,
-        };
         let (w, h) = (inputs.w, inputs.h);
         let noisy = inputs.noisy_view().map_err(|e| e.to_string())?;
-        let frame = Frame::new(noisy, inputs.guides(&set).map_err(|e| e.to_string())?);
+        let frame = Frame::new(noisy, inputs.guides(&self.guides).map_err(|e| e.to_string())?);
         let motion = match &inputs.motion {
             Some(m) => Some(ImageView::interleaved(m, w, h, 2).map_err(|e| e.to_string())?),
             None => None,
         };
         let mut ov = ImageViewMut::interleaved(out, w, h, 3).map_err(|e| e.to_string())?;
         let mut history = History::resume(&mut self.history, self.frames);
-        let r = match &mut self.pipeline {
-            Pipeline::Moments { plan, scratch, threads, pool } => match pool {
-                Some(pool) => plan.denoise_parallel(
-                    &frame,
-                    motion.as_ref(),
-                    &mut history,
-                    scratch,
-                    &mut ov,
-                    *threads,
-                    &for_each_in_groups(pool, *threads),
-                ),
-                None => plan.denoise(&frame, motion.as_ref(), &mut history, scratch, &mut ov),
-            }
-            .map(|_| ())
-            .map_err(|e| format!("flr-temporal --accumulate moments: {e}")),
-            Pipeline::Flr { plan, flr_scratch, threads, pool } => match pool {
-                Some(pool) => plan.denoise_parallel(
-                    &frame,
-                    motion.as_ref(),
-                    &mut history,
-                    &mut self.scratch,
-                    flr_scratch,
-                    &mut ov,
-                    *threads,
-                    &for_each_in_groups(pool, *threads),
-                ),
-                None => plan.denoise(&frame, motion.as_ref(), &mut history, &mut self.scratch, flr_scratch, &mut ov),
-            }
-            .map(|_| ())
-            .map_err(|e| format!("flr-temporal: {e}")),
-            Pipeline::Bmfr(b) => b
-                .denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
-                .map(|_| ())
-                .map_err(|e| format!("bmfr: {e}")),
-            Pipeline::Walr(wl) => wl
-                .denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov)
-                .map(|_| ())
-                .map_err(|e| format!("walr: {e}")),
+        let r = match &self.pool {
+            Some(pool) => self.plan.denoise_temporal_parallel(
+                &frame,
+                motion.as_ref(),
+                &mut history,
+                &mut self.scratch,
+                &mut ov,
+                self.threads,
+                &for_each_in_groups(pool, self.threads),
+            ),
+            None => self.plan.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut self.scratch, &mut ov),
         };
         // the library advances the count (its parity picks the history slots)
         self.frames = history.frames();
-        r
+        r.map(|_| ()).map_err(|e| format!("{}: {e}", self.name))
     }
 }
 

@@ -1314,6 +1314,34 @@ LrdStatus lrd_bmfr_denoise_temporal(const struct LrdBmfrConfig *config,
                                     struct LrdReport *report);
 
 /**
+ * Scratch bytes of `lrd_bmfr_denoise_temporal_parallel` with `workers`
+ * workers, and history bytes (those of `lrd_bmfr_temporal_sizes`: one
+ * history serves both calls).
+ */
+LrdStatus lrd_bmfr_temporal_parallel_sizes(const struct LrdBmfrConfig *config,
+                                           uint32_t width,
+                                           uint32_t height,
+                                           uint32_t workers,
+                                           size_t *scratch_bytes,
+                                           size_t *history_bytes);
+
+/**
+ * lrd_bmfr_denoise_temporal with the work run on the caller's threads
+ * (`executor`, see LrdExecutor); bit-identical to it. The scratch size is
+ * from `lrd_bmfr_temporal_parallel_sizes` with `executor->workers`; `out`
+ * needs rows that do not overlap in memory.
+ */
+LrdStatus lrd_bmfr_denoise_temporal_parallel(const struct LrdBmfrConfig *config,
+                                             const struct LrdFrame *frame,
+                                             const struct LrdImage *motion,
+                                             struct LrdHistory *history,
+                                             const struct LrdImageMut *out,
+                                             void *scratch,
+                                             size_t scratch_bytes,
+                                             const struct LrdExecutor *executor,
+                                             struct LrdReport *report);
+
+/**
  * WALR's defaults: normal + depth + position, T = 4, tracing and replacement
  * on, thresholds 0.5 % / 1 %, f32 averages, the adaptive blend of the last
  * two windows, and the pipeline's settings.
@@ -1365,6 +1393,34 @@ LrdStatus lrd_walr_denoise_temporal(const struct LrdWalrConfig *config,
                                     void *scratch,
                                     size_t scratch_bytes,
                                     struct LrdReport *report);
+
+/**
+ * Scratch bytes of `lrd_walr_denoise_temporal_parallel` with `workers`
+ * workers, and history bytes (those of `lrd_walr_temporal_sizes`: one
+ * history serves both calls).
+ */
+LrdStatus lrd_walr_temporal_parallel_sizes(const struct LrdWalrConfig *config,
+                                           uint32_t width,
+                                           uint32_t height,
+                                           uint32_t workers,
+                                           size_t *scratch_bytes,
+                                           size_t *history_bytes);
+
+/**
+ * lrd_walr_denoise_temporal with the work run on the caller's threads
+ * (`executor`, see LrdExecutor); bit-identical to it. The scratch size is
+ * from `lrd_walr_temporal_parallel_sizes` with `executor->workers`; `out`
+ * needs rows that do not overlap in memory.
+ */
+LrdStatus lrd_walr_denoise_temporal_parallel(const struct LrdWalrConfig *config,
+                                             const struct LrdFrame *frame,
+                                             const struct LrdImage *motion,
+                                             struct LrdHistory *history,
+                                             const struct LrdImageMut *out,
+                                             void *scratch,
+                                             size_t scratch_bytes,
+                                             const struct LrdExecutor *executor,
+                                             struct LrdReport *report);
 
 /**
  * The default FLNR configuration for the network `weights` (`weights_bytes`

@@ -1,9 +1,12 @@
 //! WALR: its configuration and entry points (single frame and the temporal
 //! pipeline, both through [`crate::temporal`]).
 
+use crate::executor::LrdExecutor;
 use crate::images::{guide_set, LrdFrame, LrdImage, LrdImageMut, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL, LRD_GUIDE_POSITION};
 use crate::status::{guard, status_of, LrdReport, LrdStatus, LrdStatus::*};
-use crate::temporal::{denoise_single, denoise_temporal, scratch_size, temporal_config, temporal_sizes, LrdHistory, LrdTemporalConfig};
+use crate::temporal::{
+    denoise_single, denoise_temporal, scratch_size, temporal_config, temporal_parallel_sizes, temporal_sizes, LrdHistory, LrdTemporalConfig,
+};
 use core::ffi::c_void;
 use lrdenoise_core::Kernel;
 
@@ -178,5 +181,46 @@ pub unsafe extern "C" fn lrd_walr_denoise_temporal(
     // SAFETY: forwarded contract (see `denoise_temporal`).
     guard(|| unsafe {
         denoise_temporal(|w, h| walr_plan(config, w, h), frame, motion, history, out, scratch, scratch_bytes, core::ptr::null(), report)
+    })
+}
+
+/// Scratch bytes of `lrd_walr_denoise_temporal_parallel` with `workers`
+/// workers, and history bytes (those of `lrd_walr_temporal_sizes`: one
+/// history serves both calls).
+#[no_mangle]
+pub unsafe extern "C" fn lrd_walr_temporal_parallel_sizes(
+    config: *const LrdWalrConfig,
+    width: u32,
+    height: u32,
+    workers: u32,
+    scratch_bytes: *mut usize,
+    history_bytes: *mut usize,
+) -> LrdStatus {
+    guard(|| temporal_parallel_sizes(walr_plan(config, width, height)?, workers, scratch_bytes, history_bytes))
+}
+
+/// lrd_walr_denoise_temporal with the work run on the caller's threads
+/// (`executor`, see LrdExecutor); bit-identical to it. The scratch size is
+/// from `lrd_walr_temporal_parallel_sizes` with `executor->workers`; `out`
+/// needs rows that do not overlap in memory.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn lrd_walr_denoise_temporal_parallel(
+    config: *const LrdWalrConfig,
+    frame: *const LrdFrame,
+    motion: *const LrdImage,
+    history: *mut LrdHistory,
+    out: *const LrdImageMut,
+    scratch: *mut c_void,
+    scratch_bytes: usize,
+    executor: *const LrdExecutor,
+    report: *mut LrdReport,
+) -> LrdStatus {
+    if executor.is_null() {
+        return LRD_STATUS_NULL_POINTER;
+    }
+    // SAFETY: forwarded contract (see `denoise_temporal`).
+    guard(|| unsafe {
+        denoise_temporal(|w, h| walr_plan(config, w, h), frame, motion, history, out, scratch, scratch_bytes, executor, report)
     })
 }

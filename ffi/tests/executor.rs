@@ -76,6 +76,7 @@ struct Planes {
     normal: Vec<f32>,
     depth: Vec<f32>,
     ao: Vec<f32>,
+    position: Vec<f32>,
     motion: Vec<f32>,
 }
 
@@ -88,6 +89,7 @@ impl Planes {
             normal: (0..3 * n).map(|i| if i % 3 == (i / 3 / 500) % 3 { 1.0 } else { 0.0 }).collect(),
             depth: (0..n).map(|i| 2.0 + (i / wu) as f32 * 0.02).collect(),
             ao: (0..n).map(|i| 0.5 + ((i * 31) % 50) as f32 / 100.0).collect(),
+            position: (0..3 * n).map(|i| ((i / 3) % wu) as f32 * 0.1 + (i % 3) as f32 + ((i / 3) / wu) as f32 * 0.05).collect(),
             motion: (0..2 * n).map(|i| if i % 2 == 0 { 5.5 } else { -0.3 }).collect(),
         }
     }
@@ -100,6 +102,24 @@ impl Planes {
         f.guides.normal = img(self.normal.as_ptr(), self.w, self.h, 3);
         f.guides.depth = img(self.depth.as_ptr(), self.w, self.h, 1);
         f.guides.ao = img(self.ao.as_ptr(), self.w, self.h, 1);
+        f
+    }
+    /// The frame with the guides `method` reads: FLR normal, depth and AO;
+    /// BMFR normal and position; WALR normal, depth and position.
+    fn frame_for(&self, noisy: &[f32], method: Temporal) -> LrdFrame {
+        let mut f = self.frame(noisy);
+        match method {
+            Temporal::Moments | Temporal::Light => {}
+            Temporal::Bmfr => {
+                f.guides.depth = none();
+                f.guides.ao = none();
+                f.guides.position = img(self.position.as_ptr(), self.w, self.h, 3);
+            }
+            Temporal::Walr => {
+                f.guides.ao = none();
+                f.guides.position = img(self.position.as_ptr(), self.w, self.h, 3);
+            }
+        }
         f
     }
     fn motion(&self) -> LrdImage {
@@ -145,38 +165,55 @@ fn flr_parallel_gives_the_sequential_bits() {
     }
 }
 
-/// Which temporal FLR the test runs.
+/// Which temporal pipeline the test runs.
 #[derive(Clone, Copy, Debug)]
 enum Temporal {
     Moments,
     Light,
+    Bmfr,
+    Walr,
+}
+
+/// A pipeline's configuration.
+enum Config {
+    Flr(LrdFlrConfig),
+    Bmfr(LrdBmfrConfig),
+    Walr(LrdWalrConfig),
 }
 
 impl Temporal {
-    fn config(self) -> LrdFlrConfig {
+    fn config(self) -> Config {
         match self {
-            Temporal::Moments => lrd_flr_config_temporal_moments_default(),
-            Temporal::Light => lrd_flr_config_temporal_default(),
+            Temporal::Moments => Config::Flr(lrd_flr_config_temporal_moments_default()),
+            Temporal::Light => Config::Flr(lrd_flr_config_temporal_default()),
+            Temporal::Bmfr => Config::Bmfr(lrd_bmfr_config_default()),
+            Temporal::Walr => Config::Walr(lrd_walr_config_default()),
         }
     }
     /// Scratch and history bytes, for `workers` workers (None: the sequential call).
-    unsafe fn sizes(self, cfg: &LrdFlrConfig, tc: &LrdTemporalConfig, w: u32, h: u32, workers: Option<u32>) -> (usize, usize) {
+    unsafe fn sizes(self, cfg: &Config, tc: &LrdTemporalConfig, w: u32, h: u32, workers: Option<u32>) -> (usize, usize) {
         let (mut sb, mut hb) = (0usize, 0usize);
         let status = unsafe {
-            match (self, workers) {
-                (Temporal::Moments, None) => lrd_flr_temporal_moments_sizes(cfg, tc, w, h, &mut sb, &mut hb),
-                (Temporal::Moments, Some(n)) => lrd_flr_temporal_moments_parallel_sizes(cfg, tc, w, h, n, &mut sb, &mut hb),
-                (Temporal::Light, None) => lrd_flr_temporal_sizes(cfg, tc, w, h, &mut sb, &mut hb),
-                (Temporal::Light, Some(n)) => lrd_flr_temporal_parallel_sizes(cfg, tc, w, h, n, &mut sb, &mut hb),
+            match (self, cfg, workers) {
+                (Temporal::Moments, Config::Flr(c), None) => lrd_flr_temporal_moments_sizes(c, tc, w, h, &mut sb, &mut hb),
+                (Temporal::Moments, Config::Flr(c), Some(n)) => lrd_flr_temporal_moments_parallel_sizes(c, tc, w, h, n, &mut sb, &mut hb),
+                (Temporal::Light, Config::Flr(c), None) => lrd_flr_temporal_sizes(c, tc, w, h, &mut sb, &mut hb),
+                (Temporal::Light, Config::Flr(c), Some(n)) => lrd_flr_temporal_parallel_sizes(c, tc, w, h, n, &mut sb, &mut hb),
+                (_, Config::Bmfr(c), None) => lrd_bmfr_temporal_sizes(c, w, h, &mut sb, &mut hb),
+                (_, Config::Bmfr(c), Some(n)) => lrd_bmfr_temporal_parallel_sizes(c, w, h, n, &mut sb, &mut hb),
+                (_, Config::Walr(c), None) => lrd_walr_temporal_sizes(c, w, h, &mut sb, &mut hb),
+                (_, Config::Walr(c), Some(n)) => lrd_walr_temporal_parallel_sizes(c, w, h, n, &mut sb, &mut hb),
+                _ => unreachable!("a pipeline with another's config"),
             }
         };
         assert_eq!(status, LrdStatus::LRD_STATUS_OK);
         (sb, hb)
     }
+    /// One frame: the sequential call without an executor, the `_parallel` call with one (`Some(NULL)`: a NULL executor).
     #[allow(clippy::too_many_arguments)]
     unsafe fn run(
         self,
-        cfg: &LrdFlrConfig,
+        cfg: &Config,
         tc: &LrdTemporalConfig,
         frame: &LrdFrame,
         motion: *const LrdImage,
@@ -184,30 +221,38 @@ impl Temporal {
         out: &LrdImageMut,
         scratch: &mut [f64],
         bytes: usize,
-        ex: Option<&LrdExecutor>,
+        ex: Option<*const LrdExecutor>,
     ) -> LrdStatus {
         let sp = scratch.as_mut_ptr() as *mut c_void;
+        let r = null_mut();
         unsafe {
-            match (self, ex) {
-                (Temporal::Moments, None) => lrd_flr_denoise_temporal_moments(cfg, tc, frame, motion, hist, out, sp, bytes, null_mut()),
-                (Temporal::Moments, Some(e)) => {
-                    lrd_flr_denoise_temporal_moments_parallel(cfg, tc, frame, motion, hist, out, sp, bytes, e, null_mut())
+            match (self, cfg, ex) {
+                (Temporal::Moments, Config::Flr(c), None) => {
+                    lrd_flr_denoise_temporal_moments(c, tc, frame, motion, hist, out, sp, bytes, r)
                 }
-                (Temporal::Light, None) => lrd_flr_denoise_temporal(cfg, tc, frame, motion, hist, out, sp, bytes, null_mut()),
-                (Temporal::Light, Some(e)) => {
-                    lrd_flr_denoise_temporal_parallel(cfg, tc, frame, motion, hist, out, sp, bytes, e, null_mut())
+                (Temporal::Moments, Config::Flr(c), Some(e)) => {
+                    lrd_flr_denoise_temporal_moments_parallel(c, tc, frame, motion, hist, out, sp, bytes, e, r)
                 }
+                (Temporal::Light, Config::Flr(c), None) => lrd_flr_denoise_temporal(c, tc, frame, motion, hist, out, sp, bytes, r),
+                (Temporal::Light, Config::Flr(c), Some(e)) => {
+                    lrd_flr_denoise_temporal_parallel(c, tc, frame, motion, hist, out, sp, bytes, e, r)
+                }
+                (_, Config::Bmfr(c), None) => lrd_bmfr_denoise_temporal(c, frame, motion, hist, out, sp, bytes, r),
+                (_, Config::Bmfr(c), Some(e)) => lrd_bmfr_denoise_temporal_parallel(c, frame, motion, hist, out, sp, bytes, e, r),
+                (_, Config::Walr(c), None) => lrd_walr_denoise_temporal(c, frame, motion, hist, out, sp, bytes, r),
+                (_, Config::Walr(c), Some(e)) => lrd_walr_denoise_temporal_parallel(c, frame, motion, hist, out, sp, bytes, e, r),
+                _ => unreachable!("a pipeline with another's config"),
             }
         }
     }
 }
 
-/// Temporal FLR (moments and light) on 3 threads gives the sequential calls'
-/// bits over 4 frames of a pan; a NULL executor, 0 workers and a short
-/// scratch are refused.
+/// Every temporal pipeline (FLR on moments and on light, BMFR, WALR) on 3
+/// threads gives the sequential call's bits over 4 frames of a pan; a NULL
+/// executor, 0 workers and a short scratch are refused.
 #[test]
-fn temporal_flr_parallel_gives_the_sequential_bits() {
-    for t in [Temporal::Moments, Temporal::Light] {
+fn temporal_parallel_gives_the_sequential_bits() {
+    for t in [Temporal::Moments, Temporal::Light, Temporal::Bmfr, Temporal::Walr] {
         for (w, h) in [(67u32, 38u32), (129, 70)] {
             let p = Planes::new(w, h);
             let (cfg, tc) = (t.config(), lrd_temporal_config_default());
@@ -225,39 +270,38 @@ fn temporal_flr_parallel_gives_the_sequential_bits() {
                 let (mut want, mut got) = (vec![0f32; n], vec![0f32; n]);
                 let (ow, og) = (packed_out(&mut want, w, h), packed_out(&mut got, w, h));
                 let mv = p.motion();
+                let zero = LrdExecutor { workers: 0, ..ex };
                 for k in 0..4 {
                     let noisy = p.noisy(k);
-                    let frame = p.frame(&noisy);
+                    let frame = p.frame_for(&noisy, t);
                     let m = if k == 0 { null() } else { &mv as *const LrdImage };
                     assert_eq!(t.run(&cfg, &tc, &frame, m, &mut h1, &ow, &mut s1, sb1, None), LrdStatus::LRD_STATUS_OK);
-                    assert_eq!(t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3, Some(&ex)), LrdStatus::LRD_STATUS_OK);
+                    assert_eq!(
+                        t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3, Some(&ex as *const LrdExecutor)),
+                        LrdStatus::LRD_STATUS_OK
+                    );
                     assert_eq!(got, want, "{t:?} {w}x{h} frame {k}");
                     assert_eq!(h3.frames, h1.frames);
                     let refused = [
-                        t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3 - 8, Some(&ex)),
-                        t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3, Some(&LrdExecutor { workers: 0, ..ex })),
+                        t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3 - 8, Some(&ex as *const LrdExecutor)),
+                        t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3, Some(&zero as *const LrdExecutor)),
+                        t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3, Some(null())),
                     ];
-                    assert_eq!(refused, [LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL, LrdStatus::LRD_STATUS_INVALID_ARGUMENT]);
-                    let sp = s3.as_mut_ptr() as *mut c_void;
-                    let null_ex = match t {
-                        Temporal::Moments => {
-                            lrd_flr_denoise_temporal_moments_parallel(&cfg, &tc, &frame, m, &mut h3, &og, sp, sb3, null(), null_mut())
-                        }
-                        Temporal::Light => {
-                            lrd_flr_denoise_temporal_parallel(&cfg, &tc, &frame, m, &mut h3, &og, sp, sb3, null(), null_mut())
-                        }
-                    };
-                    assert_eq!(null_ex, LrdStatus::LRD_STATUS_NULL_POINTER);
+                    let want_refused = [
+                        LrdStatus::LRD_STATUS_BUFFER_TOO_SMALL,
+                        LrdStatus::LRD_STATUS_INVALID_ARGUMENT,
+                        LrdStatus::LRD_STATUS_NULL_POINTER,
+                    ];
+                    assert_eq!(refused, want_refused, "{t:?}");
                     assert_eq!(h3.frames, h1.frames, "a refused call leaves the history as it was");
                 }
-                let (mut a, mut b) = (0usize, 0usize);
-                assert_eq!(
-                    lrd_flr_temporal_moments_parallel_sizes(&cfg, &tc, w, h, 0, &mut a, &mut b),
-                    LrdStatus::LRD_STATUS_INVALID_ARGUMENT
-                );
             }
         }
     }
+    let (cfg, tc) = (lrd_flr_config_temporal_moments_default(), lrd_temporal_config_default());
+    let (mut a, mut b) = (0usize, 0usize);
+    let status = unsafe { lrd_flr_temporal_moments_parallel_sizes(&cfg, &tc, 67, 38, 0, &mut a, &mut b) };
+    assert_eq!(status, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
 }
 
 /// An executor that skips a task, runs one twice or passes a worker out of
@@ -283,12 +327,12 @@ fn a_broken_executor_is_refused() {
             let sp = s.as_mut_ptr() as *mut c_void;
             let status = lrd_flr_denoise_parallel(&cfg, &frame, &o, sp, sb, &ex, null_mut());
             assert!(named.contains(&status), "{status:?}");
-            let (cfg, tc) = (lrd_flr_config_temporal_moments_default(), lrd_temporal_config_default());
+            let (cfg, tc) = (Temporal::Moments.config(), lrd_temporal_config_default());
             let (sb, hb) = Temporal::Moments.sizes(&cfg, &tc, w, h, Some(2));
             let mut s = vec![0f64; sb / 8];
             let mut hd = vec![0f32; hb / 4];
             let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
-            let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &o, &mut s, sb, Some(&ex));
+            let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &o, &mut s, sb, Some(&ex as *const LrdExecutor));
             assert!(named.contains(&status), "{status:?}");
             assert_eq!(hist.frames, 0);
         }
@@ -302,7 +346,7 @@ fn a_history_over_an_input_is_refused() {
     let (w, h) = (67u32, 38u32);
     let p = Planes::new(w, h);
     let noisy = p.noisy(0);
-    let (cfg, tc) = (lrd_flr_config_temporal_moments_default(), lrd_temporal_config_default());
+    let (cfg, tc) = (Temporal::Moments.config(), lrd_temporal_config_default());
     let mut out = vec![0f32; (3 * w * h) as usize];
     let o = packed_out(&mut out, w, h);
     unsafe {
@@ -347,12 +391,12 @@ fn a_planar_output_is_refused() {
     let pool = Pool { workers: 2, mode: Mode::Threads };
     let ex = executor(&pool);
     unsafe {
-        let (cfg, tc) = (lrd_flr_config_temporal_moments_default(), lrd_temporal_config_default());
+        let (cfg, tc) = (Temporal::Moments.config(), lrd_temporal_config_default());
         let (sb, hb) = Temporal::Moments.sizes(&cfg, &tc, w, h, Some(2));
         let mut s = vec![0f64; sb / 8];
         let mut hd = vec![0f32; hb / 4];
         let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
-        let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &planar, &mut s, sb, Some(&ex));
+        let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &planar, &mut s, sb, Some(&ex as *const LrdExecutor));
         assert_eq!(status, LrdStatus::LRD_STATUS_UNSUPPORTED);
         let cfg = lrd_flr_config_default();
         let mut sb = 0usize;

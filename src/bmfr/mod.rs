@@ -567,6 +567,21 @@ impl Bmfr {
     ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, (0, self.height))?;
+        self.fit_frame_parallel(&f, index, scratch, out, workers, for_each, self.cfg.fireflies)
+    }
+
+    /// [`Bmfr::denoise_parallel`] on a checked frame with the firefly clamp `clamp`.
+    #[allow(clippy::too_many_arguments)]
+    fn fit_frame_parallel(
+        &self,
+        f: &CheckedFrame<'_>,
+        index: u32,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+        clamp: Option<f32>,
+    ) -> Result<Report, Error> {
         let bands =
             RowBands::new(out).ok_or(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use denoise)"))?;
         run_tiles(scratch, self.tile_count(index), workers, self.worker_len(), for_each, &|t, buf| {
@@ -577,7 +592,7 @@ impl Bmfr {
             // SAFETY: each tile runs once (`run_tiles`), tiles write disjoint
             // rows (`tile_pixel_rows`) and rows do not overlap (`RowBands`).
             let mut band = unsafe { bands.band(a, b - a)? };
-            self.fit_tile(&f, index, t, buf, &mut band)
+            self.fit_tile_with(f, index, t, buf, &mut band, clamp)
         })
     }
 

@@ -15,10 +15,11 @@
 //! training sequences it scored higher: docs/RESULTS.md). All state lives in
 //! a caller-owned [`History`].
 
-use super::{Bmfr, Report};
+use super::{Bmfr, Report, BLOCK_OFFSETS};
 use crate::error::Error;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut};
+use crate::parallel::Executor;
 use crate::temporal::Reprojection;
 
 pub use crate::temporal::{History, TemporalConfig};
@@ -37,6 +38,15 @@ impl Bmfr {
     pub fn temporal_scratch_len(&self) -> usize {
         let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None));
         frame.and_then(|n| n.checked_add(self.worker_len())).unwrap_or(usize::MAX)
+    }
+
+    /// f32 values of the scratch for [`Bmfr::denoise_temporal_parallel`] with
+    /// `workers` (`None` if it overflows): the pipeline frame's and the fit's
+    /// tiles for the frame index with the most tiles.
+    pub fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let frame = self.stage().ok()?.frame_scratch_len(Some(workers))?;
+        let fit = (0..BLOCK_OFFSETS.len() as u32).map(|i| self.parallel_scratch_len(i, workers)).max()??;
+        frame.checked_add(fit)
     }
 
     /// One frame of the temporal pipeline. `motion` (2 channels: previous −
@@ -72,6 +82,47 @@ impl Bmfr {
                 let mut fit_frame = f;
                 fit_frame.noisy = acc;
                 self.fit_frame(&fit_frame, index, worker, o, None)
+            },
+        )
+    }
+
+    /// [`Bmfr::denoise_temporal`] with the stage's bands and the fit's tiles
+    /// spread by the caller's executor ([`Executor`]); bit-identical to it.
+    /// `scratch`: at least [`Bmfr::temporal_parallel_scratch_len`] f32; `out`
+    /// must have rows that do not overlap in memory. Allocates nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn denoise_temporal_parallel(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, (0, self.height))?;
+        let needed = self.temporal_parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let (cfg, stage) = (&self.cfg, self.stage()?);
+        let (fit, rest) = scratch.split_at_mut(needed - stage.frame_scratch_len(Some(workers)).unwrap_or(0));
+        stage.run_frame(
+            f.noisy,
+            frame.guides,
+            motion.copied(),
+            cfg.fireflies,
+            cfg.clamp_negative,
+            history,
+            rest,
+            Some((workers, for_each)),
+            out,
+            |acc, _, index, o| {
+                let mut fit_frame = f;
+                fit_frame.noisy = acc;
+                self.fit_frame_parallel(&fit_frame, index, fit, o, workers, for_each, None)
             },
         )
     }

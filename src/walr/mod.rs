@@ -477,6 +477,23 @@ impl Walr {
     ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, self.height)?;
+        let prep = self.prepare(&f, index);
+        self.run_parallel(&f, &prep, scratch, out, workers, for_each, self.cfg.fireflies)
+    }
+
+    /// [`Walr::denoise_parallel`] on a checked frame with the firefly clamp
+    /// `clamp` (`prep` from [`Walr::prepare_with`] with the same).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn run_parallel(
+        &self,
+        f: &CheckedFrame<'_>,
+        prep: &Prepared,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+        clamp: Option<f32>,
+    ) -> Result<Report, Error> {
         let needed = self.parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
@@ -484,7 +501,6 @@ impl Walr {
         let (own, runs) = scratch.split_at_mut(self.scratch_len());
         let rows = self.parallel_band_rows(workers);
         let nb = self.height.div_ceil(rows);
-        let prep = self.prepare(&f, index);
         let Parts { geo, sdf: [s0, s1], z: [z0, z1] } = self.parts(own)?;
         let (gl, zl, w) = (self.geo_row_len(), self.z_row_len(), self.width);
         let y0 = |b: usize| b * rows;
@@ -492,7 +508,9 @@ impl Walr {
         // stage, and a stage writes only its own band of each buffer it writes.
         let mut rep = {
             let (g, z) = (Bands::new(geo, rows * gl), Bands::new(&mut *z0, rows * zl));
-            run_tiles(runs, nb, workers, 0, for_each, &|b, _| unsafe { self.features_rows(&f, &prep, y0(b), g.get(b), z.get(b)) })?
+            run_tiles(runs, nb, workers, 0, for_each, &|b, _| unsafe {
+                self.features_rows_with(f, prep, y0(b), g.get(b), z.get(b), clamp)
+            })?
         };
         let geo = &*geo;
         let (mut sdf, mut z) = ([s0, s1], [z0, z1]);
@@ -500,7 +518,7 @@ impl Walr {
             let (sin, sout, zin, zout) = Self::iteration_buffers(t, &mut sdf, &mut z);
             let (so, zo) = (Bands::new(sout, rows * w), Bands::new(zout, rows * zl));
             run_tiles(runs, nb, workers, 0, for_each, &|b, _| {
-                unsafe { self.iterate_rows(t, &prep, y0(b), geo, sin, zin, so.get(b), zo.get(b)) }.map(|_| Report::default())
+                unsafe { self.iterate_rows(t, prep, y0(b), geo, sin, zin, so.get(b), zo.get(b)) }.map(|_| Report::default())
             })?;
         }
         let bands =
@@ -518,11 +536,11 @@ impl Walr {
             }
             let (p, l) = (&*prev, Bands::new(last, rows * zl));
             run_tiles(runs, nb, workers, 0, for_each, &|b, _| {
-                unsafe { self.blend_rows(&prep, y0(b), p, l.get(b), &mut out_band(b)?) }.map(|_| Report::default())
+                unsafe { self.blend_rows(prep, y0(b), p, l.get(b), &mut out_band(b)?) }.map(|_| Report::default())
             })?;
         } else {
             let zr = [&*z[0], &*z[1]];
-            rep += run_tiles(runs, nb, workers, 0, for_each, &|b, _| self.solve_rows(&prep, y0(b), geo, zr, &mut out_band(b)?))?;
+            rep += run_tiles(runs, nb, workers, 0, for_each, &|b, _| self.solve_rows(prep, y0(b), geo, zr, &mut out_band(b)?))?;
         }
         Ok(rep)
     }

@@ -25,6 +25,7 @@ use super::{Report, Walr};
 use crate::error::Error;
 use crate::guides::Frame;
 use crate::image::{ImageView, ImageViewMut};
+use crate::parallel::Executor;
 use crate::temporal::Reprojection;
 
 pub use crate::temporal::{History, TemporalConfig};
@@ -43,6 +44,13 @@ impl Walr {
     pub fn temporal_scratch_len(&self) -> usize {
         let frame = self.stage().ok().and_then(|s| s.frame_scratch_len(None));
         frame.and_then(|n| n.checked_add(self.scratch_len())).unwrap_or(usize::MAX)
+    }
+
+    /// f32 of scratch for [`Walr::denoise_temporal_parallel`] with `workers`
+    /// (`None` if it overflows): WALR's parallel run's and the pipeline frame's.
+    pub fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
+        let frame = self.stage().ok()?.frame_scratch_len(Some(workers))?;
+        frame.checked_add(self.parallel_scratch_len(workers)?)
     }
 
     /// One frame of the WALR pipeline. `motion` (2 channels, previous −
@@ -78,6 +86,48 @@ impl Walr {
                 let f2 = self.check_frame(&Frame { noisy: acc, ..*frame })?;
                 let prep = self.prepare_with(&f2, index, None);
                 self.run(&f2, &prep, self.parts(walr_scratch)?, o, None)
+            },
+        )
+    }
+
+    /// [`Walr::denoise_temporal`] with the stage's and WALR's bands spread
+    /// by the caller's executor ([`Executor`]); bit-identical to it.
+    /// `scratch`: at least [`Walr::temporal_parallel_scratch_len`] f32; `out`
+    /// must have rows that do not overlap in memory. Allocates nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn denoise_temporal_parallel(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        workers: usize,
+        for_each: Executor<'_>,
+    ) -> Result<Report, Error> {
+        let f = self.check_frame(frame)?;
+        self.check_out(out, self.height)?;
+        let needed = self.temporal_parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        if scratch.len() < needed {
+            return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
+        }
+        let (walr_scratch, rest) = scratch.split_at_mut(self.parallel_scratch_len(workers).unwrap_or(0));
+        let (cfg, stage) = (&self.cfg, self.stage()?);
+        stage.run_frame(
+            f.noisy,
+            frame.guides,
+            motion.copied(),
+            cfg.fireflies,
+            cfg.clamp_negative,
+            history,
+            rest,
+            Some((workers, for_each)),
+            out,
+            |acc, _, index, o| {
+                // WALR on the accumulated light (clamped already: WALR does not clamp it again)
+                let f2 = self.check_frame(&Frame { noisy: acc, ..*frame })?;
+                let prep = self.prepare_with(&f2, index, None);
+                self.run_parallel(&f2, &prep, walr_scratch, o, workers, for_each, None)
             },
         )
     }
