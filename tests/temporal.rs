@@ -735,3 +735,47 @@ fn pixel_groups_equal_the_per_pixel_reference() {
         }
     }
 }
+
+/// BMFR's and WALR's pipelines on 3 real threads (`TemporalDenoiser::
+/// denoise_temporal_parallel`) give the one-thread bits over a pan; BMFR's
+/// over 17 frames, so that every one of its 16 block-grid offsets (the
+/// parallel scratch is sized for the largest) runs.
+#[test]
+fn bmfr_and_walr_pipelines_on_threads_equal_one_thread() {
+    let (w, h) = (45, 29);
+    let mv: Vec<f32> = (0..w * h).flat_map(|i| [0.6 + (i % 3) as f32 * 0.2, -0.3]).collect();
+    let plans: [(Box<dyn TemporalDenoiser + Sync>, GuideSet, u64); 2] = [
+        (Box::new(Bmfr::new(BmfrConfig { block: 16, ..Default::default() }, w, h).unwrap()), BmfrConfig::default().guides, 17),
+        (Box::new(Walr::new(WalrConfig::default(), w, h).unwrap()), WalrConfig::default().guides, 3),
+    ];
+    let exec = |n: usize, body: &(dyn Fn(usize, usize) + Sync)| {
+        std::thread::scope(|s| {
+            for wk in 0..3 {
+                s.spawn(move || (wk..n).step_by(3).for_each(|i| body(i, wk)));
+            }
+        })
+    };
+    for (plan, set, frames) in plans {
+        let (mut h1, mut h3) = (vec![0f32; plan.history_len()], vec![0f32; plan.history_len()]);
+        let mut s1 = vec![f64::NAN; plan.temporal_scratch_len()];
+        let mut s3 = vec![f64::NAN; plan.temporal_parallel_scratch_len(3).unwrap()];
+        let (mut n1, mut n3) = (0, 0);
+        for k in 0..frames {
+            let f = frame_at(w, h, k);
+            let frame = f.frame(set);
+            let m = (k > 0).then(|| ImageView::interleaved(&mv, w, h, 2).unwrap());
+            let (mut a, mut b) = (vec![0f32; 3 * w * h], vec![0f32; 3 * w * h]);
+            let mut hist = History::resume(&mut h1, n1);
+            let ra =
+                plan.denoise_temporal(&frame, m.as_ref(), &mut hist, &mut s1, &mut ImageViewMut::interleaved(&mut a, w, h, 3).unwrap());
+            n1 = hist.frames();
+            let mut hist = History::resume(&mut h3, n3);
+            let mut ob = ImageViewMut::interleaved(&mut b, w, h, 3).unwrap();
+            let rb = plan.denoise_temporal_parallel(&frame, m.as_ref(), &mut hist, &mut s3, &mut ob, 3, &exec);
+            n3 = hist.frames();
+            assert_eq!(ra.unwrap(), rb.unwrap(), "frame {k}");
+            assert!(a.iter().zip(&b).all(|(p, q)| p.to_bits() == q.to_bits()), "frame {k}");
+            assert_eq!(n1, n3);
+        }
+    }
+}

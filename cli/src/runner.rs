@@ -272,7 +272,8 @@ impl FlrRunner {
     }
 }
 
-/// The rayon executor of [`Flr::denoise_parallel`]: a stage's tiles in
+/// The rayon executor of the `denoise_parallel` and
+/// `denoise_temporal_parallel` runs: a stage's tiles in
 /// `threads` contiguous groups (neighbouring bands share rows of the frame),
 /// one task per group, the group's index as its worker.
 fn for_each_in_groups(pool: &rayon::ThreadPool, threads: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) + '_ {

@@ -186,9 +186,10 @@ static void pool_for_each(void *pool, uint32_t count, LrdTask task, void *task_d
     PoolThread threads[WORKERS];
     pthread_t th[WORKERS];
     for (uint32_t w = 0; w < WORKERS; w++) threads[w] = (PoolThread){&job, w};
-    for (uint32_t w = 1; w < WORKERS; w++) pthread_create(&th[w], NULL, pool_thread, &threads[w]);
-    pool_thread(&threads[0]);
-    for (uint32_t w = 1; w < WORKERS; w++) pthread_join(th[w], NULL);
+    uint32_t started = 1;
+    while (started < WORKERS && pthread_create(&th[started], NULL, pool_thread, &threads[started]) == 0) started++;
+    pool_thread(&threads[0]); /* the calling thread takes what the others leave (all of it if none started) */
+    for (uint32_t w = 1; w < started; w++) pthread_join(th[w], NULL);
 }
 
 int main(int argc, char **argv) {
@@ -298,7 +299,12 @@ int main(int argc, char **argv) {
         jobs[w].status = LRD_STATUS_OK;
     }
     double t0 = now_ms();
-    for (int w = 1; w < WORKERS; w++) pthread_create(&th[w], NULL, run_tiles, &jobs[w]);
+    for (int w = 1; w < WORKERS; w++) {
+        if (pthread_create(&th[w], NULL, run_tiles, &jobs[w]) != 0) {
+            fprintf(stderr, "pthread_create failed\n"); /* the barrier needs every worker */
+            return 2;
+        }
+    }
     run_tiles(&jobs[0]);
     for (int w = 1; w < WORKERS; w++) pthread_join(th[w], NULL);
     double tiled_ms = now_ms() - t0;

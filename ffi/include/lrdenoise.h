@@ -589,7 +589,11 @@ typedef void (*LrdTask)(void *task_data, uint32_t index, uint32_t worker);
  * 1, ... A `for_each` that skips an index, calls one twice, or passes a
  * busy or out-of-range worker makes the entry point return a status
  * (LRD_STATUS_UNSUPPORTED, LRD_STATUS_STAGE_ORDER or LRD_STATUS_INVALID_TILE)
- * instead of racing; the output is then undefined.
+ * instead of racing; the output is then undefined and a history's frame
+ * count is left as it was. `task` and `task_data` are valid only until that
+ * `for_each` call returns: calling `task` later, or returning before every
+ * call of it has returned, is undefined behaviour. `workers` = 0 returns
+ * LRD_STATUS_INVALID_ARGUMENT.
  */
 typedef struct LrdExecutor {
   /**
@@ -663,11 +667,11 @@ typedef struct LrdTemporalConfig {
 
 /**
  * The caller-owned state of a temporal pipeline (FLR, BMFR or WALR): `data`
- * (4-byte aligned, at least the history size from `lrd_flr_temporal_sizes`,
- * `lrd_bmfr_temporal_sizes` or `lrd_walr_temporal_sizes`) and the number
- * of frames accumulated. Set
- * `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
- * call advances it. The contents of `data` are ignored while `frames == 0`.
+ * (4-byte aligned, at least the history size from the method's
+ * `..._temporal_sizes` or `..._temporal_parallel_sizes` call: the two give
+ * the same size) and the number of frames accumulated. Set
+ * `frames = 0` to start (or after a camera cut); each successful
+ * `..._denoise_temporal` or `..._denoise_temporal_parallel` call advances it. The contents of `data` are ignored while `frames == 0`.
  * One history serves one method, size and configuration.
  */
 typedef struct LrdHistory {

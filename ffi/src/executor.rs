@@ -20,7 +20,11 @@ pub type LrdTask = unsafe extern "C" fn(task_data: *mut c_void, index: u32, work
 /// 1, ... A `for_each` that skips an index, calls one twice, or passes a
 /// busy or out-of-range worker makes the entry point return a status
 /// (LRD_STATUS_UNSUPPORTED, LRD_STATUS_STAGE_ORDER or LRD_STATUS_INVALID_TILE)
-/// instead of racing; the output is then undefined.
+/// instead of racing; the output is then undefined and a history's frame
+/// count is left as it was. `task` and `task_data` are valid only until that
+/// `for_each` call returns: calling `task` later, or returning before every
+/// call of it has returned, is undefined behaviour. `workers` = 0 returns
+/// LRD_STATUS_INVALID_ARGUMENT.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct LrdExecutor {
@@ -48,31 +52,28 @@ unsafe extern "C" fn run_task(task_data: *mut c_void, index: u32, worker: u32) {
     }
 }
 
-/// The workers of `executor` (not NULL, `for_each` set, `workers` ≥ 1).
+/// A copy of `*executor`, checked: not NULL, `for_each` set, `workers` ≥ 1.
 ///
 /// # Safety
 /// `executor` is NULL or points to a valid `LrdExecutor`.
-pub(crate) unsafe fn workers(executor: *const LrdExecutor) -> Result<usize, LrdStatus> {
+pub(crate) unsafe fn checked(executor: *const LrdExecutor) -> Result<LrdExecutor, LrdStatus> {
     // SAFETY: the caller's contract.
-    let e = unsafe { executor.as_ref() }.ok_or(LRD_STATUS_NULL_POINTER)?;
+    let e = unsafe { *executor.as_ref().ok_or(LRD_STATUS_NULL_POINTER)? };
     if e.for_each.is_none() {
         return Err(LRD_STATUS_NULL_POINTER);
     }
     if e.workers == 0 {
         return Err(LRD_STATUS_INVALID_ARGUMENT);
     }
-    Ok(e.workers as usize)
+    Ok(e)
 }
 
-/// Runs `f` with the core's executor over `executor`'s `for_each`; a panic
-/// caught in a task returns LRD_STATUS_PANIC.
+/// Runs `f` with the core's executor over `e.for_each` (`e` from
+/// [`checked`]); a panic caught in a task returns LRD_STATUS_PANIC.
 ///
 /// # Safety
-/// `executor` is valid (checked by [`workers`]) and its `for_each` keeps the
-/// contract of [`LrdExecutor`].
-pub(crate) unsafe fn run<T>(executor: *const LrdExecutor, f: impl FnOnce(Executor<'_>) -> T) -> Result<T, LrdStatus> {
-    // SAFETY: the caller's contract.
-    let e = unsafe { *executor.as_ref().ok_or(LRD_STATUS_NULL_POINTER)? };
+/// `e.for_each` keeps the contract of [`LrdExecutor`].
+pub(crate) unsafe fn run<T>(e: &LrdExecutor, f: impl FnOnce(Executor<'_>) -> T) -> Result<T, LrdStatus> {
     let for_each_c = e.for_each.ok_or(LRD_STATUS_NULL_POINTER)?;
     let panicked = AtomicBool::new(false);
     let for_each = |count: usize, body: &(dyn Fn(usize, usize) + Sync)| {

@@ -324,7 +324,8 @@ pub unsafe extern "C" fn lrd_flr_denoise_parallel(
         let (frame, out) = unsafe { frame_and_out(frame, out)? };
         let flr = plan(config, out.width, out.height)?;
         // SAFETY: the caller passes a valid (or NULL) executor.
-        let workers = unsafe { executor::workers(executor)? };
+        let ex = unsafe { executor::checked(executor)? };
+        let workers = ex.workers as usize;
         check_scratch(scratch)?;
         let needed = tiled_scratch_bytes(&flr, workers)?;
         if scratch_bytes < needed {
@@ -341,7 +342,7 @@ pub unsafe extern "C" fn lrd_flr_denoise_parallel(
             if !o.rows_are_separable() {
                 return Err(LRD_STATUS_UNSUPPORTED);
             }
-            executor::run(executor, |for_each| flr.denoise_parallel(&f, s, &mut o, workers, for_each))?.map_err(status_of)?
+            executor::run(&ex, |for_each| flr.denoise_parallel(&f, s, &mut o, workers, for_each))?.map_err(status_of)?
         };
         write_report(report, r);
         Ok(())

@@ -326,8 +326,9 @@ pub(crate) fn byte_range(
 }
 
 /// LRD_STATUS_INVALID_ARGUMENT if the output's bytes overlap any image of
-/// `frame` or any of the `others` (address, bytes) ranges (scratch, history),
-/// or if two of its pixels or channels share memory.
+/// `frame` or any of the `others` (address, bytes) ranges (scratch, history:
+/// buffers the call writes), if one of the `others` overlaps an image of
+/// `frame`, or if two of the output's pixels or channels share memory.
 pub(crate) fn check_output_disjoint(out: &LrdImageMut, frame: &LrdFrame, others: &[(usize, usize)]) -> Result<(), LrdStatus> {
     let strides = (out.pixel_stride, out.row_stride, out.channel_stride);
     let (elem, layout, _) = layout_of(out.data, out.format, out.width, out.height, 3, strides)?;
@@ -337,10 +338,16 @@ pub(crate) fn check_output_disjoint(out: &LrdImageMut, frame: &LrdFrame, others:
     }
     let (o0, o1) = byte_range(out.data, out.format, out.width, out.height, 3, strides).ok_or(LRD_STATUS_INVALID_ARGUMENT)?;
     let overlaps = |(a, b): (usize, usize)| a < o1 && o0 < b;
-    let inputs = images(frame)
-        .filter_map(|(i, ch)| byte_range(i.data, i.format, i.width, i.height, ch, (i.pixel_stride, i.row_stride, i.channel_stride)));
-    let others = others.iter().filter(|(_, n)| *n > 0).map(|&(a, n)| (a, a.saturating_add(n)));
-    if inputs.chain(others).any(overlaps) {
+    let inputs = || {
+        images(frame)
+            .filter_map(|(i, ch)| byte_range(i.data, i.format, i.width, i.height, ch, (i.pixel_stride, i.row_stride, i.channel_stride)))
+    };
+    let others = || others.iter().filter(|(_, n)| *n > 0).map(|&(a, n)| (a, a.saturating_add(n)));
+    if inputs().chain(others()).any(overlaps) {
+        return Err(LRD_STATUS_INVALID_ARGUMENT);
+    }
+    // the scratch and the history are written too: no input may lie in them
+    if others().any(|(a, b)| inputs().any(|(c, d)| a < d && c < b)) {
         return Err(LRD_STATUS_INVALID_ARGUMENT);
     }
     Ok(())

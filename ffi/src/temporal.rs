@@ -5,7 +5,7 @@
 
 use crate::executor::{self, LrdExecutor};
 use crate::images::{
-    byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, images, view, view_mut, LrdFrame, LrdImage,
+    byte_range, check_output_disjoint, check_scratch, frame_and_out, frame_views, guide_set, view, view_mut, LrdFrame, LrdImage,
     LrdImageMut, LRD_GUIDE_DEPTH, LRD_GUIDE_NORMAL, LRD_GUIDE_POSITION,
 };
 use crate::status::{status_of, write_report, LrdReport, LrdStatus, LrdStatus::*};
@@ -13,11 +13,11 @@ use core::ffi::c_void;
 use lrdenoise_core::{Denoiser, Error, Frame, GuideSet, ImageViewMut, Report, TemporalDenoiser};
 
 /// The caller-owned state of a temporal pipeline (FLR, BMFR or WALR): `data`
-/// (4-byte aligned, at least the history size from `lrd_flr_temporal_sizes`,
-/// `lrd_bmfr_temporal_sizes` or `lrd_walr_temporal_sizes`) and the number
-/// of frames accumulated. Set
-/// `frames = 0` to start (or after a camera cut); each `..._denoise_temporal`
-/// call advances it. The contents of `data` are ignored while `frames == 0`.
+/// (4-byte aligned, at least the history size from the method's
+/// `..._temporal_sizes` or `..._temporal_parallel_sizes` call: the two give
+/// the same size) and the number of frames accumulated. Set
+/// `frames = 0` to start (or after a camera cut); each successful
+/// `..._denoise_temporal` or `..._denoise_temporal_parallel` call advances it. The contents of `data` are ignored while `frames == 0`.
 /// One history serves one method, size and configuration.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -288,7 +288,8 @@ pub(crate) unsafe fn denoise_temporal<M: TemporalDenoiser>(
         let out = out.as_ref().ok_or(LRD_STATUS_NULL_POINTER)?;
         let hist = history.as_mut().ok_or(LRD_STATUS_NULL_POINTER)?;
         let m = plan(out.width, out.height)?;
-        let workers = if executor.is_null() { None } else { Some(executor::workers(executor)?) };
+        let ex = if executor.is_null() { None } else { Some(executor::checked(executor)?) };
+        let workers = ex.map(|e| e.workers as usize);
         let ranges = [(scratch as usize, scratch_bytes), (hist.data as usize, hist.bytes)];
         check_output_disjoint(out, frame, &ranges)?;
         let motion_range = motion
@@ -301,17 +302,13 @@ pub(crate) unsafe fn denoise_temporal<M: TemporalDenoiser>(
                 return Err(LRD_STATUS_INVALID_ARGUMENT);
             }
         }
-        // the history is written too: it must not overlap the scratch, the
-        // motion or an input image
-        if !hist.data.is_null() && hist.bytes > 0 {
-            let h = (hist.data as usize, (hist.data as usize).saturating_add(hist.bytes));
-            let inputs = images(frame).filter_map(|(i, ch)| {
-                byte_range(i.data, i.format, i.width, i.height, ch, (i.pixel_stride, i.row_stride, i.channel_stride))
-            });
-            let scratch_range = (scratch as usize, (scratch as usize).saturating_add(scratch_bytes));
-            if inputs.chain(motion_range).chain(core::iter::once(scratch_range)).any(|r| overlap(r, h)) {
-                return Err(LRD_STATUS_INVALID_ARGUMENT);
-            }
+        // the history and the scratch are written: neither may overlap the
+        // motion or the other (nor an image: `check_output_disjoint`)
+        let h = (hist.data as usize, (hist.data as usize).saturating_add(hist.bytes));
+        let sc = (scratch as usize, (scratch as usize).saturating_add(scratch_bytes));
+        let written = [h, sc].into_iter().filter(|(a, b)| a < b);
+        if written.clone().any(|w| motion_range.is_some_and(|m| overlap(m, w))) || (h.0 < h.1 && sc.0 < sc.1 && overlap(h, sc)) {
+            return Err(LRD_STATUS_INVALID_ARGUMENT);
         }
         let f = frame_views(frame, false)?;
         let mv = match motion.as_ref() {
@@ -326,9 +323,16 @@ pub(crate) unsafe fn denoise_temporal<M: TemporalDenoiser>(
         let hd = f32_buffer(hist.data, hist.bytes, f32_bytes(m.history_len())?)?;
         let mut h = lrdenoise_core::History::resume(hd, hist.frames);
         let mut o = view_mut(out, 0, out.height as usize)?;
-        let r = match workers {
+        if workers.is_some() && !o.rows_are_separable() {
+            // the parallel runs write the output in row bands
+            return Err(LRD_STATUS_UNSUPPORTED);
+        }
+        let r = match ex {
             None => m.denoise_temporal(&f, mv.as_ref(), &mut h, s, &mut o),
-            Some(w) => executor::run(executor, |for_each| m.denoise_temporal_parallel(&f, mv.as_ref(), &mut h, s, &mut o, w, for_each))?,
+            Some(e) => {
+                let w = e.workers as usize;
+                executor::run(&e, |for_each| m.denoise_temporal_parallel(&f, mv.as_ref(), &mut h, s, &mut o, w, for_each))?
+            }
         }
         .map_err(status_of)?;
         hist.frames = h.frames();

@@ -282,6 +282,8 @@ fn temporal_parallel_gives_the_sequential_bits() {
                     );
                     assert_eq!(got, want, "{t:?} {w}x{h} frame {k}");
                     assert_eq!(h3.frames, h1.frames);
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<u32>>();
+                    let written = bits(&hd3);
                     let refused = [
                         t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3 - 8, Some(&ex as *const LrdExecutor)),
                         t.run(&cfg, &tc, &frame, m, &mut h3, &og, &mut s3, sb3, Some(&zero as *const LrdExecutor)),
@@ -294,6 +296,7 @@ fn temporal_parallel_gives_the_sequential_bits() {
                     ];
                     assert_eq!(refused, want_refused, "{t:?}");
                     assert_eq!(h3.frames, h1.frames, "a refused call leaves the history as it was");
+                    assert!(bits(&hd3) == written, "{t:?}: a refused call wrote the history");
                 }
             }
         }
@@ -305,42 +308,51 @@ fn temporal_parallel_gives_the_sequential_bits() {
 }
 
 /// An executor that skips a task, runs one twice or passes a worker out of
-/// range gets a status, not LRD_STATUS_OK.
+/// range gets one of the statuses LrdExecutor's contract names, and the
+/// history's frame count stays; the same call on a working pool succeeds.
 #[test]
 fn a_broken_executor_is_refused() {
     let (w, h) = (67u32, 38u32);
     let p = Planes::new(w, h);
     let noisy = p.noisy(0);
-    let frame = p.frame(&noisy);
     let mut out = vec![0f32; (3 * w * h) as usize];
     let o = packed_out(&mut out, w, h);
-    // the statuses LrdExecutor's contract names
     let named = [LrdStatus::LRD_STATUS_UNSUPPORTED, LrdStatus::LRD_STATUS_STAGE_ORDER, LrdStatus::LRD_STATUS_INVALID_TILE];
+    let good = Pool { workers: 2, mode: Mode::Threads };
+    let good = executor(&good);
     for mode in [Mode::SkipFirst, Mode::RunFirstTwice, Mode::WorkerOutOfRange] {
         let pool = Pool { workers: 2, mode };
         let ex = executor(&pool);
         unsafe {
             let cfg = lrd_flr_config_default();
+            let frame = p.frame(&noisy);
             let mut sb = 0usize;
             assert_eq!(lrd_flr_tiled_scratch_size(&cfg, w, h, 2, &mut sb), LrdStatus::LRD_STATUS_OK);
             let mut s = vec![0f64; sb / 8];
             let sp = s.as_mut_ptr() as *mut c_void;
             let status = lrd_flr_denoise_parallel(&cfg, &frame, &o, sp, sb, &ex, null_mut());
             assert!(named.contains(&status), "{status:?}");
-            let (cfg, tc) = (Temporal::Moments.config(), lrd_temporal_config_default());
-            let (sb, hb) = Temporal::Moments.sizes(&cfg, &tc, w, h, Some(2));
-            let mut s = vec![0f64; sb / 8];
-            let mut hd = vec![0f32; hb / 4];
-            let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
-            let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &o, &mut s, sb, Some(&ex as *const LrdExecutor));
-            assert!(named.contains(&status), "{status:?}");
-            assert_eq!(hist.frames, 0);
+            assert_eq!(lrd_flr_denoise_parallel(&cfg, &frame, &o, sp, sb, &good, null_mut()), LrdStatus::LRD_STATUS_OK);
+            for t in [Temporal::Moments, Temporal::Light, Temporal::Bmfr, Temporal::Walr] {
+                let (cfg, tc) = (t.config(), lrd_temporal_config_default());
+                let frame = p.frame_for(&noisy, t);
+                let (sb, hb) = t.sizes(&cfg, &tc, w, h, Some(2));
+                let mut s = vec![0f64; sb / 8];
+                let mut hd = vec![0f32; hb / 4];
+                let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+                let status = t.run(&cfg, &tc, &frame, null(), &mut hist, &o, &mut s, sb, Some(&ex as *const LrdExecutor));
+                assert!(named.contains(&status), "{t:?}: {status:?}");
+                assert_eq!(hist.frames, 0, "{t:?}");
+                let status = t.run(&cfg, &tc, &frame, null(), &mut hist, &o, &mut s, sb, Some(&good as *const LrdExecutor));
+                assert_eq!(status, LrdStatus::LRD_STATUS_OK, "{t:?}");
+                assert_eq!(hist.frames, 1, "{t:?}");
+            }
         }
     }
 }
 
-/// A history that overlaps an input image or the motion is refused: the
-/// call writes it.
+/// A history that overlaps an input image or the motion, and a scratch that
+/// overlaps an input image, are refused: the call writes them.
 #[test]
 fn a_history_over_an_input_is_refused() {
     let (w, h) = (67u32, 38u32);
@@ -367,17 +379,28 @@ fn a_history_over_an_input_is_refused() {
         let mut hist = LrdHistory { data: mbig.as_mut_ptr() as *mut _, bytes: hb, frames: 1 };
         let status = Temporal::Moments.run(&cfg, &tc, &frame, &mv, &mut hist, &o, &mut s, sb, None);
         assert_eq!(status, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        // the scratch over the noisy image, with a separate history
+        let mut hd = vec![0f32; hb / 4];
+        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+        let mut sbig = vec![0f64; sb / 8 + noisy.len()];
+        let over: &[f32] = std::slice::from_raw_parts(sbig.as_ptr() as *const f32, noisy.len());
+        let frame = p.frame(over);
+        let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &o, &mut sbig, sb, None);
+        assert_eq!(status, LrdStatus::LRD_STATUS_INVALID_ARGUMENT);
+        // and the same call with the scratch apart runs
+        let frame = p.frame(&noisy);
+        assert_eq!(Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &o, &mut s, sb, None), LrdStatus::LRD_STATUS_OK);
     }
 }
 
 /// A planar output (rows of one channel interleaved with the others'
-/// planes) cannot be split into row bands: the parallel calls refuse it.
+/// planes) cannot be split into row bands: every parallel call refuses it
+/// before it runs (the history's frame count stays).
 #[test]
 fn a_planar_output_is_refused() {
     let (w, h) = (67u32, 38u32);
     let p = Planes::new(w, h);
     let noisy = p.noisy(0);
-    let frame = p.frame(&noisy);
     let mut out = vec![0f32; (3 * w * h) as usize];
     let planar = LrdImageMut {
         data: out.as_mut_ptr() as *mut _,
@@ -391,13 +414,18 @@ fn a_planar_output_is_refused() {
     let pool = Pool { workers: 2, mode: Mode::Threads };
     let ex = executor(&pool);
     unsafe {
-        let (cfg, tc) = (Temporal::Moments.config(), lrd_temporal_config_default());
-        let (sb, hb) = Temporal::Moments.sizes(&cfg, &tc, w, h, Some(2));
-        let mut s = vec![0f64; sb / 8];
-        let mut hd = vec![0f32; hb / 4];
-        let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
-        let status = Temporal::Moments.run(&cfg, &tc, &frame, null(), &mut hist, &planar, &mut s, sb, Some(&ex as *const LrdExecutor));
-        assert_eq!(status, LrdStatus::LRD_STATUS_UNSUPPORTED);
+        for t in [Temporal::Moments, Temporal::Light, Temporal::Bmfr, Temporal::Walr] {
+            let (cfg, tc) = (t.config(), lrd_temporal_config_default());
+            let frame = p.frame_for(&noisy, t);
+            let (sb, hb) = t.sizes(&cfg, &tc, w, h, Some(2));
+            let mut s = vec![0f64; sb / 8];
+            let mut hd = vec![0f32; hb / 4];
+            let mut hist = LrdHistory { data: hd.as_mut_ptr() as *mut _, bytes: hb, frames: 0 };
+            let status = t.run(&cfg, &tc, &frame, null(), &mut hist, &planar, &mut s, sb, Some(&ex as *const LrdExecutor));
+            assert_eq!(status, LrdStatus::LRD_STATUS_UNSUPPORTED, "{t:?}");
+            assert_eq!(hist.frames, 0);
+        }
+        let frame = p.frame(&noisy);
         let cfg = lrd_flr_config_default();
         let mut sb = 0usize;
         assert_eq!(lrd_flr_tiled_scratch_size(&cfg, w, h, 2, &mut sb), LrdStatus::LRD_STATUS_OK);

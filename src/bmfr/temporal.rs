@@ -45,7 +45,7 @@ impl Bmfr {
     /// tiles for the frame index with the most tiles.
     pub fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
         let frame = self.stage().ok()?.frame_scratch_len(Some(workers))?;
-        let fit = (0..BLOCK_OFFSETS.len() as u32).map(|i| self.parallel_scratch_len(i, workers)).max()??;
+        let fit = (0..BLOCK_OFFSETS.len() as u32).try_fold(0, |m: usize, i| Some(m.max(self.parallel_scratch_len(i, workers)?)))?;
         frame.checked_add(fit)
     }
 
@@ -103,12 +103,17 @@ impl Bmfr {
     ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, (0, self.height))?;
+        if !out.rows_are_separable() {
+            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
+        }
         let needed = self.temporal_parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
         let (cfg, stage) = (&self.cfg, self.stage()?);
-        let (fit, rest) = scratch.split_at_mut(needed - stage.frame_scratch_len(Some(workers)).unwrap_or(0));
+        // the fit's part is what the stage's leaves of `needed`
+        let stage_len = stage.frame_scratch_len(Some(workers)).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        let (fit, rest) = scratch.split_at_mut(needed - stage_len);
         stage.run_frame(
             f.noisy,
             frame.guides,

@@ -129,8 +129,8 @@ impl TapTest {
 /// One cell of the reprojected history. `prev` holds the previous frame's
 /// cell records (`rec` f64 each, stored as word pairs: `lay.k` moments, the
 /// history length, `lay.q` mean guides, NaN for an empty cell) on a
-/// `cx × cy` grid; they are sampled bilinearly at the cell centre `(x, y)`
-/// moved by `motion` (previous − current, in cells), each of the 4 taps kept
+/// `grid` (cells across × down); they are sampled bilinearly at the cell
+/// `at` moved by `motion` (previous − current, in cells), each of the 4 taps kept
 /// where `test` accepts its mean guides against `cur`. Writes the kept taps'
 /// weighted mean into `out` and returns their mean history length (0 and
 /// zeros when no tap is kept).
@@ -150,11 +150,11 @@ pub(crate) fn reproject_cell(
     out[..k].fill(0.0);
     let (mut wsum, mut nsum) = (0f64, 0f64);
     for (i, w) in kept_taps(prev, rec, grid, lay, at, motion, cur, test) {
-        let at = i * rec;
+        let record = i * rec;
         for (j, o) in out[..k].iter_mut().enumerate() {
-            *o += w * get(prev, at + j);
+            *o += w * get(prev, record + j);
         }
-        nsum += w * get(prev, at + k);
+        nsum += w * get(prev, record + k);
         wsum += w;
     }
     if wsum <= MIN_TAP_WEIGHT {
@@ -428,6 +428,9 @@ impl MomentFlr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
+        if !out.rows_are_separable() {
+            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
+        }
         self.run(frame, motion, history, scratch, out, Some((workers, for_each)))
     }
 

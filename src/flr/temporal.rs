@@ -168,6 +168,9 @@ impl TemporalFlr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
+        if !out.rows_are_separable() {
+            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
+        }
         self.run(frame, motion, history, scratch, out, Some((workers, for_each)), |flr, f, o| {
             flr.denoise_parallel_checked(f, flr_scratch, o, workers, for_each)
         })
@@ -266,7 +269,7 @@ impl crate::TemporalDenoiser for TemporalFlr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
-        let too_many = Error::InvalidConfig("too many workers for the scratch size to fit a usize");
+        let too_many = Error::InvalidConfig("workers: scratch size overflows");
         let needed = crate::TemporalDenoiser::temporal_parallel_scratch_len(self, workers).ok_or(too_many)?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });

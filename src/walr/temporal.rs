@@ -107,11 +107,15 @@ impl Walr {
     ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, self.height)?;
-        let needed = self.temporal_parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        if !out.rows_are_separable() {
+            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
+        }
+        let overflow = Error::InvalidConfig("workers: scratch size overflows");
+        let needed = self.temporal_parallel_scratch_len(workers).ok_or(overflow)?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let (walr_scratch, rest) = scratch.split_at_mut(self.parallel_scratch_len(workers).unwrap_or(0));
+        let (walr_scratch, rest) = scratch.split_at_mut(self.parallel_scratch_len(workers).ok_or(overflow)?);
         let (cfg, stage) = (&self.cfg, self.stage()?);
         stage.run_frame(
             f.noisy,
