@@ -1,23 +1,31 @@
-//! A temporal pipeline (BMFR's or WALR's) over a sequence of EXR frames, with
-//! the history in a buffer the caller owns.
+//! A temporal pipeline over a sequence of EXR frames, with the history in a
+//! buffer the caller owns, on one thread or on the caller's threads.
 //!
 //! ```sh
-//! cargo run --release --example temporal                      # BMFR over data/seq_box_7
-//! cargo run --release --example temporal -- walr [DIR]
+//! cargo run --release --example temporal                        # temporal FLR over data/seq_box_7
+//! cargo run --release --example temporal -- moments|bmfr|walr [DIR] [--threads N]
 //! ```
 //!
 //! `DIR` holds `frame_0000.exr`, `frame_0001.exr`, ... in the repository's
 //! layout (`docs/DATA.md`): `noisy.R/G/B`, the guides `normal.X/Y/Z`,
-//! `position.X/Y/Z` and `depth.Z`, and `motion.X/Y` (previous − current pixel
-//! position, README "Input conventions") in every frame but the first.
+//! `depth.Z`, `position.X/Y/Z` and `ao.Y`, and `motion.X/Y` (previous −
+//! current pixel position, README "Input conventions") in every frame but
+//! the first.
 //!
-//! The pipeline keeps everything it carries from frame to frame (accumulated
-//! colour, sample counts, the previous frame's guides) in a `History` over a
-//! caller-owned f32 buffer of `history_len()` values, plus a frame counter:
-//! no allocation, no hidden state. Keep one per sequence; `History::reset`
-//! after a camera cut.
+//! Every pipeline (temporal FLR on the light or on FLR's cell moments, BMFR's,
+//! WALR's) is a [`TemporalDenoiser`]: plan it once for the frame size, then
+//! per frame `denoise_temporal` (or `denoise_temporal_parallel` with an
+//! executor, the same bits). It keeps everything it carries from frame to
+//! frame in a `History` over a caller-owned f32 buffer of `history_len()`
+//! values, plus a frame counter: no allocation, no hidden state. Keep one per
+//! sequence; `History::reset` after a camera cut.
 
-use lrdenoise::{Bmfr, BmfrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, Walr, WalrConfig};
+use lrdenoise::flr::moment_history::MomentFlr;
+use lrdenoise::flr::temporal::TemporalFlr;
+use lrdenoise::temporal::TemporalConfig;
+use lrdenoise::{
+    Bmfr, BmfrConfig, FlrConfig, Frame, GuideSet, Guides, History, ImageView, ImageViewMut, TemporalDenoiser, Walr, WalrConfig,
+};
 use std::collections::BTreeMap;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -55,12 +63,6 @@ impl Exr {
     }
 }
 
-/// The pipeline, planned once for the sequence's frame size.
-enum Pipeline {
-    Bmfr(Bmfr),
-    Walr(Walr),
-}
-
 /// An interleaved `channels`-channel view of a layer the file may lack.
 fn view(w: usize, h: usize, data: &Option<Vec<f32>>, channels: usize) -> Result<Option<ImageView<'_>>, lrdenoise::Error> {
     data.as_deref().map(|d| ImageView::interleaved(d, w, h, channels)).transpose()
@@ -76,11 +78,31 @@ fn main() -> ExitCode {
     }
 }
 
+/// An executor over `threads` scoped threads: thread `t` runs items `t`,
+/// `t + threads`, ... as worker `t`.
+fn scoped_threads(threads: usize) -> impl Fn(usize, &(dyn Fn(usize, usize) + Sync)) {
+    move |count, body| {
+        std::thread::scope(|s| {
+            for worker in 0..threads {
+                s.spawn(move || (worker..count).step_by(threads).for_each(|i| body(i, worker)));
+            }
+        })
+    }
+}
+
 fn run() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let walr = args.iter().any(|a| a == "walr");
-    let dir = args.iter().find(|a| !matches!(a.as_str(), "bmfr" | "walr")).cloned();
-    let dir = dir.unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/data/seq_box_7").into());
+    let mut method = "flr".to_string();
+    let mut dir = concat!(env!("CARGO_MANIFEST_DIR"), "/data/seq_box_7").to_string();
+    let mut threads = 1usize;
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "flr" | "moments" | "bmfr" | "walr" => method = a.clone(),
+            "--threads" => threads = it.next().and_then(|n| n.parse().ok()).filter(|&n| n > 0).ok_or("--threads takes a count ≥ 1")?,
+            _ => dir = a.clone(),
+        }
+    }
     // `lrdenoise::Error` implements `Display` and `core::error::Error`
     let lrd = |e: lrdenoise::Error| format!("lrdenoise: {e}");
 
@@ -95,32 +117,50 @@ fn run() -> Result<(), String> {
     let (w, h) = (first.width, first.height);
     let has = |layer: &str| first.channels.keys().any(|c| c.starts_with(&format!("{layer}.")));
 
-    // Plan, scratch and history, once for the sequence.
-    let (pipeline, guides) = if walr {
-        // WALR needs normals and positions; depth scales its edge-stopping
-        let guides = GuideSet { normal: true, position: true, depth: has("depth"), ..GuideSet::NONE };
-        (Pipeline::Walr(Walr::new(WalrConfig::with_guides(guides), w, h).map_err(lrd)?), guides)
-    } else {
-        // BMFR rejects history by world position, or by depth without positions
-        let guides = GuideSet { normal: has("normal"), position: has("position"), depth: !has("position"), ..GuideSet::NONE };
-        (Pipeline::Bmfr(Bmfr::new(BmfrConfig::with_guides(guides), w, h).map_err(lrd)?), guides)
+    // Plan, scratch and history, once for the sequence; `guides`: what every frame must carry.
+    let (plan, guides): (Box<dyn TemporalDenoiser + Sync>, GuideSet) = match method.as_str() {
+        "flr" => {
+            // FLR fits normal, depth and AO; world positions, where the frames have
+            // them, also judge the history (they follow a dolly that depth alone rejects)
+            let fit = GuideSet { normal: true, depth: true, ao: has("ao"), ..GuideSet::NONE };
+            let reject = GuideSet { position: has("position"), ..fit };
+            let cfg = FlrConfig { guides: fit, ..FlrConfig::temporal() };
+            let plan = TemporalFlr::new(cfg, TemporalConfig::default(), w, h).map_err(lrd)?.with_rejection_guides(reject).map_err(lrd)?;
+            let guides = plan.frame_guides();
+            (Box::new(plan), guides)
+        }
+        "moments" => {
+            let guides = GuideSet { normal: true, depth: true, ao: has("ao"), ..GuideSet::NONE };
+            let cfg = FlrConfig { guides, ..FlrConfig::temporal_moments() };
+            (Box::new(MomentFlr::new(cfg, &TemporalConfig::default(), w, h).map_err(lrd)?), guides)
+        }
+        "walr" => {
+            // WALR needs normals and positions; depth scales its edge-stopping
+            let guides = GuideSet { normal: true, position: true, depth: has("depth"), ..GuideSet::NONE };
+            (Box::new(Walr::new(WalrConfig::with_guides(guides), w, h).map_err(lrd)?), guides)
+        }
+        _ => {
+            // BMFR rejects history by world position, or by depth without positions
+            let guides = GuideSet { normal: has("normal"), position: has("position"), depth: !has("position"), ..GuideSet::NONE };
+            (Box::new(Bmfr::new(BmfrConfig::with_guides(guides), w, h).map_err(lrd)?), guides)
+        }
     };
-    let (history_len, scratch_len) = match &pipeline {
-        Pipeline::Bmfr(b) => (b.history_len(), b.temporal_scratch_len()),
-        Pipeline::Walr(wl) => (wl.history_len(), wl.temporal_scratch_len()),
+    let scratch_len = match threads {
+        1 => plan.temporal_scratch_len(),
+        n => plan.temporal_parallel_scratch_len(n).ok_or("too many threads")?,
     };
-    let mut history_buffer = vec![0f32; history_len];
+    let mut history_buffer = vec![0f32; plan.history_len()];
     let mut history = History::new(&mut history_buffer);
-    let mut scratch = vec![0f32; scratch_len];
+    let mut scratch = vec![0f64; scratch_len];
     let mut out = vec![0f32; 3 * w * h];
     let mut read_already = Some(first);
+    let executor = scoped_threads(threads);
 
     println!(
-        "{} over {dir}: {} frames of {w}x{h}, history {:.1} MB, scratch {:.1} MB",
-        if walr { "WALR" } else { "BMFR" },
+        "{method} over {dir}: {} frames of {w}x{h} on {threads} thread(s), history {:.1} MB, scratch {:.1} MB",
         paths.len(),
-        (4 * history_len) as f64 / 1e6,
-        (4 * scratch_len) as f64 / 1e6
+        (4 * plan.history_len()) as f64 / 1e6,
+        (8 * scratch_len) as f64 / 1e6
     );
     for path in &paths {
         let exr = match read_already.take() {
@@ -138,6 +178,7 @@ fn run() -> Result<(), String> {
         let normal = layer(guides.normal, "normal", &["X", "Y", "Z"])?;
         let position = layer(guides.position, "position", &["X", "Y", "Z"])?;
         let depth = layer(guides.depth, "depth", &["Z"])?;
+        let ao = layer(guides.ao, "ao", &["Y"])?;
         // absent in the first frame; the first frame of a history ignores it anyway
         let motion = exr.layer("motion", &["X", "Y"]);
 
@@ -147,6 +188,7 @@ fn run() -> Result<(), String> {
                 normal: view(w, h, &normal, 3).map_err(lrd)?,
                 position: view(w, h, &position, 3).map_err(lrd)?,
                 depth: view(w, h, &depth, 1).map_err(lrd)?,
+                ao: view(w, h, &ao, 1).map_err(lrd)?,
                 ..Default::default()
             },
         );
@@ -154,20 +196,18 @@ fn run() -> Result<(), String> {
         let mut ov = ImageViewMut::interleaved(&mut out, w, h, 3).map_err(lrd)?;
 
         let t = Instant::now();
-        let rejected = match &pipeline {
-            Pipeline::Bmfr(b) => {
-                b.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut scratch, &mut ov).map_err(lrd)?.history_rejected
-            }
-            Pipeline::Walr(wl) => {
-                wl.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut scratch, &mut ov).map_err(lrd)?.history_rejected
-            }
-        };
+        let report = match threads {
+            1 => plan.denoise_temporal(&frame, motion.as_ref(), &mut history, &mut scratch, &mut ov),
+            n => plan.denoise_temporal_parallel(&frame, motion.as_ref(), &mut history, &mut scratch, &mut ov, n, &executor),
+        }
+        .map_err(lrd)?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let name = path.rsplit('/').next().unwrap_or(path);
         println!(
-            "{name}: {ms:6.2} ms, motion {}, history rejected at {rejected:5} of {} pixels, history.frames() = {}",
+            "{name}: {ms:6.2} ms, motion {}, history rejected at {:5} {}, history.frames() = {}",
             if motion.is_some() { "yes" } else { "no " },
-            w * h,
+            report.history_rejected,
+            if method == "moments" { "cells" } else { "pixels" },
             history.frames()
         );
     }
