@@ -561,6 +561,10 @@ impl Reprojection {
     ) -> Result<Report, Error> {
         let (w, h) = (self.width, self.height);
         self.check_history(history)?;
+        if parallel.is_some() && !out.rows_are_separable() {
+            // checked before any work: the parallel passes write the output in row bands
+            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
+        }
         let overflow = Error::InvalidConfig("workers: scratch size overflows");
         let needed = self.frame_scratch_len(parallel.map(|p| p.0)).ok_or(overflow)?;
         if scratch.len() < needed {

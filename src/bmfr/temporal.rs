@@ -45,8 +45,12 @@ impl Bmfr {
     /// tiles for the frame index with the most tiles.
     pub fn temporal_parallel_scratch_len(&self, workers: usize) -> Option<usize> {
         let frame = self.stage().ok()?.frame_scratch_len(Some(workers))?;
-        let fit = (0..BLOCK_OFFSETS.len() as u32).try_fold(0, |m: usize, i| Some(m.max(self.parallel_scratch_len(i, workers)?)))?;
-        frame.checked_add(fit)
+        frame.checked_add(self.parallel_fit_len(workers)?)
+    }
+
+    /// f32 values of the parallel fit's tiles for the frame index with the most tiles.
+    fn parallel_fit_len(&self, workers: usize) -> Option<usize> {
+        (0..BLOCK_OFFSETS.len() as u32).try_fold(0, |m: usize, i| Some(m.max(self.parallel_scratch_len(i, workers)?)))
     }
 
     /// One frame of the temporal pipeline. `motion` (2 channels: previous −
@@ -60,30 +64,7 @@ impl Bmfr {
         scratch: &mut [f32],
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
-        let f = self.check_frame(frame)?;
-        self.check_out(out, (0, self.height))?;
-        if scratch.len() < self.temporal_scratch_len() {
-            return Err(Error::ScratchTooSmall { needed: self.temporal_scratch_len(), got: scratch.len() });
-        }
-        let (worker, rest) = scratch.split_at_mut(self.worker_len());
-        let (cfg, stage) = (&self.cfg, self.stage()?);
-        stage.run_frame(
-            f.noisy,
-            frame.guides,
-            motion.copied(),
-            cfg.fireflies,
-            cfg.clamp_negative,
-            history,
-            rest,
-            None,
-            out,
-            |acc, _, index, o| {
-                // the fit on the accumulated colour (clamped already: the fit does not clamp it again)
-                let mut fit_frame = f;
-                fit_frame.noisy = acc;
-                self.fit_frame(&fit_frame, index, worker, o, None)
-            },
-        )
+        self.run_temporal(frame, motion, history, scratch, out, None)
     }
 
     /// [`Bmfr::denoise_temporal`] with the stage's bands and the fit's tiles
@@ -101,19 +82,35 @@ impl Bmfr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
+        self.run_temporal(frame, motion, history, scratch, out, Some((workers, for_each)))
+    }
+
+    /// The pipeline on the calling thread (`parallel` `None`) or on the
+    /// caller's executor; the fit's worker buffers first in `scratch`, then
+    /// the stage's.
+    fn run_temporal(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        parallel: Option<(usize, Executor<'_>)>,
+    ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, (0, self.height))?;
-        if !out.rows_are_separable() {
-            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
-        }
-        let needed = self.temporal_parallel_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
+        let overflow = Error::InvalidConfig("workers: scratch size overflows");
+        let (cfg, stage) = (&self.cfg, self.stage()?);
+        let fit_len = match parallel {
+            None => self.worker_len(),
+            Some((workers, _)) => self.parallel_fit_len(workers).ok_or(overflow)?,
+        };
+        let stage_len = stage.frame_scratch_len(parallel.map(|p| p.0)).ok_or(overflow)?;
+        let needed = fit_len.checked_add(stage_len).ok_or(overflow)?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let (cfg, stage) = (&self.cfg, self.stage()?);
-        // the fit's part is what the stage's leaves of `needed`
-        let stage_len = stage.frame_scratch_len(Some(workers)).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
-        let (fit, rest) = scratch.split_at_mut(needed - stage_len);
+        let (fit, rest) = scratch.split_at_mut(fit_len);
         stage.run_frame(
             f.noisy,
             frame.guides,
@@ -122,12 +119,16 @@ impl Bmfr {
             cfg.clamp_negative,
             history,
             rest,
-            Some((workers, for_each)),
+            parallel,
             out,
             |acc, _, index, o| {
+                // the fit on the accumulated colour (clamped already: the fit does not clamp it again)
                 let mut fit_frame = f;
                 fit_frame.noisy = acc;
-                self.fit_frame_parallel(&fit_frame, index, fit, o, workers, for_each, None)
+                match parallel {
+                    Some((workers, for_each)) => self.fit_frame_parallel(&fit_frame, index, fit, o, workers, for_each, None),
+                    None => self.fit_frame(&fit_frame, index, fit, o, None),
+                }
             },
         )
     }

@@ -168,9 +168,6 @@ impl TemporalFlr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
-        if !out.rows_are_separable() {
-            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
-        }
         self.run(frame, motion, history, scratch, out, Some((workers, for_each)), |flr, f, o| {
             flr.denoise_parallel_checked(f, flr_scratch, o, workers, for_each)
         })

@@ -64,30 +64,7 @@ impl Walr {
         scratch: &mut [f32],
         out: &mut ImageViewMut<'_>,
     ) -> Result<Report, Error> {
-        let f = self.check_frame(frame)?;
-        self.check_out(out, self.height)?;
-        if scratch.len() < self.temporal_scratch_len() {
-            return Err(Error::ScratchTooSmall { needed: self.temporal_scratch_len(), got: scratch.len() });
-        }
-        let (walr_scratch, rest) = scratch.split_at_mut(self.scratch_len());
-        let (cfg, stage) = (&self.cfg, self.stage()?);
-        stage.run_frame(
-            f.noisy,
-            frame.guides,
-            motion.copied(),
-            cfg.fireflies,
-            cfg.clamp_negative,
-            history,
-            rest,
-            None,
-            out,
-            |acc, _, index, o| {
-                // WALR on the accumulated light (clamped already: WALR does not clamp it again)
-                let f2 = self.check_frame(&Frame { noisy: acc, ..*frame })?;
-                let prep = self.prepare_with(&f2, index, None);
-                self.run(&f2, &prep, self.parts(walr_scratch)?, o, None)
-            },
-        )
+        self.run_temporal(frame, motion, history, scratch, out, None)
     }
 
     /// [`Walr::denoise_temporal`] with the stage's and WALR's bands spread
@@ -105,18 +82,33 @@ impl Walr {
         workers: usize,
         for_each: Executor<'_>,
     ) -> Result<Report, Error> {
+        self.run_temporal(frame, motion, history, scratch, out, Some((workers, for_each)))
+    }
+
+    /// The pipeline on the calling thread (`parallel` `None`) or on the
+    /// caller's executor; WALR's scratch first in `scratch`, then the stage's.
+    fn run_temporal(
+        &self,
+        frame: &Frame<'_>,
+        motion: Option<&ImageView<'_>>,
+        history: &mut History<'_>,
+        scratch: &mut [f32],
+        out: &mut ImageViewMut<'_>,
+        parallel: Option<(usize, Executor<'_>)>,
+    ) -> Result<Report, Error> {
         let f = self.check_frame(frame)?;
         self.check_out(out, self.height)?;
-        if !out.rows_are_separable() {
-            return Err(Error::Unsupported("a parallel run needs an output whose rows do not overlap (use the sequential call)"));
-        }
         let overflow = Error::InvalidConfig("workers: scratch size overflows");
-        let needed = self.temporal_parallel_scratch_len(workers).ok_or(overflow)?;
+        let (cfg, stage) = (&self.cfg, self.stage()?);
+        let walr_len = match parallel {
+            None => self.scratch_len(),
+            Some((workers, _)) => self.parallel_scratch_len(workers).ok_or(overflow)?,
+        };
+        let needed = walr_len.checked_add(stage.frame_scratch_len(parallel.map(|p| p.0)).ok_or(overflow)?).ok_or(overflow)?;
         if scratch.len() < needed {
             return Err(Error::ScratchTooSmall { needed, got: scratch.len() });
         }
-        let (walr_scratch, rest) = scratch.split_at_mut(self.parallel_scratch_len(workers).ok_or(overflow)?);
-        let (cfg, stage) = (&self.cfg, self.stage()?);
+        let (walr_scratch, rest) = scratch.split_at_mut(walr_len);
         stage.run_frame(
             f.noisy,
             frame.guides,
@@ -125,13 +117,16 @@ impl Walr {
             cfg.clamp_negative,
             history,
             rest,
-            Some((workers, for_each)),
+            parallel,
             out,
             |acc, _, index, o| {
                 // WALR on the accumulated light (clamped already: WALR does not clamp it again)
                 let f2 = self.check_frame(&Frame { noisy: acc, ..*frame })?;
                 let prep = self.prepare_with(&f2, index, None);
-                self.run_parallel(&f2, &prep, walr_scratch, o, workers, for_each, None)
+                match parallel {
+                    Some((workers, for_each)) => self.run_parallel(&f2, &prep, walr_scratch, o, workers, for_each, None),
+                    None => self.run(&f2, &prep, self.parts(walr_scratch)?, o, None),
+                }
             },
         )
     }
