@@ -267,7 +267,23 @@ def sensor_dict(cam, w, h):
 
 
 # Camera motions of a sequence; frame i of n from the scene's camera cam0 (world scale sc).
-MOTIONS = ("pan", "orbit", "dolly", "rotate", "cut", "burst")
+MOTIONS = ("pan", "orbit", "dolly", "rotate", "cut", "burst", "enter")
+
+
+def mover_at(i, n, cam0):
+    """`enter`: the camera stands still and a sphere rolls in from the left edge of the view and
+    crosses to past its centre, at 60 % of the distance to the target (in front of the scene).
+    Its (centre, radius) at frame i of n."""
+    o, t, fov = (np.array(cam0[0], float), np.array(cam0[1], float), cam0[2])
+    fwd = (t - o) / np.linalg.norm(t - o)
+    right = np.cross(fwd, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    dist = 0.6 * np.linalg.norm(t - o)
+    half = dist * math.tan(math.radians(fov) / 2)  # half the view's width at that distance
+    r = 0.22 * half
+    x = -(half + r) + 1.4 * half * i / max(n - 1, 1)
+    up = np.cross(right, fwd)
+    return o + dist * fwd + x * right - 0.25 * half * up, r
 
 
 def camera_at(motion, i, n, cam0, sc):
@@ -284,6 +300,8 @@ def camera_at(motion, i, n, cam0, sc):
         a = math.radians(3.0 * i)
         v = t - o
         t = o + np.array([v[0] * math.cos(a) + v[2] * math.sin(a), v[1], -v[0] * math.sin(a) + v[2] * math.cos(a)])
+    elif motion == "enter":  # a still camera; a sphere moves in (`mover_at`)
+        pass
     elif motion == "cut":  # a pan that cuts, half way, to a camera mirrored across the target and lower
         if i >= n // 2:
             v = o - t
@@ -300,10 +318,12 @@ def inject(noisy, p, k, seed):
     noisy[hit] = k * lum
 
 
-def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0, second_reference=False, depth=3, jitter=False):
+def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_rays=64, seed=0, second_reference=False, depth=3, jitter=False, mover=None):
     """The layers of one frame. `depth`: the path integrator's max_depth; `jitter`: the guides
     (and the primary hit every light layer starts from) through a random point of each pixel,
-    as a 1-spp G-buffer gives, instead of its centre."""
+    as a 1-spp G-buffer gives, instead of its centre. `mover`: (centre, radius, step) of a
+    sphere in the scene that moved by `step` since the previous frame, so that the motion of
+    the pixels that see it follows the sphere, not only the camera."""
     integ = mi.load_dict({"type": "path", "max_depth": int(depth), "hide_emitters": True})
     n = w * h
     idx = dr.arange(mi.UInt32, n)
@@ -375,6 +395,13 @@ def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_ra
     out["ao"] = np.where(np.array(valid), open_, 0.0).reshape(h, w)
 
     if prev_sensor is not None:
+        if mover is not None:
+            # a hit on the moving sphere was `step` behind a frame ago
+            c, r, step = mover
+            p = np.array(si.p).reshape(3, -1)
+            on = np.abs(np.linalg.norm(p - np.array(c, float)[:, None], axis=0) - r) < 1e-3 * r
+            q = np.where(on[None], p - np.array(step, float)[:, None], p).astype(np.float32)
+            si.p = mi.Point3f(mi.Float(q[0]), mi.Float(q[1]), mi.Float(q[2]))
         ds, _ = prev_sensor.sample_direction(si, mi.Point2f(0.5, 0.5), valid)
         uv = np.array(ds.uv)
         uv = (uv.T if uv.ndim == 2 and uv.shape[0] == 2 else uv).reshape(h, w, 2)  # (2, n) -> (h, w, 2)
@@ -457,8 +484,14 @@ def main():
             prev = None
             for i in range(a.seq):
                 sensor = mi.load_dict(sensor_dict(camera_at(motion, i, a.seq, cam0, sc), w, h))
+                frame_scene, mover = scene, None
+                if motion == "enter":
+                    c, r = mover_at(i, a.seq, cam0)
+                    ball = sphere(c, r, (0.75, 0.35, 0.2))
+                    frame_scene = mi.load_dict({"type": "scene", **S, "mover": ball})
+                    mover = (c, r, c - mover_at(i - 1, a.seq, cam0)[0])
                 lay = render_frame(
-                    scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i, second_reference=a.second_reference, **opts(fam, seed)
+                    frame_scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i, second_reference=a.second_reference, mover=mover, **opts(fam, seed)
                 )
                 if motion == "burst" and i == a.seq // 2:
                     inject(lay["noisy"], p=1e-3, k=100.0, seed=seed * 100 + i)

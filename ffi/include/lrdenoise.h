@@ -630,7 +630,9 @@ typedef struct LrdTemporalConfig {
    */
   float position_limit;
   /**
-   * Without positions: largest relative depth difference (default 0.05).
+   * Largest relative depth difference of a history tap (default 0.05):
+   * without positions the test; with positions and depth, a tap that fails
+   * the position test is kept when it passes this one (a moving object).
    */
   float depth_limit;
   /**

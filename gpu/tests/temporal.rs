@@ -28,7 +28,7 @@ const WITH_POSITION: GuideSet = GuideSet { normal: true, depth: true, position: 
 
 /// Frame `t` of a sequence: the scene panned by `t` pixels (a pixel's
 /// previous position is one pixel to its right), fresh noise, a few
-/// fireflies, one NaN sample.
+/// fireflies, one NaN sample, every third row's positions moved.
 fn frame_at(w: usize, h: usize, t: usize) -> Owned {
     let big = Owned::synthetic(w + 16, h + 16, 5, 0.5);
     let mut f = Owned::synthetic(w, h, 5, 0.5);
@@ -52,6 +52,11 @@ fn frame_at(w: usize, h: usize, t: usize) -> Owned {
         f.noisy[3 * i + k % 3] *= 1e3;
     }
     f.noisy[3 * ((t * 7919) % (w * h))] = f32::NAN;
+    // every third row an object that moves: positions a unit further each frame, depths
+    // unchanged (with depth among the guides its taps are kept by depth)
+    for i in (0..w * h).filter(|i| (i / w).is_multiple_of(3)) {
+        f.position[3 * i] += t as f32;
+    }
     f
 }
 
