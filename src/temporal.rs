@@ -6,8 +6,7 @@
 //! 1. [`Reprojection::accumulate`]: each pixel's previous position is its
 //!    position plus `motion` (previous − current, in pixels). Its 4 bilinear
 //!    taps into the previous frame are tested against the current pixel's
-//!    guides (normal; world position or depth, either match keeping a tap,
-//!    so that a moving object keeps its history; one of them alone); the
+//!    guides (normal, world position or, without positions, depth); the
 //!    accepted taps give the previous accumulated light and sample count.
 //!    The new sample is blended in with weight `kept / n`, where `n`, the
 //!    history length, grows by `kept` per frame up to
@@ -62,10 +61,7 @@ pub struct TemporalConfig {
     /// right neighbour's position, for a 60° horizontal field of view), so
     /// that a scene's unit does not matter.
     pub position_limit: f32,
-    /// Largest relative depth difference of a history tap (default 0.05):
-    /// without positions the test; with positions and depth, a tap that fails
-    /// the position test is kept when it passes this one (a moving object's
-    /// positions move with it, its depth does not jump).
+    /// Without positions: largest relative depth difference (default 0.05).
     pub depth_limit: f32,
     /// Half-width of the output's clip box in standard deviations (default 1.5).
     pub clip_gamma: f32,
@@ -847,13 +843,12 @@ impl Reprojection {
                     // (no geometry on both sides: sky continues sky)
                     ok &= dot >= cfg.normal_limit || (empty(a) && empty(b));
                 }
-                let same_depth = |d: f32| (t(d_at) - d).abs() <= cfg.depth_limit * d.abs();
                 if self.position {
                     let d2: f32 = (0..3).map(|c| (t(p_at + c) - g(p_at + c)) * (t(p_at + c) - g(p_at + c))).sum();
-                    // or at the same depth: a moving object's positions move with it
-                    ok &= d2 <= plim2 || (self.depth && same_depth(g(d_at)));
+                    ok &= d2 <= plim2;
                 } else if self.depth {
-                    ok &= same_depth(g(d_at));
+                    let d = g(d_at);
+                    ok &= (t(d_at) - d).abs() <= cfg.depth_limit * d.abs();
                 }
                 let (pl, pn) = ([t(LIGHT), t(LIGHT + 1), t(LIGHT + 2)], t(COUNT));
                 ok &= pl.iter().all(|v| v.is_finite()) && pn.is_finite() && pn >= 0.0;

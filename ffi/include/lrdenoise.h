@@ -630,9 +630,7 @@ typedef struct LrdTemporalConfig {
    */
   float position_limit;
   /**
-   * Largest relative depth difference of a history tap (default 0.05):
-   * without positions the test; with positions and depth, a tap that fails
-   * the position test is kept when it passes this one (a moving object).
+   * Without positions: largest relative depth difference (default 0.05).
    */
   float depth_limit;
   /**

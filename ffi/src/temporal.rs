@@ -46,9 +46,7 @@ pub struct LrdTemporalConfig {
     /// camera distance: the depth, or without depth an estimate from the
     /// pixel's footprint for a 60° field of view (default 0.05).
     pub position_limit: f32,
-    /// Largest relative depth difference of a history tap (default 0.05):
-    /// without positions the test; with positions and depth, a tap that fails
-    /// the position test is kept when it passes this one (a moving object).
+    /// Without positions: largest relative depth difference (default 0.05).
     pub depth_limit: f32,
     /// Half-width of the output's clip box in standard deviations (default 1.5).
     pub clip_gamma: f32,

@@ -53,7 +53,7 @@ fn frame_at(w: usize, h: usize, t: usize) -> Owned {
     }
     f.noisy[3 * ((t * 7919) % (w * h))] = f32::NAN;
     // every third row an object that moves: positions a unit further each frame, depths
-    // unchanged (with depth among the guides its taps are kept by depth)
+    // unchanged (rejected where positions are guides, kept by depth alone)
     for i in (0..w * h).filter(|i| (i / w).is_multiple_of(3)) {
         f.position[3 * i] += t as f32;
     }

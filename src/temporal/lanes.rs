@@ -506,15 +506,12 @@ pub(super) fn accumulate_with<L: Lane>(st: &Reprojection, r: &Row<'_>, x: usize,
             let dot = normal[0] * b[0] + normal[1] * b[1] + normal[2] * b[2];
             ok &= dot.ge(L::splat(cfg.normal_limit)) | (empty(normal) & empty(b));
         }
-        let same_depth = || (unsafe { tap::<L>(records, (dy * rec + d_at) * w + tx) } - d).abs().le(L::splat(cfg.depth_limit) * d.abs());
         if st.position {
             let p = unsafe { tap3::<L>(records, (dy * rec + p_at) * w + tx, w) };
             let e = [p[0] - position[0], p[1] - position[1], p[2] - position[2]];
-            let same = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).le(plim2);
-            // or at the same depth: a moving object's positions move with it
-            ok &= if st.depth { same | same_depth() } else { same };
+            ok &= (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).le(plim2);
         } else if st.depth {
-            ok &= same_depth();
+            ok &= (unsafe { tap::<L>(records, (dy * rec + d_at) * w + tx) } - d).abs().le(L::splat(cfg.depth_limit) * d.abs());
         }
         let (pl, pn) = unsafe { (tap3::<L>(records, (dy * rec + LIGHT) * w + tx, w), tap::<L>(records, (dy * rec + COUNT) * w + tx)) };
         // (NaN/Inf in the history are not tested per tap: an accepted one makes its sums

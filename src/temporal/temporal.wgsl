@@ -288,13 +288,7 @@ fn tap_ok(tx: i32, ty: i32, wt: f32, x: u32, y: u32) -> bool {
             let e = hist_in[rec(P.p_at + c, ux, uy)] - cur_guide(P.g_position, c, x, y);
             d2 += e * e;
         }
-        var same = d2 <= plim2;
-        if P.g_depth != NONE {
-            // or at the same depth: a moving object's positions move with it
-            let d = cur_guide(P.g_depth, 0u, x, y);
-            same = same || abs(hist_in[rec(P.d_at, ux, uy)] - d) <= P.depth_limit * abs(d);
-        }
-        ok = ok && same;
+        ok = ok && d2 <= plim2;
     } else if P.g_depth != NONE {
         let d = cur_guide(P.g_depth, 0u, x, y);
         ok = ok && abs(hist_in[rec(P.d_at, ux, uy)] - d) <= P.depth_limit * abs(d);
