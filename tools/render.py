@@ -271,7 +271,7 @@ MOTIONS = ("pan", "orbit", "dolly", "rotate", "cut", "burst", "enter")
 
 
 def mover_at(i, n, cam0):
-    """`enter`: the camera stands still and a sphere rolls in from the left edge of the view and
+    """`enter`: the camera stands still and a sphere moves in from the left edge of the view and
     crosses to past its centre, at 60 % of the distance to the target (in front of the scene).
     Its (centre, radius) at frame i of n."""
     o, t, fov = (np.array(cam0[0], float), np.array(cam0[1], float), cam0[2])
@@ -398,8 +398,8 @@ def render_frame(scene, sensor, prev_sensor, w, h, spps, ref_spp, ao_dist, ao_ra
         if mover is not None:
             # a hit on the moving sphere was `step` behind a frame ago
             c, r, step = mover
-            p = np.array(si.p).reshape(3, -1)
-            on = np.abs(np.linalg.norm(p - np.array(c, float)[:, None], axis=0) - r) < 1e-3 * r
+            p = arr3(si.p).reshape(-1, 3).T
+            on = np.array(valid) & (np.abs(np.linalg.norm(p - np.array(c, float)[:, None], axis=0) - r) < 1e-3 * r)
             q = np.where(on[None], p - np.array(step, float)[:, None], p).astype(np.float32)
             si.p = mi.Point3f(mi.Float(q[0]), mi.Float(q[1]), mi.Float(q[2]))
         ds, _ = prev_sensor.sample_direction(si, mi.Point2f(0.5, 0.5), valid)
@@ -436,7 +436,7 @@ def main():
     ap.add_argument("--size", default="256x256")
     ap.add_argument("--ref-spp", type=int, default=2048)
     ap.add_argument("--seq", type=int, default=0, help="also render a sequence of N frames per scene")
-    ap.add_argument("--motion", default="pan", help=f"comma list of camera motions for --seq: {', '.join(MOTIONS)}")
+    ap.add_argument("--motion", default="pan", help=f"comma list of motions for --seq (of the camera; enter: of an object): {', '.join(MOTIONS)}")
     ap.add_argument("--seq-only", action="store_true", help="render only the sequences, not the stills")
     ap.add_argument(
         "--second-reference",
@@ -489,7 +489,7 @@ def main():
                     c, r = mover_at(i, a.seq, cam0)
                     ball = sphere(c, r, (0.75, 0.35, 0.2))
                     frame_scene = mi.load_dict({"type": "scene", **S, "mover": ball})
-                    mover = (c, r, c - mover_at(i - 1, a.seq, cam0)[0])
+                    mover = (c, r, c - mover_at(i - 1, a.seq, cam0)[0]) if i > 0 else None
                 lay = render_frame(
                     frame_scene, sensor, prev, w, h, spps, a.ref_spp, ao * sc, seed=seed * 100 + i, second_reference=a.second_reference, mover=mover, **opts(fam, seed)
                 )
