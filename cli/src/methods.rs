@@ -87,7 +87,7 @@ pub struct FlrArgs {
     /// flr, flr-temporal: run on the CPU (default) or on the GPU (wgpu's default adapter; compute shaders, f32)
     #[arg(long)]
     pub device: Option<String>,
-    /// flr-temporal: longest per-pixel history in frames (default 16)
+    /// Temporal pipelines (flr-temporal, bmfr-temporal, walr-temporal): longest per-pixel history in frames (default 16; shorter follows light that changes, e.g. around moving objects)
     #[arg(long, value_name = "FRAMES")]
     pub history: Option<f32>,
     /// flr-temporal: lowest blend weight of the new output frame in the output accumulation (default 0.5; 1 = off: ~20 % faster, the output less smooth in time)
@@ -147,7 +147,7 @@ impl FlrArgs {
             ("--previous-weight", self.previous_weight.is_some(), &[Walr]),
             ("--weights", self.weights.is_some(), &[Flnr]),
             ("--fireflies", self.fireflies.is_some(), &[Flr, Bmfr, Walr, Flnr]),
-            ("--history", self.history.is_some(), &[Flr]),
+            ("--history", self.history.is_some(), &[Flr, Bmfr, Walr]),
             ("--output-alpha", self.output_alpha.is_some(), &[Flr]),
             ("--clip-gamma", self.clip_gamma.is_some(), &[Flr]),
             ("--firefly-history", self.firefly_history.is_some(), &[Flr, Bmfr, Walr]),
@@ -414,6 +414,9 @@ pub fn bmfr_config(a: &FlrArgs, inputs: &Inputs) -> Result<BmfrConfig, String> {
     if let Some(f) = a.firefly_history {
         c.temporal.firefly_history = f;
     }
+    if let Some(n) = a.history {
+        c.temporal.max_history = n;
+    }
     c.validate().map_err(|e| format!("bmfr flags: {e}"))?;
     Ok(c)
 }
@@ -469,6 +472,9 @@ pub fn walr_config(a: &FlrArgs, inputs: &Inputs) -> Result<WalrConfig, String> {
     if let Some(f) = a.firefly_history {
         c.temporal.firefly_history = f;
     }
+    if let Some(n) = a.history {
+        c.temporal.max_history = n;
+    }
     c.validate().map_err(|e| format!("walr flags: {e}"))?;
     Ok(c)
 }
@@ -502,9 +508,19 @@ fn walr_flags(name: &str, c: &WalrConfig) -> (String, String) {
         flags += &fireflies_flag(c.fireflies);
     }
     if name == "walr-temporal" {
-        return firefly_history_label(label, flags, c.temporal.firefly_history);
+        return pipeline_label(label, flags, &c.temporal);
     }
     (label, flags)
+}
+
+/// BMFR's or WALR's temporal pipeline's label and flag line with a
+/// non-default `--history` and `--firefly-history`.
+fn pipeline_label(mut label: String, mut flags: String, t: &lrdenoise::temporal::TemporalConfig) -> (String, String) {
+    if t.max_history != lrdenoise::temporal::TemporalConfig::default().max_history {
+        label += &format!(" h{}", t.max_history);
+        flags += &format!(" --history {}", t.max_history);
+    }
+    firefly_history_label(label, flags, t.firefly_history)
 }
 
 /// A temporal pipeline's label and flag line with a non-default `--firefly-history`.
@@ -823,7 +839,7 @@ impl Method {
                     flags += &fireflies_flag(cfg.fireflies);
                 }
                 if temporal {
-                    (label, flags) = firefly_history_label(label, flags, cfg.temporal.firefly_history);
+                    (label, flags) = pipeline_label(label, flags, &cfg.temporal);
                 }
                 let (method, min_bytes) = if temporal {
                     let runner = TemporalRunner::new(cfg, w, h, threads)?;

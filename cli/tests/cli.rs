@@ -274,6 +274,10 @@ fn bmfr_single_frame_temporal_and_flicker() {
         &["--sigma is an FLR flag", "bmfr takes --guides, --block, --shrinkage"],
     );
     fails_with(&["denoise", &data("room_7.exr"), "-o", tmp("x.exr").to_str().unwrap(), "--method", "bmfr", "--block", "4"], &["block"]);
+    // the shared stage's history length, in the label and the flag line
+    let (ok, so, e) = lrd(&["eval", &seq, "--methods", "bmfr-temporal", "--history", "4", "--runs", "1"]);
+    assert!(ok && so.contains("bmfr-temporal NP b32 h4") && so.contains("--history 4"), "{e}{so}");
+    fails_with(&["denoise-seq", &seq, "-o", outdir.to_str().unwrap(), "--method", "bmfr", "--history", "0.5"], &["max_history"]);
 }
 
 #[test]
@@ -312,7 +316,7 @@ fn walr_single_frame_temporal_flags_and_errors() {
         &["denoise", &room, "-o", x, "--method", "walr", "--previous-weight", "auto"],
         &["'auto' is not a number in 0..=1 or 'adaptive'"],
     );
-    // the fixed blend (the default before the adaptive one)
+    // a fixed blend
     let (ok, so, e) = lrd(&["eval", &room, "--methods", "walr", "--previous-weight", "0.6", "--runs", "5"]);
     assert!(ok && so.contains("walr NDP t4 pw0.6 f32"), "{e}{so}");
     fails_with(&["denoise", &room, "-o", x, "--method", "bmfr", "--previous-weight", "0.5"], &["--previous-weight is a WALR flag"]);
