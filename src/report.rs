@@ -29,6 +29,9 @@ pub struct Report {
     pub invalid_motion: u64,
     /// Temporal pipelines: frames taken as a camera cut (the history restarted).
     pub history_resets: u64,
+    /// Temporal FLR on cell moments: pixels whose history restarted
+    /// because their light changed (the lag test).
+    pub light_changed: u64,
 }
 
 impl core::ops::AddAssign for Report {
@@ -43,5 +46,6 @@ impl core::ops::AddAssign for Report {
         self.clamped_fireflies += o.clamped_fireflies;
         self.invalid_motion += o.invalid_motion;
         self.history_resets += o.history_resets;
+        self.light_changed += o.light_changed;
     }
 }

@@ -17,12 +17,16 @@ Per frame:
    moments are rescaled by the ratio of the current cell's mean depth to the
    history's (clamped to 0.5–2), so its samples sit at this frame's depth.
 4. Blend: H = (1 − a) H_reprojected + a M with a = 1 / n, n the history
-   length (the accepted taps' mean plus one, at most `--max-history`).
+   length (the accepted taps' mean plus one, at most `--max-history`); the
+   fast history F the same way over at most `--fast-history` frames.
+   The lag test: where F's mean luminance over the cell's 3×3 cells differs
+   from H's by more than `--lag-k` standard errors, H is replaced by F.
 5. FLR's blur, solve, adaptive blend and apply on H; each window's variance is
    divided by the (window-blurred) history length, the samples it averages.
 
     python3 tools/temporal_moments.py SEQ_DIR... [--sigmas 3,6,12] [--per-frame]
         [--normal-limit 0.8] [--depth-limit 0.1] [--max-history 16] [--no-depth-rescale]
+        [--fast-history 2] [--lag-k 3] [--lag-radius 1]
 
 Prints the mean PSNR and flicker of each sequence's last 4 frames (docs/DATA.md's
 metrics, as `lrd eval`'s sequence table has them) and their means. `--per-frame` is FLR per frame on
@@ -73,7 +77,7 @@ def guide_means(m, q, mean, std):
     return m[1:1 + q] / np.maximum(m[0], 1e-6) * std + mean
 
 
-def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=False, sharpen=1.0):
+def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=False, sharpen=1.0, extra=None):
     """The history H (in this frame's normalisation) and its lengths nH at each
     current cell: bilinear over the previous grid at the cell's mean motion,
     taps judged by their mean normal and depth. Cells without a kept tap get 0."""
@@ -92,6 +96,7 @@ def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=Fal
     empty = lambda v: np.linalg.norm(v, axis=0) < 1e-6
     nc = unit(cur[:3])
     out, n_out, wsum = np.zeros_like(H), np.zeros((gh, gw)), np.zeros((gh, gw))
+    ext = None if extra is None else np.zeros_like(extra)
     taps = []
     for dy, dx, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)), (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
         tx, ty = x0 + dx, y0 + dy
@@ -116,9 +121,14 @@ def reproject(H, nH, m, motion, q, mean, std, normal_limit, depth_limit, mix=Fal
         ok = (w > 0) & (ok_of(th) | mix_ok)
         w = np.where(ok, w, 0.0)
         out += w[None] * H[:, ty, tx]
+        if ext is not None:
+            ext += w[None] * extra[:, ty, tx]
         n_out += w * nH[ty, tx]
         wsum += w
     has = wsum > 1e-3
+    if ext is not None:
+        ext = np.where(has[None], ext / np.maximum(wsum, 1e-9)[None], 0.0)
+        return np.where(has[None], out / np.maximum(wsum, 1e-9)[None], 0.0), np.where(has, n_out / np.maximum(wsum, 1e-9), 0.0), ext
     return np.where(has[None], out / np.maximum(wsum, 1e-9)[None], 0.0), np.where(has, n_out / np.maximum(wsum, 1e-9), 0.0)
 
 
@@ -131,6 +141,32 @@ def rescale_depth(R, m, q, mean, std):
     # depth' = r · depth in raw units, in z units: z' = r z + (r − 1) mean / std
     a[DEPTH], b[DEPTH] = r, (r - 1) * mean[DEPTH, 0, 0] / std[DEPTH, 0, 0]
     return affine(R, q, a, b)
+
+
+def pooled(v, r):
+    """Sums over the (2r+1)² cells around each cell (edges: what exists)."""
+    out = np.zeros_like(v)
+    gh, gw = v.shape[-2:]
+    p = np.pad(v, [(0, 0)] * (v.ndim - 2) + [(r, r), (r, r)])
+    for dy in range(2 * r + 1):
+        for dx in range(2 * r + 1):
+            out += p[..., dy:dy + gh, dx:dx + gw]
+    return out
+
+
+def lag_test(H, nH, F, nF, q, a):
+    """Cells whose fast history's mean luminance differs from the slow one's by
+    more than `a.lag_k` standard errors, over the (2r+1)² cells around each
+    (the library's `moment_history::lags`). F's frames are H's newest:
+    d = (1 − nF/nH)(F − O), O the mean of H's older frames."""
+    yi, ei = slice(1 + q + q * q, 4 + q + q * q), 4 + 4 * q + q * q
+    PH, PF = pooled(H, a.lag_radius), pooled(F, a.lag_radius)
+    n_h, n_f = np.maximum(PH[0], 1e-9), np.maximum(PF[0], 1e-9)
+    l_h, l_f = np.tensordot(fm.LUMA, PH[yi], 1) / n_h, np.tensordot(fm.LUMA, PF[yi], 1) / n_f
+    var = np.maximum(PH[ei] / n_h - l_h * l_h, 0.0)
+    older = np.maximum(nH - nF, 1e-9)
+    se = np.sqrt(var / n_h * (older / np.maximum(nH, 1e-9)) ** 2 * (1 / nF + 1 / older))
+    return (nH > nF) & (np.abs(l_f - l_h) > a.lag_k * se + 1e-9 * (np.abs(l_h) + np.abs(l_f)))
 
 
 def tone_mapped(est, fr):
@@ -166,6 +202,7 @@ def flicker(o, r, prev, motion):
 def sequence(paths, a):
     """PSNR and flicker (None for the first frame) of each frame of one sequence."""
     scores, flickers, H, nH, prev, prev_tm = [], [], None, None, None, None
+    F, nF, lagged = None, None, 0
     for path in paths:
         fr = load(path)
         y, g = fm.prep(fr)
@@ -178,21 +215,33 @@ def sequence(paths, a):
         m = fm.moments(y / s, z)
         if a.per_frame or H is None or "motion" not in fr:
             H, nH = m, np.ones(m.shape[1:])
+            F, nF = m, np.ones(m.shape[1:])
         else:
             pm, ps = prev
             H = affine(H, q, ps / std, (pm - mean) / std)
+            F = affine(F, q, ps / std, (pm - mean) / std)
             motion = np.nan_to_num(fr["motion"].astype(np.float64))
-            R, nR = reproject(H, nH, m, motion, q, mean, std, a.normal_limit, a.depth_limit, a.mix, a.sharpen)
+            R, nR, RF = reproject(H, nH, m, motion, q, mean, std, a.normal_limit, a.depth_limit, a.mix, a.sharpen, extra=F)
             if not a.no_depth_rescale:
                 R = rescale_depth(R, m, q, mean, std)
+                RF = rescale_depth(RF, m, q, mean, std)
             nH = np.minimum(nR + 1.0, a.max_history)
+            nF = np.minimum(nR + 1.0, a.fast_history)
             H = (1 - 1 / nH)[None] * R + (1 / nH)[None] * m
+            F = (1 - 1 / nF)[None] * RF + (1 / nF)[None] * m
+            if a.lag_k > 0:
+                lag = lag_test(H, nH, F, nF, q, a)
+                lagged += int(lag.sum())
+                H = np.where(lag[None], F, H)
+                nH = np.where(lag, nF, nH)
         prev = (mean, std)
         est = fm.fit_moments(H, z, a.sigmas, frames=nH) * s
         scores.append(fm.psnr(est, fr))
         tm = tone_mapped(est, fr)
         flickers.append(flicker(*tm, prev_tm, fr["motion"].astype(np.float64)) if prev_tm and "motion" in fr else None)
         prev_tm = tm
+    if a.lag_k > 0:
+        print(f"  cells shortened: {lagged} ({lagged / (len(paths) * H[0].size):.1%} of cell-frames)")
     return scores, flickers
 
 
@@ -207,6 +256,9 @@ def main():
     ap.add_argument("--no-depth-rescale", action="store_true")
     ap.add_argument("--sharpen", type=float, default=1.0, help="bilinear weights per axis raised to this power, renormalised")
     ap.add_argument("--mix", action="store_true", help="keep every tap where the taps' mixture passes the test")
+    ap.add_argument("--fast-history", type=float, default=2.0, help="the fast history's longest length (the lag test's)")
+    ap.add_argument("--lag-k", type=float, default=3.0, help="standard errors past which the slow history is shortened to the fast one (0: off)")
+    ap.add_argument("--lag-radius", type=int, default=1, help="cells summed each side for the lag test")
     a = ap.parse_args()
     last4, fl4 = [], []
     for d in a.seqs:

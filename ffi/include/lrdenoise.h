@@ -571,6 +571,11 @@ typedef struct LrdReport {
    * Temporal pipelines: frames taken as a camera cut (history restarted).
    */
   uint64_t history_resets;
+  /**
+   * Temporal FLR on cell moments: pixels whose history restarted
+   * because their light changed (the lag test).
+   */
+  uint64_t light_changed;
 } LrdReport;
 
 /**

@@ -68,6 +68,9 @@ pub struct LrdReport {
     pub invalid_motion: u64,
     /// Temporal pipelines: frames taken as a camera cut (history restarted).
     pub history_resets: u64,
+    /// Temporal FLR on cell moments: pixels whose history restarted
+    /// because their light changed (the lag test).
+    pub light_changed: u64,
 }
 
 pub(crate) fn status_of(e: Error) -> LrdStatus {
@@ -105,6 +108,7 @@ pub(crate) fn write_report(report: *mut LrdReport, r: Report) {
         out.clamped_fireflies += r.clamped_fireflies;
         out.invalid_motion += r.invalid_motion;
         out.history_resets += r.history_resets;
+        out.light_changed += r.light_changed;
     }
 }
 

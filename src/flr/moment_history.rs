@@ -11,9 +11,16 @@
 //!   cells keep none, the frame is a camera cut and every cell restarts;
 //! - **blend**: the kept taps moved into this frame's guide references,
 //!   their depth rescaled to the cell's, and blended with the cell as a
-//!   running mean over up to `max_history` frames; the history written, the
-//!   fit's cells made the sums over those frames, the pooled window summed
-//!   again;
+//!   running mean over up to `max_history` frames; the cell's pixel count
+//!   and luminance sum also as a running mean over up to
+//!   [`LAG_FAST_HISTORY`] frames (the fast history);
+//! - **lag**: where the light changed, the history lags it: a cell whose
+//!   fast history's mean luminance differs from the history's by more than
+//!   [`LAG_SIGMAS`] standard errors, over its 3×3 cells ([`lags`]), is
+//!   marked;
+//! - **commit**: a marked cell restarts from its own moments; the history
+//!   written, the fit's cells made the sums over its frames, the pooled
+//!   window summed again;
 //!
 //! then FLR's remaining stages. The adaptive window counts up to
 //! `max_history` samples per pixel in its variances.
@@ -21,7 +28,8 @@
 //! The caller-owned [`History`] holds two slots (the previous frame's, and
 //! the one this frame writes), each the frame's guide references and, per
 //! cell, its moments (a running mean, relative to the references), its
-//! history length and its mean guides. The values are f64, stored as two
+//! history length, its mean guides and its fast history (pixel count and
+//! luminance sum). The values are f64, stored as two
 //! 32-bit words each in the history's f32 buffer (bit patterns, never used
 //! as f32).
 
@@ -33,7 +41,7 @@ use crate::error::{Arg, Error};
 use crate::guides::{Frame, MAX_GUIDES};
 use crate::history::History;
 use crate::image::{ImageView, ImageViewMut};
-use crate::kernels::CellLayout;
+use crate::kernels::{CellLayout, LUMA};
 use crate::parallel::{run_tiles, Executor};
 use crate::report::Report;
 use crate::temporal::TemporalConfig;
@@ -42,6 +50,11 @@ use crate::temporal::TemporalConfig;
 pub const NORMAL_LIMIT: f64 = 0.8;
 /// Largest relative difference between the mean depths of a cell and a history tap.
 pub const DEPTH_LIMIT: f64 = 0.1;
+/// The fast history's longest length, in frames (the lag test's reference).
+pub const LAG_FAST_HISTORY: f64 = 2.0;
+/// Standard errors past which a cell's slow history counts as lagging the
+/// light (the lag test, [`lags`]).
+pub const LAG_SIGMAS: f64 = 3.0;
 
 /// f64 value `i` of a history slot stored as two words.
 #[inline]
@@ -132,8 +145,9 @@ impl TapTest {
 /// `grid` (cells across × down); they are sampled bilinearly at the cell
 /// `at` moved by `motion` (previous − current, in cells), each of the 4 taps kept
 /// where `test` accepts its mean guides against `cur`. Writes the kept taps'
-/// weighted mean into `out` and returns their mean history length (0 and
-/// zeros when no tap is kept).
+/// weighted mean into `out` (and of their fast histories, at record offset
+/// [`fast_at`], into `fast` where given) and returns their mean history
+/// length (0 and zeros when no tap is kept).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn reproject_cell(
     prev: &[u32],
@@ -145,27 +159,52 @@ pub(crate) fn reproject_cell(
     cur: &[f64; MAX_GUIDES],
     test: &TapTest,
     out: &mut [f64],
+    mut fast: Option<&mut [f64; FAST_LEN]>,
 ) -> f64 {
     let k = lay.k;
     out[..k].fill(0.0);
+    if let Some(f) = fast.as_deref_mut() {
+        f.fill(0.0);
+    }
     let (mut wsum, mut nsum) = (0f64, 0f64);
     for (i, w) in kept_taps(prev, rec, grid, lay, at, motion, cur, test) {
         let record = i * rec;
         for (j, o) in out[..k].iter_mut().enumerate() {
             *o += w * get(prev, record + j);
         }
+        if let Some(f) = fast.as_deref_mut() {
+            for (j, o) in f.iter_mut().enumerate() {
+                *o += w * get(prev, record + fast_at(lay) + j);
+            }
+        }
         nsum += w * get(prev, record + k);
         wsum += w;
     }
-    if wsum <= MIN_TAP_WEIGHT {
-        out[..k].fill(0.0);
-        return 0.0;
-    }
+    let kept = wsum > MIN_TAP_WEIGHT;
     let inv = 1.0 / wsum;
-    for o in out[..k].iter_mut() {
-        *o *= inv;
+    for o in out[..k].iter_mut().chain(fast.into_iter().flat_map(|f| f.iter_mut())) {
+        *o = if kept { *o * inv } else { 0.0 };
     }
-    nsum * inv
+    if kept {
+        nsum * inv
+    } else {
+        0.0
+    }
+}
+
+/// Offset of the fast history in a cell record (after the moments, the
+/// length and the mean guides): its pixel count and luminance sum
+/// ([`FAST_LEN`] values).
+pub(crate) const fn fast_at(lay: &CellLayout) -> usize {
+    lay.k + 1 + lay.q
+}
+
+/// Values of the fast history per cell: its pixel count and luminance sum.
+pub(crate) const FAST_LEN: usize = 2;
+
+/// A cell's pixel count and luminance sum, from its moments.
+fn count_and_luma(cell: &[f64], lay: &CellLayout) -> [f64; FAST_LEN] {
+    [cell[0], (0..3).map(|c| LUMA[c] as f64 * cell[lay.t + c]).sum()]
 }
 
 /// Least bilinear weight of the kept taps for a cell to keep its history.
@@ -260,20 +299,34 @@ pub(crate) struct Blend {
     pub test: TapTest,
     /// Longest history, in frames.
     pub max_history: f64,
+    /// The fast history's longest length, in frames.
+    pub fast_history: f64,
+    /// Standard errors past which the lag test marks a cell (0: off).
+    pub lag_sigmas: f64,
+}
+
+impl Blend {
+    /// The fast history's length where the slow one's is `n`.
+    pub(crate) fn fast_len(&self, n: f64) -> f64 {
+        n.min(self.fast_history)
+    }
 }
 
 /// One cell of a frame: the current cell's moments `cell` (in this frame's
 /// `reference`) blended with the previous records `prev` (in
 /// `prev_reference`; see [`reproject_cell`]) reprojected at it. Writes the
 /// history's new moments (the running mean of the frames' moments) into
-/// `hist` and returns the new length `n` and whether a history was kept
-/// (`(1, false)`, and `hist` the cell's own moments, when no tap was). The fit takes `hist · n`, the sums over
+/// `hist`, the fast history's new count and luminance sum into `fast`, and
+/// returns the new length `n` and whether a history was kept (`(1, false)`,
+/// and the cell's own values, when no tap was). The fast history's length
+/// is [`Blend::fast_len`] of `n`. The fit takes `hist · n`, the sums over
 /// `n` frames, so that its sample counts are frames × pixels.
 /// `work`: `lay.k` values of working space.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn blend_cell(
     cell: &[f64],
     hist: &mut [f64],
+    fast: &mut [f64; FAST_LEN],
     prev: &[u32],
     rec: usize,
     grid: (usize, usize),
@@ -286,11 +339,14 @@ pub(crate) fn blend_cell(
     work: &mut [f64],
 ) -> (f64, bool) {
     let k = lay.k;
+    let own = count_and_luma(cell, lay);
+    *fast = own;
     let Some(cur) = mean_guides(cell, lay, reference) else {
         hist[..k].copy_from_slice(&cell[..k]);
         return (1.0, false);
     };
-    let n_prev = reproject_cell(prev, rec, grid, lay, at, motion, &cur, &blend.test, work);
+    let mut fast_prev = [0f64; FAST_LEN];
+    let n_prev = reproject_cell(prev, rec, grid, lay, at, motion, &cur, &blend.test, work, Some(&mut fast_prev));
     if n_prev <= 0.0 {
         hist[..k].copy_from_slice(&cell[..k]);
         return (1.0, false);
@@ -301,7 +357,62 @@ pub(crate) fn blend_cell(
     for ((h, c), r) in hist[..k].iter_mut().zip(&cell[..k]).zip(&work[..k]) {
         *h = (1.0 - w) * r + w * c;
     }
+    // the count and the light sums do not change with the guides' references
+    let wf = 1.0 / blend.fast_len(n);
+    for ((f, c), r) in fast.iter_mut().zip(own).zip(fast_prev) {
+        *f = (1.0 - wf) * r + wf * c;
+    }
     (n, true)
+}
+
+/// The lag test of the cell at `(x, y)`: whether its fast history's mean
+/// luminance differs from its slow one's by more than `sigmas` standard
+/// errors. `records` are this frame's cell records (moments, length, mean
+/// guides, fast count and luminance sum; `rec` f64 each, as word pairs) on
+/// a `grid`; both histories are summed over the cell and its 8 neighbours. Both were
+/// reprojected through the same taps, so reprojection error moves them
+/// alike; light that changed moves the fast one first. The fast history
+/// holds the slow one's newest `n_f` of `n` frames, so their difference is
+/// `(1 − n_f / n)` times that of the fast frames' mean and the older ones',
+/// whose standard error follows from the slow sums' luminance variance. A
+/// cell whose slow history is no longer than the fast one does not lag.
+pub fn lags(
+    records: &[u32],
+    rec: usize,
+    (cx, cy): (usize, usize),
+    lay: &CellLayout,
+    (x, y): (usize, usize),
+    fast_cap: f64,
+    sigmas: f64,
+) -> bool {
+    let k = lay.k;
+    let n = get(records, (y * cx + x) * rec + k);
+    let n_fast = n.min(fast_cap);
+    if !(n > n_fast && sigmas > 0.0) {
+        return false;
+    }
+    let luma = |at: usize| (0..3).map(|c| LUMA[c] as f64 * get(records, at + lay.t + c)).sum::<f64>();
+    // over the 3×3 cells: the slow count, luminance and energy; the fast count and luminance
+    let (mut ns, mut ls, mut es, mut nf, mut lf) = (0f64, 0f64, 0f64, 0f64, 0f64);
+    for ty in y.saturating_sub(1)..(y + 2).min(cy) {
+        for tx in x.saturating_sub(1)..(x + 2).min(cx) {
+            let (slow, fast) = ((ty * cx + tx) * rec, (ty * cx + tx) * rec + fast_at(lay));
+            ns += get(records, slow);
+            ls += luma(slow);
+            es += get(records, slow + lay.e);
+            nf += get(records, fast);
+            lf += get(records, fast + 1);
+        }
+    }
+    if !(ns > 0.0 && nf > 0.0) {
+        return false;
+    }
+    let (ls, lf) = (ls / ns, lf / nf);
+    let var = (es / ns - ls * ls).max(0.0);
+    let older = n - n_fast;
+    let se = crate::kernels::sqrt(var / ns * (older / n) * (older / n) * (1.0 / n_fast + 1.0 / older));
+    let d = lf - ls;
+    d.is_finite() && se.is_finite() && d.abs() > sigmas * se + 1e-9 * (ls.abs() + lf.abs())
 }
 
 /// A raw pointer the tiles of one pass share; each tile takes its own band.
@@ -358,7 +469,15 @@ impl MomentFlr {
         let flr = single.with_sample_cap(max_history).without_pooling_in_moments();
         // the normal is guides 0..3, so the depth is guide 3
         let test = TapTest { normal_limit: NORMAL_LIMIT, depth_limit: DEPTH_LIMIT, depth: cfg.guides.depth.then_some(3) };
-        Ok(MomentFlr { flr, single, blend: Blend { test, max_history }, cut_fraction: temporal.cut_fraction as f64 })
+        let blend = Blend { test, max_history, fast_history: LAG_FAST_HISTORY, lag_sigmas: LAG_SIGMAS };
+        Ok(MomentFlr { flr, single, blend, cut_fraction: temporal.cut_fraction as f64 })
+    }
+    /// Without the lag test: a history never restarts because the light
+    /// changed (the fast history is still kept, so the history's size does
+    /// not change).
+    pub fn without_lag_test(mut self) -> Self {
+        self.blend.lag_sigmas = 0.0;
+        self
     }
     /// The FLR configuration it fits with.
     pub fn config(&self) -> &FlrConfig {
@@ -372,9 +491,9 @@ impl MomentFlr {
         let (cx, cy) = self.flr.cells();
         cx * cy
     }
-    /// f64 values per cell record: moments, length, mean guides.
+    /// f64 values per cell record: moments, length, mean guides, fast history.
     fn record(&self) -> usize {
-        self.flr.lay.k + 1 + self.flr.lay.q
+        fast_at(&self.flr.lay) + FAST_LEN
     }
     /// f64 values of one slot: the references, then the cell records.
     fn slot_len(&self) -> usize {
@@ -558,25 +677,43 @@ impl MomentFlr {
         let cut = index > 0 && fresh.load(Ordering::Relaxed) as f64 > self.cut_fraction * filled.load(Ordering::Relaxed) as f64;
         rep.history_resets += cut as u64;
         let blend = index > 0 && !cut;
-        let (pooled_at, pooled_window) = (Shared(pooled.as_mut_ptr()), flr.pooled_window());
         let rejected = AtomicU32::new(0);
-        let commit = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
+        // blend: the history, its length and the fast history into this frame's records
+        // (`cells` and `means` are only read until the lag pass)
+        let means_read: &[f64] = means;
+        let blend_pass = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
-            // SAFETY: tile t's cells, records and means, disjoint from every
-            // other tile's; each tile runs once (`run_tiles`).
-            let (cells_t, write_t, means_t) =
-                unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec), means_at.band(3 * c0, 3 * n)) };
+            // SAFETY: tile t's records, disjoint from every other tile's; each
+            // tile runs once (`run_tiles`).
+            let write_t = unsafe { write_at.band(2 * c0 * rec, 2 * n * rec) };
             let buf: &mut [f64] = bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Unsupported("a misaligned worker buffer"))?;
             let (work, hist) = buf.split_at_mut(k);
             let hist = &mut hist[..k];
+            let mut fast = [0f64; FAST_LEN];
             let mut rej = 0u64;
-            for (c, cell) in cells_t.chunks_exact_mut(k).enumerate() {
+            for c in 0..n {
+                let cell = &cells[(c0 + c) * k..(c0 + c + 1) * k];
                 let (len, kept) = if blend {
                     let (x, y) = ((c0 + c) % cx, (c0 + c) / cx);
-                    let (m, r) = ((means_t[3 * c], means_t[3 * c + 1]), &stats.reference);
-                    blend_cell(cell, hist, prev, rec, (cx, cy), &lay, (x, y), m, r, &prev_reference, &self.blend, work)
+                    let m = (means_read[3 * (c0 + c)], means_read[3 * (c0 + c) + 1]);
+                    blend_cell(
+                        cell,
+                        hist,
+                        &mut fast,
+                        prev,
+                        rec,
+                        (cx, cy),
+                        &lay,
+                        (x, y),
+                        m,
+                        &stats.reference,
+                        &prev_reference,
+                        &self.blend,
+                        work,
+                    )
                 } else {
                     hist.copy_from_slice(cell);
+                    fast = count_and_luma(cell, &lay);
                     (1.0, false)
                 };
                 if blend && !kept && cell[0] > 0.0 {
@@ -586,9 +723,51 @@ impl MomentFlr {
                     put(write_t, c * rec + j, *v);
                 }
                 put(write_t, c * rec + k, len);
-                if len != 1.0 {
-                    for (v, h) in cell.iter_mut().zip(hist.iter()) {
-                        *v = h * len;
+                for (j, v) in fast.iter().enumerate() {
+                    put(write_t, c * rec + fast_at(&lay) + j, *v);
+                }
+            }
+            rejected.fetch_add(rej as u32, Ordering::Relaxed);
+            Ok(Report::default())
+        };
+        run_tiles(own, tiles, workers, wl, for_each, &blend_pass)?;
+        // lag: each cell's verdict (over its neighbours' records) into `means`
+        let records: &[u32] = write;
+        let lag_pass = |t: usize, _: &mut [f32]| -> Result<Report, Error> {
+            let (c0, n) = band(t)?;
+            // SAFETY: tile t's means, disjoint from every other tile's; the
+            // records are only read during this pass.
+            let means_t = unsafe { means_at.band(3 * c0, 3 * n) };
+            for c in 0..n {
+                let at = ((c0 + c) % cx, (c0 + c) / cx);
+                let lagging = blend && lags(records, rec, (cx, cy), &lay, at, self.blend.fast_history, self.blend.lag_sigmas);
+                means_t[3 * c] = if lagging { 1.0 } else { 0.0 };
+            }
+            Ok(Report::default())
+        };
+        run_tiles(own, tiles, workers, wl, for_each, &lag_pass)?;
+        let (pooled_at, pooled_window) = (Shared(pooled.as_mut_ptr()), flr.pooled_window());
+        let relit = AtomicU32::new(0);
+        // commit: a lagging cell restarts from its own moments; the fit's sums
+        let commit = |t: usize, _: &mut [f32]| -> Result<Report, Error> {
+            let (c0, n) = band(t)?;
+            // SAFETY: tile t's cells, records and means, disjoint from every
+            // other tile's; each tile runs once (`run_tiles`).
+            let (cells_t, write_t, means_t) =
+                unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec), means_at.band(3 * c0, 3 * n)) };
+            let mut restarts = 0u64;
+            for (c, cell) in cells_t.chunks_exact_mut(k).enumerate() {
+                if means_t[3 * c] != 0.0 {
+                    // `cell` still holds this frame's own moments
+                    put(write_t, c * rec + k, 1.0);
+                    for (j, v) in cell.iter().enumerate() {
+                        put(write_t, c * rec + j, *v);
+                    }
+                    restarts += cell[0].max(0.0) as u64;
+                } else {
+                    let len = get(write_t, c * rec + k);
+                    for (j, v) in cell.iter_mut().enumerate() {
+                        *v = get(write_t, c * rec + j) * len;
                     }
                 }
                 let means = mean_guides(cell, &lay, &stats.reference).unwrap_or([f64::NAN; MAX_GUIDES]);
@@ -596,7 +775,7 @@ impl MomentFlr {
                     put(write_t, c * rec + k + 1 + i, *m);
                 }
             }
-            rejected.fetch_add(rej as u32, Ordering::Relaxed);
+            relit.fetch_add(restarts as u32, Ordering::Relaxed);
             if let Some(s) = pooled_window {
                 let r = flr.window_cells_tile_range(s, t)?;
                 // SAFETY: tile t's band of the pooled grid, disjoint from every other tile's.
@@ -606,6 +785,7 @@ impl MomentFlr {
         };
         run_tiles(own, tiles, workers, wl, for_each, &commit)?;
         rep.history_rejected += u64::from(rejected.load(Ordering::Relaxed));
+        rep.light_changed += u64::from(relit.load(Ordering::Relaxed));
         Ok(rep)
     }
 
@@ -729,16 +909,71 @@ mod tests {
     }
 
     /// Cell records as the history stores them (`reproject_cell`'s `prev`).
+    /// The fast history is the cell's own count and luminance sum.
     fn records(cells: &[Vec<f64>], lengths: &[f64], lay: &CellLayout, reference: &[f32]) -> Vec<u32> {
-        let rec = lay.k + 1 + lay.q;
+        let rec = fast_at(lay) + FAST_LEN;
         let mut w = vec![0u32; 2 * rec * cells.len()];
         for (c, (m, n)) in cells.iter().zip(lengths).enumerate() {
             let means = mean_guides(m, lay, reference).unwrap_or([f64::NAN; MAX_GUIDES]);
-            for (j, v) in m.iter().chain([*n].iter()).chain(means[..lay.q].iter()).enumerate() {
+            for (j, v) in m.iter().chain([*n].iter()).chain(means[..lay.q].iter()).chain(count_and_luma(m, lay).iter()).enumerate() {
                 put(&mut w, c * rec + j, *v);
             }
         }
         w
+    }
+
+    /// Records of a 3×3 grid after `n` frames of light `gain(f)` (per frame
+    /// `f`; each cell and frame its own noise): per cell, the history (the
+    /// mean of the `n` frames' moments) and the fast one (of the last 2).
+    fn lag_records(n: usize, gain: impl Fn(usize) -> f64, lay: &CellLayout) -> Vec<u32> {
+        let rec = fast_at(lay) + FAST_LEN;
+        let mut w = vec![0u32; 2 * rec * 9];
+        for c in 0..9 {
+            let frame = |f: usize| {
+                let px: Vec<_> = pixels((100 * c + f) as u64, 64)
+                    .into_iter()
+                    .map(|(g, y)| {
+                        // light that varies with guide 0, and 1-spp-like noise
+                        let l = gain(f) * (1.0 + 0.2 * g[0]) * (0.2 + 1.6 * y[0]);
+                        (g, [l, l, l])
+                    })
+                    .collect();
+                moments(&px, lay)
+            };
+            let (mut slow, mut fast) = (vec![0f64; lay.k], vec![0f64; lay.k]);
+            for f in 0..n {
+                let m = frame(f);
+                slow.iter_mut().zip(&m).for_each(|(s, v)| *s += v / n as f64);
+                if f + 2 >= n {
+                    fast.iter_mut().zip(&m).for_each(|(s, v)| *s += v / 2.0);
+                }
+            }
+            let fast = count_and_luma(&fast, lay);
+            for (j, v) in slow.iter().chain([n as f64].iter()).chain([0f64; MAX_GUIDES][..lay.q].iter()).chain(fast.iter()).enumerate() {
+                put(&mut w, c * rec + j, *v);
+            }
+        }
+        w
+    }
+
+    /// The lag test: no lag where the light holds (the fast history differs
+    /// from the slow one by noise); a lag where it brightened by 30 % two
+    /// frames ago; none while the slow history is no longer than the fast
+    /// one, or with the test off.
+    #[test]
+    fn the_lag_test_marks_light_that_changed_only() {
+        let lay = CellLayout::new(5);
+        let rec = fast_at(&lay) + FAST_LEN;
+        let lag = |w: &[u32], sigmas: f64| lags(w, rec, (3, 3), &lay, (1, 1), 2.0, sigmas);
+        let steady = lag_records(16, |_| 1.0, &lay);
+        assert!(!lag(&steady, 3.0));
+        let brighter = lag_records(16, |f| if f >= 14 { 1.3 } else { 1.0 }, &lay);
+        assert!(lag(&brighter, 3.0));
+        assert!(!lag(&brighter, 0.0));
+        assert!(!lag(&lag_records(2, |f| if f >= 1 { 1.3 } else { 1.0 }, &lay), 3.0));
+        // at the grid's corner: its 2×2 cells
+        assert!(lags(&brighter, rec, (3, 3), &lay, (0, 0), 2.0, 3.0));
+        assert!(!lags(&steady, rec, (3, 3), &lay, (2, 2), 2.0, 3.0));
     }
 
     /// The affine map equals the moments of the mapped guides, on awkward
@@ -782,22 +1017,22 @@ mod tests {
         let lengths = [4f64, 5.0, 6.0, 7.0, 8.0, 9.0];
         let reference = [0f32; MAX_GUIDES];
         let prev = records(&cells, &lengths, &lay, &reference);
-        let rec = lay.k + 1 + lay.q;
+        let rec = fast_at(&lay) + FAST_LEN;
         let test = TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) };
         let cur = mean_guides(&up, &lay, &reference).unwrap();
         let mut out = vec![0f64; lay.k];
-        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.0), &cur, &test, &mut out);
+        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.0), &cur, &test, &mut out, None);
         assert_eq!(n, 5.0);
         assert!(out.iter().zip(&up).all(|(a, b)| (a - b).abs() < 1e-12));
         // halfway to cell 4 (normal turned): only the kept taps, renormalised
-        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.5), &cur, &test, &mut out);
+        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.5), &cur, &test, &mut out, None);
         assert_eq!(n, 5.0);
         // towards cell 5 (depth 3 against 2): dropped too
-        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (2, 0), (0.0, 1.0), &cur, &test, &mut out);
+        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (2, 0), (0.0, 1.0), &cur, &test, &mut out, None);
         assert_eq!(n, 0.0);
         assert!(out.iter().all(|&v| v == 0.0));
         for motion in [(-5.0, 0.0), (f64::NAN, 0.0), (0.0, f64::INFINITY)] {
-            assert_eq!(reproject_cell(&prev, rec, (cx, cy), &lay, (0, 0), motion, &cur, &test, &mut out), 0.0);
+            assert_eq!(reproject_cell(&prev, rec, (cx, cy), &lay, (0, 0), motion, &cur, &test, &mut out, None), 0.0);
         }
     }
 
@@ -809,8 +1044,13 @@ mod tests {
     #[test]
     fn a_static_cell_averages_its_frames() {
         let lay = CellLayout::new(5);
-        let blend = Blend { test: TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) }, max_history: 4.0 };
-        let rec = lay.k + 1 + lay.q;
+        let blend = Blend {
+            test: TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) },
+            max_history: 4.0,
+            fast_history: 2.0,
+            lag_sigmas: 3.0,
+        };
+        let rec = fast_at(&lay) + FAST_LEN;
         let frame = |f: u64, reference: &[f32; MAX_GUIDES]| {
             let px: Vec<([f64; 5], [f64; 3])> = (0..64)
                 .map(|i| {
@@ -827,8 +1067,8 @@ mod tests {
         for f in 1..6u64 {
             let (r, pr) = (&refs[f as usize % 2], &refs[(f as usize - 1) % 2]);
             let cell = frame(f, r);
-            let mut hist = vec![0f64; lay.k];
-            let (n, _) = blend_cell(&cell, &mut hist, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), r, pr, &blend, &mut work);
+            let (mut hist, mut fast) = (vec![0f64; lay.k], [0f64; FAST_LEN]);
+            let (n, _) = blend_cell(&cell, &mut hist, &mut fast, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), r, pr, &blend, &mut work);
             assert_eq!(n, (f as f64 + 1.0).min(4.0), "frame {f}");
             // the light sums do not depend on the references: the mean of the frames' while n counts every frame
             let m = frame(f, r);
@@ -848,8 +1088,9 @@ mod tests {
         let px: Vec<([f64; 5], [f64; 3])> = (0..64).map(|_| ([1.0, 0.0, 0.0, 2.0, 0.5], [0.4, 0.4, 0.4])).collect();
         let cell = moments(&px, &lay);
         let own = cell.clone();
-        let mut hist = vec![0f64; lay.k];
-        let n = blend_cell(&cell, &mut hist, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), &refs[0], &refs[1], &blend, &mut work);
+        let (mut hist, mut fast) = (vec![0f64; lay.k], [0f64; FAST_LEN]);
+        let n =
+            blend_cell(&cell, &mut hist, &mut fast, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), &refs[0], &refs[1], &blend, &mut work);
         assert_eq!(n, (1.0, false));
         assert_eq!(hist, own);
     }
