@@ -85,6 +85,13 @@ pub struct TemporalConfig {
     /// times the previous frame's brightest there, a factor that compounds
     /// each frame.
     pub firefly_history: f32,
+    /// Temporal FLR on cell moments only (the other pipelines ignore it):
+    /// the lag test's threshold, in standard errors. A cell whose newest
+    /// frames' mean luminance differs from its history's by more than this
+    /// restarts from its own moments, so that light that changed (a moving
+    /// object's shadow) does not lag (`flr::moment_history`; default 3,
+    /// 0 turns the test off; finite ≥ 0).
+    pub lag_sigmas: f32,
 }
 
 impl Default for TemporalConfig {
@@ -98,6 +105,7 @@ impl Default for TemporalConfig {
             output_alpha: 0.5,
             cut_fraction: 0.5,
             firefly_history: 2.0,
+            lag_sigmas: 3.0,
         }
     }
 }
@@ -123,6 +131,9 @@ impl TemporalConfig {
         }
         if !(self.firefly_history == 0.0 || self.firefly_history >= 1.0 && self.firefly_history.is_finite()) {
             return Err(Error::InvalidConfig("temporal.firefly_history (0 or finite >= 1)"));
+        }
+        if !(self.lag_sigmas >= 0.0 && self.lag_sigmas.is_finite()) {
+            return Err(Error::InvalidConfig("temporal.lag_sigmas (finite >= 0)"));
         }
         Ok(())
     }

@@ -633,6 +633,11 @@ fn a_history_of_another_size_is_refused() {
     assert!(matches!(r, Err(Error::BufferTooSmall { arg: Arg::History, .. })), "{r:?}");
     assert!(TemporalFlr::new(FlrConfig { upsample: 2, ..cfg() }, TemporalConfig::default(), w, h).is_err());
     assert!(TemporalFlr::new(cfg(), TemporalConfig { output_alpha: 0.0, ..Default::default() }, w, h).is_err());
+    for lag_sigmas in [-1.0, f32::NAN, f32::INFINITY] {
+        let bad = TemporalConfig { lag_sigmas, ..Default::default() };
+        let r = MomentFlr::new(FlrConfig { guides: SET, ..FlrConfig::temporal_moments() }, &bad, w, h);
+        assert!(matches!(r, Err(Error::InvalidConfig(_))), "lag_sigmas {lag_sigmas}: {r:?}");
+    }
 }
 
 /// Over a moving sequence, the parallel run (3 threads) gives the bits of the
@@ -984,8 +989,9 @@ fn light_switched_on(w: usize, h: usize, k: u64, step: u64) -> (Owned, Vec<bool>
 #[test]
 fn moments_follow_light_that_changes() {
     let (w, h, step) = (64, 48, 16u64);
-    let plan = MomentFlr::new(FlrConfig { guides: SET, ..FlrConfig::temporal_moments() }, &TemporalConfig::default(), w, h).unwrap();
-    for (name, plan, follows) in [("lag test", plan.clone(), true), ("without the lag test", plan.without_lag_test(), false)] {
+    let cfg = FlrConfig { guides: SET, ..FlrConfig::temporal_moments() };
+    let plan = |lag_sigmas| MomentFlr::new(cfg, &TemporalConfig { lag_sigmas, ..Default::default() }, w, h).unwrap();
+    for (name, plan, follows) in [("lag test", plan(3.0), true), ("without the lag test", plan(0.0), false)] {
         let mut hist = vec![0f32; plan.history_len()];
         let mut scratch = vec![f64::NAN; plan.scratch_len()];
         let mut out = vec![0f32; 3 * w * h];

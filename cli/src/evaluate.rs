@@ -56,6 +56,7 @@ impl Variant {
         add("ao-demodulation", a.ao_demodulation.clone());
         add("fireflies", a.fireflies.clone());
         add("accumulate", a.accumulate.clone());
+        add("lag-sigmas", a.lag_sigmas.map(|v| v.to_string()));
         if a.without_ao {
             s += " --without-ao";
         }

@@ -102,9 +102,12 @@ pub struct FlrArgs {
     /// flr-temporal: the fit weighs each pixel by its history length, the samples its accumulated light averages (default off)
     #[arg(long)]
     pub history_weights: bool,
-    /// flr-temporal: what the history accumulates: "light" (default: the noisy light per pixel, then FLR on it) or "moments" (FLR's cell moments: 1.1-1.2x FLR's time at 1080p against light's 2.5-3x, about two thirds of light's gain over per-frame FLR; of the temporal flags it reads --history only; CPU only)
+    /// flr-temporal: what the history accumulates: "light" (default: the noisy light per pixel, then FLR on it) or "moments" (FLR's cell moments: 1.1-1.5x FLR's time at 1080p against light's 2.5-3x, about three quarters of light's gain over per-frame FLR; of the temporal flags it reads --history and --lag-sigmas only; CPU only)
     #[arg(long, value_name = "light|moments")]
     pub accumulate: Option<String>,
+    /// flr-temporal --accumulate moments: the lag test's threshold in standard errors; a cell whose newest 2 frames' mean luminance differs from its history's by more restarts, so that light that changes (a moving object's shadow) does not lag (default 3; 0 = off)
+    #[arg(long, value_name = "K")]
+    pub lag_sigmas: Option<f32>,
 }
 
 impl FlrArgs {
@@ -122,7 +125,7 @@ impl FlrArgs {
     /// method because `eval`, `report` and `bench` take one flag set for
     /// several methods at once, `--methods flr,bmfr`; this table gives clap's
     /// refusal instead, naming whose flag it is and what the method takes.)
-    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 27] {
+    fn flags(&self) -> [(&'static str, bool, &'static [Family]); 28] {
         use Family::*;
         [
             ("--guides", self.guides.is_some(), &[Flr, Bmfr, Walr]),
@@ -153,6 +156,7 @@ impl FlrArgs {
             ("--firefly-history", self.firefly_history.is_some(), &[Flr, Bmfr, Walr]),
             ("--history-weights", self.history_weights, &[Flr]),
             ("--accumulate", self.accumulate.is_some(), &[Flr]),
+            ("--lag-sigmas", self.lag_sigmas.is_some(), &[Flr]),
         ]
     }
 
@@ -171,7 +175,10 @@ impl FlrArgs {
         if let Some(f) = self.firefly_history {
             t.firefly_history = f;
         }
-        t.validate().map_err(|e| format!("--history / --output-alpha / --clip-gamma / --firefly-history: {e}"))?;
+        if let Some(k) = self.lag_sigmas {
+            t.lag_sigmas = k;
+        }
+        t.validate().map_err(|e| format!("--history / --output-alpha / --clip-gamma / --firefly-history / --lag-sigmas: {e}"))?;
         Ok(t)
     }
 
@@ -316,6 +323,9 @@ impl FlrArgs {
     /// the temporal flags the moments do not read.
     pub fn accumulate_moments(&self) -> Result<bool, String> {
         match self.accumulate.as_deref() {
+            None | Some("light") if self.lag_sigmas.is_some() => {
+                Err("--lag-sigmas is the moments' lag test: it needs flr-temporal --accumulate moments".into())
+            }
             None | Some("light") => Ok(false),
             Some("moments") => {
                 let unread = [
@@ -755,6 +765,10 @@ impl Method {
                 if temporal.max_history != lrdenoise::temporal::TemporalConfig::default().max_history {
                     label += &format!(" h{}", temporal.max_history);
                     flags += &format!(" --history {}", temporal.max_history);
+                }
+                if temporal.lag_sigmas != lrdenoise::temporal::TemporalConfig::default().lag_sigmas {
+                    label += &format!(" l{}", temporal.lag_sigmas);
+                    flags += &format!(" --lag-sigmas {}", temporal.lag_sigmas);
                 }
                 flags += " --accumulate moments";
                 let min_bytes = Some(temporal_bytes(w, h, cfg.guides.channels(), &runner));

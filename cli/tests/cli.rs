@@ -280,6 +280,25 @@ fn bmfr_single_frame_temporal_and_flicker() {
     fails_with(&["denoise-seq", &seq, "-o", outdir.to_str().unwrap(), "--method", "bmfr", "--history", "0.5"], &["max_history"]);
 }
 
+/// Temporal FLR on cell moments: `--lag-sigmas` in its label and flag line,
+/// refused without `--accumulate moments` and out of range; the light
+/// pipeline's flags refused with it.
+#[test]
+fn temporal_moments_flags() {
+    let seq = data("seq_box_7");
+    let (ok, so, e) = lrd(&["eval", &seq, "--methods", "flr-temporal", "--accumulate", "moments", "--lag-sigmas", "0", "--runs", "1"]);
+    assert!(ok && so.contains("temporal moments l0") && so.contains("--lag-sigmas 0 --accumulate moments"), "{e}{so}");
+    let x = tmp("seq-moments");
+    let x = x.to_str().unwrap();
+    fails_with(&["denoise-seq", &seq, "-o", x, "--method", "flr", "--lag-sigmas", "2"], &["--lag-sigmas is the moments' lag test"]);
+    fails_with(&["denoise-seq", &seq, "-o", x, "--method", "flr", "--accumulate", "moments", "--lag-sigmas=-1"], &["lag_sigmas"]);
+    fails_with(
+        &["denoise-seq", &seq, "-o", x, "--method", "flr", "--accumulate", "moments", "--output-alpha", "1"],
+        &["does not take --output-alpha"],
+    );
+    fails_with(&["denoise-seq", &seq, "-o", x, "--method", "bmfr", "--lag-sigmas", "2"], &["--lag-sigmas is an FLR flag"]);
+}
+
 #[test]
 fn walr_single_frame_temporal_flags_and_errors() {
     let json = tmp("walr.json");

@@ -660,6 +660,14 @@ typedef struct LrdTemporalConfig {
    */
   float firefly_history;
   /**
+   * Temporal FLR on moments only (the other pipelines ignore it): the lag
+   * test's threshold in standard errors. A cell whose newest frames' mean
+   * luminance differs from its history's by more than this restarts from
+   * its own moments, so that light that changed (a moving object's
+   * shadow) does not lag; finite ≥ 0 (default 3; 0 turns the test off).
+   */
+  float lag_sigmas;
+  /**
    * Temporal FLR: the bit set of LRD_GUIDE_NORMAL, LRD_GUIDE_DEPTH and
    * LRD_GUIDE_POSITION that judges history taps, which the frames must then
    * carry too; 0 (the default): FLR's own guides. Positions keep the
@@ -1149,9 +1157,9 @@ LrdStatus lrd_flr_temporal_moments_sizes(const struct LrdFlrConfig *config,
  * FLR's block moments are blended with the previous frames' (reprojected
  * per cell of `config->block` pixels with `motion`, a cell's history kept
  * where its mean normal and depth match) and FLR is fitted on the sums;
- * about 1.1-1.2x FLR's time (`docs/PERFORMANCE.md`), below
+ * about 1.1-1.5x FLR's time (`docs/PERFORMANCE.md`), below
  * `lrd_flr_denoise_temporal`'s quality. Of `temporal` it reads
- * `max_history` and `cut_fraction` (every field is validated);
+ * `max_history`, `cut_fraction` and `lag_sigmas` (every field is validated);
  * `temporal->rejection_guides` must be 0 and `frame.sample_weights` absent. `motion`, `history`, `scratch`,
  * `report` and the frame are as for `lrd_flr_denoise_temporal`, with the
  * sizes from `lrd_flr_temporal_moments_sizes`.

@@ -513,9 +513,9 @@ pub unsafe extern "C" fn lrd_flr_temporal_moments_sizes(
 /// FLR's block moments are blended with the previous frames' (reprojected
 /// per cell of `config->block` pixels with `motion`, a cell's history kept
 /// where its mean normal and depth match) and FLR is fitted on the sums;
-/// about 1.1-1.2x FLR's time (`docs/PERFORMANCE.md`), below
+/// about 1.1-1.5x FLR's time (`docs/PERFORMANCE.md`), below
 /// `lrd_flr_denoise_temporal`'s quality. Of `temporal` it reads
-/// `max_history` and `cut_fraction` (every field is validated);
+/// `max_history`, `cut_fraction` and `lag_sigmas` (every field is validated);
 /// `temporal->rejection_guides` must be 0 and `frame.sample_weights` absent. `motion`, `history`, `scratch`,
 /// `report` and the frame are as for `lrd_flr_denoise_temporal`, with the
 /// sizes from `lrd_flr_temporal_moments_sizes`.

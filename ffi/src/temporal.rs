@@ -61,6 +61,12 @@ pub struct LrdTemporalConfig {
     /// brightest luminance the previous frame kept around the cell; 0 or
     /// finite ≥ 1 (default 2; 0 turns it off).
     pub firefly_history: f32,
+    /// Temporal FLR on moments only (the other pipelines ignore it): the lag
+    /// test's threshold in standard errors. A cell whose newest frames' mean
+    /// luminance differs from its history's by more than this restarts from
+    /// its own moments, so that light that changed (a moving object's
+    /// shadow) does not lag; finite ≥ 0 (default 3; 0 turns the test off).
+    pub lag_sigmas: f32,
     /// Temporal FLR: the bit set of LRD_GUIDE_NORMAL, LRD_GUIDE_DEPTH and
     /// LRD_GUIDE_POSITION that judges history taps, which the frames must then
     /// carry too; 0 (the default): FLR's own guides. Positions keep the
@@ -88,6 +94,7 @@ pub(crate) fn lrd_temporal_config(d: &lrdenoise_core::temporal::TemporalConfig) 
         output_alpha: d.output_alpha,
         cut_fraction: d.cut_fraction,
         firefly_history: d.firefly_history,
+        lag_sigmas: d.lag_sigmas,
         rejection_guides: 0,
     }
 }
@@ -125,6 +132,7 @@ pub(crate) fn temporal_config_and_rejection(
         output_alpha: c.output_alpha,
         cut_fraction: c.cut_fraction,
         firefly_history: c.firefly_history,
+        lag_sigmas: c.lag_sigmas,
     };
     t.validate().map_err(status_of)?;
     Ok((t, reject))

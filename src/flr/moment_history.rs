@@ -3,7 +3,7 @@
 //! the cells (`docs/METHODS.md`, Temporal FLR).
 //!
 //! A frame runs FLR's [`Stage::Prepare`], [`Stage::Moments`] and
-//! [`Stage::Stats`]; then two passes over the tiles:
+//! [`Stage::Stats`]; then four passes over the tiles:
 //! - **find**: each cell's mean motion (over its middle pixel row), and
 //!   whether any history tap is kept for it: the previous frame's cells
 //!   sampled bilinearly there, a tap kept where its mean normal and depth
@@ -16,8 +16,9 @@
 //!   [`LAG_FAST_HISTORY`] frames (the fast history);
 //! - **lag**: where the light changed, the history lags it: a cell whose
 //!   fast history's mean luminance differs from the history's by more than
-//!   [`LAG_SIGMAS`] standard errors, over its 3×3 cells ([`lags`]), is
-//!   marked;
+//!   `lag_sigmas` standard errors ([`TemporalConfig::lag_sigmas`]), over
+//!   its 3×3 cells ([`lags`]), is marked (skipped on a frame that does not
+//!   blend);
 //! - **commit**: a marked cell restarts from its own moments; the history
 //!   written, the fit's cells made the sums over its frames, the pooled
 //!   window summed again;
@@ -52,9 +53,6 @@ pub const NORMAL_LIMIT: f64 = 0.8;
 pub const DEPTH_LIMIT: f64 = 0.1;
 /// The fast history's longest length, in frames (the lag test's reference).
 pub const LAG_FAST_HISTORY: f64 = 2.0;
-/// Standard errors past which a cell's slow history counts as lagging the
-/// light (the lag test, [`lags`]).
-pub const LAG_SIGMAS: f64 = 3.0;
 
 /// f64 value `i` of a history slot stored as two words.
 #[inline]
@@ -67,6 +65,29 @@ fn put(words: &mut [u32], i: usize, v: f64) {
     let b = v.to_bits();
     words[2 * i] = b as u32;
     words[2 * i + 1] = (b >> 32) as u32;
+}
+
+/// The f64 values stored as word pairs in `words`, in order (as [`get`]
+/// reads them; one bounds check for the slice instead of one per value).
+#[inline]
+fn values(words: &[u32]) -> impl Iterator<Item = f64> + '_ {
+    words.chunks_exact(2).map(|p| f64::from_bits(u64::from(p[0]) | (u64::from(p[1]) << 32)))
+}
+
+/// Stores `vals` as word pairs from the start of `words` (as [`put`] does),
+/// as many as both hold.
+#[inline]
+fn store(words: &mut [u32], vals: &[f64]) {
+    for (p, v) in words.chunks_exact_mut(2).zip(vals) {
+        let b = v.to_bits();
+        (p[0], p[1]) = (b as u32, (b >> 32) as u32);
+    }
+}
+
+/// The words of record `i` (`rec` values from value `i · rec`).
+#[inline]
+fn record(words: &[u32], i: usize, rec: usize) -> &[u32] {
+    &words[2 * i * rec..2 * (i + 1) * rec]
 }
 
 /// The moments of `g' = a g + b` (per guide) from the moments of `g`, in
@@ -168,16 +189,16 @@ pub(crate) fn reproject_cell(
     }
     let (mut wsum, mut nsum) = (0f64, 0f64);
     for (i, w) in kept_taps(prev, rec, grid, lay, at, motion, cur, test) {
-        let record = i * rec;
-        for (j, o) in out[..k].iter_mut().enumerate() {
-            *o += w * get(prev, record + j);
+        let r = record(prev, i, rec);
+        for (o, v) in out[..k].iter_mut().zip(values(r)) {
+            *o += w * v;
         }
         if let Some(f) = fast.as_deref_mut() {
-            for (j, o) in f.iter_mut().enumerate() {
-                *o += w * get(prev, record + fast_at(lay) + j);
+            for (o, v) in f.iter_mut().zip(values(&r[2 * fast_at(lay)..])) {
+                *o += w * v;
             }
         }
-        nsum += w * get(prev, record + k);
+        nsum += w * get(r, k);
         wsum += w;
     }
     let kept = wsum > MIN_TAP_WEIGHT;
@@ -204,7 +225,12 @@ pub(crate) const FAST_LEN: usize = 2;
 
 /// A cell's pixel count and luminance sum, from its moments.
 fn count_and_luma(cell: &[f64], lay: &CellLayout) -> [f64; FAST_LEN] {
-    [cell[0], (0..3).map(|c| LUMA[c] as f64 * cell[lay.t + c]).sum()]
+    [cell[0], luma(|c| cell[lay.t + c])]
+}
+
+/// The luminance of the colour whose channel `c` is `rgb(c)`.
+fn luma(rgb: impl Fn(usize) -> f64) -> f64 {
+    (0..3).map(|c| LUMA[c] as f64 * rgb(c)).sum()
 }
 
 /// Least bilinear weight of the kept taps for a cell to keep its history.
@@ -240,7 +266,10 @@ fn kept_taps<'a>(
     test: &'a TapTest,
 ) -> impl Iterator<Item = (usize, f64)> + 'a {
     taps(x, y, motion, cx, cy).into_iter().flatten().filter(move |&(i, _)| {
-        let tm: [f64; MAX_GUIDES] = core::array::from_fn(|g| if g < lay.q { get(prev, i * rec + lay.k + 1 + g) } else { 0.0 });
+        let mut tm = [0f64; MAX_GUIDES];
+        for (t, v) in tm[..lay.q].iter_mut().zip(values(&record(prev, i, rec)[2 * (lay.k + 1)..])) {
+            *t = v;
+        }
         !tm[0].is_nan() && test.accepts(cur, &tm)
     })
 }
@@ -301,7 +330,8 @@ pub(crate) struct Blend {
     pub max_history: f64,
     /// The fast history's longest length, in frames.
     pub fast_history: f64,
-    /// Standard errors past which the lag test marks a cell (0: off).
+    /// Standard errors past which the lag test marks a cell (0: off;
+    /// [`TemporalConfig::lag_sigmas`]).
     pub lag_sigmas: f64,
 }
 
@@ -376,7 +406,7 @@ pub(crate) fn blend_cell(
 /// `(1 − n_f / n)` times that of the fast frames' mean and the older ones',
 /// whose standard error follows from the slow sums' luminance variance. A
 /// cell whose slow history is no longer than the fast one does not lag.
-pub fn lags(
+pub(crate) fn lags(
     records: &[u32],
     rec: usize,
     (cx, cy): (usize, usize),
@@ -391,17 +421,16 @@ pub fn lags(
     if !(n > n_fast && sigmas > 0.0) {
         return false;
     }
-    let luma = |at: usize| (0..3).map(|c| LUMA[c] as f64 * get(records, at + lay.t + c)).sum::<f64>();
     // over the 3×3 cells: the slow count, luminance and energy; the fast count and luminance
     let (mut ns, mut ls, mut es, mut nf, mut lf) = (0f64, 0f64, 0f64, 0f64, 0f64);
     for ty in y.saturating_sub(1)..(y + 2).min(cy) {
         for tx in x.saturating_sub(1)..(x + 2).min(cx) {
-            let (slow, fast) = ((ty * cx + tx) * rec, (ty * cx + tx) * rec + fast_at(lay));
-            ns += get(records, slow);
-            ls += luma(slow);
-            es += get(records, slow + lay.e);
-            nf += get(records, fast);
-            lf += get(records, fast + 1);
+            let (r, fast) = (record(records, ty * cx + tx, rec), fast_at(lay));
+            ns += get(r, 0);
+            ls += luma(|c| get(r, lay.t + c));
+            es += get(r, lay.e);
+            nf += get(r, fast);
+            lf += get(r, fast + 1);
         }
     }
     if !(ns > 0.0 && nf > 0.0) {
@@ -453,8 +482,8 @@ pub struct MomentFlr {
 }
 
 impl MomentFlr {
-    /// Plans `width × height` frames; of `temporal` it reads `max_history`
-    /// and `cut_fraction`. [`FlrConfig::temporal_moments`] is the default
+    /// Plans `width × height` frames; of `temporal` it reads `max_history`,
+    /// `cut_fraction` and `lag_sigmas`. [`FlrConfig::temporal_moments`] is the default
     /// configuration for it.
     pub fn new(cfg: FlrConfig, temporal: &TemporalConfig, width: usize, height: usize) -> Result<Self, Error> {
         temporal.validate()?;
@@ -469,15 +498,8 @@ impl MomentFlr {
         let flr = single.with_sample_cap(max_history).without_pooling_in_moments();
         // the normal is guides 0..3, so the depth is guide 3
         let test = TapTest { normal_limit: NORMAL_LIMIT, depth_limit: DEPTH_LIMIT, depth: cfg.guides.depth.then_some(3) };
-        let blend = Blend { test, max_history, fast_history: LAG_FAST_HISTORY, lag_sigmas: LAG_SIGMAS };
+        let blend = Blend { test, max_history, fast_history: LAG_FAST_HISTORY, lag_sigmas: temporal.lag_sigmas as f64 };
         Ok(MomentFlr { flr, single, blend, cut_fraction: temporal.cut_fraction as f64 })
-    }
-    /// Without the lag test: a history never restarts because the light
-    /// changed (the fast history is still kept, so the history's size does
-    /// not change).
-    pub fn without_lag_test(mut self) -> Self {
-        self.blend.lag_sigmas = 0.0;
-        self
     }
     /// The FLR configuration it fits with.
     pub fn config(&self) -> &FlrConfig {
@@ -719,19 +741,17 @@ impl MomentFlr {
                 if blend && !kept && cell[0] > 0.0 {
                     rej += cell[0] as u64;
                 }
-                for (j, v) in hist.iter().enumerate() {
-                    put(write_t, c * rec + j, *v);
-                }
-                put(write_t, c * rec + k, len);
-                for (j, v) in fast.iter().enumerate() {
-                    put(write_t, c * rec + fast_at(&lay) + j, *v);
-                }
+                let r = &mut write_t[2 * c * rec..2 * (c + 1) * rec];
+                store(r, hist);
+                put(r, k, len);
+                store(&mut r[2 * fast_at(&lay)..], &fast);
             }
             rejected.fetch_add(rej as u32, Ordering::Relaxed);
             Ok(Report::default())
         };
         run_tiles(own, tiles, workers, wl, for_each, &blend_pass)?;
-        // lag: each cell's verdict (over its neighbours' records) into `means`
+        // lag: each cell's verdict (over its neighbours' records) into `means`;
+        // without a blend (the first frame, a cut) every record is the cell's own
         let records: &[u32] = write;
         let lag_pass = |t: usize, _: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
@@ -740,12 +760,15 @@ impl MomentFlr {
             let means_t = unsafe { means_at.band(3 * c0, 3 * n) };
             for c in 0..n {
                 let at = ((c0 + c) % cx, (c0 + c) / cx);
-                let lagging = blend && lags(records, rec, (cx, cy), &lay, at, self.blend.fast_history, self.blend.lag_sigmas);
+                let lagging = lags(records, rec, (cx, cy), &lay, at, self.blend.fast_history, self.blend.lag_sigmas);
                 means_t[3 * c] = if lagging { 1.0 } else { 0.0 };
             }
             Ok(Report::default())
         };
-        run_tiles(own, tiles, workers, wl, for_each, &lag_pass)?;
+        let lag_tested = blend && self.blend.lag_sigmas > 0.0;
+        if lag_tested {
+            run_tiles(own, tiles, workers, wl, for_each, &lag_pass)?;
+        }
         let (pooled_at, pooled_window) = (Shared(pooled.as_mut_ptr()), flr.pooled_window());
         let relit = AtomicU32::new(0);
         // commit: a lagging cell restarts from its own moments; the fit's sums
@@ -757,23 +780,20 @@ impl MomentFlr {
                 unsafe { (cells_at.band(c0 * k, n * k), write_at.band(2 * c0 * rec, 2 * n * rec), means_at.band(3 * c0, 3 * n)) };
             let mut restarts = 0u64;
             for (c, cell) in cells_t.chunks_exact_mut(k).enumerate() {
-                if means_t[3 * c] != 0.0 {
+                let r = &mut write_t[2 * c * rec..2 * (c + 1) * rec];
+                if lag_tested && means_t[3 * c] != 0.0 {
                     // `cell` still holds this frame's own moments
-                    put(write_t, c * rec + k, 1.0);
-                    for (j, v) in cell.iter().enumerate() {
-                        put(write_t, c * rec + j, *v);
-                    }
+                    put(r, k, 1.0);
+                    store(r, cell);
                     restarts += cell[0].max(0.0) as u64;
                 } else {
-                    let len = get(write_t, c * rec + k);
-                    for (j, v) in cell.iter_mut().enumerate() {
-                        *v = get(write_t, c * rec + j) * len;
+                    let len = get(r, k);
+                    for (v, h) in cell.iter_mut().zip(values(r)) {
+                        *v = h * len;
                     }
                 }
                 let means = mean_guides(cell, &lay, &stats.reference).unwrap_or([f64::NAN; MAX_GUIDES]);
-                for (i, m) in means[..lay.q].iter().enumerate() {
-                    put(write_t, c * rec + k + 1 + i, *m);
-                }
+                store(&mut r[2 * (k + 1)..], &means[..lay.q]);
             }
             relit.fetch_add(restarts as u32, Ordering::Relaxed);
             if let Some(s) = pooled_window {

@@ -66,7 +66,7 @@ Each configuration is named `METHOD GUIDES SETTINGS`; the `flags` column gives t
 `s6/12/20` the adaptive window, fits with σ 6, 12 and 20 blended per cell (the default); `boxR` a box window of radius R (`--box`); \
 `-ao` the adaptive window's extra AO-free fit (`--without-ao`); `-aod` AO demodulation off (`--ao-demodulation off`), `aodC` with \
 offset C; `tik` Tikhonov regularization (`--regularization tikhonov:…`); `up2`, `up4` traced at ½ or ¼ resolution and upsampled \
-jointly (`--upsample`). `… temporal` is temporal FLR over a sequence (`--method flr-temporal`: accumulated light, output accumulated under a clip); `hH oA gG` its history length, output blend weight and clip width when not the defaults (`--history`, `--output-alpha`, `--clip-gamma`; `o1` = no output accumulation); `… temporal moments` accumulates FLR's cell moments instead (`--accumulate moments`).
+jointly (`--upsample`). `… temporal` is temporal FLR over a sequence (`--method flr-temporal`: accumulated light, output accumulated under a clip); `hH oA gG` its history length, output blend weight and clip width when not the defaults (`--history`, `--output-alpha`, `--clip-gamma`; `o1` = no output accumulation); `… temporal moments` accumulates FLR's cell moments instead (`--accumulate moments`; `hH lK` its history length and lag test threshold when not the defaults, `--history`, `--lag-sigmas`).
 - `bmfr`: `bB` block size (`--block`); `kK` Wiener shrinkage κ = K (`--shrinkage`; `k0` = the paper's plain least squares; \
 default 4, not shown). `bmfr-temporal` is the pipeline over a sequence (accumulation, reprojection).
 - `walr`: `tT` à-trous iterations (`--iterations`); `pw-adaptive` the last two windows blended per pixel (default), `pwW` a fixed \
