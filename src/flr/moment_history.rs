@@ -164,8 +164,8 @@ impl TapTest {
 /// cell records (`rec` f64 each, stored as word pairs: `lay.k` moments, the
 /// history length, `lay.q` mean guides, NaN for an empty cell) on a
 /// `grid` (cells across × down); they are sampled bilinearly at the cell
-/// `at` moved by `motion` (previous − current, in cells), each of the 4 taps kept
-/// where `test` accepts its mean guides against `cur`. Writes the kept taps'
+/// `at` moved by `motion` (previous − current, in cells), the taps of
+/// `kept` ([`kept_mask`]) only. Writes the kept taps'
 /// weighted mean into `out` (and of their fast histories, at record offset
 /// [`fast_at`], into `fast` where given) and returns their mean history
 /// length (0 and zeros when no tap is kept).
@@ -177,8 +177,7 @@ pub(crate) fn reproject_cell(
     lay: &CellLayout,
     at: (usize, usize),
     motion: (f64, f64),
-    cur: &[f64; MAX_GUIDES],
-    test: &TapTest,
+    kept: u8,
     out: &mut [f64],
     mut fast: Option<&mut [f64; FAST_LEN]>,
 ) -> f64 {
@@ -188,7 +187,7 @@ pub(crate) fn reproject_cell(
         f.fill(0.0);
     }
     let (mut wsum, mut nsum) = (0f64, 0f64);
-    for (i, w) in kept_taps(prev, rec, grid, lay, at, motion, cur, test) {
+    for (i, w) in masked_taps(grid, at, motion, kept) {
         let r = record(prev, i, rec);
         for (o, v) in out[..k].iter_mut().zip(values(r)) {
             *o += w * v;
@@ -236,42 +235,46 @@ fn luma(rgb: impl Fn(usize) -> f64) -> f64 {
 /// Least bilinear weight of the kept taps for a cell to keep its history.
 const MIN_TAP_WEIGHT: f64 = 1e-3;
 
-/// Whether [`reproject_cell`] would keep the history (the same taps, without the moments).
+/// Whether [`reproject_cell`] with `kept` keeps the history at cell `at`
+/// moved by `motion`: the kept taps' bilinear weight is above [`MIN_TAP_WEIGHT`].
+pub(crate) fn keeps_history(grid: (usize, usize), at: (usize, usize), motion: (f64, f64), kept: u8) -> bool {
+    masked_taps(grid, at, motion, kept).map(|(_, w)| w).sum::<f64>() > MIN_TAP_WEIGHT
+}
+
+/// The bilinear taps at cell `at` moved by `motion` (bit `j` for tap `j` of
+/// [`taps`]) whose records are not empty and whose mean guides `test`
+/// accepts against `cur`.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn any_tap_kept(
+pub(crate) fn kept_mask(
     prev: &[u32],
     rec: usize,
-    grid: (usize, usize),
+    (cx, cy): (usize, usize),
     lay: &CellLayout,
-    at: (usize, usize),
+    (x, y): (usize, usize),
     motion: (f64, f64),
     cur: &[f64; MAX_GUIDES],
     test: &TapTest,
-) -> bool {
-    kept_taps(prev, rec, grid, lay, at, motion, cur, test).map(|(_, w)| w).sum::<f64>() > MIN_TAP_WEIGHT
-}
-
-/// The bilinear taps (previous cell index, weight) at cell `(x, y)` moved by
-/// `motion` whose records are not empty and whose mean guides `test` accepts
-/// against `cur`.
-#[allow(clippy::too_many_arguments)]
-fn kept_taps<'a>(
-    prev: &'a [u32],
-    rec: usize,
-    (cx, cy): (usize, usize),
-    lay: &'a CellLayout,
-    (x, y): (usize, usize),
-    motion: (f64, f64),
-    cur: &'a [f64; MAX_GUIDES],
-    test: &'a TapTest,
-) -> impl Iterator<Item = (usize, f64)> + 'a {
-    taps(x, y, motion, cx, cy).into_iter().flatten().filter(move |&(i, _)| {
+) -> u8 {
+    let accepted = |i: usize| {
         let mut tm = [0f64; MAX_GUIDES];
         for (t, v) in tm[..lay.q].iter_mut().zip(values(&record(prev, i, rec)[2 * (lay.k + 1)..])) {
             *t = v;
         }
         !tm[0].is_nan() && test.accepts(cur, &tm)
-    })
+    };
+    let mut mask = 0;
+    for (j, tap) in taps(x, y, motion, cx, cy).into_iter().enumerate() {
+        if tap.is_some_and(|(i, _)| accepted(i)) {
+            mask |= 1 << j;
+        }
+    }
+    mask
+}
+
+/// The taps (previous cell index, weight) of `kept` ([`kept_mask`]) at
+/// cell `(x, y)` moved by `motion`, in [`taps`]' order.
+fn masked_taps((cx, cy): (usize, usize), (x, y): (usize, usize), motion: (f64, f64), kept: u8) -> impl Iterator<Item = (usize, f64)> {
+    taps(x, y, motion, cx, cy).into_iter().enumerate().filter_map(move |(j, t)| if kept >> j & 1 == 1 { t } else { None })
 }
 
 /// The 4 bilinear taps (cell index, weight) at cell `(x, y)` moved by
@@ -350,7 +353,8 @@ impl Blend {
 /// returns the new length `n` and whether a history was kept (`(1, false)`,
 /// and the cell's own values, when no tap was). The fast history's length
 /// is [`Blend::fast_len`] of `n`. The fit takes `hist · n`, the sums over
-/// `n` frames, so that its sample counts are frames × pixels.
+/// `n` frames, so that its sample counts are frames × pixels. `kept`: the
+/// taps to keep where already known ([`kept_mask`]), else `None`.
 /// `work`: `lay.k` values of working space.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn blend_cell(
@@ -366,6 +370,7 @@ pub(crate) fn blend_cell(
     reference: &[f32],
     prev_reference: &[f32],
     blend: &Blend,
+    kept: Option<u8>,
     work: &mut [f64],
 ) -> (f64, bool) {
     let k = lay.k;
@@ -376,7 +381,8 @@ pub(crate) fn blend_cell(
         return (1.0, false);
     };
     let mut fast_prev = [0f64; FAST_LEN];
-    let n_prev = reproject_cell(prev, rec, grid, lay, at, motion, &cur, &blend.test, work, Some(&mut fast_prev));
+    let kept = kept.unwrap_or_else(|| kept_mask(prev, rec, grid, lay, at, motion, &cur, &blend.test));
+    let n_prev = reproject_cell(prev, rec, grid, lay, at, motion, kept, work, Some(&mut fast_prev));
     if n_prev <= 0.0 {
         hist[..k].copy_from_slice(&cell[..k]);
         return (1.0, false);
@@ -631,9 +637,10 @@ impl MomentFlr {
     /// block moments, relative to `stats.reference`) and the two history
     /// slots in `words`; frame `index` reads slot `(index + 1) % 2` and
     /// writes slot `index % 2`. The first pass finds each cell's mean motion
-    /// (into `means`) and whether any history tap is kept, for the cut test;
-    /// the second blends, writes the history and leaves the fit's sums in
-    /// `cells` (and `pooled`).
+    /// and the history taps it keeps (into `means`: x, y, [`kept_mask`]) and
+    /// whether it keeps any, for the cut test; the second blends and writes
+    /// the history; the third runs the lag test; the fourth leaves the fit's
+    /// sums in `cells` (and `pooled`).
     #[allow(clippy::too_many_arguments)]
     fn history_passes(
         &self,
@@ -687,7 +694,9 @@ impl MomentFlr {
                     let Some(cur) = mean_guides(&cells[c * k..(c + 1) * k], &lay, &stats.reference) else { continue };
                     fi += 1;
                     let m = (row_means[3 * x], row_means[3 * x + 1]);
-                    fr += !any_tap_kept(prev, rec, (cx, cy), &lay, (x, y), m, &cur, &self.blend.test) as u64;
+                    let kept = kept_mask(prev, rec, (cx, cy), &lay, (x, y), m, &cur, &self.blend.test);
+                    row_means[3 * x + 2] = kept as f64;
+                    fr += !keeps_history((cx, cy), (x, y), m, kept) as u64;
                 }
             }
             fresh.fetch_add(fr as u32, Ordering::Relaxed);
@@ -731,6 +740,7 @@ impl MomentFlr {
                         &stats.reference,
                         &prev_reference,
                         &self.blend,
+                        Some(means_read[3 * (c0 + c) + 2] as u8),
                         work,
                     )
                 } else {
@@ -809,7 +819,8 @@ impl MomentFlr {
         Ok(rep)
     }
 
-    /// Cell row `y`'s mean motion in cells, `[x, y, count]` per cell, over
+    /// Cell row `y`'s mean motion in cells, `[x, y, 0]` per cell (the third
+    /// value is for the find pass's kept taps), over
     /// the cell's middle pixel row (as good as all its rows on the training
     /// sequences, at an eighth of the reads; values within twice the frame's
     /// size only; NaN without any, so that the cell finds no history; 0
@@ -840,7 +851,7 @@ impl MomentFlr {
             if n > 0 {
                 // pixels → cells
                 let scale = 1.0 / (n * b) as f64;
-                (cell[0], cell[1], cell[2]) = (sx as f64 * scale, sy as f64 * scale, n as f64);
+                (cell[0], cell[1]) = (sx as f64 * scale, sy as f64 * scale);
             } else {
                 // no usable vector: the cell finds no history
                 (cell[0], cell[1]) = (f64::NAN, f64::NAN);
@@ -1041,18 +1052,22 @@ mod tests {
         let test = TapTest { normal_limit: 0.8, depth_limit: 0.1, depth: Some(3) };
         let cur = mean_guides(&up, &lay, &reference).unwrap();
         let mut out = vec![0f64; lay.k];
-        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.0), &cur, &test, &mut out, None);
+        let at = |c, motion, out: &mut [f64]| {
+            let kept = kept_mask(&prev, rec, (cx, cy), &lay, c, motion, &cur, &test);
+            reproject_cell(&prev, rec, (cx, cy), &lay, c, motion, kept, out, None)
+        };
+        let n = at((1, 0), (0.0, 0.0), &mut out);
         assert_eq!(n, 5.0);
         assert!(out.iter().zip(&up).all(|(a, b)| (a - b).abs() < 1e-12));
         // halfway to cell 4 (normal turned): only the kept taps, renormalised
-        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (1, 0), (0.0, 0.5), &cur, &test, &mut out, None);
+        let n = at((1, 0), (0.0, 0.5), &mut out);
         assert_eq!(n, 5.0);
         // towards cell 5 (depth 3 against 2): dropped too
-        let n = reproject_cell(&prev, rec, (cx, cy), &lay, (2, 0), (0.0, 1.0), &cur, &test, &mut out, None);
+        let n = at((2, 0), (0.0, 1.0), &mut out);
         assert_eq!(n, 0.0);
         assert!(out.iter().all(|&v| v == 0.0));
         for motion in [(-5.0, 0.0), (f64::NAN, 0.0), (0.0, f64::INFINITY)] {
-            assert_eq!(reproject_cell(&prev, rec, (cx, cy), &lay, (0, 0), motion, &cur, &test, &mut out, None), 0.0);
+            assert_eq!(at((0, 0), motion, &mut out), 0.0);
         }
     }
 
@@ -1088,7 +1103,8 @@ mod tests {
             let (r, pr) = (&refs[f as usize % 2], &refs[(f as usize - 1) % 2]);
             let cell = frame(f, r);
             let (mut hist, mut fast) = (vec![0f64; lay.k], [0f64; FAST_LEN]);
-            let (n, _) = blend_cell(&cell, &mut hist, &mut fast, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), r, pr, &blend, &mut work);
+            let (n, _) =
+                blend_cell(&cell, &mut hist, &mut fast, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), r, pr, &blend, None, &mut work);
             assert_eq!(n, (f as f64 + 1.0).min(4.0), "frame {f}");
             // the light sums do not depend on the references: the mean of the frames' while n counts every frame
             let m = frame(f, r);
@@ -1109,8 +1125,22 @@ mod tests {
         let cell = moments(&px, &lay);
         let own = cell.clone();
         let (mut hist, mut fast) = (vec![0f64; lay.k], [0f64; FAST_LEN]);
-        let n =
-            blend_cell(&cell, &mut hist, &mut fast, &prev, rec, (1, 1), &lay, (0, 0), (0.0, 0.0), &refs[0], &refs[1], &blend, &mut work);
+        let n = blend_cell(
+            &cell,
+            &mut hist,
+            &mut fast,
+            &prev,
+            rec,
+            (1, 1),
+            &lay,
+            (0, 0),
+            (0.0, 0.0),
+            &refs[0],
+            &refs[1],
+            &blend,
+            None,
+            &mut work,
+        );
         assert_eq!(n, (1.0, false));
         assert_eq!(hist, own);
     }
