@@ -401,28 +401,31 @@ pub(crate) fn blend_cell(
     (n, true)
 }
 
+/// Values per cell of the lag test's inputs ([`lag_inputs`]).
+pub(crate) const LAG_LEN: usize = 6;
+
+/// The lag test's inputs from a cell record `r` (word pairs): its history
+/// length, pixel count, luminance sum and energy, and its fast history's
+/// count and luminance sum.
+fn lag_inputs(r: &[u32], lay: &CellLayout) -> [f64; LAG_LEN] {
+    let fast = fast_at(lay);
+    [get(r, lay.k), get(r, 0), luma(|c| get(r, lay.t + c)), get(r, lay.e), get(r, fast), get(r, fast + 1)]
+}
+
 /// The lag test of the cell at `(x, y)`: whether its fast history's mean
 /// luminance differs from its slow one's by more than `sigmas` standard
-/// errors. `records` are this frame's cell records (moments, length, mean
-/// guides, fast count and luminance sum; `rec` f64 each, as word pairs) on
-/// a `grid`; both histories are summed over the cell and its 8 neighbours. Both were
+/// errors. `inputs` are this frame's cells' [`lag_inputs`] ([`LAG_LEN`]
+/// each) on a `grid`; both histories are summed over the cell and its 8
+/// neighbours. Both were
 /// reprojected through the same taps, so reprojection error moves them
 /// alike; light that changed moves the fast one first. The fast history
 /// holds the slow one's newest `n_f` of `n` frames, so their difference is
 /// `(1 − n_f / n)` times that of the fast frames' mean and the older ones',
 /// whose standard error follows from the slow sums' luminance variance. A
 /// cell whose slow history is no longer than the fast one does not lag.
-pub(crate) fn lags(
-    records: &[u32],
-    rec: usize,
-    (cx, cy): (usize, usize),
-    lay: &CellLayout,
-    (x, y): (usize, usize),
-    fast_cap: f64,
-    sigmas: f64,
-) -> bool {
-    let k = lay.k;
-    let n = get(records, (y * cx + x) * rec + k);
+pub(crate) fn lags(inputs: &[f64], (cx, cy): (usize, usize), (x, y): (usize, usize), fast_cap: f64, sigmas: f64) -> bool {
+    let cell = |c: usize| &inputs[LAG_LEN * c..LAG_LEN * (c + 1)];
+    let n = cell(y * cx + x)[0];
     let n_fast = n.min(fast_cap);
     if !(n > n_fast && sigmas > 0.0) {
         return false;
@@ -431,12 +434,12 @@ pub(crate) fn lags(
     let (mut ns, mut ls, mut es, mut nf, mut lf) = (0f64, 0f64, 0f64, 0f64, 0f64);
     for ty in y.saturating_sub(1)..(y + 2).min(cy) {
         for tx in x.saturating_sub(1)..(x + 2).min(cx) {
-            let (r, fast) = (record(records, ty * cx + tx, rec), fast_at(lay));
-            ns += get(r, 0);
-            ls += luma(|c| get(r, lay.t + c));
-            es += get(r, lay.e);
-            nf += get(r, fast);
-            lf += get(r, fast + 1);
+            let v = cell(ty * cx + tx);
+            ns += v[1];
+            ls += v[2];
+            es += v[3];
+            nf += v[4];
+            lf += v[5];
         }
     }
     if !(ns > 0.0 && nf > 0.0) {
@@ -537,10 +540,11 @@ impl MomentFlr {
         self.flr.size().0.max(2 * self.flr.lay.k)
     }
     /// f64 values of the scratch of [`MomentFlr::denoise_parallel`] with
-    /// `workers`: FLR's, each cell's mean motion, the workers' buffers.
+    /// `workers`: FLR's, each cell's mean motion and kept taps, its lag
+    /// test's inputs, the workers' buffers.
     pub fn parallel_scratch_len(&self, workers: usize) -> Option<usize> {
         let own = crate::parallel::TileRun::scratch_len(self.flr.tile_count(), workers, 2 * self.worker_len())?;
-        self.flr.tiled_scratch_len(workers)?.checked_add(3 * self.cells())?.checked_add(own.div_ceil(2))
+        self.flr.tiled_scratch_len(workers)?.checked_add((3 + LAG_LEN) * self.cells())?.checked_add(own.div_ceil(2))
     }
     /// f64 values of the scratch of [`MomentFlr::denoise`].
     pub fn scratch_len(&self) -> usize {
@@ -615,6 +619,7 @@ impl MomentFlr {
         let flr_len = self.flr.tiled_scratch_len(workers).ok_or(Error::InvalidConfig("workers: scratch size overflows"))?;
         let (flr_scratch, own) = scratch.split_at_mut(flr_len);
         let (means, own) = own.split_at_mut(3 * self.cells());
+        let (lag_in, own) = own.split_at_mut(LAG_LEN * self.cells());
         let own: &mut [f32] = bytemuck::cast_slice_mut(own);
         let sequential = |n: usize, body: &(dyn Fn(usize, usize) + Sync)| (0..n).for_each(|i| body(i, 0));
         let for_each: Executor<'_> = parallel.map_or(&sequential, |p| p.1);
@@ -625,7 +630,7 @@ impl MomentFlr {
         {
             let (cells, pooled, stats) = tiled.cells_before_blur()?;
             let words: &mut [u32] = bytemuck::cast_slice_mut(&mut *history.data);
-            rep += self.history_passes(cells, pooled, &stats, motion, words, index, means, own, workers, for_each)?;
+            rep += self.history_passes(cells, pooled, &stats, motion, words, index, means, lag_in, own, workers, for_each)?;
         }
         rep += self.flr.run_stages(&tiled, &f, out, &Stage::ALL[3..], stages)?;
         // the slots alternate with the count's parity (past u32::MAX it goes on at 2)
@@ -651,6 +656,7 @@ impl MomentFlr {
         words: &mut [u32],
         index: u32,
         means: &mut [f64],
+        lag_in: &mut [f64],
         own: &mut [f32],
         workers: usize,
         for_each: Executor<'_>,
@@ -712,11 +718,12 @@ impl MomentFlr {
         // blend: the history, its length and the fast history into this frame's records
         // (`cells` and `means` are only read until the lag pass)
         let means_read: &[f64] = means;
+        let lag_at = Shared(lag_in.as_mut_ptr());
         let blend_pass = |t: usize, buf: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
-            // SAFETY: tile t's records, disjoint from every other tile's; each
-            // tile runs once (`run_tiles`).
-            let write_t = unsafe { write_at.band(2 * c0 * rec, 2 * n * rec) };
+            // SAFETY: tile t's records and lag inputs, disjoint from every
+            // other tile's; each tile runs once (`run_tiles`).
+            let (write_t, lag_t) = unsafe { (write_at.band(2 * c0 * rec, 2 * n * rec), lag_at.band(LAG_LEN * c0, LAG_LEN * n)) };
             let buf: &mut [f64] = bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Unsupported("a misaligned worker buffer"))?;
             let (work, hist) = buf.split_at_mut(k);
             let hist = &mut hist[..k];
@@ -755,22 +762,23 @@ impl MomentFlr {
                 store(r, hist);
                 put(r, k, len);
                 store(&mut r[2 * fast_at(&lay)..], &fast);
+                lag_t[LAG_LEN * c..LAG_LEN * (c + 1)].copy_from_slice(&lag_inputs(r, &lay));
             }
             rejected.fetch_add(rej as u32, Ordering::Relaxed);
             Ok(Report::default())
         };
         run_tiles(own, tiles, workers, wl, for_each, &blend_pass)?;
-        // lag: each cell's verdict (over its neighbours' records) into `means`;
+        // lag: each cell's verdict (over its neighbours' lag inputs) into `means`;
         // without a blend (the first frame, a cut) every record is the cell's own
-        let records: &[u32] = write;
+        let lag_read: &[f64] = lag_in;
         let lag_pass = |t: usize, _: &mut [f32]| -> Result<Report, Error> {
             let (c0, n) = band(t)?;
             // SAFETY: tile t's means, disjoint from every other tile's; the
-            // records are only read during this pass.
+            // lag inputs are only read during this pass.
             let means_t = unsafe { means_at.band(3 * c0, 3 * n) };
             for c in 0..n {
                 let at = ((c0 + c) % cx, (c0 + c) / cx);
-                let lagging = lags(records, rec, (cx, cy), &lay, at, self.blend.fast_history, self.blend.lag_sigmas);
+                let lagging = lags(lag_read, (cx, cy), at, self.blend.fast_history, self.blend.lag_sigmas);
                 means_t[3 * c] = if lagging { 1.0 } else { 0.0 };
             }
             Ok(Report::default())
@@ -995,7 +1003,8 @@ mod tests {
     fn the_lag_test_marks_light_that_changed_only() {
         let lay = CellLayout::new(5);
         let rec = fast_at(&lay) + FAST_LEN;
-        let lag = |w: &[u32], sigmas: f64| lags(w, rec, (3, 3), &lay, (1, 1), 2.0, sigmas);
+        let inputs = |w: &[u32]| -> Vec<f64> { (0..9).flat_map(|c| lag_inputs(record(w, c, rec), &lay)).collect() };
+        let lag = |w: &[u32], sigmas: f64| lags(&inputs(w), (3, 3), (1, 1), 2.0, sigmas);
         let steady = lag_records(16, |_| 1.0, &lay);
         assert!(!lag(&steady, 3.0));
         let brighter = lag_records(16, |f| if f >= 14 { 1.3 } else { 1.0 }, &lay);
@@ -1003,8 +1012,8 @@ mod tests {
         assert!(!lag(&brighter, 0.0));
         assert!(!lag(&lag_records(2, |f| if f >= 1 { 1.3 } else { 1.0 }, &lay), 3.0));
         // at the grid's corner: its 2×2 cells
-        assert!(lags(&brighter, rec, (3, 3), &lay, (0, 0), 2.0, 3.0));
-        assert!(!lags(&steady, rec, (3, 3), &lay, (2, 2), 2.0, 3.0));
+        assert!(lags(&inputs(&brighter), (3, 3), (0, 0), 2.0, 3.0));
+        assert!(!lags(&inputs(&steady), (3, 3), (2, 2), 2.0, 3.0));
     }
 
     /// The affine map equals the moments of the mapped guides, on awkward
